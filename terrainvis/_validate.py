@@ -1,0 +1,74 @@
+"""Input validation shared by the public functions (kernels never validate)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def describe(value) -> str:
+    """A short description of ``value`` for error messages."""
+    if isinstance(value, np.ndarray):
+        return f"array of shape {value.shape} and dtype {value.dtype}"
+    text = repr(value)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    return f"{type(value).__name__} {text}"
+
+
+def as_float_array(value, name: str) -> np.ndarray:
+    """``value`` as a float64 ndarray (a new array when a conversion is needed)."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be numeric array-like, got {describe(value)}") from exc
+    return arr
+
+
+def as_points(value, name: str, dim: int, *, finite: bool = True) -> np.ndarray:
+    """Validate an (m, dim) float array of points and return it as float64.
+
+    A single point of shape (dim,) is not accepted: callers pass (m, dim) arrays, and
+    being strict here avoids silently broadcasting a wrong shape.
+    """
+    arr = as_float_array(value, name)
+    if arr.ndim != 2:
+        raise ValueError(
+            f"{name} must be a 2-D array of shape (m, {dim}), got {arr.ndim}-D with shape {arr.shape}"
+        )
+    if arr.shape[1] != dim:
+        raise ValueError(f"{name} must have shape (m, {dim}), got shape {arr.shape}")
+    if finite and arr.size and not np.isfinite(arr).all():
+        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+        raise ValueError(
+            f"{name} must be finite, but {bad.size} row(s) hold NaN or inf "
+            f"(first at index {int(bad[0])})"
+        )
+    return arr
+
+
+def as_positive_finite(value, name: str) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+    if not np.isfinite(out) or out <= 0:
+        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    return out
+
+
+def as_int(value, name: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, got {describe(value)}")
+    out = int(value)
+    if minimum is not None and out < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {out}")
+    if maximum is not None and out > maximum:
+        raise ValueError(f"{name} must be <= {maximum}, got {out}")
+    return out
+
+
+def choice(value, name: str, valid) -> str:
+    valid = list(valid)
+    if value not in valid:
+        raise ValueError(f"{name} must be one of {valid}, got {value!r}")
+    return value

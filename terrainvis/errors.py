@@ -1,0 +1,31 @@
+"""Exceptions raised by terrainvis.
+
+Every exception subclasses a built-in one, so ``except ValueError`` keeps working.
+"""
+
+from __future__ import annotations
+
+__all__ = ["NodataError", "OutsideFootprintError", "SimplificationError"]
+
+
+class NodataError(ValueError):
+    """An operation that needs every sample to be finite met NaN (nodata) samples."""
+
+    def __init__(self, operation: str, n_nan: int, shape: tuple[int, int]):
+        self.operation = operation
+        self.n_nan = int(n_nan)
+        self.shape = tuple(shape)
+        super().__init__(
+            f"{operation} needs a grid without nodata, but z has {self.n_nan} NaN "
+            f"cell(s) out of {shape[0]}x{shape[1]}; fill them with "
+            f"HeightGrid.fill_nodata() or cut them away with HeightGrid.crop(...) "
+            f"(HeightGrid.valid_window() gives the largest NaN-free window)"
+        )
+
+
+class OutsideFootprintError(ValueError):
+    """Query points lie outside the terrain's footprint (or on a nodata cell)."""
+
+
+class SimplificationError(RuntimeError):
+    """A simplifier could not produce a valid result; the message names the method and cause."""

@@ -1,0 +1,90 @@
+"""Random test points on a terrain."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._validate import as_float_array, as_int, describe
+from .terrain import TIN, HeightGrid, as_terrain
+
+__all__ = ["sample_points"]
+
+
+def sample_points(terrain, n: int, seed=0, offset: float = 0.0) -> np.ndarray:
+    """``n`` points drawn uniformly over the terrain's valid footprint.
+
+    Parameters
+    ----------
+    terrain : HeightGrid or TIN
+    n : int
+        Number of points.
+    seed : int or numpy.random.Generator
+        Seed of the generator (the same seed gives the same points).
+    offset : float
+        Height added to the surface height (an observer's eye height).
+
+    Returns
+    -------
+    (n, 3) float64
+        x and y uniform over the footprint (cells with a nodata corner excluded), z on
+        the surface plus ``offset``.
+
+    Examples
+    --------
+    >>> from terrainvis import HeightGrid
+    >>> pts = sample_points(HeightGrid(np.zeros((3, 3))), 4, seed=1, offset=2.0)
+    >>> pts.shape, bool((pts[:, 2] == 2.0).all())
+    ((4, 3), True)
+    """
+    as_terrain(terrain)
+    n = as_int(n, "n", minimum=0)
+    offset_arr = as_float_array(offset, "offset")
+    if offset_arr.ndim != 0 or not np.isfinite(offset_arr):
+        raise ValueError(f"offset must be a finite scalar, got {describe(offset)}")
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    if isinstance(terrain, TIN):
+        xy = _sample_tin(terrain, n, rng)
+    else:
+        xy = _sample_grid(terrain, n, rng)
+    z = terrain.height_at(xy) + float(offset_arr)
+    return np.column_stack([xy, z])
+
+
+def _sample_grid(grid: HeightGrid, n: int, rng) -> np.ndarray:
+    xmin, xmax, ymin, ymax = grid.extent
+    if not grid.n_nodata:
+        return np.column_stack([rng.uniform(xmin, xmax, n), rng.uniform(ymin, ymax, n)])
+    # Rejection sampling over the extent: uniform over the valid part of the footprint.
+    out = np.empty((0, 2))
+    valid_fraction = np.isfinite(grid.z).mean()
+    if valid_fraction == 0:
+        raise ValueError("terrain has no valid (non-nodata) cell to sample from")
+    for _ in range(1000):
+        need = n - out.shape[0]
+        if need <= 0:
+            break
+        m = int(need / max(valid_fraction, 1e-3) * 1.3) + 16
+        cand = np.column_stack([rng.uniform(xmin, xmax, m), rng.uniform(ymin, ymax, m)])
+        ok = np.isfinite(grid.height_at(cand))
+        out = np.vstack([out, cand[ok][:need]])
+    if out.shape[0] < n:
+        raise ValueError("could not place the points: the valid part of the footprint is too small")
+    return out
+
+
+def _sample_tin(tin: TIN, n: int, rng) -> np.ndarray:
+    # Area-weighted choice of a face, then a uniform point inside it.
+    area = 0.5 * np.abs(tin.face_normals_z())
+    total = area.sum()
+    if not total > 0:
+        raise ValueError("terrain has a zero footprint area")
+    face = rng.choice(tin.n_faces, size=n, p=area / total)
+    r1 = rng.random(n)
+    r2 = rng.random(n)
+    flip = r1 + r2 > 1
+    r1[flip] = 1 - r1[flip]
+    r2[flip] = 1 - r2[flip]
+    v = tin.vertices[:, :2]
+    f = tin.faces[face]
+    a = v[f[:, 0]]
+    return a + r1[:, None] * (v[f[:, 1]] - a) + r2[:, None] * (v[f[:, 2]] - a)

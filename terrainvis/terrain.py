@@ -1,0 +1,555 @@
+"""The two terrain models everything else works on: :class:`HeightGrid` and :class:`TIN`.
+
+The surface of a grid
+---------------------
+A :class:`HeightGrid` stands for one piecewise-linear surface. Each cell, between
+rows r, r+1 and columns c, c+1, is split along the diagonal from vertex (r, c) to
+vertex (r+1, c+1) into two triangles:
+
+* the *lower* triangle (r, c), (r, c+1), (r+1, c+1), where u >= v, and
+* the *upper* triangle (r, c), (r+1, c+1), (r+1, c), where v > u,
+
+with u = (x - xs[c]) / (xs[c+1] - xs[c]) and v = (y - ys[r]) / (ys[r+1] - ys[r]) the
+local coordinates in the cell. :meth:`HeightGrid.height_at`, :meth:`HeightGrid.to_tin`,
+the grid line-of-sight engine and every simplifier use this one surface, so a grid and
+its TIN are the same surface and line of sight on them agrees.
+
+Rows and north
+--------------
+``z[r, c]`` sits at ``(xs[c], ys[r])`` and both coordinate vectors increase, so row 0 is
+the *smallest* y. A north-up raster (row 0 is north) is therefore flipped by
+:func:`terrainvis.load_dem`: raster row ``i`` becomes grid row ``rows - 1 - i`` and y
+grows northwards. The :class:`HeightGrid` constructors themselves never flip anything.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _kernels
+from ._validate import as_float_array, as_int, as_points, as_positive_finite, describe
+from .errors import NodataError
+
+__all__ = ["HeightGrid", "TIN", "as_terrain"]
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    arr.flags.writeable = False
+    return arr
+
+
+def _check_coords(values, name: str, length: int) -> np.ndarray:
+    arr = as_float_array(values, name)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be a 1-D array of length {length}, got {arr.ndim}-D with shape {arr.shape}")
+    if arr.shape[0] != length:
+        raise ValueError(f"{name} must have length {length} to match z, got length {arr.shape[0]}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be finite, got {int((~np.isfinite(arr)).sum())} non-finite value(s)")
+    steps = np.diff(arr)
+    if (steps <= 0).any():
+        i = int(np.flatnonzero(steps <= 0)[0])
+        raise ValueError(
+            f"{name} must be strictly increasing, but {name}[{i + 1}] = {arr[i + 1]!r} "
+            f"is not greater than {name}[{i}] = {arr[i]!r}"
+        )
+    return np.array(arr, dtype=np.float64, copy=True)
+
+
+def _check_z(z) -> np.ndarray:
+    arr = as_float_array(z, "z")
+    if arr.ndim != 2:
+        raise ValueError(f"z must be a 2-D array (rows, cols), got {arr.ndim}-D with shape {arr.shape}")
+    if arr.shape[0] < 2 or arr.shape[1] < 2:
+        raise ValueError(f"z must have at least 2x2 samples, got shape {arr.shape}")
+    if np.isinf(arr).any():
+        raise ValueError(
+            f"z must hold finite heights or NaN for nodata, got {int(np.isinf(arr).sum())} infinite value(s)"
+        )
+    return np.array(arr, dtype=np.float64, order="C", copy=True)
+
+
+class HeightGrid:
+    """A rectilinear height grid and the piecewise-linear surface over it.
+
+    ``z[r, c]`` is the height at ``(xs[c], ys[r])``. Each cell is split along the
+    diagonal from vertex (r, c) to vertex (r+1, c+1); this is the surface used by every
+    part of terrainvis (see the module docstring). NaN marks nodata.
+
+    Parameters
+    ----------
+    z : (rows, cols) array_like
+        Heights, copied to a read-only float64 array. Never flipped.
+    dx, dy : float
+        Uniform sample spacing along x (columns) and y (rows).
+    origin : (float, float)
+        Coordinates ``(xs[0], ys[0])`` of sample ``z[0, 0]``.
+
+    Examples
+    --------
+    >>> g = HeightGrid([[0.0, 1.0], [2.0, 3.0]], dx=10.0, dy=10.0)
+    >>> g.shape, g.extent
+    ((2, 2), (0.0, 10.0, 0.0, 10.0))
+    >>> float(g.height_at([[10.0, 0.0]])[0])
+    1.0
+    """
+
+    __slots__ = ("z", "xs", "ys", "attrs", "_cache", "__weakref__")
+
+    def __init__(self, z, dx: float = 1.0, dy: float = 1.0, origin=(0.0, 0.0), *, attrs=None):
+        zz = _check_z(z)
+        dx = as_positive_finite(dx, "dx")
+        dy = as_positive_finite(dy, "dy")
+        try:
+            ox, oy = (float(v) for v in origin)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"origin must be a pair of numbers (x0, y0), got {describe(origin)}") from exc
+        if not (math.isfinite(ox) and math.isfinite(oy)):
+            raise ValueError(f"origin must be finite, got {origin!r}")
+        rows, cols = zz.shape
+        self._init(zz, ox + dx * np.arange(cols, dtype=np.float64), oy + dy * np.arange(rows, dtype=np.float64), attrs)
+
+    @classmethod
+    def from_coords(cls, z, xs, ys, *, attrs=None) -> "HeightGrid":
+        """A rectilinear grid: ``z[r, c]`` at ``(xs[c], ys[r])``, xs and ys strictly increasing."""
+        zz = _check_z(z)
+        rows, cols = zz.shape
+        xx = _check_coords(xs, "xs", cols)
+        yy = _check_coords(ys, "ys", rows)
+        obj = cls.__new__(cls)
+        obj._init(zz, xx, yy, attrs)
+        return obj
+
+    def _init(self, z, xs, ys, attrs):
+        self.z = _frozen(z)
+        self.xs = _frozen(xs)
+        self.ys = _frozen(ys)
+        self.attrs = dict(attrs or {})
+        self._cache = {}
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.z.shape
+
+    @property
+    def size(self) -> int:
+        """Number of samples."""
+        return int(self.z.size)
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, xmax, ymin, ymax)`` of the footprint."""
+        return (float(self.xs[0]), float(self.xs[-1]), float(self.ys[0]), float(self.ys[-1]))
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by z and the two coordinate vectors."""
+        return int(self.z.nbytes + self.xs.nbytes + self.ys.nbytes)
+
+    @property
+    def is_uniform(self) -> bool:
+        """True when both coordinate vectors are evenly spaced (to 1e-9 relative)."""
+        return _is_uniform(self.xs) and _is_uniform(self.ys)
+
+    @property
+    def dx(self) -> float:
+        """Mean spacing along x (the spacing itself on a uniform grid)."""
+        return float((self.xs[-1] - self.xs[0]) / (self.xs.size - 1))
+
+    @property
+    def dy(self) -> float:
+        """Mean spacing along y (the spacing itself on a uniform grid)."""
+        return float((self.ys[-1] - self.ys[0]) / (self.ys.size - 1))
+
+    @property
+    def n_nodata(self) -> int:
+        """Number of NaN (nodata) samples."""
+        if "n_nodata" not in self._cache:
+            self._cache["n_nodata"] = int(np.isnan(self.z).sum())
+        return self._cache["n_nodata"]
+
+    def require_finite(self, operation: str) -> None:
+        """Raise :class:`~terrainvis.errors.NodataError` when z holds NaN."""
+        if self.n_nodata:
+            raise NodataError(operation, self.n_nodata, self.shape)
+
+    def __repr__(self) -> str:
+        xmin, xmax, ymin, ymax = self.extent
+        kind = "uniform" if self.is_uniform else "rectilinear"
+        return (
+            f"HeightGrid({self.shape[0]}x{self.shape[1]} {kind}, x [{xmin:g}, {xmax:g}], "
+            f"y [{ymin:g}, {ymax:g}], z [{np.nanmin(self.z):g}, {np.nanmax(self.z):g}]"
+            + (f", {self.n_nodata} nodata" if self.n_nodata else "")
+            + ")"
+        )
+
+    def copy_with(self, z=None, *, xs=None, ys=None) -> "HeightGrid":
+        """A new grid with some arrays replaced (the attrs are carried over)."""
+        return HeightGrid.from_coords(
+            self.z if z is None else z,
+            self.xs if xs is None else xs,
+            self.ys if ys is None else ys,
+            attrs=self.attrs,
+        )
+
+    # ---------------------------------------------------------------- surface
+    def height_at(self, xy) -> np.ndarray:
+        """Height of the surface at each point.
+
+        Parameters
+        ----------
+        xy : (m, 2) array_like
+            World coordinates.
+
+        Returns
+        -------
+        (m,) float64
+            The piecewise-linear surface (cells split along the (r, c)-(r+1, c+1)
+            diagonal), NaN outside the extent or where a corner of the cell is nodata.
+        """
+        pts = as_points(xy, "xy", 2)
+        out = np.full(pts.shape[0], np.nan)
+        if pts.shape[0] == 0:
+            return out
+        x = pts[:, 0]
+        y = pts[:, 1]
+        xs, ys, z = self.xs, self.ys, self.z
+        inside = (x >= xs[0]) & (x <= xs[-1]) & (y >= ys[0]) & (y <= ys[-1])
+        x = x[inside]
+        y = y[inside]
+        c = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, xs.size - 2)
+        r = np.clip(np.searchsorted(ys, y, side="right") - 1, 0, ys.size - 2)
+        u = (x - xs[c]) / (xs[c + 1] - xs[c])
+        v = (y - ys[r]) / (ys[r + 1] - ys[r])
+        z00 = z[r, c]
+        z01 = z[r, c + 1]
+        z10 = z[r + 1, c]
+        z11 = z[r + 1, c + 1]
+        lower = u >= v
+        out[inside] = np.where(
+            lower,
+            z00 + u * (z01 - z00) + v * (z11 - z01),
+            z00 + v * (z10 - z00) + u * (z11 - z10),
+        )
+        return out
+
+    def sample_xy(self) -> np.ndarray:
+        """(rows*cols, 2) coordinates of every sample in row-major order."""
+        X, Y = np.meshgrid(self.xs, self.ys)
+        return np.column_stack([X.ravel(), Y.ravel()])
+
+    def to_tin(self) -> "TIN":
+        """The TIN of exactly this surface.
+
+        One vertex per sample (index ``r * cols + c``), two triangles per cell split
+        along the (r, c)-(r+1, c+1) diagonal, counter-clockwise so normals point up.
+        Cells with a nodata corner are left out. The result is cached on the grid.
+        """
+        tin = self._cache.get("tin")
+        if tin is not None:
+            return tin
+        rows, cols = self.shape
+        X, Y = np.meshgrid(self.xs, self.ys)
+        vertices = np.column_stack([X.ravel(), Y.ravel(), self.z.ravel()])
+        idx = np.arange(rows * cols, dtype=np.int64).reshape(rows, cols)
+        a = idx[:-1, :-1]
+        b = idx[:-1, 1:]
+        c = idx[1:, 1:]
+        d = idx[1:, :-1]
+        lower = np.stack([a, b, c], axis=-1).reshape(-1, 3)
+        upper = np.stack([a, c, d], axis=-1).reshape(-1, 3)
+        faces = np.stack([lower, upper], axis=1).reshape(-1, 3)
+        if self.n_nodata:
+            keep = np.isfinite(vertices[faces, 2]).all(axis=1)
+            faces = faces[keep]
+        dtype = np.int32 if vertices.shape[0] < 2**31 - 1 else np.int64
+        tin = TIN(vertices, faces.astype(dtype), meta={"source": "HeightGrid.to_tin", "grid_shape": self.shape})
+        self._cache["tin"] = tin
+        return tin
+
+    # ---------------------------------------------------------------- nodata
+    def valid_window(self) -> tuple[slice, slice]:
+        """``(rows, cols)`` slices of the largest axis-aligned window without nodata."""
+        if not self.n_nodata:
+            return slice(0, self.shape[0]), slice(0, self.shape[1])
+        r0, r1, c0, c1 = _kernels.largest_valid_rectangle(np.isfinite(self.z))
+        if r1 - r0 < 2 or c1 - c0 < 2:
+            raise ValueError(f"z has no NaN-free window of at least 2x2 samples ({self.n_nodata} NaN cells)")
+        return slice(int(r0), int(r1)), slice(int(c0), int(c1))
+
+    def crop(self, rows=None, cols=None, *, bbox=None) -> "HeightGrid":
+        """A sub-grid.
+
+        Parameters
+        ----------
+        rows, cols : slice or (start, stop), optional
+            Index ranges to keep (step 1). ``None`` keeps everything.
+        bbox : (xmin, xmax, ymin, ymax), optional
+            Keep the samples inside this box instead (inclusive).
+
+        Examples
+        --------
+        >>> g = HeightGrid(np.arange(16.0).reshape(4, 4))
+        >>> g.crop(rows=(1, 3), cols=slice(0, 2)).shape
+        (2, 2)
+        """
+        if bbox is not None:
+            if rows is not None or cols is not None:
+                raise TypeError("crop takes either rows/cols or bbox, not both")
+            try:
+                xmin, xmax, ymin, ymax = (float(v) for v in bbox)
+            except (TypeError, ValueError) as exc:
+                raise TypeError(f"bbox must be (xmin, xmax, ymin, ymax), got {describe(bbox)}") from exc
+            cmask = np.flatnonzero((self.xs >= xmin) & (self.xs <= xmax))
+            rmask = np.flatnonzero((self.ys >= ymin) & (self.ys <= ymax))
+            rs = slice(int(rmask[0]), int(rmask[-1]) + 1) if rmask.size else slice(0, 0)
+            cs = slice(int(cmask[0]), int(cmask[-1]) + 1) if cmask.size else slice(0, 0)
+        else:
+            rs = _as_slice(rows, "rows", self.shape[0])
+            cs = _as_slice(cols, "cols", self.shape[1])
+        z = self.z[rs, cs]
+        if z.shape[0] < 2 or z.shape[1] < 2:
+            raise ValueError(f"crop must keep at least 2x2 samples, got {z.shape[0]}x{z.shape[1]}")
+        return HeightGrid.from_coords(z, self.xs[cs], self.ys[rs], attrs=self.attrs)
+
+    def subsample(self, step: int) -> "HeightGrid":
+        """Every ``step``-th sample along both axes (a cheap way to shrink a large DEM)."""
+        step = as_int(step, "step", minimum=1)
+        if (self.shape[0] - 1) // step < 1 or (self.shape[1] - 1) // step < 1:
+            raise ValueError(f"step must leave at least 2x2 samples of the {self.shape} grid, got {step}")
+        return HeightGrid.from_coords(self.z[::step, ::step], self.xs[::step], self.ys[::step], attrs=self.attrs)
+
+    def fill_nodata(self, method: str = "nearest") -> "HeightGrid":
+        """A copy with every NaN sample filled.
+
+        Parameters
+        ----------
+        method : {"nearest", "linear"}
+            ``"nearest"`` copies the nearest valid sample (in index space).
+            ``"linear"`` interpolates linearly inside the convex hull of the valid samples
+            (Delaunay, scipy) and falls back to nearest outside it.
+        """
+        if method not in ("nearest", "linear"):
+            raise ValueError(f"method must be one of ['nearest', 'linear'], got {method!r}")
+        if not self.n_nodata:
+            return self
+        from scipy import ndimage
+
+        nan = np.isnan(self.z)
+        if nan.all():
+            raise ValueError("z is entirely nodata; there is nothing to fill from")
+        z = self.z.copy()
+        if method == "linear":
+            from scipy.interpolate import griddata
+
+            X, Y = np.meshgrid(self.xs, self.ys)
+            z[nan] = griddata((X[~nan], Y[~nan]), self.z[~nan], (X[nan], Y[nan]), method="linear")
+        still = np.isnan(z)
+        if still.any():
+            _, (ri, ci) = ndimage.distance_transform_edt(nan, return_indices=True)
+            z[still] = self.z[ri[still], ci[still]]
+        return self.copy_with(z)
+
+
+def _as_slice(value, name: str, length: int) -> slice:
+    if value is None:
+        return slice(0, length)
+    if isinstance(value, slice):
+        if value.step not in (None, 1):
+            raise ValueError(f"{name} must have step 1, got step {value.step}; use subsample() to thin a grid")
+        start, stop, _ = value.indices(length)
+        return slice(start, stop)
+    try:
+        start, stop = value
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be a slice or a (start, stop) pair, got {describe(value)}") from exc
+    start, stop, _ = slice(int(start), int(stop)).indices(length)
+    return slice(start, stop)
+
+
+def _is_uniform(v: np.ndarray) -> bool:
+    if v.size < 3:
+        return True
+    d = np.diff(v)
+    return bool(np.abs(d - d.mean()).max() <= 1e-9 * max(abs(d.mean()), np.abs(v).max() * 1e-7))
+
+
+@dataclass(frozen=True)
+class _Buckets:
+    starts: np.ndarray
+    items: np.ndarray
+    x0: float
+    y0: float
+    bw: float
+    bh: float
+    nbx: int
+    nby: int
+
+
+class TIN:
+    """A triangulated irregular network: a terrain surface made of triangles.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like
+        x, y, z of each vertex (copied to read-only float64).
+    faces : (m, 3) array_like of int
+        Vertex indices of each triangle, counter-clockwise seen from above.
+    meta : dict, optional
+        Free-form metadata. The simplifiers record method, level, vertex count, bytes,
+        errors and timing here.
+    """
+
+    __slots__ = ("vertices", "faces", "meta", "_cache", "__weakref__")
+
+    def __init__(self, vertices, faces, *, meta=None):
+        v = as_float_array(vertices, "vertices")
+        if v.ndim != 2 or v.shape[1] != 3:
+            raise ValueError(f"vertices must have shape (n, 3), got {v.shape}")
+        if v.shape[0] < 3:
+            raise ValueError(f"vertices must hold at least 3 vertices, got {v.shape[0]}")
+        if not np.isfinite(v).all():
+            raise ValueError(f"vertices must be finite, got {int((~np.isfinite(v)).any(axis=1).sum())} non-finite row(s)")
+        f = np.asarray(faces)
+        if f.ndim != 2 or f.shape[1] != 3:
+            raise ValueError(f"faces must have shape (m, 3), got {f.shape}")
+        if f.shape[0] < 1:
+            raise ValueError("faces must hold at least one triangle, got 0")
+        if not np.issubdtype(f.dtype, np.integer):
+            raise TypeError(f"faces must be an integer array, got dtype {f.dtype}")
+        if f.min() < 0 or f.max() >= v.shape[0]:
+            raise ValueError(f"faces must index vertices in [0, {v.shape[0] - 1}], got range [{f.min()}, {f.max()}]")
+        self.vertices = _frozen(np.array(v, dtype=np.float64, order="C", copy=True))
+        dtype = np.int32 if v.shape[0] < 2**31 - 1 else np.int64
+        self.faces = _frozen(np.array(f, dtype=dtype, order="C", copy=True))
+        self.meta = dict(meta or {})
+        self._cache = {}
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the vertex and face arrays."""
+        return int(self.vertices.nbytes + self.faces.nbytes)
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, xmax, ymin, ymax)`` of the vertices."""
+        lo = self.vertices[:, :2].min(axis=0)
+        hi = self.vertices[:, :2].max(axis=0)
+        return (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+
+    @property
+    def mesh(self):
+        """The :class:`trimesh.Trimesh` of this TIN (built once, not processed)."""
+        mesh = self._cache.get("mesh")
+        if mesh is None:
+            import trimesh
+
+            mesh = trimesh.Trimesh(vertices=self.vertices, faces=self.faces, process=False, validate=False)
+            self._cache["mesh"] = mesh
+        return mesh
+
+    def __repr__(self) -> str:
+        xmin, xmax, ymin, ymax = self.extent
+        return (
+            f"TIN({self.n_vertices} vertices, {self.n_faces} faces, x [{xmin:g}, {xmax:g}], "
+            f"y [{ymin:g}, {ymax:g}])"
+        )
+
+    # ---------------------------------------------------------------- geometry
+    def face_normals_z(self) -> np.ndarray:
+        """(m,) z component of each face's (unnormalised) normal: twice its signed projected area."""
+        v = self.vertices
+        f = self.faces
+        a = v[f[:, 0], :2]
+        b = v[f[:, 1], :2]
+        c = v[f[:, 2], :2]
+        return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+
+    def footprint_area(self) -> float:
+        """Sum of the signed projected areas of the faces."""
+        return float(0.5 * self.face_normals_z().sum())
+
+    def is_height_field(self, rtol: float = 1e-9) -> bool:
+        """True when every face normal has z > 0 and the footprint area equals the extent's."""
+        nz = self.face_normals_z()
+        if not (nz > 0).all():
+            return False
+        xmin, xmax, ymin, ymax = self.extent
+        area = (xmax - xmin) * (ymax - ymin)
+        return bool(abs(self.footprint_area() - area) <= rtol * area)
+
+    def _buckets(self) -> _Buckets:
+        bk = self._cache.get("buckets")
+        if bk is None:
+            xmin, xmax, ymin, ymax = self.extent
+            nf = self.n_faces
+            side = max(1, int(math.sqrt(nf / 2.0)))
+            w = max(xmax - xmin, 1e-300)
+            h = max(ymax - ymin, 1e-300)
+            nbx = max(1, int(round(side * math.sqrt(w / h))))
+            nby = max(1, int(round(side * math.sqrt(h / w))))
+            bw = w / nbx
+            bh = h / nby
+            v = self.vertices
+            starts, items = _kernels.build_buckets(
+                np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), self.faces, xmin, ymin, bw, bh, nbx, nby
+            )
+            bk = _Buckets(starts, items, xmin, ymin, bw, bh, nbx, nby)
+            self._cache["buckets"] = bk
+        return bk
+
+    def height_at(self, xy) -> np.ndarray:
+        """Height of the TIN at each point, NaN outside the footprint.
+
+        Parameters
+        ----------
+        xy : (m, 2) array_like
+
+        Returns
+        -------
+        (m,) float64
+        """
+        pts = as_points(xy, "xy", 2)
+        out = np.full(pts.shape[0], np.nan)
+        if pts.shape[0] == 0:
+            return out
+        bk = self._buckets()
+        v = self.vertices
+        _kernels.locate_heights(
+            np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
+            self.faces, bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10,
+        )
+        return out
+
+    def height_on_grid(self, xs, ys) -> np.ndarray:
+        """Heights at every node of a rectilinear grid, shape (len(ys), len(xs)); NaN outside."""
+        xs = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
+        ys = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
+        out = np.full((ys.size, xs.size), np.nan)
+        v = self.vertices
+        _kernels.rasterize_tin(
+            np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
+            self.faces, xs, ys, out, 1e-10,
+        )
+        return out
+
+
+
+def as_terrain(terrain, name: str = "terrain"):
+    """Check that ``terrain`` is a HeightGrid or a TIN."""
+    if not isinstance(terrain, (HeightGrid, TIN)):
+        raise TypeError(f"{name} must be a terrainvis.HeightGrid or terrainvis.TIN, got {describe(terrain)}")
+    return terrain

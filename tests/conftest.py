@@ -1,0 +1,49 @@
+"""Shared fixtures: the real DEMs in ../shared/data/dem and the bundled terrains."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DEM = REPO.parent / "shared" / "data" / "dem"
+DEM_NAMES = ("jacksboro_fault_tn", "mount_st_helens_wa", "green_mountains_vt", "west_bijou_escarpment_co")
+
+
+def shared_dem_path(name: str, suffix: str = ".npz") -> Path:
+    """Path of a shared DEM, skipping the test (with the reason) when it is absent."""
+    path = SHARED_DEM / f"{name}{suffix}"
+    if not path.exists():
+        pytest.skip(f"shared DEM {path} is absent (the ../shared folder is not beside this checkout)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def shared_dems():
+    """Every shared DEM as a HeightGrid, keyed by name (loaded once per session)."""
+    from terrainvis import load_dem
+
+    out = {}
+    for name in DEM_NAMES:
+        out[name] = load_dem(shared_dem_path(name))
+    return out
+
+
+def shared_dem_120(name: str):
+    """A NaN-free 120x120 crop from the middle of a shared DEM's valid window."""
+    from terrainvis import load_dem
+
+    grid = load_dem(shared_dem_path(name))
+    rs, cs = grid.valid_window()
+    grid = grid.crop(rs, cs)
+    rows, cols = grid.shape
+    n_r, n_c = min(120, rows), min(120, cols)
+    r0, c0 = (rows - n_r) // 2, (cols - n_c) // 2
+    return grid.crop(rows=(r0, r0 + n_r), cols=(c0, c0 + n_c))
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
