@@ -26,7 +26,7 @@ def sample_points(terrain, n: int, seed=0, offset: float = 0.0) -> np.ndarray:
     Returns
     -------
     (n, 3) float64
-        x and y uniform over the footprint (cells with a nodata corner excluded), z on
+        x and y uniform over the footprint (triangles with a nodata vertex excluded), z on
         the surface plus ``offset``.
 
     Examples

@@ -209,7 +209,8 @@ class HeightGrid:
         -------
         (m,) float64
             The piecewise-linear surface (cells split along the (r, c)-(r+1, c+1)
-            diagonal), NaN outside the extent or where a corner of the cell is nodata.
+            diagonal), NaN outside the extent or where a vertex of the triangle under
+            the point is nodata (the same triangles that :meth:`to_tin` leaves out).
         """
         pts = as_points(xy, "xy", 2)
         out = np.full(pts.shape[0], np.nan)
@@ -247,7 +248,9 @@ class HeightGrid:
 
         One vertex per sample (index ``r * cols + c``), two triangles per cell split
         along the (r, c)-(r+1, c+1) diagonal, counter-clockwise so normals point up.
-        Cells with a nodata corner are left out. The result is cached on the grid.
+        On a grid with nodata, the nodata vertices and the triangles touching them are
+        left out (and the remaining vertices keep their row-major order). The result is
+        cached on the grid.
         """
         tin = self._cache.get("tin")
         if tin is not None:
@@ -264,8 +267,12 @@ class HeightGrid:
         upper = np.stack([a, c, d], axis=-1).reshape(-1, 3)
         faces = np.stack([lower, upper], axis=1).reshape(-1, 3)
         if self.n_nodata:
-            keep = np.isfinite(vertices[faces, 2]).all(axis=1)
-            faces = faces[keep]
+            # Drop the triangles touching nodata, then the nodata vertices (re-indexed).
+            finite = np.isfinite(vertices[:, 2])
+            faces = faces[finite[faces].all(axis=1)]
+            new_index = np.cumsum(finite) - 1
+            vertices = vertices[finite]
+            faces = new_index[faces]
         dtype = np.int32 if vertices.shape[0] < 2**31 - 1 else np.int64
         tin = TIN(vertices, faces.astype(dtype), meta={"source": "HeightGrid.to_tin", "grid_shape": self.shape})
         self._cache["tin"] = tin

@@ -1,0 +1,1 @@
+"""The bundled terrains, installed as the package ``terrainvis.data`` (see README.md)."""
