@@ -323,6 +323,20 @@ def save_dem(grid: HeightGrid, path) -> Path:
 _SAMPLES = {"jacksboro": "jacksboro_fault_dem.npz"}
 
 
+def _matplotlib_sample(filename: str) -> Path:
+    """Path of a file in matplotlib's sample data, found without importing matplotlib."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("matplotlib")
+    if spec is None or not spec.submodule_search_locations:
+        raise ImportError("sample_dem needs matplotlib (a core dependency of terrainvis): pip install matplotlib")
+    for root in spec.submodule_search_locations:
+        path = Path(root) / "mpl-data" / "sample_data" / filename
+        if path.exists():
+            return path
+    raise FileNotFoundError(f"matplotlib's sample data has no {filename!r} (looked in {list(spec.submodule_search_locations)})")
+
+
 def sample_dem(name: str = "jacksboro") -> HeightGrid:
     """A real DEM that ships with matplotlib, so it needs no download.
 
@@ -341,9 +355,7 @@ def sample_dem(name: str = "jacksboro") -> HeightGrid:
     """
     if name not in _SAMPLES:
         raise ValueError(f"name must be one of {list(_SAMPLES)}, got {name!r}")
-    from matplotlib import cbook
-
-    with cbook.get_sample_data(_SAMPLES[name]) as data:
+    with np.load(_matplotlib_sample(_SAMPLES[name]), allow_pickle=False) as data:
         z = np.asarray(data["elevation"], dtype=np.float64)
         dx_deg = float(data["dx"])
         dy_deg = float(data["dy"])

@@ -130,6 +130,11 @@ class HeightGrid:
         self.attrs = dict(attrs or {})
         self._cache = {}
 
+    def __reduce__(self):
+        # Pickle the data only: cached acceleration structures (pyramid, Embree scene,
+        # TIN) are rebuilt on demand in the receiving process.
+        return (_rebuild_grid, (self.z, self.xs, self.ys, self.attrs))
+
     # ------------------------------------------------------------------ basics
     @property
     def shape(self) -> tuple[int, int]:
@@ -436,6 +441,9 @@ class TIN:
         self.meta = dict(meta or {})
         self._cache = {}
 
+    def __reduce__(self):
+        return (_rebuild_tin, (self.vertices, self.faces, self.meta))
+
     @property
     def n_vertices(self) -> int:
         return int(self.vertices.shape[0])
@@ -553,6 +561,14 @@ class TIN:
         )
         return out
 
+
+
+def _rebuild_grid(z, xs, ys, attrs):
+    return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+
+
+def _rebuild_tin(vertices, faces, meta):
+    return TIN(vertices, faces, meta=meta)
 
 
 def as_terrain(terrain, name: str = "terrain"):

@@ -308,3 +308,18 @@ def test_sample_points_bad_input():
         sample_points(g, -1)
     with pytest.raises(ValueError, match="offset must be a finite scalar"):
         sample_points(g, 3, offset=np.nan)
+
+
+def test_pickle_round_trip_drops_caches():
+    import pickle
+
+    g = HeightGrid(np.arange(12.0).reshape(3, 4), dx=2.0, attrs={"name": "x"})
+    tin = g.to_tin()
+    tin.meta["method"] = "m"
+    g2 = pickle.loads(pickle.dumps(g))
+    np.testing.assert_array_equal(g2.z, g.z)
+    np.testing.assert_array_equal(g2.xs, g.xs)
+    assert g2.attrs == {"name": "x"} and g2._cache == {} and not g2.z.flags.writeable
+    t2 = pickle.loads(pickle.dumps(tin))
+    np.testing.assert_array_equal(t2.faces, tin.faces)
+    assert t2.meta["method"] == "m"

@@ -1,0 +1,246 @@
+"""Figures: hillshades, LOS pairs, accuracy against size, and the speed/accuracy trade-off.
+
+This is the only module of terrainvis that imports matplotlib. Every function returns a
+:class:`matplotlib.figure.Figure` and never calls ``show()``; in a notebook the figure
+displays itself, and the CLI saves it as a PNG.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from matplotlib.colors import LightSource
+from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
+
+from ._validate import as_points, describe
+from .terrain import TIN, HeightGrid, as_terrain
+
+__all__ = ["hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff"]
+
+_METHOD_STYLE = {
+    "simple": ("tab:gray", "o"), "gls": ("tab:blue", "s"), "lls": ("tab:cyan", "D"),
+    "feature": ("tab:green", "^"), "qec": ("tab:red", "v"), "greedy-insertion": ("tab:orange", "P"),
+    "greedy-cuts": ("tab:purple", "X"),
+}
+
+
+def _shade_image(terrain, resolution: int | None = None):
+    """An RGB hillshade image of a terrain and its extent (TINs are rasterised)."""
+    if isinstance(terrain, HeightGrid) and terrain.is_uniform:
+        z, (xmin, xmax, ymin, ymax) = terrain.z, terrain.extent
+        dx, dy = terrain.dx, terrain.dy
+    else:
+        xmin, xmax, ymin, ymax = terrain.extent
+        n = resolution or 400
+        xs = np.linspace(xmin, xmax, n)
+        ys = np.linspace(ymin, ymax, max(2, int(round(n * (ymax - ymin) / (xmax - xmin)))))
+        if isinstance(terrain, TIN):
+            z = terrain.height_on_grid(xs, ys)
+        else:
+            X, Y = np.meshgrid(xs, ys)
+            z = terrain.height_at(np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
+        dx, dy = xs[1] - xs[0], ys[1] - ys[0]
+    zf = np.where(np.isnan(z), np.nanmin(z), z)
+    import matplotlib as mpl
+
+    ls = LightSource(azdeg=315, altdeg=45)
+    # imshow with origin="lower" puts row 0 at the bottom, i.e. y grows upwards (north).
+    # LightSource assumes row 0 at the top, so shade the flipped array and flip back.
+    rgb = ls.shade(zf[::-1], cmap=mpl.colormaps["terrain"], vert_exag=1.0, dx=dx, dy=dy, blend_mode="soft")[::-1]
+    rgb[np.isnan(z)] = (1.0, 1.0, 1.0, 1.0)
+    return rgb, (xmin, xmax, ymin, ymax)
+
+
+def _draw_terrain(ax, terrain, *, wireframe: bool = True, title: str | None = None):
+    rgb, extent = _shade_image(terrain)
+    ax.imshow(rgb, origin="lower", extent=extent, interpolation="nearest")
+    if isinstance(terrain, TIN) and wireframe:
+        v = terrain.vertices
+        ax.triplot(v[:, 0], v[:, 1], terrain.faces, color="k", lw=0.25, alpha=0.5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    if title:
+        ax.set_title(title, fontsize=9)
+
+
+def hillshade(terrain, *, wireframe: bool = True, title: str | None = None, figsize=(6, 5)) -> Figure:
+    """A hillshade of a HeightGrid, or of a TIN with its wireframe.
+
+    Parameters
+    ----------
+    terrain : HeightGrid or TIN
+    wireframe : bool
+        Draw a TIN's edges.
+    title : str, optional
+    """
+    as_terrain(terrain)
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=wireframe, title=title or repr(terrain))
+    return fig
+
+
+def terrain_views(original: HeightGrid, simplified: dict, *, ncols: int = 4, panel_size: float = 3.2) -> Figure:
+    """The original terrain and its simplifications side by side.
+
+    Parameters
+    ----------
+    original : HeightGrid
+    simplified : dict of str to HeightGrid or TIN
+        Panel title -> simplified terrain.
+    """
+    as_terrain(original, "original")
+    if not isinstance(simplified, dict):
+        raise TypeError(f"simplified must be a dict of title -> terrain, got {describe(simplified)}")
+    panels = [("original", original)] + list(simplified.items())
+    nrows = int(np.ceil(len(panels) / ncols))
+    fig = Figure(figsize=(panel_size * ncols, panel_size * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax, (title, t) in zip(axes, panels):
+        as_terrain(t, f"simplified[{title!r}]")
+        n = t.size if isinstance(t, HeightGrid) else t.n_vertices
+        _draw_terrain(ax, t, title=f"{title} ({n} vertices)")
+    for ax in axes[len(panels):]:
+        ax.set_axis_off()
+    return fig
+
+
+def los_pairs(terrain, points, V_true, V_test, *, only_changed: bool = False, title: str | None = None,
+              figsize=(7, 6)) -> Figure:
+    """Line-of-sight pairs over a terrain, coloured by whether their verdict survived.
+
+    Colours: grey, the same verdict on both terrains; red, *false blocked* (visible on
+    the original, blocked on the simplification); blue, *false visible*.
+
+    Parameters
+    ----------
+    terrain : HeightGrid or TIN
+        Drawn as the background.
+    points : (n, 3) array_like
+    V_true, V_test : (n, n) bool
+        Visibility on the original and on the simplified terrain.
+    only_changed : bool
+        Draw only the pairs whose verdict changed.
+    """
+    as_terrain(terrain)
+    pts = as_points(points, "points", 3)
+    t = np.asarray(V_true, dtype=bool)
+    s = np.asarray(V_test, dtype=bool)
+    n = pts.shape[0]
+    if t.shape != (n, n) or s.shape != (n, n):
+        raise ValueError(f"V_true and V_test must have shape ({n}, {n}), got {t.shape} and {s.shape}")
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title)
+    i, j = np.triu_indices(n, k=1)
+    segs = np.stack([pts[i, :2], pts[j, :2]], axis=1)
+    same = t[i, j] == s[i, j]
+    false_blocked = t[i, j] & ~s[i, j]
+    false_visible = ~t[i, j] & s[i, j]
+    if not only_changed:
+        ax.add_collection(LineCollection(segs[same], colors="0.3", linewidths=0.3, alpha=0.35))
+    ax.add_collection(LineCollection(segs[false_blocked], colors="tab:red", linewidths=1.0))
+    ax.add_collection(LineCollection(segs[false_visible], colors="tab:blue", linewidths=1.0))
+    ax.plot(pts[:, 0], pts[:, 1], "k.", ms=4)
+    handles = [
+        Line2D([], [], color="0.3", lw=1, label=f"same verdict ({int(same.sum())})"),
+        Line2D([], [], color="tab:red", lw=1.5, label=f"false blocked ({int(false_blocked.sum())})"),
+        Line2D([], [], color="tab:blue", lw=1.5, label=f"false visible ({int(false_visible.sum())})"),
+    ]
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+
+
+def _check_df(df, needed):
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"df must be a pandas DataFrame from terrainvis.compare, got {describe(df)}")
+    missing = set(needed) - set(df.columns)
+    if missing:
+        raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
+    if "error" in df.columns:
+        df = df[df["error"].fillna("").astype(str) == ""]
+    return df
+
+
+def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
+    """Accuracy against terrain size (% of the original samples), per method and relocation.
+
+    One panel per relocation; each method is a line through its levels, with the
+    standard deviation over terrains x point sets as a band.
+    """
+    from simplifiers._registry import METHOD_ORDER
+
+    from .relocation import RELOCATIONS
+
+    data = _check_df(df, {"method", "relocation", "size_fraction", "accuracy", "level"})
+    rels = [r for r in RELOCATIONS if r in set(data["relocation"])]
+    fig = Figure(figsize=figsize or (4.2 * max(1, len(rels)), 3.8), layout="constrained")
+    axes = fig.subplots(1, max(1, len(rels)), squeeze=False, sharey=True).ravel()
+    for ax, rel in zip(axes, rels):
+        sub = data[data["relocation"] == rel]
+        for m in [m for m in METHOD_ORDER if m in set(sub["method"])]:
+            g = sub[sub["method"] == m].groupby("level").agg(
+                size=("size_fraction", "median"), mu=("accuracy", "mean"), sd=("accuracy", "std")
+            ).sort_values("size")
+            color, marker = _METHOD_STYLE.get(m, ("k", "o"))
+            x = 100 * g["size"].to_numpy()
+            mu = 100 * g["mu"].to_numpy()
+            sd = 100 * g["sd"].fillna(0).to_numpy()
+            ax.plot(x, mu, marker=marker, color=color, label=m)
+            ax.fill_between(x, mu - sd, mu + sd, color=color, alpha=0.08)
+        ax.set_xscale("log")
+        sizes = sorted({round(100 * v, 2) for v in sub.groupby("level")["size_fraction"].median()})
+        ax.set_xticks(sizes, [f"{v:g}%" for v in sizes])
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_title(f"relocation: {rel}", fontsize=10)
+        ax.set_xlabel("size of S(T) (% of samples of T)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("accuracy (% of pairs agreeing)")
+    axes[-1].legend(fontsize=8, loc="lower right")
+    return fig
+
+
+def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=(10, 4)) -> Figure:
+    """What simplification buys against what it costs.
+
+    Left: LOS speedup (time on T / time on S(T)) against accuracy lost; right: memory
+    (bytes of S(T) / bytes of T) against accuracy lost. One point per method and level
+    (medians over terrains and point sets), for one relocation.
+    """
+    data = _check_df(df, {"method", "level", "relocation", "accuracy", "los_seconds", "los_seconds_original",
+                          "nbytes", "nbytes_original"})
+    data = data[data["relocation"] == relocation]
+    if data.empty:
+        raise ValueError(f"relocation {relocation!r} has no rows in df")
+    data = data.assign(
+        lost=100 * (1 - data["accuracy"]),
+        speedup=data["los_seconds_original"] / data["los_seconds"],
+        memory=data["nbytes"] / data["nbytes_original"],
+    )
+    g = data.groupby(["method", "level"]).agg(lost=("lost", "mean"), speedup=("speedup", "median"), memory=("memory", "median"))
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax1, ax2 = fig.subplots(1, 2)
+    for (m, lv), row in g.iterrows():
+        color, marker = _METHOD_STYLE.get(m, ("k", "o"))
+        for ax, col in ((ax1, "speedup"), (ax2, "memory")):
+            ax.scatter(row["lost"], row[col], color=color, marker=marker, label=m if lv == g.loc[m].index.min() else None)
+            ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax1.set_yscale("log")
+    ax2.set_yscale("log")
+    ax1.axhline(1.0, color="k", lw=0.5)
+    ax2.axhline(1.0, color="k", lw=0.5)
+    ax1.set_xlabel("accuracy lost (percentage points)")
+    ax2.set_xlabel("accuracy lost (percentage points)")
+    ax1.set_ylabel("LOS speedup on S(T) (×)")
+    ax2.set_ylabel("memory of S(T) / memory of T")
+    ax1.set_title(f"speed gained ({relocation}; labels: level)", fontsize=10)
+    ax2.set_title("memory kept", fontsize=10)
+    ax2.legend(fontsize=8)
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+    return fig
