@@ -210,7 +210,7 @@ def _frame(rows: list[dict]) -> pd.DataFrame:
     for col in COLUMNS:
         if col not in df.columns:
             df[col] = np.nan
-    df["error"] = df["error"].fillna("").astype(str)
+    df["error"] = df["error"].astype(object).fillna("").astype(str)
     return df[list(COLUMNS)]
 
 
@@ -223,7 +223,7 @@ def _read_done(path: Path, settings: _Settings) -> tuple[pd.DataFrame, set]:
     missing = [c for c in COLUMNS if c not in old.columns]
     if missing:
         raise ValueError(f"out_csv {str(path)!r} is not a terrainvis results file (missing columns {missing})")
-    old["error"] = old["error"].fillna("").astype(str)
+    old["error"] = old["error"].astype(object).fillna("").astype(str)
     same = (
         (old["n_points"] == settings.n_points) & (old["seed"] == settings.seed) & (old["offset"] == settings.offset)
         & ((old["max_distance"].isna()) if settings.max_distance is None else (old["max_distance"] == settings.max_distance))

@@ -94,6 +94,12 @@ def volume_error(fine: HeightGrid, coarse) -> float:
         coarse = coarse.to_tin()
     if not np.allclose(coarse.extent, fine.extent, rtol=0, atol=1e-9 * (1 + np.abs(fine.extent).max())):
         raise ValueError(f"coarse must cover the extent of fine {fine.extent}, got {coarse.extent}")
+    xmin, xmax, ymin, ymax = fine.extent
+    area = (xmax - xmin) * (ymax - ymin)
+    if abs(coarse.footprint_area() - area) > 1e-9 * area:
+        raise ValueError(
+            f"coarse must cover the footprint of fine (area {area:g}), but its faces cover {coarse.footprint_area():g}"
+        )
     ft = fine.to_tin()
     # A local origin keeps the coordinates small (UTM northings lose digits otherwise).
     origin = np.array([fine.xs[0], fine.ys[0], 0.0])
