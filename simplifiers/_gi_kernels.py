@@ -1,0 +1,428 @@
+"""Numba loops for greedy insertion (Garland & Heckbert 1995, Algorithm III).
+
+Kernels loop and never validate: :mod:`simplifiers.greedy_insertion` checks the input.
+
+Geometry is done in *index space*: a vertex is a grid sample ``(col, row)`` held as
+integers, so orientation tests and scan conversion are exact integer arithmetic (points
+on edges and on grid lines are detected exactly). The in-circle test of the Delaunay
+flips uses the cell aspect ratio ``ratio = (dy / dx) ** 2``: with integer coordinates
+relative to the query point it splits into two exact int64 determinants ``D1 + ratio *
+D2``, so it is exact for square cells (``ratio == 1``) and for cocircular axis-aligned
+rectangles under any ratio.
+
+Data layout (half-edge, as in Delaunator): triangle ``t`` has half-edges ``3t, 3t+1,
+3t+2``; half-edge ``e`` runs from vertex ``tri[e]`` to ``tri[next(e)]`` and every triangle
+is counter-clockwise with x = column and y = row; ``half[e]`` is the twin half-edge in the
+neighbouring triangle or -1 on the grid boundary.
+
+Each triangle keeps one candidate: the non-vertex grid sample in its closure with the
+largest vertical error (``cand[t]``, the flat index ``row * W + col``, or -1 when the
+triangle holds no sample besides its corners) and that error ``terr[t]``. Triangles with a
+candidate sit in an indexed binary max-heap (``heap``, ``hval``, ``pos[t]`` = heap slot
+or -1), so a triangle's entry can be updated or removed when it changes.
+
+Limits: the in-circle determinants are exact in int64 for grids up to about 30,000
+samples per side; triangle and half-edge indices are int32 (grids below about 350 million
+samples).
+
+``counts`` holds the state that persists between calls: ``[n_vertices, n_triangles,
+heap_size, n_flips, n_edge_splits]``.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
+
+
+# ----------------------------------------------------------------- predicates
+@nb.njit(cache=True, nogil=True, inline="always")
+def _orient(ax, ay, bx, by, cx, cy):
+    """Twice the signed area of (a, b, c): > 0 counter-clockwise, 0 collinear (exact int64)."""
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+
+
+@nb.njit(cache=True, nogil=True)
+def _in_circle(ax, ay, bx, by, cx, cy, px, py, ratio):
+    """True when p lies strictly inside the circumcircle of the counter-clockwise (a, b, c).
+
+    Coordinates are integer grid indices; the circle is taken in the scaled space
+    (col * dx, row * dy), ``ratio = (dy / dx) ** 2``.
+    """
+    ax -= px
+    ay -= py
+    bx -= px
+    by -= py
+    cx -= px
+    cy -= py
+    # det[i, j, i^2] and det[i, j, j^2] over the rows a, b, c (exact int64)
+    m_ab = ax * by - bx * ay
+    m_bc = bx * cy - cx * by
+    m_ca = cx * ay - ax * cy
+    d1 = ax * ax * m_bc + bx * bx * m_ca + cx * cx * m_ab
+    d2 = ay * ay * m_bc + by * by * m_ca + cy * cy * m_ab
+    if ratio == 1.0:
+        return d1 + d2 > 0
+    return float(d1) + ratio * float(d2) > 0.0
+
+
+# ------------------------------------------------------------ scan conversion
+@nb.njit(cache=True, nogil=True)
+def _edge_span(ux, uy, vx, vy, py, lo, hi):
+    """Narrow [lo, hi] to the columns px with orient(u, v, (px, py)) >= 0 (exact)."""
+    a = -(vy - uy)
+    b = (vx - ux) * (py - uy) + (vy - uy) * ux
+    if a > 0:
+        m = -(b // a)  # ceil(-b / a)
+        if m > lo:
+            lo = m
+    elif a < 0:
+        m = b // (-a)  # floor(b / -a)
+        if m < hi:
+            hi = m
+    elif b < 0:
+        hi = lo - 1
+    return lo, hi
+
+
+@nb.njit(cache=True, nogil=True)
+def scan_triangle(z, W, ax, ay, bx, by, cx, cy):
+    """Largest vertical error over the grid samples in the closed triangle (a, b, c).
+
+    Parameters
+    ----------
+    z : (H * W,) float64
+        Heights, row-major.
+    W : int
+        Columns.
+    ax, ay, bx, by, cx, cy : int
+        Counter-clockwise corners as (col, row).
+
+    Returns
+    -------
+    (err, idx) : (float, int)
+        The error of the worst sample other than the three corners and its flat index
+        (the first in row-major order on ties), or (-1.0, -1) when the triangle holds no
+        other sample.
+    """
+    area = float(_orient(ax, ay, bx, by, cx, cy))
+    za = z[ay * W + ax]
+    zb = z[by * W + bx]
+    zc = z[cy * W + cx]
+    gx = (-(zb - za) * (ay - cy) - (zc - za) * (by - ay)) / area
+    gy = ((zb - za) * (ax - cx) + (zc - za) * (bx - ax)) / area
+    ymin = min(ay, by, cy)
+    ymax = max(ay, by, cy)
+    xmin = min(ax, bx, cx)
+    xmax = max(ax, bx, cx)
+    best = -1.0
+    best_idx = -1
+    for py in range(ymin, ymax + 1):
+        lo, hi = _edge_span(ax, ay, bx, by, py, xmin, xmax)
+        lo, hi = _edge_span(bx, by, cx, cy, py, lo, hi)
+        lo, hi = _edge_span(cx, cy, ax, ay, py, lo, hi)
+        if lo > hi:
+            continue
+        base = za - gx * ax + gy * (py - ay)
+        row = py * W
+        for px in range(lo, hi + 1):
+            d = abs(base + gx * px - z[row + px])
+            if d > best:
+                if (px == ax and py == ay) or (px == bx and py == by) or (px == cx and py == cy):
+                    continue
+                best = d
+                best_idx = row + px
+    return best, best_idx
+
+
+# ---------------------------------------------------------------- the max-heap
+@nb.njit(cache=True, nogil=True)
+def _heap_up(heap, hval, pos, i):
+    t = heap[i]
+    v = hval[i]
+    while i > 0:
+        p = (i - 1) >> 1
+        if hval[p] >= v:
+            break
+        heap[i] = heap[p]
+        hval[i] = hval[p]
+        pos[heap[i]] = i
+        i = p
+    heap[i] = t
+    hval[i] = v
+    pos[t] = i
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_down(heap, hval, pos, i, n):
+    t = heap[i]
+    v = hval[i]
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and hval[c + 1] > hval[c]:
+            c += 1
+        if hval[c] <= v:
+            break
+        heap[i] = heap[c]
+        hval[i] = hval[c]
+        pos[heap[i]] = i
+        i = c
+    heap[i] = t
+    hval[i] = v
+    pos[t] = i
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_remove(heap, hval, pos, counts, t):
+    i = pos[t]
+    pos[t] = -1
+    n = counts[NH] - 1
+    counts[NH] = n
+    if i == n:
+        return
+    heap[i] = heap[n]
+    hval[i] = hval[n]
+    pos[heap[i]] = i
+    if i > 0 and hval[i] > hval[(i - 1) >> 1]:
+        _heap_up(heap, hval, pos, i)
+    else:
+        _heap_down(heap, hval, pos, i, n)
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_set(heap, hval, pos, counts, t, v):
+    i = pos[t]
+    if i < 0:
+        i = counts[NH]
+        counts[NH] = i + 1
+        heap[i] = t
+        hval[i] = v
+        pos[t] = i
+        _heap_up(heap, hval, pos, i)
+        return
+    old = hval[i]
+    hval[i] = v
+    if v > old:
+        _heap_up(heap, hval, pos, i)
+    elif v < old:
+        _heap_down(heap, hval, pos, i, counts[NH])
+
+
+# ------------------------------------------------------------ triangulation
+@nb.njit(cache=True, nogil=True, inline="always")
+def _link(half, a, b):
+    half[a] = b
+    if b >= 0:
+        half[b] = a
+
+
+@nb.njit(cache=True, nogil=True)
+def _set_tri(tri, half, pend, pmark, npend, t, p0, p1, p2, h0, h1, h2):
+    """Write triangle t = (p0, p1, p2), link its half-edges to h0, h1, h2, mark it for a rescan."""
+    e = 3 * t
+    tri[e] = p0
+    tri[e + 1] = p1
+    tri[e + 2] = p2
+    _link(half, e, h0)
+    _link(half, e + 1, h1)
+    _link(half, e + 2, h2)
+    if not pmark[t]:
+        pmark[t] = True
+        pend[npend] = t
+        npend += 1
+    return npend
+
+
+@nb.njit(cache=True, nogil=True)
+def _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, a_start, ratio):
+    """Restore the Delaunay property around half-edge ``a_start`` by in-circle edge flips."""
+    top = 0
+    stack[top] = a_start
+    top += 1
+    while top > 0:
+        top -= 1
+        a = stack[top]
+        b = half[a]
+        if b < 0:
+            continue
+        a0 = a - a % 3
+        b0 = b - b % 3
+        al = a0 + (a + 1) % 3
+        ar = a0 + (a + 2) % 3
+        bl = b0 + (b + 2) % 3
+        br = b0 + (b + 1) % 3
+        p0 = tri[ar]
+        pr = tri[a]
+        pl = tri[al]
+        p1 = tri[bl]
+        if not _in_circle(vx[p0], vy[p0], vx[pr], vy[pr], vx[pl], vy[pl], vx[p1], vy[p1], ratio):
+            continue
+        # flip the edge pr-pl of triangles (pr, pl, p0) and (pl, pr, p1) to p0-p1
+        tri[a] = p1
+        tri[b] = p0
+        hbl = half[bl]
+        har = half[ar]
+        _link(half, a, hbl)
+        _link(half, b, har)
+        _link(half, ar, bl)
+        counts[NFLIP] += 1
+        ta = a0 // 3
+        tb = b0 // 3
+        if not pmark[ta]:
+            pmark[ta] = True
+            pend[npend] = ta
+            npend += 1
+        if not pmark[tb]:
+            pmark[tb] = True
+            pend[npend] = tb
+            npend += 1
+        stack[top] = br
+        top += 1
+        stack[top] = a
+        top += 1
+    return npend
+
+
+@nb.njit(cache=True, nogil=True)
+def _rescan(z, W, vx, vy, tri, cand, terr, heap, hval, pos, pend, pmark, npend, counts):
+    for k in range(npend):
+        t = pend[k]
+        pmark[t] = False
+        e = 3 * t
+        i0 = tri[e]
+        i1 = tri[e + 1]
+        i2 = tri[e + 2]
+        err, idx = scan_triangle(z, W, vx[i0], vy[i0], vx[i1], vy[i1], vx[i2], vy[i2])
+        cand[t] = idx
+        terr[t] = err
+        if idx < 0:
+            if pos[t] >= 0:
+                _heap_remove(heap, hval, pos, counts, t)
+        else:
+            _heap_set(heap, hval, pos, counts, t, err)
+
+
+@nb.njit(cache=True, nogil=True)
+def init_state(z, W, H, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pmark, counts):
+    """The two triangles over the four corners, split along (0, 0)-(W-1, H-1), scanned."""
+    x1 = W - 1
+    y1 = H - 1
+    vx[0] = 0
+    vy[0] = 0
+    vx[1] = x1
+    vy[1] = 0
+    vx[2] = x1
+    vy[2] = y1
+    vx[3] = 0
+    vy[3] = y1
+    counts[NV] = 4
+    counts[NT] = 2
+    counts[NH] = 0
+    half[:6] = -1
+    npend = 0
+    npend = _set_tri(tri, half, pend, pmark, npend, 0, 0, 1, 2, -1, -1, -1)
+    npend = _set_tri(tri, half, pend, pmark, npend, 1, 0, 2, 3, 2, -1, -1)
+    _rescan(z, W, vx, vy, tri, cand, terr, heap, hval, pos, pend, pmark, npend, counts)
+
+
+@nb.njit(cache=True, nogil=True)
+def run(z, W, ratio, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pmark, stack, counts,
+        n_target, max_error):
+    """Insert the worst candidate until there are ``n_target`` vertices, no candidate is left,
+    or the worst error is <= ``max_error`` (ignored when negative).
+
+    Returns the largest vertical error of the current TIN over all grid samples.
+    """
+    while counts[NV] < n_target and counts[NH] > 0:
+        if max_error >= 0.0 and hval[0] <= max_error:
+            break
+        t = heap[0]
+        _heap_remove(heap, hval, pos, counts, t)
+        idx = cand[t]
+        px = idx % W
+        py = idx // W
+        pn = counts[NV]
+        vx[pn] = px
+        vy[pn] = py
+        counts[NV] = pn + 1
+
+        e0 = 3 * t
+        p0 = tri[e0]
+        p1 = tri[e0 + 1]
+        p2 = tri[e0 + 2]
+        on = -1
+        if _orient(vx[p0], vy[p0], vx[p1], vy[p1], px, py) == 0:
+            on = e0
+        elif _orient(vx[p1], vy[p1], vx[p2], vy[p2], px, py) == 0:
+            on = e0 + 1
+        elif _orient(vx[p2], vy[p2], vx[p0], vy[p0], px, py) == 0:
+            on = e0 + 2
+        npend = 0
+        nt = counts[NT]
+        if on < 0:
+            # strictly inside: split in 3
+            h0 = half[e0]
+            h1 = half[e0 + 1]
+            h2 = half[e0 + 2]
+            t0 = t
+            t1 = nt
+            t2 = nt + 1
+            counts[NT] = nt + 2
+            npend = _set_tri(tri, half, pend, pmark, npend, t0, p0, p1, pn, h0, -1, -1)
+            npend = _set_tri(tri, half, pend, pmark, npend, t1, p1, p2, pn, h1, -1, 3 * t0 + 1)
+            npend = _set_tri(tri, half, pend, pmark, npend, t2, p2, p0, pn, h2, 3 * t0 + 2, 3 * t1 + 1)
+            npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t0, ratio)
+            npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1, ratio)
+            npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t2, ratio)
+        else:
+            counts[NEDGE] += 1
+            a = on
+            an = e0 + (a + 1) % 3
+            ap = e0 + (a + 2) % 3
+            pa = tri[a]
+            pb = tri[an]
+            pc = tri[ap]
+            h_bc = half[an]
+            h_ca = half[ap]
+            b = half[a]
+            if b < 0:
+                # on a boundary edge: split in 2
+                t0 = t
+                t1 = nt
+                counts[NT] = nt + 1
+                npend = _set_tri(tri, half, pend, pmark, npend, t0, pn, pb, pc, -1, h_bc, -1)
+                npend = _set_tri(tri, half, pend, pmark, npend, t1, pn, pc, pa, 3 * t0 + 2, h_ca, -1)
+                npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t0 + 1, ratio)
+                npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1 + 1, ratio)
+            else:
+                # on an interior edge: split both triangles, 4 in all
+                b0 = b - b % 3
+                bn = b0 + (b + 1) % 3
+                bp = b0 + (b + 2) % 3
+                pd = tri[bp]
+                h_ad = half[bn]
+                h_db = half[bp]
+                tb = b0 // 3
+                if pos[tb] >= 0:
+                    _heap_remove(heap, hval, pos, counts, tb)
+                t0 = t
+                t1 = nt
+                t2 = tb
+                t3 = nt + 1
+                counts[NT] = nt + 2
+                npend = _set_tri(tri, half, pend, pmark, npend, t0, pn, pb, pc, -1, h_bc, -1)
+                npend = _set_tri(tri, half, pend, pmark, npend, t1, pn, pc, pa, 3 * t0 + 2, h_ca, -1)
+                npend = _set_tri(tri, half, pend, pmark, npend, t2, pn, pa, pd, 3 * t1 + 2, h_ad, -1)
+                npend = _set_tri(tri, half, pend, pmark, npend, t3, pn, pd, pb, 3 * t2 + 2, h_db, 3 * t0)
+                npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t0 + 1, ratio)
+                npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1 + 1, ratio)
+                npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t2 + 1, ratio)
+                npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t3 + 1, ratio)
+        _rescan(z, W, vx, vy, tri, cand, terr, heap, hval, pos, pend, pmark, npend, counts)
+    if counts[NH] > 0:
+        return max(hval[0], 0.0)
+    return 0.0
