@@ -32,7 +32,7 @@ from ._validate import as_int, describe
 from .relocation import RELOCATIONS
 from .terrain import HeightGrid
 
-__all__ = ["compare", "resolve_terrains", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW", "COLUMNS"]
+__all__ = ["compare", "resolve_terrains", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW", "COLUMNS", "VOLUME_AUTO_LIMIT"]
 
 #: The default terrains: the five bundled 120x120 terrains and a 120x120 window of the real Jacksboro DEM.
 DEFAULT_TERRAINS = ("hills", "mesas", "rough", "mountains", "ridges", "jacksboro")
@@ -156,8 +156,16 @@ class _Settings:
     max_distance: float | None
     offset: float
     engine: str
-    volume: bool
+    volume: object
     repeats: int
+
+
+#: Largest grid (samples) for which ``volume="auto"`` computes the volume shape error.
+VOLUME_AUTO_LIMIT = 1_000_000
+
+
+def _want_volume(volume, grid: HeightGrid) -> bool:
+    return bool(volume) if volume != "auto" else grid.size <= VOLUME_AUTO_LIMIT
 
 
 def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings: _Settings) -> list[dict]:
@@ -182,7 +190,7 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
         base.update(
             n_vertices=meta["n_vertices"], size_fraction=meta["n_vertices"] / grid.size, nbytes=meta["nbytes"],
             max_error=meta["max_error"], rms_error=meta["rms_error"], simplify_seconds=meta["seconds"],
-            volume_error=volume_error(grid, simplified) if settings.volume else np.nan,
+            volume_error=volume_error(grid, simplified) if _want_volume(settings.volume, grid) else np.nan,
         )
         # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
         t0 = time.perf_counter()
@@ -275,7 +283,7 @@ def compare(
     *,
     offset: float = 0.0,
     engine: str = "auto",
-    volume: bool = True,
+    volume="auto",
     repeats: int = 3,
     out_csv=None,
     resume: bool = False,
@@ -310,8 +318,10 @@ def compare(
         Observer height above the original surface (see :mod:`terrainvis.relocation`).
     engine : str
         Visibility engine (:func:`terrainvis.visibility_matrix`).
-    volume : bool
-        Compute the volume shape error with manifold3d (costly on very large grids).
+    volume : bool or "auto"
+        Compute the volume shape error with manifold3d. It builds closed solids of both
+        terrains, which takes minutes and gigabytes at SRTM sizes; ``"auto"`` computes it
+        for grids of at most :data:`VOLUME_AUTO_LIMIT` samples and leaves NaN above.
     repeats : int
         Each visibility matrix is timed this many times; the fastest run is kept.
     out_csv : str or Path, optional
@@ -358,7 +368,9 @@ def compare(
         max_distance = float(max_distance)
         if not np.isfinite(max_distance) or max_distance <= 0:
             raise ValueError(f"max_distance must be finite and > 0, got {max_distance!r}")
-    settings = _Settings(relocations, n_points, n_sets, seed, max_distance, float(offset), engine, bool(volume), repeats)
+    if volume not in (True, False, "auto"):
+        raise ValueError(f"volume must be True, False or 'auto', got {volume!r}")
+    settings = _Settings(relocations, n_points, n_sets, seed, max_distance, float(offset), engine, volume, repeats)
 
     units = [(t, m, lv) for t in grids for m in methods for lv in levels]
     done_rows = _frame([])
