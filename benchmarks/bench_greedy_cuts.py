@@ -1,0 +1,117 @@
+"""Greedy cuts: terrainvis (numba advancing front + ε search) against pydelatin at the same vertex count.
+
+Run:  python benchmarks/bench_greedy_cuts.py [--repeats 3] [--kinds hills mountains ...] [--big-size 1024]
+      [--big-kinds mountains rough] [--no-big]
+
+Part 1, 120x120: for each bundled terrain, ``build`` at levels 1, 2, 3 (budgets 3,600, 900
+and 225 vertices, including the whole search on ε), ``repeats`` times; it prints the
+median seconds per level and for the three levels together (target <= 5 s), the runs
+(triangulations) the search needed, the ε reached (= our guaranteed max error) and the
+measured max error, and pydelatin (greedy insertion, C++) at the same vertex count: its
+median seconds and its max error. Part 2: level 2 of a ``--big-size`` synthetic terrain
+(budget (size/4)^2 = 65,536 for 1024; target <= 60 s), once, with the same columns.
+
+Greedy cuts is not expected to beat greedy insertion on max error at a fixed count: it
+guarantees ε by construction but grows the front greedily from the boundary, while
+greedy insertion always fixes the worst sample. The comparison shows the price. Timings
+on a shared machine are noisy: medians, and ratios measured in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+from simplifiers._registry import vertex_budget
+from simplifiers.greedy_cuts import build, greedy_cuts
+from terrainvis import TIN, HeightGrid, bundled_terrain, synthetic_terrain
+from terrainvis.metrics import vertical_errors
+from terrainvis.synthetic import KINDS
+
+
+def pydelatin_max_error(z: np.ndarray, n: int) -> tuple[float, float]:
+    """Seconds and max vertical error of pydelatin's TIN with ``n`` vertices on the unit grid of ``z``."""
+    import pydelatin
+
+    t0 = time.perf_counter()
+    d = pydelatin.Delatin(np.ascontiguousarray(z), max_error=0.0, max_points=int(n))
+    seconds = time.perf_counter() - t0
+    xy = np.rint(d.vertices[:, :2]).astype(np.int64)
+    c, r = xy[:, 0], z.shape[0] - 1 - xy[:, 1]  # pydelatin's y is H - 1 - row
+    v = np.column_stack([c, r, z[r, c]]).astype(np.float64)
+    f = d.triangles.astype(np.int64)
+    e = v[f]
+    nz = (e[:, 1, 0] - e[:, 0, 0]) * (e[:, 2, 1] - e[:, 0, 1]) - (e[:, 2, 0] - e[:, 0, 0]) * (e[:, 1, 1] - e[:, 0, 1])
+    tin = TIN(v, np.where((nz < 0)[:, None], f[:, ::-1], f))
+    return seconds, vertical_errors(HeightGrid(z), tin)[0]
+
+
+def one(grid: HeightGrid, budget: int):
+    t0 = time.perf_counter()
+    tin = build(grid, budget)
+    return time.perf_counter() - t0, tin
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--kinds", nargs="+", default=list(KINDS))
+    ap.add_argument("--big-size", type=int, default=1024)
+    ap.add_argument("--big-kinds", nargs="+", default=["mountains", "rough"])
+    ap.add_argument("--no-big", action="store_true")
+    args = ap.parse_args(argv)
+
+    greedy_cuts(HeightGrid(np.random.default_rng(0).normal(size=(9, 9))), 0.5)  # compile / load the numba cache
+    print(f"greedy cuts, 120x120 bundled terrains, levels 1-3, median of {args.repeats} runs each")
+    head = (
+        f"{'terrain':<10} {'lvl':>3} {'budget':>6} {'verts':>6} {'runs':>4} {'ours s':>7} "
+        f"{'eps':>9} {'max err':>9} {'delatin s':>9} {'delatin err':>11} {'err ratio':>9}"
+    )
+    print(head)
+    totals = []
+    for kind in args.kinds:
+        grid = bundled_terrain(kind)
+        per_level = []
+        for level in (1, 2, 3):
+            budget = vertex_budget(grid.shape, level)
+            times, tin = [], None
+            for _ in range(args.repeats):
+                s, tin = one(grid, budget)
+                times.append(s)
+            dt = [pydelatin_max_error(grid.z, tin.n_vertices) for _ in range(args.repeats)]
+            d_s = statistics.median(t for t, _ in dt)
+            d_err = dt[0][1]
+            err = vertical_errors(grid, tin)[0]
+            per_level.append(times)
+            print(
+                f"{kind:<10} {level:>3} {budget:>6} {tin.n_vertices:>6} {tin.meta['runs']:>4} "
+                f"{statistics.median(times):>7.3f} {tin.meta['epsilon']:>9.4g} {err:>9.4g} {d_s:>9.4f} "
+                f"{d_err:>11.4g} {err / d_err if d_err else float('nan'):>9.2f}"
+            )
+        total = [sum(ts) for ts in zip(*per_level)]
+        totals.append(statistics.median(total))
+        print(f"{kind:<10} all three levels: median {statistics.median(total):.3f} s (target <= 5 s)")
+    print(f"worst terrain, all three levels: {max(totals):.3f} s")
+
+    if args.no_big:
+        return
+    size = args.big_size
+    for kind in args.big_kinds:
+        grid = synthetic_terrain(kind, size=size, seed=0)
+        budget = vertex_budget(grid.shape, 2)
+        s, tin = one(grid, budget)
+        err = vertical_errors(grid, tin)[0]
+        d_s, d_err = pydelatin_max_error(grid.z, tin.n_vertices)
+        print(
+            f"{kind} {size}x{size} level 2: budget {budget}, {tin.n_vertices} vertices, {tin.meta['runs']} runs, "
+            f"{s:.2f} s (target <= 60 s), eps {tin.meta['epsilon']:.4g}, max err {err:.4g}; "
+            f"pydelatin {d_s:.3f} s, max err {d_err:.4g} (ratio ours/pydelatin: time {s / d_s:.1f}, "
+            f"error {err / d_err:.2f})"
+        )
+
+
+if __name__ == "__main__":
+    main()
