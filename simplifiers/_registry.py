@@ -194,7 +194,8 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options):
         )
     t0 = time.perf_counter()
     if grid.shape == (2, 2) or budget == grid.size:
-        tin = TIN(grid.to_tin().vertices, grid.to_tin().faces)
+        own = grid.to_tin()
+        tin = TIN(own.vertices, own.faces)  # a fresh object: its meta must not touch the grid's cached TIN
     else:
         build = info.load()
         try:
