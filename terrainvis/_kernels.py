@@ -160,3 +160,37 @@ def largest_valid_rectangle(valid):
             stack[top] = c
             top += 1
     return br0, br1, bc0, bc1
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_on_grid(xs, ys, z, qx, qy, out):
+    """Evaluate the grid surface (xs, ys, z) at every node (qx[j], qy[i]) of another grid.
+
+    The query nodes are separable, so each column's cell and u, and each row's cell and
+    v, are found once. Nodes outside the extent stay as pre-filled by the caller (NaN).
+    """
+    nc = xs.shape[0]
+    nr = ys.shape[0]
+    cidx = np.empty(qx.shape[0], dtype=np.int64)
+    uu = np.empty(qx.shape[0])
+    for j in range(qx.shape[0]):
+        c = min(max(np.searchsorted(xs, qx[j], side="right") - 1, 0), nc - 2)
+        cidx[j] = c
+        uu[j] = (qx[j] - xs[c]) / (xs[c + 1] - xs[c])
+    for i in range(qy.shape[0]):
+        y = qy[i]
+        if not (y >= ys[0] and y <= ys[nr - 1]):
+            continue
+        r = min(max(np.searchsorted(ys, y, side="right") - 1, 0), nr - 2)
+        v = (y - ys[r]) / (ys[r + 1] - ys[r])
+        for j in range(qx.shape[0]):
+            x = qx[j]
+            if not (x >= xs[0] and x <= xs[nc - 1]):
+                continue
+            c = cidx[j]
+            u = uu[j]
+            z00 = z[r, c]
+            if u >= v:
+                out[i, j] = z00 + u * (z[r, c + 1] - z00) + v * (z[r + 1, c + 1] - z[r, c + 1])
+            else:
+                out[i, j] = z00 + v * (z[r + 1, c] - z00) + u * (z[r + 1, c + 1] - z[r + 1, c])

@@ -30,7 +30,7 @@ def vertical_errors(fine: HeightGrid, coarse) -> tuple[float, float]:
     if isinstance(coarse, TIN):
         approx = coarse.height_on_grid(fine.xs, fine.ys)
     elif isinstance(coarse, HeightGrid):
-        approx = coarse.height_at(fine.sample_xy()).reshape(fine.shape)
+        approx = coarse.height_on_grid(fine.xs, fine.ys)
     else:
         raise TypeError(f"coarse must be a terrainvis.HeightGrid or terrainvis.TIN, got {describe(coarse)}")
     valid = np.isfinite(fine.z)

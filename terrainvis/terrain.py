@@ -243,6 +243,18 @@ class HeightGrid:
         )
         return out
 
+    def height_on_grid(self, xs, ys) -> np.ndarray:
+        """Heights at every node of another rectilinear grid, shape (len(ys), len(xs)).
+
+        The same surface as :meth:`height_at` (NaN outside the extent), evaluated without
+        building the (len(ys) * len(xs), 2) array of query points.
+        """
+        qx = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
+        qy = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
+        out = np.full((qy.size, qx.size), np.nan)
+        _kernels.grid_on_grid(self.xs, self.ys, self.z, qx, qy, out)
+        return out
+
     def sample_xy(self) -> np.ndarray:
         """(rows*cols, 2) coordinates of every sample in row-major order."""
         X, Y = np.meshgrid(self.xs, self.ys)

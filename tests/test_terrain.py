@@ -187,6 +187,18 @@ def test_tin_is_the_same_surface(g, seed):
     np.testing.assert_allclose(tin.height_on_grid(g.xs, g.ys), g.z, rtol=0, atol=1e-9 * scale)
 
 
+@settings(max_examples=40, deadline=None)
+@given(grids(), grids(max_side=12))
+def test_height_on_grid_equals_height_at(g, q):
+    # q supplies arbitrary query coordinates, partly outside g's extent
+    got = g.height_on_grid(q.xs, q.ys)
+    X, Y = np.meshgrid(q.xs, q.ys)
+    expect = g.height_at(np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(expect))
+    np.testing.assert_allclose(got, expect, rtol=1e-12, atol=1e-9 * (1 + np.abs(g.z).max()))
+    np.testing.assert_allclose(g.height_on_grid(g.xs, g.ys), g.z, rtol=1e-12, atol=1e-9)
+
+
 def test_to_tin_uses_the_r_c_to_r1_c1_diagonal():
     g = HeightGrid(np.zeros((2, 2)))
     faces = {tuple(sorted(f)) for f in g.to_tin().faces.tolist()}
