@@ -1,0 +1,496 @@
+"""Numba loops for line of sight (grid walk, min/max pyramid, TIN clipping).
+
+Kernels loop and never validate: the public functions in ``terrainvis.visibility``
+check their input, shift coordinates to a local origin and pass plain arrays.
+
+Pyramid layout
+--------------
+Level 0 is the cell itself (never stored: its surface is evaluated exactly from ``z``).
+Level ``L >= 1`` node ``(R, C)`` covers cells ``[R*2**L, (R+1)*2**L) x [C*2**L, (C+1)*2**L)``
+(clipped to the grid) and stores ``(min, max)`` of the height samples at the corners of
+those cells as float32, rounded outwards so the bounds stay conservative. Level ``L``
+starts at ``pyr[off[L]]`` and holds ``nyl[L] x nxl[L]`` nodes, two floats each.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+_INF = np.inf
+
+
+# --------------------------------------------------------------------------- pyramid
+@nb.njit(cache=True, nogil=True)
+def _f32_down(v):
+    f = np.float32(v)
+    if np.float64(f) > v:
+        f = np.nextafter(f, np.float32(-np.inf))
+    return f
+
+
+@nb.njit(cache=True, nogil=True)
+def _f32_up(v):
+    f = np.float32(v)
+    if np.float64(f) < v:
+        f = np.nextafter(f, np.float32(np.inf))
+    return f
+
+
+@nb.njit(cache=True, nogil=True)
+def build_pyramid(z, pyr, off, nxl, nyl, ltop):
+    """Fill the min/max pyramid (levels 1..ltop) of the height samples ``z``."""
+    nr, nc = z.shape
+    if ltop < 1:
+        return
+    # level 1: blocks of 2x2 cells -> up to 3x3 samples
+    nx = nxl[1]
+    ny = nyl[1]
+    base = off[1]
+    for R in range(ny):
+        r0 = 2 * R
+        r1 = min(r0 + 2, nr - 1)
+        for C in range(nx):
+            c0 = 2 * C
+            c1 = min(c0 + 2, nc - 1)
+            lo = _INF
+            hi = -_INF
+            for r in range(r0, r1 + 1):
+                for c in range(c0, c1 + 1):
+                    v = z[r, c]
+                    if v < lo:
+                        lo = v
+                    if v > hi:
+                        hi = v
+            k = base + 2 * (R * nx + C)
+            pyr[k] = _f32_down(lo)
+            pyr[k + 1] = _f32_up(hi)
+    for L in range(2, ltop + 1):
+        nx = nxl[L]
+        ny = nyl[L]
+        cnx = nxl[L - 1]
+        cny = nyl[L - 1]
+        base = off[L]
+        cbase = off[L - 1]
+        for R in range(ny):
+            for C in range(nx):
+                lo = np.float32(np.inf)
+                hi = np.float32(-np.inf)
+                for rr in range(2 * R, min(2 * R + 2, cny)):
+                    for cc in range(2 * C, min(2 * C + 2, cnx)):
+                        k = cbase + 2 * (rr * cnx + cc)
+                        if pyr[k] < lo:
+                            lo = pyr[k]
+                        if pyr[k + 1] > hi:
+                            hi = pyr[k + 1]
+                k = base + 2 * (R * nx + C)
+                pyr[k] = lo
+                pyr[k + 1] = hi
+
+
+# --------------------------------------------------------------------------- grid walk
+@nb.njit(cache=True, nogil=True)
+def _cell_height(z, xs, ys, ixw, iyw, r, c, x, y):
+    """Height of cell (r, c)'s surface at (x, y) (local coordinates clamped into the cell).
+
+    ``ixw[c] = 1 / (xs[c+1] - xs[c])`` and ``iyw[r] = 1 / (ys[r+1] - ys[r])``.
+    """
+    u = (x - xs[c]) * ixw[c]
+    v = (y - ys[r]) * iyw[r]
+    if u < 0.0:
+        u = 0.0
+    elif u > 1.0:
+        u = 1.0
+    if v < 0.0:
+        v = 0.0
+    elif v > 1.0:
+        v = 1.0
+    z00 = z[r, c]
+    z11 = z[r + 1, c + 1]
+    if u >= v:
+        z01 = z[r, c + 1]
+        return z00 + u * (z01 - z00) + v * (z11 - z01)
+    z10 = z[r + 1, c]
+    return z00 + v * (z10 - z00) + u * (z11 - z10)
+
+
+@nb.njit(cache=True, nogil=True)
+def _cell_min(z, xs, ys, ixw, iyw, r, c, ax, ay, az, dx, dy, dz, t0, t1, with_t0):
+    """Exact minimum clearance of the segment over [t0, t1] inside cell (r, c).
+
+    The clearance is linear on each side of the cell diagonal, so its minimum is at
+    t0, t1 or the diagonal crossing. ``with_t0`` False skips t0 (already evaluated as
+    the end of the previous cell: the surface is continuous).
+    """
+    m = az + t1 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
+    if with_t0:
+        e = az + t0 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
+        if e < m:
+            m = e
+    den = dx * ixw[c] - dy * iyw[r]
+    if den != 0.0:
+        td = ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
+        if td > t0 and td < t1:
+            e = az + td * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+            if e < m:
+                m = e
+    return m
+
+
+@nb.njit(cache=True, nogil=True)
+def _locate(v, iw, lo, hi, uniform, x):
+    """Index i in [lo, hi) with v[i] <= x < v[i+1] (clamped), v local coordinates from 0."""
+    if uniform:
+        # a guess from the first spacing, corrected against the coordinates below
+        i = int(x * iw[0])
+        if i < lo:
+            i = lo
+        elif i > hi - 1:
+            i = hi - 1
+        while i > lo and v[i] > x:
+            i -= 1
+        while i < hi - 1 and v[i + 1] <= x:
+            i += 1
+    else:
+        a = lo
+        b = hi
+        while b - a > 1:
+            mid = (a + b) >> 1
+            if v[mid] <= x:
+                a = mid
+            else:
+                b = mid
+        i = a
+    if i < lo:
+        i = lo
+    elif i > hi - 1:
+        i = hi - 1
+    return i
+
+
+@nb.njit(cache=True, nogil=True)
+def segment_min(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, ax, ay, az, dx, dy, dz, t0, t1, los, tol, sL, sR, sC, sT):
+    """Minimum clearance of the segment a + t*d over [t0, t1] (pyramid descent).
+
+    With ``los`` False the result is the exact minimum (nodes that cannot lower the
+    current best are skipped). With ``los`` True the walk stops as soon as the
+    clearance is known to drop below ``-tol`` and skips every node whose lower bound is
+    at least ``-tol``; the result is then only meaningful as ``result >= -tol``.
+    ``sL, sR, sC`` (int64) and ``sT`` (float64, 2 per entry) are scratch stacks of at
+    least ``3 * ltop + 4`` entries.
+
+    Every internal node of level >= 2 also probes the (true) clearance where the
+    segment crosses the node's two mid lines (the surface is linear along a grid line):
+    in ``los`` mode a mountain between the ends is found before the walk reaches it, and
+    for the exact minimum the probes lower ``best`` early so that more nodes are pruned.
+    """
+    ncx = xs.shape[0] - 1
+    ncy = ys.shape[0] - 1
+    best = _INF
+    sp = 0
+    sL[0] = ltop
+    sR[0] = 0
+    sC[0] = 0
+    sT[0] = t0
+    sT[1] = t1
+    sp = 1
+    last_t = -_INF
+    while sp > 0:
+        sp -= 1
+        L = sL[sp]
+        R = sR[sp]
+        C = sC[sp]
+        a0 = sT[2 * sp]
+        a1 = sT[2 * sp + 1]
+        if L == 0:
+            m = _cell_min(z, xs, ys, ixw, iyw, R, C, ax, ay, az, dx, dy, dz, a0, a1, a0 != last_t)
+            last_t = a1
+            if m < best:
+                best = m
+                if los and best < -tol:
+                    return best
+            continue
+        za0 = az + a0 * dz
+        za1 = az + a1 * dz
+        lo = min(za0, za1)
+        k = off[L] + 2 * (R * nxl[L] + C)
+        thr = -tol if los else best
+        if lo - pyr[k + 1] >= thr:
+            continue
+        if los:
+            hi = max(za0, za1)
+            if hi - pyr[k] < -tol:
+                return hi - pyr[k]
+        half = 1 << (L - 1)
+        cm = (C << L) + half
+        rm = (R << L) + half
+        splitx = cm < ncx
+        splity = rm < ncy
+        # crossing parameters of the two mid lines inside (a0, a1)
+        s1 = _INF
+        s2 = _INF
+        if splitx and dx != 0.0:
+            tx = (xs[cm] - ax) / dx
+            if tx > a0 and tx < a1:
+                s1 = tx
+                if L >= 2:
+                    yy = ay + tx * dy
+                    r = _locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
+                    v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
+                    e = az + tx * dz - (z[r, cm] + v * (z[r + 1, cm] - z[r, cm]))
+                    if e < best:
+                        best = e
+                        if los and best < -tol:
+                            return best
+        if splity and dy != 0.0:
+            ty = (ys[rm] - ay) / dy
+            if ty > a0 and ty < a1:
+                if L >= 2:
+                    xx = ax + ty * dx
+                    c = _locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
+                    u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
+                    e = az + ty * dz - (z[rm, c] + u * (z[rm, c + 1] - z[rm, c]))
+                    if e < best:
+                        best = e
+                        if los and best < -tol:
+                            return best
+                if ty < s1:
+                    s2 = s1
+                    s1 = ty
+                else:
+                    s2 = ty
+        # boundaries a0 < s1 < s2 < a1 (missing ones are inf); push far-first
+        nb_ = 1
+        if s1 < _INF:
+            nb_ = 2
+            if s2 < _INF:
+                nb_ = 3
+        for q in range(nb_ - 1, -1, -1):
+            if q == 0:
+                b0 = a0
+            elif q == 1:
+                b0 = s1
+            else:
+                b0 = s2
+            if q == nb_ - 1:
+                b1 = a1
+            elif q == 0:
+                b1 = s1
+            else:
+                b1 = s2
+            tm = 0.5 * (b0 + b1)
+            cc = 2 * C
+            rr = 2 * R
+            if splitx and ax + tm * dx >= xs[cm]:
+                cc += 1
+            if splity and ay + tm * dy >= ys[rm]:
+                rr += 1
+            sL[sp] = L - 1
+            sR[sp] = rr
+            sC[sp] = cc
+            sT[2 * sp] = b0
+            sT[2 * sp + 1] = b1
+            sp += 1
+    return best
+
+
+@nb.njit(cache=True, nogil=True)
+def _pair_min(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, ax, ay, az, bx, by, bz, delta, los, tol, sL, sR, sC, sT):
+    """Clearance of one segment with the canonical direction and the length trim."""
+    # walk from the lexicographically smaller end, so (a, b) and (b, a) give identical bits
+    if (bx < ax) or (bx == ax and (by < ay or (by == ay and bz < az))):
+        ax, bx = bx, ax
+        ay, by = by, ay
+        az, bz = bz, az
+    dx = bx - ax
+    dy = by - ay
+    dz = bz - az
+    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    if length <= 2.0 * delta:
+        return _INF
+    tau = delta / length
+    return segment_min(
+        z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, ax, ay, az, dx, dy, dz, tau, 1.0 - tau, los, tol, sL, sR, sC, sT
+    )
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def grid_pairs(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, a, b, order, delta, los, tol, out):
+    """``out[order[k]]`` = clearance of segment a[order[k]] -> b[order[k]] (parallel)."""
+    m = order.shape[0]
+    chunk = 512
+    nchunk = (m + chunk - 1) // chunk
+    ns = 3 * ltop + 8
+    for ch in nb.prange(nchunk):
+        sL = np.empty(ns, dtype=np.int64)
+        sR = np.empty(ns, dtype=np.int64)
+        sC = np.empty(ns, dtype=np.int64)
+        sT = np.empty(2 * ns, dtype=np.float64)
+        for k in range(ch * chunk, min(m, (ch + 1) * chunk)):
+            i = order[k]
+            out[i] = _pair_min(
+                z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, a[i, 0], a[i, 1], a[i, 2], b[i, 0], b[i, 1], b[i, 2],
+                delta, los, tol, sL, sR, sC, sT,
+            )
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def grid_matrix(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, p, perm, delta, tol, out):
+    """Visibility matrix of the points ``p`` (already in walk order).
+
+    Row k and row n-1-k are handled by the same iteration so every iteration has n-1
+    pairs (balanced load). Result (i, j) of the ordered points goes to
+    ``out[perm[i], perm[j]]`` and its mirror; the diagonal is set True.
+    """
+    n = p.shape[0]
+    ns = 3 * ltop + 8
+    for k in nb.prange((n + 1) // 2):
+        sL = np.empty(ns, dtype=np.int64)
+        sR = np.empty(ns, dtype=np.int64)
+        sC = np.empty(ns, dtype=np.int64)
+        sT = np.empty(2 * ns, dtype=np.float64)
+        kk = np.int64(k)
+        for h in range(2):
+            i = kk if h == 0 else np.int64(n - 1) - kk
+            if h == 1 and i == kk:
+                break
+            pi = perm[i]
+            out[pi, pi] = True
+            for j in range(i + 1, n):
+                m = _pair_min(
+                    z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, p[i, 0], p[i, 1], p[i, 2], p[j, 0], p[j, 1], p[j, 2],
+                    delta, True, tol, sL, sR, sC, sT,
+                )
+                vis = m >= -tol
+                pj = perm[j]
+                out[pi, pj] = vis
+                out[pj, pi] = vis
+
+
+# --------------------------------------------------------------------------- TIN
+@nb.njit(cache=True, nogil=True)
+def _face_clip_min(vx, vy, vz, i0, i1, i2, ax, ay, az, dx, dy, dz, t0, t1, eps):
+    """Min clearance of the segment over the part of [t0, t1] whose ground track is in the face."""
+    x0 = vx[i0]
+    y0 = vy[i0]
+    x1 = vx[i1]
+    y1 = vy[i1]
+    x2 = vx[i2]
+    y2 = vy[i2]
+    det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    if det == 0.0:
+        return _INF
+    sgn = 1.0 if det > 0.0 else -1.0
+    lo = t0
+    hi = t1
+    for e in range(3):
+        if e == 0:
+            px = x0
+            py = y0
+            qx = x1
+            qy = y1
+        elif e == 1:
+            px = x1
+            py = y1
+            qx = x2
+            qy = y2
+        else:
+            px = x2
+            py = y2
+            qx = x0
+            qy = y0
+        ex = qx - px
+        ey = qy - py
+        # f(t) = cross(e, A + t D - p) * sgn >= -eps * |e|
+        f0 = sgn * (ex * (ay - py) - ey * (ax - px)) + eps * (abs(ex) + abs(ey))
+        f1 = sgn * (ex * dy - ey * dx)
+        if f1 == 0.0:
+            if f0 < 0.0:
+                return _INF
+        elif f1 > 0.0:
+            t = -f0 / f1
+            if t > lo:
+                lo = t
+        else:
+            t = -f0 / f1
+            if t < hi:
+                hi = t
+        if lo > hi:
+            return _INF
+    best = _INF
+    for q in range(2):
+        t = lo if q == 0 else hi
+        x = ax + t * dx
+        y = ay + t * dy
+        l1 = ((x - x0) * (y2 - y0) - (x2 - x0) * (y - y0)) / det
+        l2 = ((x1 - x0) * (y - y0) - (x - x0) * (y1 - y0)) / det
+        zs = (1.0 - l1 - l2) * vz[i0] + l1 * vz[i1] + l2 * vz[i2]
+        c = az + t * dz - zs
+        if c < best:
+            best = c
+    return best
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def tin_pairs(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, a, b, delta, eps, out):
+    """Exact minimum clearance of each segment over a TIN (clip against every face crossed).
+
+    The buckets whose rows and columns the ground track passes through (plus one bucket
+    of margin) are visited; every face in them is clipped against the track and the
+    clearance is evaluated at the clip points (the minimum of a piecewise-linear
+    function is at a breakpoint).
+    """
+    m = a.shape[0]
+    for i in nb.prange(m):
+        ax = a[i, 0]
+        ay = a[i, 1]
+        az = a[i, 2]
+        bx = b[i, 0]
+        by = b[i, 1]
+        bz = b[i, 2]
+        if (bx < ax) or (bx == ax and (by < ay or (by == ay and bz < az))):
+            ax, bx = bx, ax
+            ay, by = by, ay
+            az, bz = bz, az
+        dx = bx - ax
+        dy = by - ay
+        dz = bz - az
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if length <= 2.0 * delta:
+            out[i] = _INF
+            continue
+        t0 = delta / length
+        t1 = 1.0 - t0
+        ya = ay + t0 * dy
+        yb = ay + t1 * dy
+        ymin = min(ya, yb)
+        ymax = max(ya, yb)
+        by0 = max(int(np.floor((ymin - y0) / bh)) - 1, 0)
+        by1 = min(int(np.floor((ymax - y0) / bh)) + 1, nby - 1)
+        best = _INF
+        for rb in range(by0, by1 + 1):
+            # part of the track inside this bucket row (with a margin of one bucket row)
+            lo = t0
+            hi = t1
+            if dy != 0.0:
+                ta = (y0 + (rb - 1) * bh - ay) / dy
+                tb = (y0 + (rb + 2) * bh - ay) / dy
+                if ta > tb:
+                    ta, tb = tb, ta
+                lo = max(lo, ta)
+                hi = min(hi, tb)
+                if lo > hi:
+                    continue
+            xa = ax + lo * dx
+            xb = ax + hi * dx
+            bx0 = max(int(np.floor((min(xa, xb) - x0) / bw)) - 1, 0)
+            bx1 = min(int(np.floor((max(xa, xb) - x0) / bw)) + 1, nbx - 1)
+            for cb in range(bx0, bx1 + 1):
+                bk = rb * nbx + cb
+                for s in range(starts[bk], starts[bk + 1]):
+                    f = items[s]
+                    c = _face_clip_min(vx, vy, vz, faces[f, 0], faces[f, 1], faces[f, 2],
+                                       ax, ay, az, dx, dy, dz, t0, t1, eps)
+                    if c < best:
+                        best = c
+        out[i] = best
