@@ -2,8 +2,8 @@
 
 ``terrainvis compare`` runs the paper's experiment (by default on the five bundled 120x120
 terrains and the real Jacksboro DEM), prints Tables 1-4 and the cost table, and writes
-``results.csv``, ``tables.md`` and figures into ``--out``. ``terrainvis info`` describes
-a terrain.
+``results.csv``, ``tables.md``, figures and the simplified terrains (``simplified/``) into
+``--out``. ``terrainvis info`` describes a terrain.
 """
 
 from __future__ import annotations
@@ -85,7 +85,8 @@ def _compare(args) -> int:
     df = compare(
         grids, methods=args.methods, levels=levels, relocations=relocations, n_points=points, n_sets=sets,
         seed=args.seed, max_distance=args.max_distance, workers=args.workers, client=client, offset=args.offset,
-        volume=False if args.no_volume else "auto", out_csv=out / "results.csv", resume=args.resume, progress=True,
+        volume=False if args.no_volume else "auto", out_csv=out / "results.csv", resume=args.resume,
+        save_dir=out / "simplified", progress=True,
     )
     seconds = time.perf_counter() - t0
     df.to_csv(out / "results.csv", index=False)  # the same rows, now in sorted order
@@ -120,6 +121,7 @@ def _write_plots(df, grids, levels, methods, out: Path) -> None:
     from simplifiers._registry import METHOD_ORDER
 
     from . import plot
+    from .experiment import load_simplified, simplified_path
 
     fig = plot.accuracy_vs_size(df)
     fig.savefig(out / "accuracy_vs_size.png", dpi=110)
@@ -132,6 +134,10 @@ def _write_plots(df, grids, levels, methods, out: Path) -> None:
     for name, grid in grids.items():
         views = {}
         for m in methods or METHOD_ORDER:
+            path = simplified_path(out / "simplified", name, m, level)
+            if path.exists():  # saved by the run
+                views[m] = load_simplified(path)
+                continue
             try:
                 views[m] = simplify(grid, m, level)
             except Exception as exc:  # a failed method is reported in the tables already

@@ -32,7 +32,10 @@ from ._validate import as_int, describe
 from .relocation import RELOCATIONS
 from .terrain import HeightGrid
 
-__all__ = ["compare", "resolve_terrains", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW", "COLUMNS", "VOLUME_AUTO_LIMIT"]
+__all__ = [
+    "compare", "resolve_terrains", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW", "COLUMNS", "VOLUME_AUTO_LIMIT",
+    "save_simplified", "load_simplified", "simplified_path",
+]
 
 #: The default terrains: the five bundled 120x120 terrains and a 120x120 window of the real Jacksboro DEM.
 DEFAULT_TERRAINS = ("hills", "mesas", "rough", "mountains", "ridges", "jacksboro")
@@ -158,6 +161,7 @@ class _Settings:
     engine: str
     volume: object
     repeats: int
+    save_dir: str | None = None
 
 
 #: Largest grid (samples) for which ``volume="auto"`` computes the volume shape error.
@@ -186,6 +190,8 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
     rows = []
     try:
         simplified = simplify(grid, method, level)
+        if settings.save_dir is not None:
+            save_simplified(simplified, simplified_path(settings.save_dir, terrain, method, level))
         meta = simplified.attrs if isinstance(simplified, HeightGrid) else simplified.meta
         base.update(
             n_vertices=meta["n_vertices"], size_fraction=meta["n_vertices"] / grid.size, nbytes=meta["nbytes"],
@@ -211,6 +217,38 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
         message = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         rows = [dict(base, set=s, relocation=how, error=message) for s in range(settings.n_sets) for how in settings.relocations]
     return rows
+
+
+def simplified_path(save_dir, terrain: str, method: str, level: int) -> Path:
+    """Where :func:`compare` saves a simplified terrain when given ``save_dir``."""
+    return Path(save_dir) / f"{terrain}__{method}__level{level}.npz"
+
+
+def save_simplified(terrain, path) -> Path:
+    """Save a HeightGrid (z, xs, ys) or a TIN (vertices, faces) to an ``.npz`` file."""
+    from .terrain import TIN
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part.npz")
+    if isinstance(terrain, TIN):
+        np.savez_compressed(tmp, kind="tin", vertices=terrain.vertices, faces=terrain.faces)
+    elif isinstance(terrain, HeightGrid):
+        np.savez_compressed(tmp, kind="grid", z=terrain.z, xs=terrain.xs, ys=terrain.ys)
+    else:
+        raise TypeError(f"terrain must be a HeightGrid or a TIN, got {describe(terrain)}")
+    os.replace(tmp, path)  # never leave a half-written file under the final name
+    return path
+
+
+def load_simplified(path):
+    """Read a terrain written by :func:`save_simplified`."""
+    from .terrain import TIN
+
+    with np.load(path, allow_pickle=False) as data:
+        if str(data["kind"]) == "tin":
+            return TIN(data["vertices"], data["faces"])
+        return HeightGrid.from_coords(data["z"], data["xs"], data["ys"])
 
 
 def _frame(rows: list[dict]) -> pd.DataFrame:
@@ -287,6 +325,7 @@ def compare(
     repeats: int = 3,
     out_csv=None,
     resume: bool = False,
+    save_dir=None,
     progress: bool = False,
 ) -> pd.DataFrame:
     """Run the paper's experiment: how many LOS verdicts survive each simplification.
@@ -328,6 +367,9 @@ def compare(
         Append each finished unit's rows to this CSV as soon as it finishes.
     resume : bool
         With ``out_csv``: keep the units already completed there and run only the rest.
+    save_dir : str or Path, optional
+        Save every simplified terrain there (:func:`simplified_path`,
+        :func:`load_simplified`).
     progress : bool
         Show a tqdm progress bar on stderr.
 
@@ -370,7 +412,10 @@ def compare(
             raise ValueError(f"max_distance must be finite and > 0, got {max_distance!r}")
     if volume not in (True, False, "auto"):
         raise ValueError(f"volume must be True, False or 'auto', got {volume!r}")
-    settings = _Settings(relocations, n_points, n_sets, seed, max_distance, float(offset), engine, volume, repeats)
+    settings = _Settings(
+        relocations, n_points, n_sets, seed, max_distance, float(offset), engine, volume, repeats,
+        None if save_dir is None else str(save_dir),
+    )
 
     units = [(t, m, lv) for t in grids for m in methods for lv in levels]
     done_rows = _frame([])

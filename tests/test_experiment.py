@@ -153,3 +153,23 @@ def test_bad_names_list_the_valid_ones(small):
     z[0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         compare({"holes": HeightGrid(z)}, workers=1)
+
+
+def test_save_dir_keeps_every_simplified_terrain(small, tmp_path):
+    from simplifiers import simplify
+
+    from terrainvis import TIN
+    from terrainvis.experiment import load_simplified, simplified_path
+
+    compare({"a": small["a"]}, workers=1, save_dir=tmp_path, **_kw(n_sets=1))
+    for method in ("simple", "lls", "greedy-insertion"):
+        for level in (1, 2):
+            saved = load_simplified(simplified_path(tmp_path, "a", method, level))
+            fresh = simplify(small["a"], method, level)
+            if isinstance(fresh, TIN):
+                np.testing.assert_array_equal(saved.vertices, fresh.vertices)
+                np.testing.assert_array_equal(saved.faces, fresh.faces)
+            else:
+                np.testing.assert_array_equal(saved.z, fresh.z)
+                np.testing.assert_array_equal(saved.xs, fresh.xs)
+    assert not list(tmp_path.glob("*.part.npz"))
