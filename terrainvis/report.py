@@ -118,7 +118,7 @@ def _fmt(v) -> str:
     if isinstance(v, (float, np.floating)):
         if not np.isfinite(v):
             return "–"
-        if v != 0 and (abs(v) >= 1e5 or abs(v) < 1e-3):
+        if v != 0 and (abs(v) >= 1e5 or abs(v) < 0.1):
             return f"{v:.3g}"
         return f"{v:.2f}"
     return str(v)
