@@ -229,7 +229,109 @@ def section_regular(args) -> None:
         print(f"target feature <= 10 s: {med:.2f} s -> {'met' if med <= 10 else 'NOT met'}")
 
 
-SECTIONS = {"regular": section_regular}
+def _peer_pydelatin(z: np.ndarray, n: int):
+    import pydelatin
+
+    return pydelatin.Delatin(z, max_error=0.0, max_points=n)
+
+
+def _pydelatin_tin(grid, d):
+    """pydelatin's result as our TIN: its vertex (x, y) is our sample (row H-1-y, col x)."""
+    from terrainvis import TIN
+
+    cols = d.vertices[:, 0].astype(int)
+    rows = grid.shape[0] - 1 - d.vertices[:, 1].astype(int)
+    v = np.column_stack([grid.xs[cols], grid.ys[rows], grid.z[rows, cols]])
+    f = np.asarray(d.triangles, dtype=np.int64)
+    a, b, c = v[f[:, 0], :2], v[f[:, 1], :2], v[f[:, 2], :2]
+    cw = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]) < 0
+    f[cw] = f[cw][:, ::-1]
+    return TIN(v, f)
+
+
+def _peer_fast_simplification(tin, n: int):
+    import fast_simplification
+
+    origin = tin.vertices.min(axis=0)
+    v = np.array(tin.vertices - origin)
+    f = np.array(tin.faces, dtype=np.int32)  # a writeable C-contiguous copy
+    return origin, fast_simplification.simplify(v, f, target_reduction=1.0 - n / tin.n_vertices)
+
+
+def _errors_over_cover(grid, tin):
+    """Max and RMS vertical error over the samples the TIN covers, and the covered share."""
+    approx = tin.height_on_grid(grid.xs, grid.ys)
+    ok = np.isfinite(approx)
+    d = approx[ok] - grid.z[ok]
+    return float(np.abs(d).max()), float(np.sqrt(np.mean(d**2))), float(ok.mean())
+
+
+def section_all(args) -> None:
+    """All seven methods through simplify() on 120², 512² and 1024², levels 1-3, with peers."""
+    import time
+    import tracemalloc
+
+    import simplifiers
+    from terrainvis import HeightGrid
+    from terrainvis.synthetic import synthetic_terrain
+
+    methods = args.methods or list(simplifiers.available())
+    print("\n== all methods: simplify(grid, method, level) on a synthetic 'mountains' terrain ==")
+    print("time: median of the runs; peak: tracemalloc peak (numpy allocations) during one run;")
+    print("peers run on the same grid at the same vertex count, in the same run")
+    rows = []
+    warm = synthetic_terrain("mountains", size=33, seed=args.seed)
+    for method in methods:  # compile and load every kernel before timing
+        simplifiers.simplify(warm, method, 1)
+    for size in args.all_sizes:
+        grid = synthetic_terrain("mountains", size=size, seed=args.seed)
+        unit = HeightGrid(grid.z)  # pydelatin works on unit spacing; errors are in z units either way
+        for level in (1, 2, 3):
+            n = simplifiers.vertex_budget(grid.shape, level)
+            repeats = args.repeats if size <= 512 else max(1, min(args.repeats, 3))
+            for method in methods + ["peer: pydelatin", "peer: fast-simplification"]:
+                if method == "greedy-cuts" and size > 1024:
+                    continue
+                times = []
+                peak = 0
+                full_tin = grid.to_tin() if method == "peer: fast-simplification" else None
+                for _ in range(repeats):
+                    tracemalloc.start()
+                    t0 = time.perf_counter()
+                    if method == "peer: pydelatin":
+                        out = _peer_pydelatin(unit.z, n)
+                    elif method == "peer: fast-simplification":
+                        out = _peer_fast_simplification(full_tin, n)
+                    else:
+                        out = simplifiers.simplify(grid, method, level)
+                    times.append(time.perf_counter() - t0)
+                    peak = max(peak, tracemalloc.get_traced_memory()[1])
+                    tracemalloc.stop()
+                if method == "peer: pydelatin":
+                    tin = _pydelatin_tin(grid, out)
+                    err, nv = _errors_over_cover(grid, tin)[:2], tin.n_vertices
+                elif method == "peer: fast-simplification":
+                    from terrainvis import TIN
+
+                    origin, (pv, pf) = out
+                    tin = TIN(pv + origin, pf)
+                    mx, rms, cover = _errors_over_cover(grid, tin)
+                    err, nv = (mx, rms), tin.n_vertices
+                    method = f"{method} ({100 * cover:.1f}% covered)"
+                else:
+                    meta = out.attrs if isinstance(out, HeightGrid) else out.meta
+                    err = (meta["max_error"], meta["rms_error"])
+                    nv = meta["n_vertices"]
+                rows.append((size, level, method, nv, float(np.median(times)), peak / 2**20, err[0], err[1]))
+                print(f"  {size:5d} L{level} {method:40s} {nv:8d} v {np.median(times):8.3f} s "
+                      f"{peak / 2**20:8.1f} MiB  max {err[0]:8.2f}  rms {err[1]:7.3f}", flush=True)
+    _print_table(
+        [(f"{r[0]}", f"{r[1]}", r[2], f"{r[3]}", f"{r[4]:.3f}", f"{r[5]:.1f}", f"{r[6]:.2f}", f"{r[7]:.3f}") for r in rows],
+        ("size", "level", "method", "vertices", "median s", "peak MiB", "max err m", "RMS m"),
+    )
+
+
+SECTIONS = {"regular": section_regular, "all": section_all}
 
 
 def main(argv=None) -> int:
@@ -240,6 +342,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--methods", nargs="+", default=[], help="restrict to these methods (default: all)")
     parser.add_argument("--threads", type=int, default=0, help="numba threads (default: all)")
+    parser.add_argument("--all-sizes", type=int, nargs="+", default=[120, 512, 1024],
+                        help="grid sides of the 'all' section (default 120 512 1024)")
     args = parser.parse_args(argv)
     import numba
 
