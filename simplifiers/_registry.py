@@ -17,7 +17,7 @@ import numpy as np
 
 from terrainvis._validate import as_int, describe
 from terrainvis.errors import SimplificationError
-from terrainvis.metrics import vertical_errors
+from terrainvis.metrics import errors_from_heights, vertical_errors
 from terrainvis.terrain import TIN, HeightGrid
 
 __all__ = ["simplify", "available", "coarse_length", "max_level", "vertex_budget", "check_height_field"]
@@ -146,9 +146,12 @@ def simplify(grid: HeightGrid, method: str, level: int = 1, **options):
         seconds = time.perf_counter() - t0
         meta = out.attrs
     else:
-        out, seconds = _run_irregular(grid, info, level, options)
+        out, seconds, approx = _run_irregular(grid, info, level, options)
         meta = out.meta
-    err_max, err_rms = vertical_errors(grid, out)
+    if info.kind == "regular":
+        err_max, err_rms = vertical_errors(grid, out)
+    else:
+        err_max, err_rms = errors_from_heights(grid, approx)
     n_vertices = out.size if isinstance(out, HeightGrid) else out.n_vertices
     meta.update(
         method=method, kind=info.kind, level=level, n_vertices=int(n_vertices), nbytes=int(out.nbytes),
@@ -209,13 +212,13 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options):
     if tin.meta.get("stopped_by") == "max_error":
         # An error threshold stopped the method before the budget: fewer vertices are
         # expected, every other rule still holds.
-        check_height_field(tin, grid, method=info.name, budget=None)
+        approx = check_height_field(tin, grid, method=info.name, budget=None)
         if tin.n_vertices > budget:
             raise SimplificationError(f"{info.name} stopped by max_error with {tin.n_vertices} vertices, over the budget of {budget}")
     else:
-        check_height_field(tin, grid, method=info.name, budget=budget)
+        approx = check_height_field(tin, grid, method=info.name, budget=budget)
     tin.meta["budget"] = budget
-    return tin, seconds
+    return tin, seconds, approx
 
 
 def budget_tolerance(budget: int) -> int:
@@ -223,13 +226,18 @@ def budget_tolerance(budget: int) -> int:
     return max(1, int(0.01 * budget))
 
 
-def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int | None = None) -> None:
+def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int | None = None) -> np.ndarray:
     """Raise :class:`SimplificationError` unless ``tin`` is a valid height field over ``grid``'s extent.
 
     The rules: the four corners are vertices, every boundary vertex lies on a boundary
     line, every face normal has z > 0, the projected area equals the extent's, every grid
     sample lies inside the footprint, and the vertex count is within
     :func:`budget_tolerance` of the budget.
+
+    Returns
+    -------
+    (rows, cols) float64
+        The TIN's heights at the grid's samples (computed for the footprint check).
     """
     xmin, xmax, ymin, ymax = grid.extent
     v = tin.vertices
@@ -240,9 +248,13 @@ def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int |
     outside = (v[:, 0] < xmin) | (v[:, 0] > xmax) | (v[:, 1] < ymin) | (v[:, 1] > ymax)
     if outside.any():
         problems.append(f"{int(outside.sum())} vertices lie outside the extent")
-    edges = np.sort(tin.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    uniq, counts = np.unique(edges, axis=0, return_counts=True)
-    bverts = np.unique(uniq[counts == 1])
+    # Undirected edges as one int64 key each (lo * n + hi): a 1-D unique is far cheaper
+    # than a row-wise one.
+    n = np.int64(tin.n_vertices)
+    e = tin.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64)
+    keys, counts = np.unique(np.minimum(e[:, 0], e[:, 1]) * n + np.maximum(e[:, 0], e[:, 1]), return_counts=True)
+    single = keys[counts == 1]
+    bverts = np.unique(np.concatenate([single // n, single % n]))
     on_line = (v[bverts, 0] == xmin) | (v[bverts, 0] == xmax) | (v[bverts, 1] == ymin) | (v[bverts, 1] == ymax)
     if not on_line.all():
         problems.append(f"{int((~on_line).sum())} boundary vertices lie off the boundary lines")
@@ -255,11 +267,14 @@ def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int |
     fp = tin.footprint_area()
     if abs(fp - area) > 1e-9 * area:
         problems.append(f"the projected area is {fp / area:.6%} of the extent's")
+    approx = None
     if not problems:
-        missing = np.isnan(tin.height_on_grid(grid.xs, grid.ys))
+        approx = tin.height_on_grid(grid.xs, grid.ys)
+        missing = np.isnan(approx)
         if missing.any():
             problems.append(f"{int(missing.sum())} grid samples lie outside the footprint")
     if budget is not None and abs(tin.n_vertices - budget) > budget_tolerance(budget):
         problems.append(f"it has {tin.n_vertices} vertices for a budget of {budget}")
     if problems:
         raise SimplificationError(f"{method} returned an invalid height field: " + "; ".join(problems))
+    return approx

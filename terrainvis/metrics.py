@@ -33,6 +33,15 @@ def vertical_errors(fine: HeightGrid, coarse) -> tuple[float, float]:
         approx = coarse.height_on_grid(fine.xs, fine.ys)
     else:
         raise TypeError(f"coarse must be a terrainvis.HeightGrid or terrainvis.TIN, got {describe(coarse)}")
+    return errors_from_heights(fine, approx)
+
+
+def errors_from_heights(fine: HeightGrid, approx: np.ndarray) -> tuple[float, float]:
+    """Max and RMS of ``approx - fine.z`` over the finite samples of ``fine``.
+
+    ``approx`` holds a simplified surface's heights at ``fine``'s samples (NaN where it
+    does not cover them, which is an error).
+    """
     valid = np.isfinite(fine.z)
     if np.isnan(approx[valid]).any():
         n = int(np.isnan(approx[valid]).sum())
