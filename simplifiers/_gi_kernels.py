@@ -32,7 +32,6 @@ heap_size, n_flips, n_edge_splits]``.
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
 
 NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
 

@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from terrainvis._validate import as_int, describe
+from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
 
@@ -105,13 +105,7 @@ def _check_grid(grid) -> None:
 
 
 def _check_epsilon(epsilon) -> float:
-    try:
-        eps = float(epsilon)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"epsilon must be a real number, got {describe(epsilon)}") from exc
-    if not math.isfinite(eps) or eps < 0:
-        raise ValueError(f"epsilon must be finite and >= 0 (z units), got {epsilon!r}")
-    return eps
+    return as_nonnegative_finite(epsilon, "epsilon", "z units")
 
 
 def greedy_cuts(grid: HeightGrid, epsilon: float) -> TIN:

@@ -25,11 +25,10 @@ fields", Technical Report CMU-CS-95-181, Carnegie Mellon University, 1995.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
-from terrainvis._validate import as_int, describe
+from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
 
@@ -45,15 +44,7 @@ _MAX_SIDE = 32768
 def _check_max_error(max_error):
     if max_error is None:
         return None
-    if isinstance(max_error, (bool, np.bool_)):
-        raise TypeError(f"max_error must be a real number >= 0 or None, got {describe(max_error)}")
-    try:
-        out = float(max_error)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"max_error must be a real number >= 0 or None, got {describe(max_error)}") from exc
-    if not math.isfinite(out) or out < 0:
-        raise ValueError(f"max_error must be finite and >= 0 (in z units), got {max_error!r}")
-    return out
+    return as_nonnegative_finite(max_error, "max_error", "in z units")
 
 
 class GreedyInserter:

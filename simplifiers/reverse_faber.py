@@ -46,7 +46,7 @@ import math
 import numba
 import numpy as np
 
-from terrainvis._validate import as_int, describe
+from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis.terrain import HeightGrid
 
 from . import _faber_kernels as _k
@@ -381,12 +381,7 @@ def feature(f, axis: int = -1, *, weight: float = 1.0):
     >>> feature([0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0]).round(3).tolist()
     [-1.006, 2.315, 1.093, -0.87]
     """
-    try:
-        w = float(weight)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"weight must be a real number, got {describe(weight)}") from exc
-    if not math.isfinite(w) or w < 0:
-        raise ValueError(f"weight must be finite and >= 0, got {weight!r}")
+    w = as_nonnegative_finite(weight, "weight")
     f3, out_shape, axis, m, n = _as_curves(f, axis, "feature")
     s = _faber_structure(m)
     out = np.empty((f3.shape[0], n, f3.shape[2]))

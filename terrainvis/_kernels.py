@@ -34,19 +34,26 @@ def _tri_z_at(vx, vy, vz, i0, i1, i2, x, y, rel_eps):
 
 
 @nb.njit(cache=True, nogil=True)
+def _face_buckets(vx, vy, faces, f, x0, y0, bw, bh, nbx, nby):
+    """The range of bucket columns and rows covered by face f's bounding box."""
+    xmin = min(vx[faces[f, 0]], vx[faces[f, 1]], vx[faces[f, 2]])
+    xmax = max(vx[faces[f, 0]], vx[faces[f, 1]], vx[faces[f, 2]])
+    ymin = min(vy[faces[f, 0]], vy[faces[f, 1]], vy[faces[f, 2]])
+    ymax = max(vy[faces[f, 0]], vy[faces[f, 1]], vy[faces[f, 2]])
+    bx0 = min(max(int((xmin - x0) / bw), 0), nbx - 1)
+    bx1 = min(max(int((xmax - x0) / bw), 0), nbx - 1)
+    by0 = min(max(int((ymin - y0) / bh), 0), nby - 1)
+    by1 = min(max(int((ymax - y0) / bh), 0), nby - 1)
+    return bx0, bx1, by0, by1
+
+
+@nb.njit(cache=True, nogil=True)
 def build_buckets(vx, vy, faces, x0, y0, bw, bh, nbx, nby):
     """Bin faces into a uniform bucket grid by their bounding boxes (CSR layout)."""
     nf = faces.shape[0]
     counts = np.zeros(nbx * nby + 1, dtype=np.int64)
     for f in range(nf):
-        xmin = min(vx[faces[f, 0]], vx[faces[f, 1]], vx[faces[f, 2]])
-        xmax = max(vx[faces[f, 0]], vx[faces[f, 1]], vx[faces[f, 2]])
-        ymin = min(vy[faces[f, 0]], vy[faces[f, 1]], vy[faces[f, 2]])
-        ymax = max(vy[faces[f, 0]], vy[faces[f, 1]], vy[faces[f, 2]])
-        bx0 = min(max(int((xmin - x0) / bw), 0), nbx - 1)
-        bx1 = min(max(int((xmax - x0) / bw), 0), nbx - 1)
-        by0 = min(max(int((ymin - y0) / bh), 0), nby - 1)
-        by1 = min(max(int((ymax - y0) / bh), 0), nby - 1)
+        bx0, bx1, by0, by1 = _face_buckets(vx, vy, faces, f, x0, y0, bw, bh, nbx, nby)
         for by in range(by0, by1 + 1):
             for bx in range(bx0, bx1 + 1):
                 counts[by * nbx + bx + 1] += 1
@@ -55,14 +62,7 @@ def build_buckets(vx, vy, faces, x0, y0, bw, bh, nbx, nby):
     items = np.empty(counts[nbx * nby], dtype=np.int64)
     fill = counts[:-1].copy()
     for f in range(nf):
-        xmin = min(vx[faces[f, 0]], vx[faces[f, 1]], vx[faces[f, 2]])
-        xmax = max(vx[faces[f, 0]], vx[faces[f, 1]], vx[faces[f, 2]])
-        ymin = min(vy[faces[f, 0]], vy[faces[f, 1]], vy[faces[f, 2]])
-        ymax = max(vy[faces[f, 0]], vy[faces[f, 1]], vy[faces[f, 2]])
-        bx0 = min(max(int((xmin - x0) / bw), 0), nbx - 1)
-        bx1 = min(max(int((xmax - x0) / bw), 0), nbx - 1)
-        by0 = min(max(int((ymin - y0) / bh), 0), nby - 1)
-        by1 = min(max(int((ymax - y0) / bh), 0), nby - 1)
+        bx0, bx1, by0, by1 = _face_buckets(vx, vy, faces, f, x0, y0, bw, bh, nbx, nby)
         for by in range(by0, by1 + 1):
             for bx in range(bx0, bx1 + 1):
                 b = by * nbx + bx

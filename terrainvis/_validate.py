@@ -56,6 +56,20 @@ def as_positive_finite(value, name: str) -> float:
     return out
 
 
+def as_nonnegative_finite(value, name: str, unit: str = "") -> float:
+    """A finite real number >= 0 (``unit`` is named in the message, e.g. "z units")."""
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a real number, got {describe(value)}")
+    try:
+        out = float(value)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+    if not np.isfinite(out) or out < 0:
+        suffix = f" ({unit})" if unit else ""
+        raise ValueError(f"{name} must be finite and >= 0{suffix}, got {value!r}")
+    return out
+
+
 def as_int(value, name: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, got {describe(value)}")

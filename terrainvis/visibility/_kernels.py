@@ -295,9 +295,9 @@ def segment_min(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, ax, ay, az, d
 
 
 @nb.njit(cache=True, nogil=True)
-def _pair_min(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, ax, ay, az, bx, by, bz, delta, los, tol, sL, sR, sC, sT):
-    """Clearance of one segment with the canonical direction and the length trim."""
-    # walk from the lexicographically smaller end, so (a, b) and (b, a) give identical bits
+def _canonical(ax, ay, az, bx, by, bz):
+    """Start, direction and length of the segment, walked from its lexicographically
+    smaller end, so that (a, b) and (b, a) give identical bits."""
     if (bx < ax) or (bx == ax and (by < ay or (by == ay and bz < az))):
         ax, bx = bx, ax
         ay, by = by, ay
@@ -305,7 +305,13 @@ def _pair_min(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, ax, ay, az, bx,
     dx = bx - ax
     dy = by - ay
     dz = bz - az
-    length = np.sqrt(dx * dx + dy * dy + dz * dz)
+    return ax, ay, az, dx, dy, dz, np.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@nb.njit(cache=True, nogil=True)
+def _pair_min(z, xs, ys, ixw, iyw, uniform, pyr, off, nxl, ltop, ax, ay, az, bx, by, bz, delta, los, tol, sL, sR, sC, sT):
+    """Clearance of one segment with the canonical direction and the length trim."""
+    ax, ay, az, dx, dy, dz, length = _canonical(ax, ay, az, bx, by, bz)
     if length <= 2.0 * delta:
         return _INF
     tau = delta / length
@@ -448,14 +454,7 @@ def tin_pairs(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, a, b, 
         bx = b[i, 0]
         by = b[i, 1]
         bz = b[i, 2]
-        if (bx < ax) or (bx == ax and (by < ay or (by == ay and bz < az))):
-            ax, bx = bx, ax
-            ay, by = by, ay
-            az, bz = bz, az
-        dx = bx - ax
-        dy = by - ay
-        dz = bz - az
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        ax, ay, az, dx, dy, dz, length = _canonical(ax, ay, az, bx, by, bz)
         if length <= 2.0 * delta:
             out[i] = _INF
             continue
