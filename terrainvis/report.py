@@ -178,13 +178,22 @@ def findings(df: pd.DataFrame) -> list[dict]:
         mu = g.mean().unstack("method")
         sd = g.std(ddof=1).unstack("method")
         spread = 100 * (mu.max(axis=1) - mu.min(axis=1)).max()
-        lowest = (sd.idxmin(axis=1) == "feature").mean()
-        add(
-            "GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ",
-            bool(spread <= 1.0 and lowest > 0.5),
-            f"largest gap between their mean accuracies in any level x relocation: {spread:.2f} points; "
-            f"feature-aware has the lowest σ in {100 * lowest:.0f}% of level x relocation cells",
-        )
+        sd = sd.dropna(how="any")  # σ needs at least two terrain x set samples per cell
+        if len(sd):
+            lowest = float((sd.idxmin(axis=1) == "feature").mean())
+            add(
+                "GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ",
+                bool(spread <= 1.0 and lowest > 0.5),
+                f"largest gap between their mean accuracies in any level x relocation: {spread:.2f} points; "
+                f"feature-aware has the lowest σ in {100 * lowest:.0f}% of level x relocation cells",
+            )
+        else:
+            add(
+                "GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ",
+                None,
+                f"largest gap between their mean accuracies: {spread:.2f} points; σ needs at least two "
+                "terrain x point-set samples per cell",
+            )
     rel = data.groupby("relocation")["accuracy"].mean().sort_values(ascending=False)
     if len(rel) >= 2:
         add(

@@ -116,3 +116,14 @@ def test_cli_errors_list_valid_names(tmp_path, capsys):
 def test_cli_info(capsys):
     assert main(["info", "jacksboro"]) == 0
     assert "120 x 120" in capsys.readouterr().out
+
+
+def test_single_sample_cells_do_not_break_the_report():
+    # One terrain and one point set: every σ is undefined (NaN), which must not raise.
+    g = synthetic_terrain("hills", size=17, seed=0)
+    df = compare({"h": g}, methods=["gls", "lls", "feature"], levels=[1], n_points=8, n_sets=1, workers=1, repeats=1)
+    tables = report.paper_tables(df)
+    assert tables["Table 1"]["sigma"].isna().all()
+    held = {f["claim"]: f["held"] for f in report.findings(df)}
+    assert held["GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ"] is None
+    assert "| gls | identity |" in report.to_markdown(tables)
