@@ -114,9 +114,6 @@ def _compare(args) -> int:
 
 
 def _write_plots(df, grids, levels, methods, out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
     from simplifiers import simplify
     from simplifiers._registry import METHOD_ORDER
 

@@ -127,3 +127,21 @@ def test_single_sample_cells_do_not_break_the_report():
     held = {f["claim"]: f["held"] for f in report.findings(df)}
     assert held["GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ"] is None
     assert "| gls | identity |" in report.to_markdown(tables)
+
+
+def test_only_plot_imports_matplotlib():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import terrainvis as tv, simplifiers\n"
+        "from terrainvis import experiment, report, cli, relocation, metrics, io, visibility\n"
+        "g = tv.sample_dem('jacksboro').crop(rows=(0, 40), cols=(0, 40))\n"
+        "for m in simplifiers.available(): simplifiers.simplify(g, m, 1)\n"
+        "P = tv.sample_points(g, 5)\n"
+        "tv.visibility_matrix(g, P); tv.visibility_matrix(g.to_tin(), P)\n"
+        "print('matplotlib' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
