@@ -31,6 +31,7 @@ from terrainvis._validate import as_int, describe
 from terrainvis.terrain import HeightGrid
 
 from . import reverse_faber as rf
+from ._registry import coarse_length
 
 __all__ = ["simplify_dask", "HALO", "simplify_grid_blockwise"]
 
@@ -58,11 +59,9 @@ def _reduce_axis(x, method: str, axis: int, options: dict):
             sizes.append(rest)
     if len(sizes) == 1:
         # One block along this axis: no halo needed.
-        return x.rechunk({axis: m}).map_blocks(
-            lambda b: op(b, axis=axis, **options),
-            chunks=tuple(c if i != axis else ((m + 1) // 2,) for i, c in enumerate(x.rechunk({axis: m}).chunks)),
-            dtype=np.float64,
-        )
+        one = x.rechunk({axis: m})
+        out_chunks = tuple(c if i != axis else (coarse_length(m),) for i, c in enumerate(one.chunks))
+        return one.map_blocks(lambda b: op(b, axis=axis, **options), chunks=out_chunks, dtype=np.float64)
     x = x.rechunk({axis: tuple(sizes)})
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     n_blocks = len(sizes)
@@ -71,7 +70,7 @@ def _reduce_axis(x, method: str, axis: int, options: dict):
         if i < n_blocks - 1:
             out_sizes.append(L // 2)
         else:
-            out_sizes.append((m + 1) // 2 - sum(out_sizes))
+            out_sizes.append(coarse_length(m) - sum(out_sizes))
     depth = {d: 0 for d in range(x.ndim)}
     depth[axis] = halo
     padded = da.overlap.overlap(x, depth=depth, boundary={d: "none" for d in range(x.ndim)})

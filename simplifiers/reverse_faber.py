@@ -69,24 +69,29 @@ LLS_WEIGHTS = {
 
 
 # ------------------------------------------------------------------ validation
+def _real_array_axis(value, name: str, axis):
+    """``value`` as a real numeric array with at least one axis, and ``axis`` normalised."""
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # an object numpy cannot turn into an array
+        raise TypeError(f"{name} must be a numeric array, got {describe(value)}") from exc
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be a real numeric array, got {describe(arr)}")
+    if arr.ndim == 0:
+        raise ValueError(f"{name} must have at least one axis, got a 0-D array ({describe(arr)})")
+    axis = as_int(axis, "axis")
+    if not -arr.ndim <= axis < arr.ndim:
+        raise ValueError(f"axis must be in [{-arr.ndim}, {arr.ndim - 1}] for a {arr.ndim}-D array, got {axis}")
+    return arr, axis % arr.ndim
+
+
 def _as_curves(f, axis, op: str):
     """Validate ``f`` and ``axis``; return the (A, m, B) C-contiguous float64 view and shapes."""
     if isinstance(f, HeightGrid):
         raise TypeError(
             f"f must be an array of heights; to reduce a HeightGrid use simplifiers.simplify(grid, {op!r}, level)"
         )
-    try:
-        arr = np.asarray(f)
-    except Exception as exc:  # an object numpy cannot turn into an array
-        raise TypeError(f"f must be a numeric array, got {describe(f)}") from exc
-    if arr.dtype.kind not in "biuf":
-        raise TypeError(f"f must be a real numeric array, got {describe(arr)}")
-    if arr.ndim == 0:
-        raise ValueError(f"f must have at least one axis, got a 0-D array ({describe(arr)})")
-    axis = as_int(axis, "axis")
-    if not -arr.ndim <= axis < arr.ndim:
-        raise ValueError(f"axis must be in [{-arr.ndim}, {arr.ndim - 1}] for a {arr.ndim}-D array, got {axis}")
-    axis %= arr.ndim
+    arr, axis = _real_array_axis(f, "f", axis)
     m = arr.shape[axis]
     if m < 3:
         raise ValueError(
@@ -524,18 +529,7 @@ def subdivide(c, axis: int = -1, m: int | None = None):
     >>> subdivide([0.0, 3.0], m=4).tolist()
     [0.0, 1.0, 2.0, 3.0]
     """
-    try:
-        arr = np.asarray(c)
-    except Exception as exc:
-        raise TypeError(f"c must be a numeric array, got {describe(c)}") from exc
-    if arr.dtype.kind not in "biuf":
-        raise TypeError(f"c must be a real numeric array, got {describe(arr)}")
-    if arr.ndim == 0:
-        raise ValueError(f"c must have at least one axis, got a 0-D array ({describe(arr)})")
-    axis = as_int(axis, "axis")
-    if not -arr.ndim <= axis < arr.ndim:
-        raise ValueError(f"axis must be in [{-arr.ndim}, {arr.ndim - 1}] for a {arr.ndim}-D array, got {axis}")
-    axis %= arr.ndim
+    arr, axis = _real_array_axis(c, "c", axis)
     n = arr.shape[axis]
     if n < 2:
         raise ValueError(f"subdivide: the curve along axis {axis} has {n} sample(s); it needs at least 2")

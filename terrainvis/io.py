@@ -199,19 +199,16 @@ def _load_asc(p: Path) -> HeightGrid:
     z = values.reshape(nrows, ncols)
     if "nodata_value" in header:
         z[z == header["nodata_value"]] = np.nan
-    if "xllcenter" in header:
-        x0 = header["xllcenter"]
-    elif "xllcorner" in header:
-        x0 = header["xllcorner"] + 0.5 * dx
-    else:
-        raise _Corrupt("header has neither 'xllcorner' nor 'xllcenter'")
-    if "yllcenter" in header:
-        y0 = header["yllcenter"]
-    elif "yllcorner" in header:
-        y0 = header["yllcorner"] + 0.5 * dy
-    else:
-        raise _Corrupt("header has neither 'yllcorner' nor 'yllcenter'")
-    return HeightGrid(z[::-1], dx=dx, dy=dy, origin=(x0, y0))
+    return HeightGrid(z[::-1], dx=dx, dy=dy, origin=(_asc_centre(header, "x", dx), _asc_centre(header, "y", dy)))
+
+
+def _asc_centre(header: dict, axis: str, spacing: float) -> float:
+    """The lower-left cell centre along ``axis`` ("x" or "y") from an ESRI ASCII header."""
+    if f"{axis}llcenter" in header:
+        return header[f"{axis}llcenter"]
+    if f"{axis}llcorner" in header:
+        return header[f"{axis}llcorner"] + 0.5 * spacing
+    raise _Corrupt(f"header has neither '{axis}llcorner' nor '{axis}llcenter'")
 
 
 def _rasterio():
