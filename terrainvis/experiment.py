@@ -459,20 +459,20 @@ def compare(
             _append_csv(path, _frame(rows), header=False)
         bar.update(1)
 
-    # The original terrain's verdicts depend only on the terrain and the point set, so
-    # they are computed once per terrain and shared by its units. They are computed where
-    # the units run (same process pool or cluster, same numba threads), so that the LOS
-    # times on T and on S(T) are measured under the same conditions.
-    names = list(dict.fromkeys(u[0] for u in units))
+    # The original terrain's verdicts depend only on the terrain and the point set.
+    truths = {name: _truth(grids[name], name, settings) for name in dict.fromkeys(u[0] for u in units)}
     try:
         if not units:
             pass
         elif client is not None:
             futures = {}
-            grid_f = {name: client.scatter(grids[name], broadcast=False) for name in names}
-            truth_f = {name: client.submit(_truth, grid_f[name], name, settings, pure=False) for name in names}
+            scattered = {
+                name: (client.scatter(grids[name], broadcast=False), client.scatter(truths[name], broadcast=False))
+                for name in truths
+            }
             for t, m, lv in units:
-                futures[client.submit(_run_unit, grid_f[t], t, m, lv, settings, truth_f[t], pure=False)] = (t, m, lv)
+                grid_f, truth_f = scattered[t]
+                futures[client.submit(_run_unit, grid_f, t, m, lv, settings, truth_f, pure=False)] = (t, m, lv)
             from dask.distributed import as_completed as dask_completed
 
             for fut in dask_completed(list(futures)):
@@ -480,7 +480,6 @@ def compare(
         else:
             n_workers = (os.cpu_count() or 1) if workers is None else as_int(workers, "workers", minimum=1)
             if n_workers == 1 or len(units) == 1:
-                truths = {name: _truth(grids[name], name, settings) for name in names}
                 for t, m, lv in units:
                     collect(_run_unit(grids[t], t, m, lv, settings, truths[t]))
             else:
@@ -491,8 +490,6 @@ def compare(
                     max_workers=min(n_workers, len(units)), mp_context=mp.get_context("spawn"),
                     initializer=_worker_init, initargs=(threads,),
                 ) as pool:
-                    truth_jobs = {name: pool.submit(_truth, grids[name], name, settings) for name in names}
-                    truths = {name: job.result() for name, job in truth_jobs.items()}
                     futures = {
                         pool.submit(_run_unit, grids[t], t, m, lv, settings, truths[t]): (t, m, lv) for t, m, lv in units
                     }
