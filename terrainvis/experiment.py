@@ -172,21 +172,8 @@ def _want_volume(volume, grid: HeightGrid) -> bool:
     return bool(volume) if volume != "auto" else grid.size <= VOLUME_AUTO_LIMIT
 
 
-def _truth(grid: HeightGrid, terrain: str, settings: _Settings):
-    """The point sets of a terrain and, for each, its visibility matrix on the original
-    terrain and the (fastest of ``repeats``) time it took. Shared by all of the
-    terrain's units, so it is computed once."""
-    from .visibility import visibility_matrix
-
-    sets = point_sets(grid, terrain, settings.n_points, settings.n_sets, settings.seed, settings.offset)
-    return [(pts, *_timed(visibility_matrix, grid, pts, engine=settings.engine, repeats=settings.repeats)) for pts in sets]
-
-
-def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings: _Settings, truth) -> list[dict]:
-    """Simplify once, then every point set and relocation: the rows of one unit.
-
-    ``truth`` is :func:`_truth` of the terrain: (points, visibility on T, its time) per set.
-    """
+def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings: _Settings) -> list[dict]:
+    """Simplify once, then every point set and relocation: the rows of one unit."""
     from simplifiers import simplify
     from simplifiers._registry import method_info
 
@@ -199,6 +186,7 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
         "n_points": settings.n_points, "n_vertices_original": grid.size, "nbytes_original": grid.nbytes,
         "seed": settings.seed, "max_distance": settings.max_distance, "offset": settings.offset, "error": "",
     }
+    sets = point_sets(grid, terrain, settings.n_points, settings.n_sets, settings.seed, settings.offset)
     rows = []
     try:
         simplified = simplify(grid, method, level)
@@ -212,9 +200,10 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
         )
         # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
         t0 = time.perf_counter()
-        visibility_matrix(simplified, truth[0][0][:2], engine=settings.engine)
+        visibility_matrix(simplified, sets[0][:2], engine=settings.engine)
         base["los_build_seconds"] = time.perf_counter() - t0
-        for s, (pts, v_true, t_true) in enumerate(truth):
+        for s, pts in enumerate(sets):
+            v_true, t_true = _timed(visibility_matrix, grid, pts, engine=settings.engine, repeats=settings.repeats)
             mask = _pair_mask(pts, settings.max_distance)
             for how in settings.relocations:
                 moved = relocate(pts, simplified, how, offset=settings.offset)
@@ -459,20 +448,14 @@ def compare(
             _append_csv(path, _frame(rows), header=False)
         bar.update(1)
 
-    # The original terrain's verdicts depend only on the terrain and the point set.
-    truths = {name: _truth(grids[name], name, settings) for name in dict.fromkeys(u[0] for u in units)}
     try:
         if not units:
             pass
         elif client is not None:
             futures = {}
-            scattered = {
-                name: (client.scatter(grids[name], broadcast=False), client.scatter(truths[name], broadcast=False))
-                for name in truths
-            }
+            scattered = {name: client.scatter(grids[name], broadcast=False) for name in {u[0] for u in units}}
             for t, m, lv in units:
-                grid_f, truth_f = scattered[t]
-                futures[client.submit(_run_unit, grid_f, t, m, lv, settings, truth_f, pure=False)] = (t, m, lv)
+                futures[client.submit(_run_unit, scattered[t], t, m, lv, settings, pure=False)] = (t, m, lv)
             from dask.distributed import as_completed as dask_completed
 
             for fut in dask_completed(list(futures)):
@@ -481,7 +464,7 @@ def compare(
             n_workers = (os.cpu_count() or 1) if workers is None else as_int(workers, "workers", minimum=1)
             if n_workers == 1 or len(units) == 1:
                 for t, m, lv in units:
-                    collect(_run_unit(grids[t], t, m, lv, settings, truths[t]))
+                    collect(_run_unit(grids[t], t, m, lv, settings))
             else:
                 import multiprocessing as mp
 
@@ -490,9 +473,7 @@ def compare(
                     max_workers=min(n_workers, len(units)), mp_context=mp.get_context("spawn"),
                     initializer=_worker_init, initargs=(threads,),
                 ) as pool:
-                    futures = {
-                        pool.submit(_run_unit, grids[t], t, m, lv, settings, truths[t]): (t, m, lv) for t, m, lv in units
-                    }
+                    futures = {pool.submit(_run_unit, grids[t], t, m, lv, settings): (t, m, lv) for t, m, lv in units}
                     for fut in as_completed(futures):
                         collect(fut.result())
     finally:

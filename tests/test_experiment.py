@@ -99,11 +99,11 @@ def test_incremental_csv_and_resume(small, tmp_path, monkeypatch):
     calls = []
     real = experiment._run_unit
 
-    def counting(grid, terrain, method, level, settings, truth):
+    def counting(grid, terrain, method, level, settings):
         calls.append((terrain, method, level))
         if len(calls) == 3:
             raise KeyboardInterrupt  # interrupted after two finished units
-        return real(grid, terrain, method, level, settings, truth)
+        return real(grid, terrain, method, level, settings)
 
     monkeypatch.setattr(experiment, "_run_unit", counting)
     with pytest.raises(KeyboardInterrupt):
