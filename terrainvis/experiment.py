@@ -351,6 +351,9 @@ def compare(
         visibility tests).
     workers : int, optional
         Processes of the local pool (default: the number of CPUs; 1 runs in this process).
+        Workers are started with ``spawn``, which imports the caller's ``__main__``
+        module again: in a script, call :func:`compare` under
+        ``if __name__ == "__main__":`` (notebooks and the CLI need nothing).
     client : dask.distributed.Client, optional
         Run the units on this cluster instead (needs the ``dask`` extra).
     offset : float
@@ -469,13 +472,25 @@ def compare(
                 import multiprocessing as mp
 
                 threads = max(1, (os.cpu_count() or 1) // n_workers)
-                with ProcessPoolExecutor(
-                    max_workers=min(n_workers, len(units)), mp_context=mp.get_context("spawn"),
-                    initializer=_worker_init, initargs=(threads,),
-                ) as pool:
-                    futures = {pool.submit(_run_unit, grids[t], t, m, lv, settings): (t, m, lv) for t, m, lv in units}
-                    for fut in as_completed(futures):
-                        collect(fut.result())
+                from concurrent.futures.process import BrokenProcessPool
+
+                try:
+                    with ProcessPoolExecutor(
+                        max_workers=min(n_workers, len(units)), mp_context=mp.get_context("spawn"),
+                        initializer=_worker_init, initargs=(threads,),
+                    ) as pool:
+                        futures = {
+                            pool.submit(_run_unit, grids[t], t, m, lv, settings): (t, m, lv) for t, m, lv in units
+                        }
+                        for fut in as_completed(futures):
+                            collect(fut.result())
+                except BrokenProcessPool as exc:
+                    raise RuntimeError(
+                        "compare's worker processes died. They are started with 'spawn', which imports "
+                        "your __main__ module again: in a script, call compare() under "
+                        "`if __name__ == \"__main__\":`, or pass workers=1 to run in this process. "
+                        f"Units finished before the failure are in out_csv if one was given ({exc})"
+                    ) from exc
     finally:
         bar.close()
 
