@@ -25,10 +25,10 @@ import time
 
 import numpy as np
 
-from simplifiers._registry import vertex_budget
+from simplifiers import vertex_budget
 from simplifiers.greedy_cuts import build, greedy_cuts
 from terrainvis import TIN, HeightGrid, bundled_terrain, synthetic_terrain
-from terrainvis.metrics import vertical_errors
+from terrainvis.deviation import vertical_errors
 from terrainvis.synthetic import KINDS
 
 
@@ -87,8 +87,8 @@ def main(argv=None) -> None:
             err = vertical_errors(grid, tin)[0]
             per_level.append(times)
             print(
-                f"{kind:<10} {level:>3} {budget:>6} {tin.n_vertices:>6} {tin.meta['runs']:>4} "
-                f"{statistics.median(times):>7.3f} {tin.meta['epsilon']:>9.4g} {err:>9.4g} {d_s:>9.4f} "
+                f"{kind:<10} {level:>3} {budget:>6} {tin.n_vertices:>6} {tin.attrs['runs']:>4} "
+                f"{statistics.median(times):>7.3f} {tin.attrs['epsilon']:>9.4g} {err:>9.4g} {d_s:>9.4f} "
                 f"{d_err:>11.4g} {err / d_err if d_err else float('nan'):>9.2f}"
             )
         total = [sum(ts) for ts in zip(*per_level)]
@@ -106,8 +106,8 @@ def main(argv=None) -> None:
         err = vertical_errors(grid, tin)[0]
         d_s, d_err = pydelatin_max_error(grid.z, tin.n_vertices)
         print(
-            f"{kind} {size}x{size} level 2: budget {budget}, {tin.n_vertices} vertices, {tin.meta['runs']} runs, "
-            f"{s:.2f} s (target <= 60 s), eps {tin.meta['epsilon']:.4g}, max err {err:.4g}; "
+            f"{kind} {size}x{size} level 2: budget {budget}, {tin.n_vertices} vertices, {tin.attrs['runs']} runs, "
+            f"{s:.2f} s (target <= 60 s), eps {tin.attrs['epsilon']:.4g}, max err {err:.4g}; "
             f"pydelatin {d_s:.3f} s, max err {d_err:.4g} (ratio ours/pydelatin: time {s / d_s:.1f}, "
             f"error {err / d_err:.2f})"
         )

@@ -7,7 +7,7 @@ library call on the same full-resolution mesh with the same first face target an
 settings (what our first decimation pass asks for, without the boundary snapping,
 fold-over repair and budget passes). It prints medians over the repeats of the time, the vertex count, the max
 and RMS vertical error against the grid, and the ratios pymeshlab / fast-simplification
-and ours / bare library. Our time is ``meta["seconds"]``: the whole build (all passes,
+and ours / bare library. Our time is ``attrs["seconds"]``: the whole build (all passes,
 post-processing and our own validity check), without the registry's error metrics.
 
 Run from the repository root::
@@ -30,8 +30,8 @@ import numpy as np
 
 import simplifiers
 from simplifiers import quadric
-from simplifiers._registry import vertex_budget
-from terrainvis.metrics import vertical_errors
+from simplifiers import vertex_budget
+from terrainvis.deviation import vertical_errors
 from terrainvis.synthetic import synthetic_terrain
 
 BACKENDS = ("pymeshlab", "fast-simplification")
@@ -101,8 +101,8 @@ def main(argv=None):
             for _ in range(repeats):
                 for backend in BACKENDS:
                     tin = simplifiers.simplify(grid, "qec", level, backend=backend)
-                    times[backend].append(tin.meta["seconds"])  # the build alone, as for the bare calls
-                    m = tin.meta
+                    times[backend].append(tin.attrs["seconds"])  # the build alone, as for the bare calls
+                    m = tin.attrs
                     share, folds = _footprint(tin.vertices, tin.faces, grid)
                     rows[backend] = (tin.n_vertices, m["max_error"], m["rms_error"], share, folds,
                                      f"stages={m['stages']} repairs={m['repairs']} collapses={m['collapses']}")

@@ -166,7 +166,7 @@ def section_regular(args) -> None:
     if "lls" in results:
         peer = _peer_lls_numpy(z)
         checks.append(("lls vs numpy slicing", float(np.abs(peer - results["lls"]).max())))
-        fused = rf.reduce_level(z, "lls")
+        fused = rf.reduce_level(z, rf.lls)
         checks.append(("lls fused vs two passes", float(np.abs(fused - results["lls"]).max())))
     if "gls" in results:
         peer = _peer_gls_scipy(z)
@@ -181,9 +181,9 @@ def section_regular(args) -> None:
     for name in fast:
         funcs[name] = (lambda op: lambda: level(op, z))(ops[name])
     if "lls" in fast:
-        funcs["lls fused (reduce_level)"] = lambda: rf.reduce_level(z, "lls")
+        funcs["lls fused (reduce_level)"] = lambda: rf.reduce_level(z, rf.lls)
     if "simple" in fast:
-        funcs["simple gather (reduce_level)"] = lambda: rf.reduce_level(z, "simple")
+        funcs["simple gather (reduce_level)"] = lambda: rf.reduce_level(z, rf.simple)
     if "lls" in fast:
         funcs["peer: lls numpy slicing"] = lambda: _peer_lls_numpy(z)
     if "gls" in fast:
@@ -319,7 +319,7 @@ def section_all(args) -> None:
                     err, nv = (mx, rms), tin.n_vertices
                     method = f"{method} ({100 * cover:.1f}% covered)"
                 else:
-                    meta = out.attrs if isinstance(out, HeightGrid) else out.meta
+                    meta = out.attrs
                     err = (meta["max_error"], meta["rms_error"])
                     nv = meta["n_vertices"]
                 rows.append((size, level, method, nv, float(np.median(times)), peak / 2**20, err[0], err[1]))

@@ -33,7 +33,7 @@ greedy insertion, greedy cuts) return a `TIN` with the same number of vertices."
     ("code", """level = 2
 results = {m: simplifiers.simplify(T, m, level) for m in simplifiers.available()}
 for m, S in results.items():
-    meta = S.attrs if isinstance(S, tv.HeightGrid) else S.meta
+    meta = S.attrs
     print(f"{m:17s} {meta['n_vertices']:6d} vertices  {meta['nbytes'] / 1e3:7.1f} kB  "
           f"max err {meta['max_error']:6.1f} m  RMS {meta['rms_error']:5.2f} m  {meta['seconds']:6.3f} s")
 plot.terrain_views(T, results)"""),

@@ -2,29 +2,23 @@
 
 Regular methods keep a height grid (reverse Faber subdivision: ``"simple"``, ``"gls"``,
 ``"lls"``, ``"feature"``); irregular ones return a TIN with the same vertex budget
-(``"qec"``, ``"greedy-insertion"``, ``"greedy-cuts"``). :func:`available` lists them.
+(``"qec"``, ``"greedy-insertion"``, ``"greedy-cuts"``). :data:`METHODS` holds every fact
+about each method (kind, the paper's order, block-wise halo, cost, plot style, options);
+:mod:`simplifiers.levels` maps levels to sizes and budgets.
 """
 
 from __future__ import annotations
 
 import importlib
 
-from ._registry import available, check_height_field, max_level, simplify, vertex_budget
+from .levels import budget_tolerance, coarse_length, coarse_shape, max_level, vertex_budget
+from .registry import METHODS, Method, available, check_height_field, method_info, simplify
 
 __all__ = [
-    "simplify", "available", "max_level", "vertex_budget", "check_height_field",
-    "reconstruction_error", "faber_subdivide", "reverse_faber",
+    "simplify", "available", "METHODS", "Method", "method_info", "check_height_field",
+    "max_level", "vertex_budget", "budget_tolerance", "coarse_length", "coarse_shape",
+    "faber_subdivide", "reverse_faber", "quadric", "greedy_insertion", "greedy_cuts", "blockwise", "levels",
 ]
-
-
-def reconstruction_error(fine, coarse) -> tuple[float, float]:
-    """Maximum and RMS vertical error of a simplified surface (grid or TIN) against ``fine``.
-
-    See :func:`terrainvis.metrics.vertical_errors`.
-    """
-    from terrainvis.metrics import vertical_errors
-
-    return vertical_errors(fine, coarse)
 
 
 def __getattr__(name):
@@ -32,6 +26,6 @@ def __getattr__(name):
         from .reverse_faber import faber_subdivide
 
         return faber_subdivide
-    if name in ("reverse_faber", "quadric", "greedy_insertion", "greedy_cuts"):
+    if name in ("reverse_faber", "quadric", "greedy_insertion", "greedy_cuts", "blockwise"):
         return importlib.import_module(f"simplifiers.{name}")
     raise AttributeError(f"module 'simplifiers' has no attribute {name!r}")

@@ -30,13 +30,15 @@ import numpy as np
 from terrainvis._validate import as_int, describe
 from terrainvis.terrain import HeightGrid
 
-from . import reverse_faber as rf
-from ._registry import coarse_length
+from .levels import coarse_coords, coarse_length
+from .registry import METHODS, method_info
 
-__all__ = ["simplify_dask", "HALO", "simplify_grid_blockwise"]
+__all__ = ["simplify_dask", "simplify_grid_blockwise", "blockwise_methods"]
 
-#: Halo (fine samples on each side) for each method that can run block-wise.
-HALO = {"simple": 2, "lls": 4, "gls": 64}
+
+def blockwise_methods() -> list[str]:
+    """The methods that can run block-wise: those with a finite halo in the registry."""
+    return [name for name, m in METHODS.items() if m.halo is not None]
 
 
 def _reduce_axis(x, method: str, axis: int, options: dict):
@@ -45,8 +47,9 @@ def _reduce_axis(x, method: str, axis: int, options: dict):
     m = x.shape[axis]
     if m < 3:
         raise ValueError(f"axis {axis} has {m} samples; a curve needs at least 3 to reduce")
-    halo = HALO[method]
-    op = getattr(rf, method)
+    info = method_info(method)
+    halo = info.halo
+    op = info.load()
     # Even chunk lengths along the axis (at least the halo), except possibly the last.
     target = max(int(np.median(x.chunks[axis])), 2 * halo, 8)
     target += target % 2
@@ -109,8 +112,8 @@ def simplify_dask(z, method: str = "lls", level: int = 1, **options):
     """
     import dask.array as da
 
-    if method not in HALO:
-        raise ValueError(f"method must be one of {list(HALO)} for block-wise reduction, got {method!r}")
+    if method not in blockwise_methods():
+        raise ValueError(f"method must be one of {blockwise_methods()} for block-wise reduction, got {method!r}")
     level = as_int(level, "level", minimum=0)
     x = z if isinstance(z, da.Array) else da.asarray(np.asarray(z, dtype=np.float64))
     if x.ndim != 2:
@@ -136,8 +139,5 @@ def simplify_grid_blockwise(grid: HeightGrid, method: str = "lls", level: int = 
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
     grid.require_finite("simplify_grid_blockwise")
     zc = simplify_dask(da.from_array(grid.z, chunks=chunks), method, level, **options).compute()
-    xs, ys = grid.xs, grid.ys
-    for _ in range(as_int(level, "level", minimum=0)):
-        xs = rf.simple(xs, axis=0)
-        ys = rf.simple(ys, axis=0)
-    return HeightGrid.from_coords(zc, xs, ys, attrs=grid.attrs)
+    level = as_int(level, "level", minimum=0)
+    return HeightGrid.from_coords(zc, coarse_coords(grid.xs, level), coarse_coords(grid.ys, level), attrs=grid.attrs)

@@ -96,7 +96,7 @@ def _to_tin(grid: HeightGrid, tris: np.ndarray, meta: dict) -> TIN:
     r, c = np.divmod(used, cols)
     vertices = np.column_stack([grid.xs[c], grid.ys[r], grid.z[r, c]])
     faces = inverse.reshape(-1, 3)
-    return TIN(vertices, faces, meta=meta)
+    return TIN(vertices, faces, attrs=meta)
 
 
 def _check_grid(grid) -> None:
@@ -124,7 +124,7 @@ def greedy_cuts(grid: HeightGrid, epsilon: float) -> TIN:
     TIN
         A subset TIN (every vertex is a grid sample, at its world coordinates) covering
         the grid's extent, with ``max |TIN(x, y) - z| <= epsilon`` over all samples.
-        ``meta`` holds ``epsilon``, ``n_ears`` (triangles adding no vertex: ears and
+        ``attrs`` holds ``epsilon``, ``n_ears`` (triangles adding no vertex: ears and
         connections to the front), ``n_bites`` (triangles adding a vertex, including
         ``n_splits`` fallback insertions), ``n_evaluated`` (candidate triangles tested)
         and ``plane_space`` (``"index"`` or ``"world"``, see ``_gc_kernels``).
@@ -167,11 +167,11 @@ def build(grid: HeightGrid, n_vertices: int, *, epsilon: float | None = None) ->
     Returns
     -------
     TIN
-        Every sample lies within ``meta["epsilon"]`` of it; ``meta["runs"]`` counts the
+        Every sample lies within ``attrs["epsilon"]`` of it; ``attrs["runs"]`` counts the
         triangulations made. When the budget needed the mixed tolerance (step 2 below),
-        ``meta["epsilon_rest"]`` is the smaller tolerance and
-        ``meta["n_samples_at_epsilon"]`` the number of samples (the first of the order
-        ``meta["mixed_order"]``) allowed ``meta["epsilon"]``.
+        ``attrs["epsilon_rest"]`` is the smaller tolerance and
+        ``attrs["n_samples_at_epsilon"]`` the number of samples (the first of the order
+        ``attrs["mixed_order"]``) allowed ``attrs["epsilon"]``.
 
     Raises
     ------
@@ -197,12 +197,12 @@ def build(grid: HeightGrid, n_vertices: int, *, epsilon: float | None = None) ->
        250,000 samples, where runs are cheap and the window narrowest, else 4)
        may be ``eps_hi`` off, the others ``eps_lo``; k = 0 gives too many vertices and
        k = all too few, and a bisection on k lands in between (the guarantee is then
-       ``eps_hi``; ``meta["mixed_order"]`` names the order).
+       ``eps_hi``; ``attrs["mixed_order"]`` names the order).
        This is needed on quantised DEMs (integer metres), where thousands of samples
        have errors of exactly 1 and the count jumps by a quarter at ε = 1.
     3. Last resort: ε within ±2 % of the jump in steps of 0.1 %.
     """
-    from ._registry import budget_tolerance
+    from .levels import budget_tolerance
 
     _check_grid(grid)
     budget = as_int(n_vertices, "n_vertices")

@@ -33,6 +33,7 @@ from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
 
 from . import _gi_kernels as K
+from .levels import check_budget
 
 __all__ = ["build", "GreedyInserter"]
 
@@ -228,7 +229,7 @@ class GreedyInserter:
             "n_flips": int(self._counts[K.NFLIP]),
             "n_edge_splits": int(self._counts[K.NEDGE]),
         }
-        return TIN(vertices, faces, meta=meta)
+        return TIN(vertices, faces, attrs=meta)
 
 
 def build(grid: HeightGrid, n_vertices: int, *, max_error=None) -> TIN:
@@ -243,13 +244,13 @@ def build(grid: HeightGrid, n_vertices: int, *, max_error=None) -> TIN:
         ``max_error`` stops it earlier.
     max_error : float, optional
         Also stop as soon as the largest vertical error is <= ``max_error`` (z units);
-        the TIN then has fewer vertices and ``meta["stopped_by"] == "max_error"``.
+        the TIN then has fewer vertices and ``attrs["stopped_by"] == "max_error"``.
 
     Returns
     -------
     TIN
         Vertices are grid samples (the four corners first, then in insertion order), faces
-        counter-clockwise. ``meta`` holds ``stopped_by`` (``"budget"`` or ``"max_error"``),
+        counter-clockwise. ``attrs`` holds ``stopped_by`` (``"budget"`` or ``"max_error"``),
         ``greedy_max_error`` (the largest vertical error over every sample), the numbers of
         edge flips and of edge splits, and the backend.
 
@@ -269,17 +270,13 @@ def build(grid: HeightGrid, n_vertices: int, *, max_error=None) -> TIN:
     if not isinstance(grid, HeightGrid):
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
     grid.require_finite(f"{_NAME}.build")
-    n = as_int(n_vertices, "n_vertices")
-    if n < 4 or n > grid.size:
-        raise ValueError(
-            f"n_vertices must be in [4, {grid.size}] for a {grid.shape[0]}x{grid.shape[1]} grid, got {n}"
-        )
+    n = check_budget(grid.shape, n_vertices)
     eps = _check_max_error(max_error)
     gi = GreedyInserter(grid).run(n_vertices=n, max_error=eps)
     if gi.n_vertices < n and not (eps is not None and gi.max_error <= eps):
         raise SimplificationError(f"{_NAME}: ran out of candidates at {gi.n_vertices} of {n} vertices")
     tin = gi.to_tin()
-    tin.meta["stopped_by"] = "budget" if gi.n_vertices == n else "max_error"
+    tin.attrs["stopped_by"] = "budget" if gi.n_vertices == n else "max_error"
     if eps is not None:
-        tin.meta["max_error_threshold"] = eps
+        tin.attrs["max_error_threshold"] = eps
     return tin

@@ -8,7 +8,7 @@ shrinks the border or freezes every border vertex, fast-simplification moves cor
 away, and both can leave a few faces folded over in projection. So every decimated
 mesh goes through the same post-processing, which turns it into a valid height field
 over the grid's exact extent (the rules of
-:func:`simplifiers._registry.check_height_field`):
+:func:`simplifiers.registry.check_height_field`):
 
 pymeshlab runs with a high ``boundaryweight`` (1000): its boundary quadric then keeps
 the border within a fraction of a cell of the lines (on 120² terrains at 900 and 225
@@ -21,7 +21,7 @@ by up to 200 m and lost the corners).
    triangle (its height is the grid sample there). Every other boundary vertex is moved
    onto its chain's boundary line (the coordinate across the line is set exactly; its
    height is kept); a chain whose order along its line came out reversed somewhere
-   takes its own coordinates in sorted order (``meta["reordered"]``). Boundary vertices
+   takes its own coordinates in sorted order (``attrs["reordered"]``). Boundary vertices
    can therefore slide and collapse along the border, which is what a 1.5 % budget needs.
 2. **Fold-over repair.** For each face whose projected (signed) area is not positive,
    one of its vertices is moved into the kernel of its star (the set of positions where
@@ -30,9 +30,9 @@ by up to 200 m and lost the corners).
    only along its line and a corner never moves. A moved vertex takes the grid's height
    at its new position. When no vertex of a bad face can be moved, the face is removed
    by a half-edge collapse of one of its vertices (a documented last resort, counted in
-   ``meta["collapses"]``).
+   ``attrs["collapses"]``).
 3. **Budget.** The vertex count of the *post-processed* mesh must be within
-   :func:`~simplifiers._registry.budget_tolerance` of the budget. The libraries take a
+   :func:`~simplifiers.levels.budget_tolerance` of the budget. The libraries take a
    face target, and a disk has F = 2V - B - 2 faces (B boundary vertices), so the
    decimation runs in stages: a first pass to about the budget, then further passes
    on the decimated mesh with face targets corrected from the measured count (a later
@@ -45,7 +45,7 @@ by up to 200 m and lost the corners).
    ``max(16, min(budget // 10, 200))`` vertices) is finished by our own valid half-edge
    collapses, flattest vertex (umbrella operator) first.
 
-Every moved, snapped, inserted or collapsed vertex is counted in ``tin.meta``.
+Every moved, snapped, inserted or collapsed vertex is counted in ``tin.attrs``.
 The vertex heights come from the library (optimal placement), except an inserted
 corner and a relocated vertex, which take the grid's height at their position; a
 snapped boundary vertex keeps its height.
@@ -105,7 +105,7 @@ def build(grid: HeightGrid, n_vertices: int, *, backend: str = "pymeshlab", **tu
         libraries).
     n_vertices : int
         The vertex budget, in [4, grid.size]. The result has this many vertices to
-        within :func:`simplifiers._registry.budget_tolerance` (1 %, at least one).
+        within :func:`simplifiers.levels.budget_tolerance` (1 %, at least one).
     backend : {"pymeshlab", "fast-simplification"}
         The library that performs the collapses.
     **tuning
@@ -120,7 +120,7 @@ def build(grid: HeightGrid, n_vertices: int, *, backend: str = "pymeshlab", **tu
     Returns
     -------
     TIN
-        Counter-clockwise faces covering exactly ``grid.extent``. ``meta`` records the
+        Counter-clockwise faces covering exactly ``grid.extent``. ``attrs`` records the
         backend, the ``settings``, ``stages`` (decimation passes), ``failures`` (passes
         whose output could not be post-processed), ``history`` (target faces, faces
         and vertices, or the error, per pass), ``target_faces`` (of the last pass),
@@ -157,12 +157,12 @@ def build(grid: HeightGrid, n_vertices: int, *, backend: str = "pymeshlab", **tu
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
     settings, common = _check_tuning(backend, tuning)
-    from ._registry import budget_tolerance
+    from .levels import budget_tolerance
 
     tol = budget_tolerance(n_vertices)
     fine = grid.to_tin()
     if n_vertices == grid.size:
-        return TIN(fine.vertices, fine.faces, meta={"backend": backend, "stages": 0})
+        return TIN(fine.vertices, fine.faces, attrs={"backend": backend, "stages": 0})
     origin = np.array([grid.xs[0], grid.ys[0], float(np.mean(grid.z))])
     local = fine.vertices - origin  # a new float64 array: the libraries see a local origin
     faces = np.array(fine.faces, dtype=np.int32, copy=True)
@@ -171,7 +171,7 @@ def build(grid: HeightGrid, n_vertices: int, *, backend: str = "pymeshlab", **tu
     result, info = _meet_budget(decimate, settings, local, faces, post, n_vertices, tol, common["max_stages"], backend)
     vertices, out_faces, stats = result
     meta = {"backend": backend, "settings": dict(settings), **stats, **info}
-    tin = TIN(vertices, out_faces, meta=meta)
+    tin = TIN(vertices, out_faces, attrs=meta)
     _self_check(tin, grid, n_vertices, tol, backend)
     return tin
 
@@ -263,7 +263,7 @@ def _meet_budget(decimate, settings, local, faces, post, budget, tol, max_stages
     mesh known to post-process to more than ``budget`` vertices (at first the full grid).
     When a pass cannot be post-processed (a rare library output that is not a disk, or
     corners out of order) or the library cannot get closer, the last valid result above
-    the budget is finished by our own valid half-edge collapses (``meta["collapses"]``).
+    the budget is finished by our own valid half-edge collapses (``attrs["collapses"]``).
     """
     b_guess = int(math.sqrt(budget))
     # A disk has F = 2V - B - 2. Guess B low (a quarter of a uniform grid's boundary) so that
@@ -797,7 +797,7 @@ def _walk_loop(nxt, start, out):
 def _self_check(tin: TIN, grid: HeightGrid, budget: int, tol: int, backend: str) -> None:
     """Raise SimplificationError unless ``tin`` is a valid height field over the grid's extent.
 
-    The same rules as :func:`simplifiers._registry.check_height_field`, checked the cheap
+    The same rules as :func:`simplifiers.registry.check_height_field`, checked the cheap
     way: a disk whose faces are all counter-clockwise, whose boundary loop lies on the
     four boundary lines and whose projected area is the extent's covers the extent once.
     """

@@ -24,9 +24,14 @@ _API = {
     "visibility_matrix": "terrainvis.visibility",
     "relocate": "terrainvis.relocation",
     "agreement": "terrainvis.metrics",
+    "vertical_errors": "terrainvis.deviation",
+    "volume_error": "terrainvis.deviation",
     "compare": "terrainvis.experiment",
 }
-_MODULES = {"errors", "synthetic", "io", "visibility", "relocation", "metrics", "experiment", "report", "plot", "cli", "terrain", "sampling"}
+_MODULES = {
+    "errors", "synthetic", "io", "visibility", "relocation", "deviation", "metrics", "experiment", "report", "plot",
+    "cli", "terrain", "sampling",
+}
 
 __all__ = sorted(_API) + sorted(_MODULES)
 

@@ -19,7 +19,7 @@ QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "points": 20, "sets"
 
 
 def _parser() -> argparse.ArgumentParser:
-    from simplifiers._registry import METHOD_ORDER
+    from simplifiers import METHODS
 
     from .experiment import DEFAULT_TERRAINS
     from .relocation import RELOCATIONS
@@ -39,7 +39,7 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--terrain", nargs="+", default=None, metavar="T",
                    help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}) or DEM files (.npz .npy .asc .tif)")
     c.add_argument("--levels", nargs="+", type=int, default=None, help="simplification levels (default: 1 2 3)")
-    c.add_argument("--methods", nargs="+", default=None, metavar="M", help=f"methods (default: all of {', '.join(METHOD_ORDER)})")
+    c.add_argument("--methods", nargs="+", default=None, metavar="M", help=f"methods (default: all of {', '.join(METHODS)})")
     c.add_argument("--relocations", nargs="+", default=None, metavar="R", help=f"relocations (default: {' '.join(RELOCATIONS)})")
     c.add_argument("--points", type=int, default=None, help="points per set (default 50)")
     c.add_argument("--sets", type=int, default=None, help="point sets per terrain (default 6)")
@@ -115,7 +115,7 @@ def _compare(args) -> int:
 
 def _write_plots(df, grids, levels, methods, out: Path) -> None:
     from simplifiers import simplify
-    from simplifiers._registry import METHOD_ORDER
+    from simplifiers import METHODS
 
     from . import plot
     from .experiment import load_simplified, simplified_path
@@ -130,7 +130,7 @@ def _write_plots(df, grids, levels, methods, out: Path) -> None:
     level = min(levels) if levels else 1
     for name, grid in grids.items():
         views = {}
-        for m in methods or METHOD_ORDER:
+        for m in methods or METHODS:
             path = simplified_path(out / "simplified", name, m, level)
             if path.exists():  # saved by the run
                 views[m] = load_simplified(path)

@@ -175,9 +175,10 @@ def _want_volume(volume, grid: HeightGrid) -> bool:
 def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings: _Settings) -> list[dict]:
     """Simplify once, then every point set and relocation: the rows of one unit."""
     from simplifiers import simplify
-    from simplifiers._registry import method_info
+    from simplifiers import method_info
 
-    from .metrics import agreement, volume_error
+    from .deviation import volume_error
+    from .metrics import agreement
     from .relocation import relocate
     from .visibility import visibility_matrix
 
@@ -192,7 +193,7 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
         simplified = simplify(grid, method, level)
         if settings.save_dir is not None:
             save_simplified(simplified, simplified_path(settings.save_dir, terrain, method, level))
-        meta = simplified.attrs if isinstance(simplified, HeightGrid) else simplified.meta
+        meta = simplified.attrs
         base.update(
             n_vertices=meta["n_vertices"], size_fraction=meta["n_vertices"] / grid.size, nbytes=meta["nbytes"],
             max_error=meta["max_error"], rms_error=meta["rms_error"], simplify_seconds=meta["seconds"],
@@ -390,10 +391,10 @@ def compare(
     >>> len(df), set(df["relocation"]) == {"identity", "full", "half"}
     (3, True)
     """
-    from simplifiers._registry import METHOD_ORDER, method_info
+    from simplifiers import METHODS, method_info
 
     grids = resolve_terrains(terrains)
-    methods = list(METHOD_ORDER if methods is None else ([methods] if isinstance(methods, str) else methods))
+    methods = list(METHODS if methods is None else ([methods] if isinstance(methods, str) else methods))
     if not methods:
         raise ValueError("methods must name at least one method, got an empty list")
     for m in methods:
@@ -437,8 +438,7 @@ def compare(
             _frame([]).to_csv(path, index=False)
 
     # Expensive units first keeps the pool busy to the end.
-    cost = {"greedy-cuts": 0, "qec": 1, "feature": 2, "greedy-insertion": 3}
-    units.sort(key=lambda u: (cost.get(u[1], 9), u[2]))
+    units.sort(key=lambda u: (METHODS[u[1]].cost_rank, u[2]))
 
     from tqdm.auto import tqdm
 
@@ -496,7 +496,7 @@ def compare(
 
     df = pd.concat([done_rows, _frame(new_rows)], ignore_index=True) if len(done_rows) else _frame(new_rows)
     order_t = {t: i for i, t in enumerate(grids)}
-    order_m = {m: i for i, m in enumerate(METHOD_ORDER)}
+    order_m = {m: i for i, m in enumerate(METHODS)}
     order_r = {r: i for i, r in enumerate(RELOCATIONS)}
     df = df.assign(
         _t=df["terrain"].map(order_t), _m=df["method"].map(order_m), _r=df["relocation"].map(order_r)

@@ -18,11 +18,13 @@ from .terrain import TIN, HeightGrid, as_terrain
 
 __all__ = ["hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff"]
 
-_METHOD_STYLE = {
-    "simple": ("tab:gray", "o"), "gls": ("tab:blue", "s"), "lls": ("tab:cyan", "D"),
-    "feature": ("tab:green", "^"), "qec": ("tab:red", "v"), "greedy-insertion": ("tab:orange", "P"),
-    "greedy-cuts": ("tab:purple", "X"),
-}
+
+def _style(method: str) -> tuple[str, str]:
+    """Colour and marker of a method (from the registry; black dots for unknown names)."""
+    from simplifiers import METHODS
+
+    info = METHODS.get(method)
+    return info.style if info is not None else ("k", "o")
 
 
 def _shade_image(terrain, resolution: int | None = None):
@@ -173,7 +175,7 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
     One panel per relocation; each method is a line through its levels, with the
     standard deviation over terrains x point sets as a band.
     """
-    from simplifiers._registry import METHOD_ORDER
+    from simplifiers import METHODS
 
     from .relocation import RELOCATIONS
 
@@ -183,11 +185,11 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
     axes = fig.subplots(1, max(1, len(rels)), squeeze=False, sharey=True).ravel()
     for ax, rel in zip(axes, rels):
         sub = data[data["relocation"] == rel]
-        for m in [m for m in METHOD_ORDER if m in set(sub["method"])]:
+        for m in [m for m in METHODS if m in set(sub["method"])]:
             g = sub[sub["method"] == m].groupby("level").agg(
                 size=("size_fraction", "median"), mu=("accuracy", "mean"), sd=("accuracy", "std")
             ).sort_values("size")
-            color, marker = _METHOD_STYLE.get(m, ("k", "o"))
+            color, marker = _style(m)
             x = 100 * g["size"].to_numpy()
             mu = 100 * g["mu"].to_numpy()
             sd = 100 * g["sd"].fillna(0).to_numpy()
@@ -226,7 +228,7 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=(10, 4)) -> 
     fig = Figure(figsize=figsize, layout="constrained")
     ax1, ax2 = fig.subplots(1, 2)
     for (m, lv), row in g.iterrows():
-        color, marker = _METHOD_STYLE.get(m, ("k", "o"))
+        color, marker = _style(m)
         for ax, col in ((ax1, "speedup"), (ax2, "memory")):
             ax.scatter(row["lost"], row[col], color=color, marker=marker, label=m if lv == g.loc[m].index.min() else None)
             ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, xytext=(3, 3), textcoords="offset points")

@@ -54,7 +54,7 @@ def paper_tables(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
         ``los_speedup`` (LOS time on T / on S(T)), ``simplify_s``, ``max_error``,
         ``rms_error`` and ``volume_error`` (medians over terrains).
     """
-    from simplifiers._registry import METHOD_ORDER
+    from simplifiers import METHODS
 
     from .relocation import RELOCATIONS
 
@@ -72,7 +72,7 @@ def paper_tables(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
         t = pd.DataFrame({"mu": 100 * g.mean(), "sigma": 100 * g.std(ddof=1), "n": g.size()})
         idx = [
             (m, r)
-            for m in _ordered(sub["method"].unique(), METHOD_ORDER)
+            for m in _ordered(sub["method"].unique(), METHODS)
             for r in _ordered(sub["relocation"].unique(), RELOCATIONS)
             if (m, r) in t.index
         ]
@@ -87,7 +87,7 @@ def paper_tables(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
             t4 = g.unstack("relocation")
             t4 = t4.swaplevel(0, 1, axis=1)
             cols = [(r, c) for r in ("identity", "half") for c in ("visible_kept", "blocked_kept") if (r, c) in t4.columns]
-            t4 = t4[cols].loc[_ordered(t4.index, METHOD_ORDER)]
+            t4 = t4[cols].loc[_ordered(t4.index, METHODS)]
             t4.attrs["title"] = f"Table 4: visible and blocked pairs kept (%) at level {deepest}"
             tables["Table 4"] = t4
     per_unit = data.drop_duplicates(["terrain", "method", "level", "set", "relocation"])
@@ -107,7 +107,7 @@ def paper_tables(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
             "volume_error": g["volume_error"].median(),
         }
     )
-    idx = [(m, lv) for m in _ordered({i[0] for i in cost.index}, METHOD_ORDER) for lv in levels if (m, lv) in cost.index]
+    idx = [(m, lv) for m in _ordered({i[0] for i in cost.index}, METHODS) for lv in levels if (m, lv) in cost.index]
     cost = cost.loc[idx]
     cost.attrs["title"] = "Cost: what S(T) buys (medians over terrains, point sets and relocations)"
     tables["Cost"] = cost
@@ -164,7 +164,9 @@ def findings(df: pd.DataFrame) -> list[dict]:
             bool(at1.index[0] == "qec") if "qec" in at1.index else None,
             "level 1 mean accuracy: " + ", ".join(f"{m} {100 * v:.2f}" for m, v in at1.items()),
         )
-    regular = [m for m in ("simple", "gls", "lls", "feature") if m in data["method"].values]
+    from simplifiers import METHODS
+
+    regular = [m for m, info in METHODS.items() if info.regular and m in data["method"].values]
     if len(regular) >= 2 and "simple" in regular:
         by = data[data["method"].isin(regular)].groupby("method")["accuracy"].mean().sort_values()
         add(

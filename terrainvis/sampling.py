@@ -74,7 +74,7 @@ def _sample_grid(grid: HeightGrid, n: int, rng) -> np.ndarray:
 
 def _sample_tin(tin: TIN, n: int, rng) -> np.ndarray:
     # Area-weighted choice of a face, then a uniform point inside it.
-    area = 0.5 * np.abs(tin.face_normals_z())
+    area = np.abs(tin.face_areas())
     total = area.sum()
     if not total > 0:
         raise ValueError("terrain has a zero footprint area")

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels
+from ._mesh import signed_area2
 from ._validate import as_float_array, as_int, as_points, as_positive_finite, describe
 from .errors import NodataError
 
@@ -291,7 +292,7 @@ class HeightGrid:
             vertices = vertices[finite]
             faces = new_index[faces]
         dtype = np.int32 if vertices.shape[0] < 2**31 - 1 else np.int64
-        tin = TIN(vertices, faces.astype(dtype), meta={"source": "HeightGrid.to_tin", "grid_shape": self.shape})
+        tin = TIN(vertices, faces.astype(dtype), attrs={"source": "HeightGrid.to_tin", "grid_shape": self.shape})
         self._cache["tin"] = tin
         return tin
 
@@ -423,14 +424,14 @@ class TIN:
         x, y, z of each vertex (copied to read-only float64).
     faces : (m, 3) array_like of int
         Vertex indices of each triangle, counter-clockwise seen from above.
-    meta : dict, optional
-        Free-form metadata. The simplifiers record method, level, vertex count, bytes,
-        errors and timing here.
+    attrs : dict, optional
+        Free-form metadata, as in ``HeightGrid.attrs``. The simplifiers record the
+        method, level, vertex count, bytes, errors and timing here.
     """
 
-    __slots__ = ("vertices", "faces", "meta", "_cache", "__weakref__")
+    __slots__ = ("vertices", "faces", "attrs", "_cache", "__weakref__")
 
-    def __init__(self, vertices, faces, *, meta=None):
+    def __init__(self, vertices, faces, *, attrs=None):
         v = as_float_array(vertices, "vertices")
         if v.ndim != 2 or v.shape[1] != 3:
             raise ValueError(f"vertices must have shape (n, 3), got {v.shape}")
@@ -450,11 +451,11 @@ class TIN:
         self.vertices = _frozen(np.array(v, dtype=np.float64, order="C", copy=True))
         dtype = np.int32 if v.shape[0] < 2**31 - 1 else np.int64
         self.faces = _frozen(np.array(f, dtype=dtype, order="C", copy=True))
-        self.meta = dict(meta or {})
+        self.attrs = dict(attrs or {})
         self._cache = {}
 
     def __reduce__(self):
-        return (_rebuild_tin, (self.vertices, self.faces, self.meta))
+        return (_rebuild_tin, (self.vertices, self.faces, self.attrs))
 
     @property
     def n_vertices(self) -> int:
@@ -495,27 +496,22 @@ class TIN:
         )
 
     # ---------------------------------------------------------------- geometry
-    def face_normals_z(self) -> np.ndarray:
-        """(m,) z component of each face's (unnormalised) normal: twice its signed projected area."""
-        v = self.vertices
-        f = self.faces
-        a = v[f[:, 0], :2]
-        b = v[f[:, 1], :2]
-        c = v[f[:, 2], :2]
-        return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+    def face_areas(self) -> np.ndarray:
+        """(m,) signed projected (x, y) area of each face: > 0 for counter-clockwise faces."""
+        return 0.5 * signed_area2(self.vertices, self.faces)
 
     def footprint_area(self) -> float:
         """Sum of the signed projected areas of the faces."""
-        return float(0.5 * self.face_normals_z().sum())
+        return float(self.face_areas().sum())
 
     def is_height_field(self, rtol: float = 1e-9) -> bool:
-        """True when every face normal has z > 0 and the footprint area equals the extent's."""
-        nz = self.face_normals_z()
-        if not (nz > 0).all():
+        """True when every face is counter-clockwise in projection and the footprint area equals the extent's."""
+        areas = self.face_areas()
+        if not (areas > 0).all():
             return False
         xmin, xmax, ymin, ymax = self.extent
         area = (xmax - xmin) * (ymax - ymin)
-        return bool(abs(self.footprint_area() - area) <= rtol * area)
+        return bool(abs(areas.sum() - area) <= rtol * area)
 
     def _buckets(self) -> _Buckets:
         bk = self._cache.get("buckets")
@@ -579,8 +575,8 @@ def _rebuild_grid(z, xs, ys, attrs):
     return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
 
 
-def _rebuild_tin(vertices, faces, meta):
-    return TIN(vertices, faces, meta=meta)
+def _rebuild_tin(vertices, faces, attrs):
+    return TIN(vertices, faces, attrs=attrs)
 
 
 def as_terrain(terrain, name: str = "terrain"):

@@ -52,7 +52,7 @@ def test_grid_wrapper_and_errors():
     np.testing.assert_array_equal(b.z, s.z)
     np.testing.assert_array_equal(b.xs, s.xs)
     np.testing.assert_array_equal(b.ys, s.ys)
-    with pytest.raises(ValueError, match=r"method must be one of \['simple', 'lls', 'gls'\]"):
+    with pytest.raises(ValueError, match=r"method must be one of \['simple', 'gls', 'lls'\]"):
         simplify_dask(z, "feature")
     with pytest.raises(ValueError, match="2-D"):
         simplify_dask(np.zeros(10), "lls")

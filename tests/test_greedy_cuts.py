@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 import simplifiers
 from conftest import DEM_NAMES, shared_dem_120
-from simplifiers._registry import budget_tolerance, check_height_field, vertex_budget
+from simplifiers import budget_tolerance, check_height_field, vertex_budget
 from simplifiers.greedy_cuts import build, greedy_cuts
 from terrainvis import HeightGrid
 from terrainvis.errors import NodataError, SimplificationError
@@ -80,7 +80,7 @@ def assert_rules(tin, grid, budget=None):
     for cx, cy in ((xmin, ymin), (xmax, ymin), (xmin, ymax), (xmax, ymax)):
         assert ((v[:, 0] == cx) & (v[:, 1] == cy)).any()
     assert tin.is_height_field()
-    assert (tin.face_normals_z() > 0).all()
+    assert (tin.face_areas() > 0).all()
     assert tin.extent == grid.extent
     edges = np.sort(tin.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     uniq, counts = np.unique(edges, axis=0, return_counts=True)
@@ -155,10 +155,10 @@ def test_meta_and_subset_vertices(bundled):
     g = bundled["hills"]
     tin = greedy_cuts(g, 1.0)
     vertex_cells(tin, g)
-    assert tin.meta["epsilon"] == 1.0
-    assert tin.meta["n_ears"] + tin.meta["n_bites"] == tin.n_faces
+    assert tin.attrs["epsilon"] == 1.0
+    assert tin.attrs["n_ears"] + tin.attrs["n_bites"] == tin.n_faces
     # every face adding a vertex adds exactly one, to the boundary's vertices
-    assert tin.meta["plane_space"] == "index"
+    assert tin.attrs["plane_space"] == "index"
 
 
 # ------------------------------------------------------------- the ε guarantee
@@ -228,9 +228,9 @@ def _check_simplified(g, level):
     budget = vertex_budget(g.shape, level)
     assert_rules(tin, g, budget)
     vertex_cells(tin, g)
-    err = assert_guarantee(tin, g, tin.meta["epsilon"])
-    assert tin.meta["max_error"] == pytest.approx(err, rel=1e-9, abs=1e-12)
-    assert tin.meta["method"] == "greedy-cuts" and tin.meta["budget"] == budget
+    err = assert_guarantee(tin, g, tin.attrs["epsilon"])
+    assert tin.attrs["max_error"] == pytest.approx(err, rel=1e-9, abs=1e-12)
+    assert tin.attrs["method"] == "greedy-cuts" and tin.attrs["budget"] == budget
     return tin
 
 
@@ -252,7 +252,7 @@ def test_rectilinear_and_non_square_cells(bundled):
     rng = np.random.default_rng(3)
     rect = HeightGrid.from_coords(z, np.cumsum(rng.uniform(5, 40, z.shape[1])), np.cumsum(rng.uniform(5, 60, z.shape[0])))
     tin = _check_simplified(rect, 2)
-    assert tin.meta["plane_space"] == "world"
+    assert tin.attrs["plane_space"] == "world"
     # on a uniform grid the cell aspect is an affine map: the same triangulation
     a = build(HeightGrid(z, dx=10.0, dy=37.0), 900)
     b = build(HeightGrid(z, dx=30.0, dy=30.0), 900)
@@ -267,15 +267,15 @@ def test_deterministic(bundled):
     b = simplifiers.simplify(g, "greedy-cuts", 2)
     np.testing.assert_array_equal(a.vertices, b.vertices)
     np.testing.assert_array_equal(a.faces, b.faces)
-    assert a.meta["epsilon"] == b.meta["epsilon"]
+    assert a.attrs["epsilon"] == b.attrs["epsilon"]
 
 
 def test_vertices_override_and_epsilon_guess(bundled):
     g = bundled["hills"]
     tin = simplifiers.simplify(g, "greedy-cuts", None, vertices=500)
     assert abs(tin.n_vertices - 500) <= budget_tolerance(500)
-    guessed = build(g, 500, epsilon=tin.meta["epsilon"])
-    assert guessed.meta["runs"] == 1  # the given ε is tried first and lands at once
+    guessed = build(g, 500, epsilon=tin.attrs["epsilon"])
+    assert guessed.attrs["runs"] == 1  # the given ε is tried first and lands at once
     np.testing.assert_array_equal(guessed.faces, tin.faces)
 
 

@@ -98,8 +98,8 @@ def test_bundled_terrains(name, level, backend):
     grid = _terrain(name)
     tin = _qec(name, level, backend)
     assert_height_field(tin, grid, _budget(grid, level))
-    assert tin.meta["backend"] == backend and tin.meta["method"] == "qec"
-    assert tin.meta["n_vertices"] == tin.n_vertices
+    assert tin.attrs["backend"] == backend and tin.attrs["method"] == "qec"
+    assert tin.attrs["n_vertices"] == tin.n_vertices
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -134,14 +134,14 @@ def test_explicit_vertex_budget():
     grid = _terrain("hills")
     tin = simplifiers.simplify(grid, "qec", None, vertices=500)
     assert_height_field(tin, grid, 500)
-    assert tin.meta["budget"] == 500
+    assert tin.attrs["budget"] == 500
 
 
 # --------------------------------------------------------------------------- error sanity
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("name", KINDS)
 def test_error_decreases_as_the_budget_grows(name, backend):
-    errs = [_qec(name, level, backend).meta for level in (3, 2, 1)]  # 225, 900, 3600 vertices
+    errs = [_qec(name, level, backend).attrs for level in (3, 2, 1)]  # 225, 900, 3600 vertices
     max_err = [m["max_error"] for m in errs]
     rms_err = [m["rms_error"] for m in errs]
     assert max_err[0] > max_err[1] > max_err[2] > 0
@@ -156,7 +156,7 @@ def test_beats_the_regular_grid_of_equal_size(name, level, backend):
     grid = _terrain(name)
     regular = simplifiers.simplify(grid, "simple", level)
     tin = _qec(name, level, backend)
-    assert tin.meta["rms_error"] < regular.attrs["rms_error"]
+    assert tin.attrs["rms_error"] < regular.attrs["rms_error"]
 
 
 def test_errors_recorded_match_an_independent_evaluation():
@@ -166,8 +166,8 @@ def test_errors_recorded_match_an_independent_evaluation():
     tri = mtri.Triangulation(v[:, 0], v[:, 1], tin.faces)
     X, Y = np.meshgrid(grid.xs, grid.ys)
     diff = np.ma.getdata(mtri.LinearTriInterpolator(tri, v[:, 2])(X, Y)) - grid.z
-    assert tin.meta["max_error"] == pytest.approx(np.abs(diff).max(), rel=1e-9, abs=1e-9)
-    assert tin.meta["rms_error"] == pytest.approx(np.sqrt(np.mean(diff**2)), rel=1e-9, abs=1e-9)
+    assert tin.attrs["max_error"] == pytest.approx(np.abs(diff).max(), rel=1e-9, abs=1e-9)
+    assert tin.attrs["rms_error"] == pytest.approx(np.sqrt(np.mean(diff**2)), rel=1e-9, abs=1e-9)
 
 
 # --------------------------------------------------------------------------- determinism, meta
@@ -186,9 +186,9 @@ def test_deterministic(backend):
 def test_meta_counts_the_post_processing(backend):
     tin = _qec("ridges", 3, backend)
     for key in ("stages", "snapped", "max_snap", "corners_inserted", "repairs", "collapses", "settings"):
-        assert key in tin.meta
-    assert tin.meta["stages"] >= 1
-    assert tin.meta["corners_inserted"] in range(5)
+        assert key in tin.attrs
+    assert tin.attrs["stages"] >= 1
+    assert tin.attrs["corners_inserted"] in range(5)
 
 
 def test_input_is_not_modified():

@@ -470,7 +470,7 @@ def test_reduce_level_equals_rows_then_columns_bitwise(shape, method, options):
     z = np.random.default_rng(sum(shape)).normal(0, 100, shape).round(0)
     op = OPS[method]
     expected = op(op(z, axis=1, **options), axis=0, **options)
-    got = rf.reduce_level(z, method, **options)
+    got = rf.reduce_level(z, op, **options)
     assert got.shape == expected.shape
     np.testing.assert_array_equal(got, expected)
 
@@ -478,8 +478,8 @@ def test_reduce_level_equals_rows_then_columns_bitwise(shape, method, options):
 def test_reduce_level_large_grid_runs_in_parallel_chunks():
     # big enough for the threaded path; chunks restart their ring of filtered rows
     z = np.random.default_rng(1).normal(size=(1201, 1000))
-    np.testing.assert_array_equal(rf.reduce_level(z, "lls"), rf.lls(rf.lls(z, axis=1), axis=0))
-    np.testing.assert_array_equal(rf.reduce_level(z, "gls"), rf.gls(rf.gls(z, axis=1), axis=0))
+    np.testing.assert_array_equal(rf.reduce_level(z, rf.lls), rf.lls(rf.lls(z, axis=1), axis=0))
+    np.testing.assert_array_equal(rf.reduce_level(z, rf.gls), rf.gls(rf.gls(z, axis=1), axis=0))
     # and the threaded two-pass kernels agree with the serial per-curve ones
     np.testing.assert_array_equal(rf.gls(z, axis=0)[:, 17], rf.gls(z[:, 17].copy()))
     np.testing.assert_array_equal(rf.lls(z, axis=1)[999], rf.lls(z[999].copy()))
@@ -487,21 +487,21 @@ def test_reduce_level_large_grid_runs_in_parallel_chunks():
 
 
 def test_reduce_level_bad_input():
-    with pytest.raises(ValueError, match="method must be one of"):
-        rf.reduce_level(np.zeros((5, 5)), "qec")
+    with pytest.raises(TypeError, match="op must be a curve operator"):
+        rf.reduce_level(np.zeros((5, 5)), "lls")
     with pytest.raises(ValueError, match="z must be a 2-D array"):
-        rf.reduce_level(np.zeros(5), "lls")
+        rf.reduce_level(np.zeros(5), rf.lls)
     with pytest.raises(ValueError, match="too short to reduce"):
-        rf.reduce_level(np.zeros((2, 5)), "lls")
+        rf.reduce_level(np.zeros((2, 5)), rf.lls)
     with pytest.raises(ValueError, match="weights must be one of"):
-        rf.reduce_level(np.zeros((5, 5)), "lls", weights="x")
+        rf.reduce_level(np.zeros((5, 5)), rf.lls, weights="x")
     for shape in [(3, 3), (4, 4), (7, 9)]:
         for pos in np.ndindex(*shape):
             z = np.zeros(shape)
             z[pos] = np.nan
-            for method in ("simple", "lls"):
+            for op in (rf.simple, rf.lls):
                 with pytest.raises(ValueError, match="f must be finite"):
-                    rf.reduce_level(z, method)
+                    rf.reduce_level(z, op)
 
 
 @pytest.mark.parametrize("name", list(OPS))

@@ -1,0 +1,290 @@
+"""The registry of methods, and the one entry point :func:`simplify`.
+
+Every fact about a method lives in its :class:`Method` entry here: its name, kind, the
+paper's row order (the order of :data:`METHODS`), where its code is, the halo it needs
+on the block-wise path, how expensive it is (the runner schedules expensive units
+first), how figures draw it, and the options it accepts. The rest of terrainvis reads
+them through :data:`METHODS` and :func:`method_info`; adding a method means adding an
+entry here and writing its module.
+
+A *regular* method provides a curve operator ``op(f, axis=..., **options)`` that
+reduces one axis of an array; :func:`simplify` applies it along rows, then columns,
+``level`` times (:func:`simplifiers.reverse_faber.reduce_level`). An *irregular* method
+provides ``build(grid, n_vertices, **options) -> TIN``; :func:`simplify` computes the
+vertex budget, checks the result against the height-field rules
+(:func:`check_height_field`) and records the metadata.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from terrainvis._mesh import NotADiskError, boundary_loop, signed_area2
+from terrainvis._validate import as_int, describe
+from terrainvis.deviation import vertical_errors
+from terrainvis.errors import SimplificationError
+from terrainvis.terrain import TIN, HeightGrid
+
+from .levels import check_budget, check_level, check_vertex_count, coarse_coords, vertex_budget
+
+__all__ = ["Method", "METHODS", "available", "method_info", "simplify", "check_height_field"]
+
+
+@dataclass(frozen=True)
+class Method:
+    """One simplification method and everything the rest of terrainvis needs to know about it.
+
+    Attributes
+    ----------
+    name : str
+        The name passed to :func:`simplify` (and written in result tables).
+    kind : {"regular", "irregular"}
+        Regular methods return a HeightGrid, irregular ones a TIN.
+    module, attr : str
+        Where the code is: a curve operator (regular) or ``build`` (irregular).
+    description : str
+        One line, with the reference.
+    options : tuple of str
+        The keyword options the method accepts (passed through :func:`simplify`).
+    halo : int or None
+        Fine samples each block needs from its neighbours on the block-wise path
+        (:mod:`simplifiers.blockwise`); None when the method cannot run block-wise.
+    cost_rank : int
+        Scheduling order of the comparison runner: lower runs first (the most expensive
+        methods), so that the pool stays busy to the end.
+    style : (str, str)
+        Matplotlib colour and marker of the method in figures.
+    """
+
+    name: str
+    kind: str
+    module: str
+    attr: str
+    description: str
+    options: tuple = ()
+    halo: int | None = None
+    cost_rank: int = 9
+    style: tuple = ("k", "o")
+
+    def load(self):
+        """The method's operator (regular) or build function (irregular)."""
+        return getattr(importlib.import_module(self.module), self.attr)
+
+    @property
+    def regular(self) -> bool:
+        return self.kind == "regular"
+
+
+_RF = "simplifiers.reverse_faber"
+
+#: Every method, in the paper's row order (irregular first, then regular).
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        Method(
+            "qec", "irregular", "simplifiers.quadric", "build",
+            "quadric edge collapse (Garland & Heckbert 1997) through pymeshlab",
+            options=("backend",), cost_rank=1, style=("tab:red", "v"),
+        ),
+        Method(
+            "greedy-cuts", "irregular", "simplifiers.greedy_cuts", "build",
+            "greedy cuts (Silva, Mitchell & Kaufman 1995)",
+            options=("max_error",), cost_rank=0, style=("tab:purple", "X"),
+        ),
+        Method(
+            "greedy-insertion", "irregular", "simplifiers.greedy_insertion", "build",
+            "greedy insertion (Garland & Heckbert 1995, Algorithm III)",
+            options=("max_error",), cost_rank=3, style=("tab:orange", "P"),
+        ),
+        Method("simple", "regular", _RF, "simple", "reverse Faber: keep the coarse samples",
+               halo=2, cost_rank=6, style=("tab:gray", "o")),
+        Method("gls", "regular", _RF, "gls", "reverse Faber: global least squares",
+               halo=64, cost_rank=5, style=("tab:blue", "s")),
+        Method("lls", "regular", _RF, "lls", "reverse Faber: local least squares",
+               options=("weights",), halo=4, cost_rank=5, style=("tab:cyan", "D")),
+        Method("feature", "regular", _RF, "feature", "reverse Faber: feature-aware least squares",
+               options=("weight",), cost_rank=2, style=("tab:green", "^")),
+    )
+}
+
+
+def available() -> dict[str, str]:
+    """Every registered method and its kind, in the paper's order.
+
+    Examples
+    --------
+    >>> available()["lls"], available()["qec"]
+    ('regular', 'irregular')
+    """
+    return {name: m.kind for name, m in METHODS.items()}
+
+
+def method_info(method) -> Method:
+    """The registry entry of ``method``, or ValueError naming the valid methods."""
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"method must be one of {list(METHODS)} (see simplifiers.available()), got {method!r}")
+    return METHODS[method]
+
+
+def simplify(grid: HeightGrid, method: str, level: int = 1, **options):
+    """Simplify a height grid with one of the registered methods.
+
+    Parameters
+    ----------
+    grid : HeightGrid
+        The fine terrain; it must hold no nodata.
+    method : str
+        One of :func:`available`: ``"simple"``, ``"gls"``, ``"lls"``, ``"feature"``
+        (regular: the result is a HeightGrid) or ``"qec"``, ``"greedy-insertion"``,
+        ``"greedy-cuts"`` (irregular: the result is a TIN).
+    level : int
+        Number of reverse-subdivision steps; each halves both axes (120 -> 60 -> 30 -> 15).
+        For an irregular method, the vertex budget is the sample count of the regular
+        result at this level.
+    **options
+        The method's options (:attr:`Method.options`). Irregular methods also accept
+        ``n_vertices=N`` to set the budget directly (``level`` is then only recorded).
+
+    Returns
+    -------
+    HeightGrid or TIN
+        ``attrs`` records ``method``, ``kind``, ``level``, ``n_vertices``, ``nbytes``,
+        ``max_error`` and ``rms_error`` against ``grid`` (:func:`terrainvis.vertical_errors`)
+        and ``seconds`` (the simplification alone); irregular results also ``budget``.
+
+    Examples
+    --------
+    >>> from terrainvis import synthetic_terrain
+    >>> S = simplify(synthetic_terrain("hills", size=33), "lls", 2)
+    >>> S.shape, S.attrs["method"], S.attrs["n_vertices"]
+    ((9, 9), 'lls', 81)
+    """
+    if not isinstance(grid, HeightGrid):
+        raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
+    info = method_info(method)
+    grid.require_finite(f"simplify(method={method!r})")
+    unknown = sorted(set(options) - set(info.options) - ({"n_vertices"} if not info.regular else set()))
+    if unknown:
+        raise TypeError(f"{method} got unexpected option(s) {unknown}; it accepts {sorted(info.options)}")
+    if info.regular:
+        level = check_level(grid.shape, level)
+        t0 = time.perf_counter()
+        out = _apply_regular(grid, info, level, options)
+        seconds = time.perf_counter() - t0
+        extra = {}
+    else:
+        out, seconds, level, budget = _run_irregular(grid, info, level, options)
+        extra = {"budget": budget}
+    err_max, err_rms = vertical_errors(grid, out)
+    n_vertices = out.size if info.regular else out.n_vertices
+    out.attrs.update(
+        method=method, kind=info.kind, level=level, n_vertices=int(n_vertices), nbytes=int(out.nbytes),
+        max_error=err_max, rms_error=err_rms, seconds=seconds, **extra,
+    )
+    return out
+
+
+def _apply_regular(grid: HeightGrid, info: Method, level: int, options) -> HeightGrid:
+    if level == 0:
+        return grid.copy_with()
+    from .reverse_faber import reduce_level
+
+    op = info.load()
+    z = grid.z
+    for _ in range(level):
+        z = reduce_level(z, op, **options)
+    return HeightGrid.from_coords(z, coarse_coords(grid.xs, level), coarse_coords(grid.ys, level), attrs=grid.attrs)
+
+
+def _run_irregular(grid: HeightGrid, info: Method, level, options):
+    options = dict(options)
+    n_override = options.pop("n_vertices", None)
+    if n_override is None:
+        level = check_level(grid.shape, level)
+        budget = vertex_budget(grid.shape, level)
+    else:
+        if level is not None:
+            level = as_int(level, "level", minimum=0)
+        budget = check_budget(grid.shape, n_override, "n_vertices")
+    t0 = time.perf_counter()
+    if grid.shape == (2, 2) or budget == grid.size:
+        own = grid.to_tin()
+        tin = TIN(own.vertices, own.faces)  # a fresh object: its attrs must not touch the grid's cached TIN
+    else:
+        build = info.load()
+        try:
+            tin = build(grid, budget, **options)
+        except (SimplificationError, TypeError, ValueError, MemoryError):
+            raise
+        except Exception as exc:  # a library failed: name the method and the cause
+            raise SimplificationError(f"{info.name} failed on a {grid.shape} grid: {type(exc).__name__}: {exc}") from exc
+    seconds = time.perf_counter() - t0
+    early = tin.attrs.get("stopped_by") == "max_error"
+    if early and tin.n_vertices > budget:
+        raise SimplificationError(
+            f"{info.name} stopped by max_error with {tin.n_vertices} vertices, over the budget of {budget}"
+        )
+    # An error threshold may stop a method before the budget: fewer vertices are
+    # expected then, and every other rule still holds.
+    check_height_field(tin, grid, method=info.name, budget=None if early else budget)
+    return tin, seconds, level, budget
+
+
+def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int | None = None) -> None:
+    """Raise :class:`SimplificationError` unless ``tin`` is a valid height field over ``grid``'s extent.
+
+    The rules: the four corners are vertices and no vertex lies outside the extent; the
+    mesh is one triangulated disk (every edge shared by at most two faces, consistently
+    oriented, one boundary loop, Euler characteristic 1) whose boundary edges all lie
+    on the four boundary lines; every face is counter-clockwise in projection; the
+    projected area equals the extent's; and the vertex count is within
+    :func:`~simplifiers.levels.budget_tolerance` of ``budget`` (when given).
+
+    Together these mean the TIN covers the extent exactly once: with every face
+    counter-clockwise, the number of faces over a point equals the winding number of the
+    boundary loop around it. A loop running along the rectangle's sides has one winding
+    number k everywhere inside, and the area rule makes k = 1. So no grid sample needs to
+    be located to check coverage.
+    """
+    xmin, xmax, ymin, ymax = grid.extent
+    v = tin.vertices
+    problems = []
+    for cx, cy in ((xmin, ymin), (xmax, ymin), (xmin, ymax), (xmax, ymax)):
+        if not ((v[:, 0] == cx) & (v[:, 1] == cy)).any():
+            problems.append(f"corner ({cx:g}, {cy:g}) is missing")
+    outside = (v[:, 0] < xmin) | (v[:, 0] > xmax) | (v[:, 1] < ymin) | (v[:, 1] > ymax)
+    if outside.any():
+        problems.append(f"{int(outside.sum())} vertices lie outside the extent")
+    area2 = signed_area2(v, tin.faces)
+    if not (area2 > 0).all():
+        problems.append(f"{int((area2 <= 0).sum())} of {area2.size} faces fold over (not counter-clockwise)")
+    area = (xmax - xmin) * (ymax - ymin)
+    if abs(0.5 * area2.sum() - area) > 1e-9 * area:
+        problems.append(f"the projected area is {0.5 * area2.sum() / area:.6%} of the extent's")
+    used = np.zeros(tin.n_vertices, dtype=bool)
+    used[tin.faces.ravel()] = True
+    if not used.all():
+        problems.append(f"{int((~used).sum())} vertices belong to no face")
+    else:
+        try:
+            loop = boundary_loop(tin.faces, tin.n_vertices)
+        except NotADiskError as exc:
+            problems.append(str(exc))
+        else:
+            p, q = v[loop], v[np.roll(loop, -1)]
+            on_line = (
+                ((p[:, 0] == xmin) & (q[:, 0] == xmin)) | ((p[:, 0] == xmax) & (q[:, 0] == xmax))
+                | ((p[:, 1] == ymin) & (q[:, 1] == ymin)) | ((p[:, 1] == ymax) & (q[:, 1] == ymax))
+            )
+            if not on_line.all():
+                problems.append(f"{int((~on_line).sum())} boundary edges lie off the boundary lines")
+    if budget is not None:
+        count = check_vertex_count(tin.n_vertices, budget)
+        if count:
+            problems.append(count)
+    if problems:
+        raise SimplificationError(f"{method} returned an invalid height field: " + "; ".join(problems))
