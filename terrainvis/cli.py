@@ -1,9 +1,18 @@
 """The ``terrainvis`` command line.
 
-``terrainvis compare`` runs the paper's experiment (by default on the five bundled 120x120
-terrains and the real Jacksboro DEM), prints Tables 1-4 and the cost table, and writes
-``results.csv``, ``tables.md``, figures and the simplified terrains (``simplified/``) into
-``--out``. ``terrainvis info`` describes a terrain.
+* ``terrainvis compare`` runs the paper's experiment (by default on the five bundled
+  120x120 terrains and the real Jacksboro DEM), prints Tables 1-4, the cost table and
+  the paper's findings, and writes ``results.csv``, ``tables.md``, figures and the
+  simplified terrains (``simplified/``) into ``--out``.
+* ``terrainvis simplify DEM -m METHOD -l LEVEL -o OUT`` simplifies a DEM and writes the
+  result as a grid (``.tif``, ``.asc``, ``.npz``) or a mesh (``.ply``, ``.obj``, ``.stl``,
+  ``.glb``; TINs also ``.npz``).
+* ``terrainvis los DEM --from X Y --to X Y`` checks lines of sight.
+* ``terrainvis info DEM`` describes a terrain.
+
+User mistakes end with one line on stderr and exit status 2; a run that produced no
+result exits with 1; an interrupt exits with 130 (SIGINT) or 143 (SIGTERM), after the
+finished units have been written.
 """
 
 from __future__ import annotations
@@ -15,20 +24,33 @@ from pathlib import Path
 
 __all__ = ["main"]
 
+#: ``--quick``: a run of seconds for smoke tests.
 QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "points": 20, "sets": 2}
+
+
+class UsageError(ValueError):
+    """A mistake on the command line: reported in one line, exit status 2."""
+
+
+# ------------------------------------------------------------------ parser
+def _add_nodata(p) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--fill", choices=["nearest", "linear"], default=None,
+                   help="fill nodata cells first (nearest sample, or linear inside the valid hull)")
+    g.add_argument("--crop-valid", action="store_true", help="cut the DEM to its largest window without nodata")
 
 
 def _parser() -> argparse.ArgumentParser:
     from simplifiers import METHODS
 
-    from .experiment import DEFAULT_TERRAINS
+    from .experiment import DEFAULT_TERRAINS, DEFAULTS, PREDICATES
     from .relocation import RELOCATIONS
 
     p = argparse.ArgumentParser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
     c = sub.add_parser(
-        "compare",
-        help="run the paper's experiment and print its tables",
+        "compare", help="run the paper's experiment and print its tables",
         description=(
             "Simplify each terrain with each method and level, relocate random point sets onto the "
             "simplification, and count the line-of-sight verdicts that survive. Defaults reproduce the "
@@ -38,143 +60,342 @@ def _parser() -> argparse.ArgumentParser:
     )
     c.add_argument("--terrain", nargs="+", default=None, metavar="T",
                    help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}) or DEM files (.npz .npy .asc .tif)")
-    c.add_argument("--levels", nargs="+", type=int, default=None, help="simplification levels (default: 1 2 3)")
+    c.add_argument("--levels", nargs="+", type=int, default=None,
+                   help=f"simplification levels (default: {' '.join(map(str, DEFAULTS.levels))})")
     c.add_argument("--methods", nargs="+", default=None, metavar="M", help=f"methods (default: all of {', '.join(METHODS)})")
-    c.add_argument("--relocations", nargs="+", default=None, metavar="R", help=f"relocations (default: {' '.join(RELOCATIONS)})")
-    c.add_argument("--points", type=int, default=None, help="points per set (default 50)")
-    c.add_argument("--sets", type=int, default=None, help="point sets per terrain (default 6)")
-    c.add_argument("--seed", type=int, default=0, help="seed of the point sets (default 0)")
-    c.add_argument("--offset", type=float, default=0.0, help="observer height above the surface (default 0)")
+    c.add_argument("--relocations", nargs="+", default=None, metavar="R",
+                   help=f"relocations (default: {' '.join(RELOCATIONS)})")
+    c.add_argument("--points", type=int, default=None, help=f"points per set (default {DEFAULTS.n_points})")
+    c.add_argument("--sets", type=int, default=None, help=f"point sets per terrain (default {DEFAULTS.n_sets})")
+    c.add_argument("--seed", type=int, default=DEFAULTS.seed, help=f"seed of the point sets (default {DEFAULTS.seed})")
+    c.add_argument("--offset", type=float, default=DEFAULTS.offset,
+                   help=f"observer height above the surface (default {DEFAULTS.offset:g})")
     c.add_argument("--max-distance", type=float, default=None, help="count only pairs within this horizontal distance")
+    c.add_argument("--predicate", choices=PREDICATES, default=DEFAULTS.predicate,
+                   help="line-of-sight predicate on S(T): exact, or paper (ignore one cell of S(T) around each end)")
+    c.add_argument("--engine", choices=["auto", "grid", "embree"], default=DEFAULTS.engine, help="visibility engine")
+    c.add_argument("--repeats", type=int, default=DEFAULTS.repeats, help="timings per visibility matrix (the fastest is kept)")
     c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")
-    c.add_argument("--no-volume", action="store_true", help="skip the manifold3d volume shape error (skipped anyway above 10^6 samples)")
+    c.add_argument("--no-volume", action="store_true", help="skip the volume between T and S(T)")
     c.add_argument("--no-plots", action="store_true", help="do not write the figures")
     c.add_argument("--quick", action="store_true",
                    help="a run of seconds for smoke tests: terrains hills and ridges, levels 1 and 3, 2 sets of 20 points")
     c.add_argument("--resume", action="store_true", help="keep the units already in OUT/results.csv and run only the rest")
     c.add_argument("--out", default="terrainvis-results", help="output folder (default: ./terrainvis-results)")
+    _add_nodata(c)
+
+    s = sub.add_parser(
+        "simplify", help="simplify a DEM and write the result",
+        description=(
+            "Simplify a DEM with one method at one level and write it. OUT by extension: .tif .asc .npz for grids "
+            "(regular methods), .ply .obj .stl .glb for any result as a mesh, .npz for TINs."
+        ),
+    )
+    s.add_argument("dem", help="DEM file or bundled name")
+    s.add_argument("-m", "--method", required=True, choices=list(METHODS), metavar="METHOD",
+                   help=f"one of {', '.join(METHODS)}")
+    s.add_argument("-l", "--level", type=int, default=1, help="level: each one halves both axes (default 1)")
+    s.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
+    s.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="an option of the method, e.g. weights=derived for lls (repeatable)")
+    _add_nodata(s)
+
+    los = sub.add_parser(
+        "los", help="check lines of sight on a DEM",
+        description=(
+            "Print whether the points see each other, and the lowest clearance of the segment (segment height "
+            "minus surface height) with where it occurs. Coordinates are the DEM's x, y (see terrainvis info)."
+        ),
+    )
+    los.add_argument("dem", help="DEM file or bundled name")
+    los.add_argument("--from", dest="start", nargs=2, type=float, metavar=("X", "Y"), help="observer position")
+    los.add_argument("--to", dest="end", nargs=2, type=float, metavar=("X", "Y"), help="target position")
+    los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2")
+    los.add_argument("--height", type=float, default=1.7, help="observer height above the surface (default 1.7)")
+    los.add_argument("--target-height", type=float, default=0.0, help="target height above the surface (default 0)")
+    los.add_argument("--end-radius", type=float, default=0.0, help="ignore the surface within this distance of each end")
+    _add_nodata(los)
+
     i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
     i.add_argument("terrain", help="bundled name or DEM file")
     return p
 
 
-def _compare(args) -> int:
-    import pandas as pd
+# ------------------------------------------------------------------ helpers
+def _terrain(name: str, args=None):
+    """One terrain from a bundled name or a DEM file, with --fill / --crop-valid applied."""
+    from .experiment import _resolve_one
 
+    if Path(name).suffix and not Path(name).exists():
+        raise UsageError(f"DEM file {name!r} does not exist")
+    label, grid = _resolve_one(None, name, 0)
+    if args is not None and getattr(args, "fill", None):
+        grid = grid.fill_nodata(args.fill)
+    elif args is not None and getattr(args, "crop_valid", False):
+        rs, cs = grid.valid_window()
+        grid = grid.crop(rs, cs)
+    return label, grid
+
+
+def _option_value(text: str):
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)
+
+
+def _options(items) -> dict:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise UsageError(f"--option must be KEY=VALUE, got {item!r}")
+        out[key.strip()] = _option_value(value.strip())
+    return out
+
+
+# ------------------------------------------------------------------ compare
+def _client(address: str):
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise UsageError('--scheduler needs the dask extra: pip install "terrainvis[dask]"') from None
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise UsageError(f"--scheduler {address!r} could not be reached within 10 s ({type(exc).__name__})") from None
+
+
+def _compare(args) -> int:
     from . import report
-    from .experiment import DEFAULT_TERRAINS, compare, resolve_terrains
+    from ._fileio import atomic_write_text, check_writable_dir
+    from .experiment import DEFAULT_TERRAINS, DEFAULTS, compare, resolve_terrains
 
     terrains = args.terrain or (QUICK["terrains"] if args.quick else list(DEFAULT_TERRAINS))
-    levels = args.levels or (QUICK["levels"] if args.quick else [1, 2, 3])
-    points = args.points or (QUICK["points"] if args.quick else 50)
-    sets = args.sets or (QUICK["sets"] if args.quick else 6)
-    relocations = args.relocations or ["identity", "full", "half"]
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    client = None
-    if args.scheduler:
-        try:
-            from dask.distributed import Client
-        except ImportError:
-            print('terrainvis: --scheduler needs the dask extra: pip install "terrainvis[dask]"', file=sys.stderr)
-            return 2
-        client = Client(args.scheduler)
-    grids = resolve_terrains(terrains)
+    levels = args.levels if args.levels is not None else (QUICK["levels"] if args.quick else list(DEFAULTS.levels))
+    points = args.points if args.points is not None else (QUICK["points"] if args.quick else DEFAULTS.n_points)
+    sets = args.sets if args.sets is not None else (QUICK["sets"] if args.quick else DEFAULTS.n_sets)
+    out = check_writable_dir(args.out, "--out")
+    grids = {}
+    for t in terrains:
+        label, grid = _terrain(t, args)
+        if label in grids:
+            raise UsageError(f"--terrain names must be unique, got {label!r} twice")
+        grids[label] = grid
+    grids = resolve_terrains(grids)
+    client = _client(args.scheduler) if args.scheduler else None
     t0 = time.perf_counter()
     df = compare(
-        grids, methods=args.methods, levels=levels, relocations=relocations, n_points=points, n_sets=sets,
-        seed=args.seed, max_distance=args.max_distance, workers=args.workers, client=client, offset=args.offset,
-        volume=False if args.no_volume else "auto", out_csv=out / "results.csv", resume=args.resume,
-        save_dir=out / "simplified", progress=True,
+        grids, methods=args.methods, levels=levels, relocations=args.relocations, n_points=points, n_sets=sets,
+        seed=args.seed, max_distance=args.max_distance, offset=args.offset, engine=args.engine,
+        predicate=args.predicate, volume=not args.no_volume, repeats=args.repeats, workers=args.workers,
+        client=client, out_csv=out / "results.csv", resume=args.resume, save_dir=out / "simplified", progress=True,
     )
     seconds = time.perf_counter() - t0
-    df.to_csv(out / "results.csv", index=False)  # the same rows, now in sorted order
-    tables = report.paper_tables(df)
-    text = report.to_markdown(tables)
-    found = report.findings(df)
-    verdict = {True: "held", False: "did not hold", None: "cannot tell"}
-    lines = ["### The paper's findings on these terrains", ""]
-    lines += [f"- **{f['claim']}**: {verdict[f['held']]}. {f['evidence']}." for f in found]
+    text = report.to_markdown(report.paper_tables(df)) + "\n" + report.comparison_markdown(report.paper_comparison(df))
+    lines = report.findings_markdown(report.findings(df))
     failed = df[df["error"] != ""].drop_duplicates(["terrain", "method", "level"])
     if len(failed):
         lines += ["", "### Failed units", ""]
         lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
     summary = (
         f"{df[['terrain', 'method', 'level']].drop_duplicates().shape[0]} units, {len(df)} rows, "
-        f"{len(grids)} terrains, {seconds:.1f} s"
+        f"{len(grids)} terrains, predicate {args.predicate}, {seconds:.1f} s"
     )
-    (out / "tables.md").write_text(f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")
+    atomic_write_text(out / "tables.md", f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")
     print(text)
     print("\n".join(lines))
     if not args.no_plots:
-        _write_plots(df, grids, levels, args.methods, out)
+        _write_plots(df, grids, out)
     print(f"\n{summary}; wrote {out / 'results.csv'}, {out / 'tables.md'}" + ("" if args.no_plots else " and figures"))
-    return 0 if pd.isna(df["accuracy"]).sum() < len(df) else 1
+    if df["accuracy"].notna().any():
+        return 0
+    if len(failed) == df[["terrain", "method", "level"]].drop_duplicates().shape[0]:
+        print("terrainvis compare: every unit failed (see 'Failed units' above)", file=sys.stderr)
+    else:
+        print("terrainvis compare: no pair was counted: every accuracy is undefined (with --max-distance, "
+              "no two points of a set lie that close; try a larger distance or more --points)", file=sys.stderr)
+    return 1
 
 
-def _write_plots(df, grids, levels, methods, out: Path) -> None:
-    from simplifiers import simplify
+def _write_plots(df, grids, out: Path) -> None:
+    """The figures, drawn from the rows and the saved simplified terrains (nothing is simplified again)."""
     from simplifiers import METHODS
 
     from . import plot
-    from .experiment import load_simplified, simplified_path
+    from ._fileio import atomic_path
+    from .experiment import simplified_path
+    from .io import load_terrain
 
-    fig = plot.accuracy_vs_size(df)
-    fig.savefig(out / "accuracy_vs_size.png", dpi=110)
-    for rel in sorted(set(df["relocation"])):
-        try:
-            plot.tradeoff(df, relocation=rel).savefig(out / f"tradeoff_{rel}.png", dpi=110)
-        except ValueError:
-            pass
-    level = min(levels) if levels else 1
+    def save(fig, name, dpi):
+        with atomic_path(out / name) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
+
+    ok = df[df["error"] == ""]
+    if ok.empty:
+        return
+    save(plot.accuracy_vs_size(ok), "accuracy_vs_size.png", 110)
+    for rel in sorted(set(ok["relocation"])):
+        save(plot.tradeoff(ok, relocation=rel), f"tradeoff_{rel}.png", 110)
+    level = int(ok["level"].min())
     for name, grid in grids.items():
         views = {}
-        for m in methods or METHODS:
+        for m in METHODS:
             path = simplified_path(out / "simplified", name, m, level)
-            if path.exists():  # saved by the run
-                views[m] = load_simplified(path)
-                continue
-            try:
-                views[m] = simplify(grid, m, level)
-            except Exception as exc:  # a failed method is reported in the tables already
-                print(f"terrainvis: no view of {m} on {name}: {exc}", file=sys.stderr)
+            if path.exists():  # a failed unit saved nothing and is reported in the tables already
+                views[m] = load_terrain(path)
         fig = plot.terrain_views(grid, views)
         fig.suptitle(f"{name}: level {level}")
-        fig.savefig(out / f"views_{name}.png", dpi=90)
+        save(fig, f"views_{name}.png", 90)
 
 
+# ------------------------------------------------------------------ simplify
+_GRID_SUFFIXES = (".tif", ".tiff", ".asc", ".npz", ".npy")
+_MESH_SUFFIXES = (".ply", ".obj", ".stl", ".glb")
+
+
+def _simplify(args) -> int:
+    from simplifiers import METHODS, simplify
+
+    from .io import save_terrain
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    regular = METHODS[args.method].regular
+    valid = (_GRID_SUFFIXES + _MESH_SUFFIXES) if regular else (".npz",) + _MESH_SUFFIXES
+    if suffix not in valid:
+        kind = "a grid" if regular else "a TIN"
+        raise UsageError(f"-o must end in one of {list(valid)} for {args.method} (its result is {kind}), got {out.name!r}")
+    if not out.parent.exists():
+        raise UsageError(f"-o {str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    label, grid = _terrain(args.dem, args)
+    result = simplify(grid, args.method, args.level, **_options(args.option))
+    save_terrain(result, out)
+    a = result.attrs
+    kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {result.n_faces:,} faces"
+    print(f"{label}: {args.method} level {a['level']}: {a['n_vertices']:,} vertices ({kind}), "
+          f"{100 * a['n_vertices'] / grid.size:.2f} % of {grid.size:,}")
+    print(f"  max error {a['max_error']:.4g}, RMS error {a['rms_error']:.4g} (z units), {a['seconds']:.3f} s")
+    for note in a.get("notes", []):
+        print(f"  note: {note}")
+    print(f"  wrote {out}")
+    return 0
+
+
+# ------------------------------------------------------------------ los
+def _los(args) -> int:
+    import numpy as np
+
+    from .visibility import line_of_sight, min_clearance
+    from .visibility.profile import lowest_point
+
+    label, grid = _terrain(args.dem, args)
+    if args.pairs:
+        if args.start or args.end:
+            raise UsageError("give either --pairs or --from and --to, not both")
+        import pandas as pd
+
+        try:
+            table = pd.read_csv(args.pairs)
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"--pairs {args.pairs!r} could not be read as CSV: {exc}") from None
+        missing = [c for c in ("x1", "y1", "x2", "y2") if c not in table.columns]
+        if missing:
+            raise UsageError(f"--pairs needs the columns x1, y1, x2, y2; {args.pairs!r} lacks {missing}")
+        xy1 = table[["x1", "y1"]].to_numpy(float)
+        xy2 = table[["x2", "y2"]].to_numpy(float)
+    else:
+        if not (args.start and args.end):
+            raise UsageError("give --from X Y and --to X Y (or --pairs CSV)")
+        xy1 = np.array([args.start], float)
+        xy2 = np.array([args.end], float)
+    z1 = grid.height_at(xy1) + args.height
+    z2 = grid.height_at(xy2) + args.target_height
+    outside = np.isnan(z1) | np.isnan(z2)
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        xmin, xmax, ymin, ymax = grid.extent
+        raise UsageError(
+            f"point pair {k} lies outside the DEM's valid surface x [{xmin:.6g}, {xmax:.6g}], "
+            f"y [{ymin:.6g}, {ymax:.6g}] (or on nodata): from {xy1[k].tolist()} to {xy2[k].tolist()}"
+        )
+    a = np.column_stack([xy1, z1])
+    b = np.column_stack([xy2, z2])
+    visible = line_of_sight(grid, a, b, **({"end_radius": args.end_radius} if args.end_radius else {}))
+    clear = min_clearance(grid, a, b, **({"end_radius": args.end_radius} if args.end_radius else {}))
+    print(f"{label}: observer {args.height:g} above the surface, target {args.target_height:g} above it")
+    for k in range(a.shape[0]):
+        low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius)
+        verdict = "visible" if visible[k] else "blocked"
+        where = ("" if not np.isfinite(clear[k]) else
+                 f" at ({low['x']:.6g}, {low['y']:.6g}), {low['distance']:.6g} from the observer")
+        print(f"  ({xy1[k, 0]:.6g}, {xy1[k, 1]:.6g}) -> ({xy2[k, 0]:.6g}, {xy2[k, 1]:.6g}): {verdict}; "
+              f"lowest clearance {clear[k]:.4g}{where}")
+    return 0
+
+
+# ------------------------------------------------------------------ info
 def _info(args) -> int:
-    from .experiment import resolve_terrains
+    import numpy as np
 
-    (name, grid), = resolve_terrains([args.terrain]).items()
+    from simplifiers import METHODS, max_level, vertex_budget
+
+    label, grid = _terrain(args.terrain)
     rows, cols = grid.shape
     xmin, xmax, ymin, ymax = grid.extent
-    print(f"{name}: {grid!r}")
+    z = grid.z
+    print(f"{label}: {grid!r}")
     print(f"  samples   {rows} x {cols} = {grid.size:,}  ({grid.nbytes / 1e6:.2f} MB as a grid)")
     print(f"  spacing   dx {grid.dx:g}, dy {grid.dy:g}" + ("" if grid.is_uniform else " (mean; rectilinear)"))
     print(f"  extent    x [{xmin:.6g}, {xmax:.6g}], y [{ymin:.6g}, {ymax:.6g}]")
-    print(f"  nodata    {grid.n_nodata} cells")
-    print(f"  TIN       {grid.size:,} vertices, {2 * (rows - 1) * (cols - 1):,} faces")
-    from simplifiers import max_level
-
-    print(f"  levels    0 to {max_level(grid.shape)}")
+    crs = grid.attrs.get("crs") or "not recorded"
+    print(f"  CRS       {crs}" + (" (x, y converted to local metres)" if grid.attrs.get("geographic") else ""))
+    if np.isfinite(z).any():
+        print(f"  heights   {np.nanmin(z):.6g} to {np.nanmax(z):.6g}")
+    print(f"  nodata    {grid.n_nodata:,} cells ({100 * grid.n_nodata / grid.size:.2f} %)"
+          + (" (use --fill or --crop-valid)" if grid.n_nodata else ""))
+    top = max_level(grid.shape)
+    print("  levels    vertices per level (regular methods keep a grid; irregular ones get the same budget)")
+    for level in range(1, top + 1):
+        n = vertex_budget(grid.shape, level)
+        print(f"    {level}: {n:>12,} vertices ({100 * n / grid.size:.3g} %)")
+    print(f"  methods   {', '.join(METHODS)}")
     return 0
+
+
+# ------------------------------------------------------------------ main
+_COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "info": _info}
 
 
 def main(argv=None) -> int:
     """Entry point of the ``terrainvis`` console script."""
+    from .errors import SimplificationError
+    from .runner import Interrupted
+
     args = _parser().parse_args(argv)
+    name = f"terrainvis {args.command}"
     try:
-        if args.command == "compare":
-            return _compare(args)
-        return _info(args)
-    except (ValueError, TypeError, FileNotFoundError) as exc:
-        print(f"terrainvis {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return _COMMANDS[args.command](args)
+    except Interrupted as exc:
+        code = 128 + exc.signum
+        note = " finished units are in results.csv (use --resume)" if args.command == "compare" else ""
+        print(f"{name}: interrupted ({exc});{note}", file=sys.stderr)
+        return code
     except KeyboardInterrupt:
-        print("terrainvis: interrupted; finished units are in results.csv (use --resume)", file=sys.stderr)
+        print(f"{name}: interrupted", file=sys.stderr)
         return 130
+    except SimplificationError as exc:
+        print(f"{name}: failed: {exc}", file=sys.stderr)
+        return 1
+    except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"{name}: error: {exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -6,35 +6,40 @@ three ways, computes the visibility matrix there, and counts how many verdicts a
 It also measures what the paper claimed but never measured: the time and memory that
 S(T) saves, and how far its shape is from T.
 
-Work is split into *units*, one per terrain x method x level (a unit simplifies once and
-then runs every point set and relocation). Units run on a local process pool, or on a
-dask.distributed cluster when ``client`` is given; results do not depend on where they
-ran. With ``out_csv``, each finished unit is appended to a CSV at once, so an
-interrupted run loses no finished unit, and ``resume=True`` skips the units already
-there.
+The run goes in four stages:
+
+1. **plan**: every argument is validated up front (methods, levels against each
+   terrain's size, relocations, engine, predicate, ...) and the work is split into
+   *units*, one per terrain x method x level (a unit simplifies once, then runs every
+   point set and relocation), the most expensive first;
+2. **resume**: with ``out_csv`` the results go to a :class:`~terrainvis.results.ResultStore`,
+   which keeps the complete units of an earlier run with the same settings and refuses
+   a resume with other settings;
+3. **execute**: :func:`terrainvis.runner.run_units` runs the units in this process, on a
+   local process pool or on a dask cluster; each finished unit is written at once,
+   atomically, so an interrupt (Ctrl-C, SIGTERM) loses no finished unit;
+4. **collect**: the rows, sorted (terrains as given, methods in the paper's order).
 """
 
 from __future__ import annotations
 
-import io as _io
-import os
+import hashlib
 import sys
 import time
 import zlib
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from ._validate import as_int, describe
+from ._validate import as_float_array, as_int, choice, describe
 from .relocation import RELOCATIONS
 from .terrain import HeightGrid
 
 __all__ = [
-    "compare", "resolve_terrains", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW", "COLUMNS", "VOLUME_AUTO_LIMIT",
-    "save_simplified", "load_simplified", "simplified_path",
+    "compare", "Settings", "DEFAULTS", "resolve_terrains", "point_sets", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW",
+    "COLUMNS", "PREDICATES", "simplified_path", "end_radius_for",
 ]
 
 #: The default terrains: the five bundled 120x120 terrains and a 120x120 window of the real Jacksboro DEM.
@@ -45,17 +50,73 @@ DEFAULT_TERRAINS = ("hills", "mesas", "rough", "mountains", "ridges", "jacksboro
 #: window keeps the real sampling; resampling the whole DEM to 120x120 would smooth it.
 JACKSBORO_WINDOW = ((112, 232), (141, 261))
 
+#: Line-of-sight predicates for the verdicts on S(T) (verdicts on T are always exact):
+#: ``"exact"`` tests the whole segment; ``"paper"`` ignores the surface within one cell
+#: of S(T) around each end (see :func:`end_radius_for`).
+PREDICATES = ("exact", "paper")
+
 #: Columns of the result table, in order.
 COLUMNS = (
-    "terrain", "set", "method", "kind", "level", "relocation",
+    "terrain", "set", "method", "kind", "level", "relocation", "predicate",
     "accuracy", "visible_kept", "blocked_kept", "accuracy_paper",
     "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
     "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
-    "max_error", "rms_error", "volume_error",
+    "max_error", "rms_error", "volume_error", "end_radius",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
     "seed", "max_distance", "offset", "error",
 )
-_KEY = ("terrain", "method", "level")
+#: Columns that identify a unit.
+UNIT_KEY = ("terrain", "method", "level")
+#: Columns holding times (they differ between runs; everything else is deterministic).
+TIMING_COLUMNS = ("simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything that determines the rows of a :func:`compare` run, with the defaults.
+
+    The defaults are the paper's protocol; the CLI takes its defaults from here too
+    (:data:`DEFAULTS`). ``methods=None`` means every registered method.
+    """
+
+    methods: tuple | None = None
+    levels: tuple = (1, 2, 3)
+    relocations: tuple = RELOCATIONS
+    n_points: int = 50
+    n_sets: int = 6
+    seed: int = 0
+    max_distance: float | None = None
+    offset: float = 0.0
+    engine: str = "auto"
+    predicate: str = "exact"
+    volume: bool = True
+    repeats: int = 3
+
+
+#: The defaults of :func:`compare` and ``terrainvis compare``.
+DEFAULTS = Settings()
+
+
+def _resolve_one(name, t, i):
+    from .synthetic import BUNDLED, bundled_terrain
+
+    if isinstance(t, HeightGrid):
+        return name or t.attrs.get("name") or f"terrain{i}", t
+    if not isinstance(t, (str, Path)):
+        raise TypeError(f"terrains must hold HeightGrids, names or paths, got {describe(t)}")
+    text = str(t)
+    known = list(BUNDLED) + ["jacksboro"]
+    if text in BUNDLED:
+        return name or text, bundled_terrain(text)
+    if text == "jacksboro":
+        return name or text, _jacksboro()
+    if Path(text).suffix:
+        if not Path(text).exists():
+            raise ValueError(f"terrain {text!r} is neither a bundled terrain {known} nor an existing file")
+        from .io import load_dem
+
+        return name or Path(text).stem, load_dem(text)
+    raise ValueError(f"terrain must be a bundled terrain {known}, a DEM file or a HeightGrid, got {text!r}")
 
 
 def _jacksboro() -> HeightGrid:
@@ -73,48 +134,29 @@ def resolve_terrains(terrains) -> dict[str, HeightGrid]:
     Accepted: a HeightGrid; a bundled name (:data:`terrainvis.synthetic.BUNDLED`);
     ``"jacksboro"`` (see :data:`JACKSBORO_WINDOW`); a path to a DEM file (any format of
     :func:`terrainvis.load_dem`; named by its stem); a list of these; or a dict
-    ``{name: HeightGrid or str}``.
+    ``{name: HeightGrid or str}``. Every terrain must be free of nodata.
     """
-    from .synthetic import BUNDLED, bundled_terrain
-
     if isinstance(terrains, (HeightGrid, str, Path)):
         terrains = [terrains]
-    items = list(terrains.items()) if isinstance(terrains, dict) else [(None, t) for t in terrains]
+    if isinstance(terrains, dict):
+        items = list(terrains.items())
+    elif isinstance(terrains, (list, tuple)):
+        items = [(None, t) for t in terrains]
+    else:
+        raise TypeError(
+            "terrains must be a terrain (HeightGrid, bundled name or DEM path), a list of them or a dict "
+            f"{{name: terrain}}, got {describe(terrains)}"
+        )
     if not items:
         raise ValueError("terrains must name at least one terrain, got an empty collection")
     out: dict[str, HeightGrid] = {}
     for i, (name, t) in enumerate(items):
-        if isinstance(t, HeightGrid):
-            grid = t
-            name = name or grid.attrs.get("name") or f"terrain{i}"
-        elif isinstance(t, (str, Path)):
-            text = str(t)
-            if text in BUNDLED:
-                grid = bundled_terrain(text)
-            elif text == "jacksboro":
-                grid = _jacksboro()
-            elif Path(text).suffix:
-                from .io import load_dem
-
-                if not Path(text).exists():
-                    raise ValueError(
-                        f"terrain {text!r} is neither a bundled terrain {list(BUNDLED) + ['jacksboro']} "
-                        f"nor an existing file"
-                    )
-                grid = load_dem(text)
-                name = name or Path(text).stem
-            else:
-                raise ValueError(
-                    f"terrain must be a bundled terrain {list(BUNDLED) + ['jacksboro']}, a DEM file or a "
-                    f"HeightGrid, got {text!r}"
-                )
-            name = name or text
-        else:
-            raise TypeError(f"terrains must hold HeightGrids, names or paths, got {describe(t)}")
+        name, grid = _resolve_one(name, t, i)
+        name = str(name)
         if name in out:
             raise ValueError(f"terrain names must be unique, got {name!r} twice")
         grid.require_finite(f"compare (terrain {name!r})")
-        out[str(name)] = grid
+        out[name] = grid
     return out
 
 
@@ -131,6 +173,24 @@ def point_sets(grid: HeightGrid, terrain: str, n_points: int, n_sets: int, seed:
         sample_points(grid, n_points, seed=np.random.default_rng(_set_seed(seed, terrain, s)), offset=offset)
         for s in range(n_sets)
     ]
+
+
+def end_radius_for(simplified, original: HeightGrid, level: int, predicate: str) -> float:
+    """The end radius of the verdicts on S(T) under ``predicate`` (0 for ``"exact"``).
+
+    ``"paper"``: one cell of the surface under test. For a grid, its larger mean cell
+    side; for a TIN, the larger cell side of the regular grid with the same vertex
+    budget (the regular result at the same level).
+    """
+    if predicate == "exact":
+        return 0.0
+    if isinstance(simplified, HeightGrid):
+        return float(max(simplified.dx, simplified.dy))
+    from simplifiers.levels import coarse_shape
+
+    rows, cols = coarse_shape(original.shape, level)
+    xmin, xmax, ymin, ymax = original.extent
+    return float(max((xmax - xmin) / max(cols - 1, 1), (ymax - ymin) / max(rows - 1, 1)))
 
 
 def _pair_mask(points: np.ndarray, max_distance):
@@ -150,32 +210,14 @@ def _timed(fn, *args, repeats: int = 3, **kwargs):
     return out, best
 
 
-@dataclass(frozen=True)
-class _Settings:
-    relocations: tuple
-    n_points: int
-    n_sets: int
-    seed: int
-    max_distance: float | None
-    offset: float
-    engine: str
-    volume: object
-    repeats: int
-    save_dir: str | None = None
+def simplified_path(save_dir, terrain: str, method: str, level: int) -> Path:
+    """Where :func:`compare` saves a simplified terrain when given ``save_dir``."""
+    return Path(save_dir) / f"{terrain}__{method}__level{level}.npz"
 
 
-#: Largest grid (samples) for which ``volume="auto"`` computes the volume shape error.
-VOLUME_AUTO_LIMIT = 1_000_000
-
-
-def _want_volume(volume, grid: HeightGrid) -> bool:
-    return bool(volume) if volume != "auto" else grid.size <= VOLUME_AUTO_LIMIT
-
-
-def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings: _Settings) -> list[dict]:
+def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings: Settings, save_dir) -> list[dict]:
     """Simplify once, then every point set and relocation: the rows of one unit."""
-    from simplifiers import simplify
-    from simplifiers import method_info
+    from simplifiers import METHODS, simplify
 
     from .deviation import volume_error
     from .metrics import agreement
@@ -183,34 +225,37 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
     from .visibility import visibility_matrix
 
     base = {
-        "terrain": terrain, "method": method, "kind": method_info(method).kind, "level": level,
-        "n_points": settings.n_points, "n_vertices_original": grid.size, "nbytes_original": grid.nbytes,
-        "seed": settings.seed, "max_distance": settings.max_distance, "offset": settings.offset, "error": "",
+        "terrain": terrain, "method": method, "kind": METHODS[method].kind, "level": level,
+        "predicate": settings.predicate, "n_points": settings.n_points, "n_vertices_original": grid.size,
+        "nbytes_original": grid.nbytes, "seed": settings.seed, "max_distance": settings.max_distance,
+        "offset": settings.offset, "error": "",
     }
     sets = point_sets(grid, terrain, settings.n_points, settings.n_sets, settings.seed, settings.offset)
     rows = []
     try:
         simplified = simplify(grid, method, level)
-        if settings.save_dir is not None:
-            save_simplified(simplified, simplified_path(settings.save_dir, terrain, method, level))
+        if save_dir is not None:
+            _save(simplified, simplified_path(save_dir, terrain, method, level))
         meta = simplified.attrs
+        radius = end_radius_for(simplified, grid, level, settings.predicate)
         base.update(
             n_vertices=meta["n_vertices"], size_fraction=meta["n_vertices"] / grid.size, nbytes=meta["nbytes"],
             max_error=meta["max_error"], rms_error=meta["rms_error"], simplify_seconds=meta["seconds"],
-            volume_error=volume_error(grid, simplified) if _want_volume(settings.volume, grid) else np.nan,
+            volume_error=volume_error(grid, simplified) if settings.volume else np.nan, end_radius=radius,
         )
+        test_kw = {"engine": settings.engine}
+        if radius > 0:
+            test_kw["end_radius"] = radius
         # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
         t0 = time.perf_counter()
-        visibility_matrix(simplified, sets[0][:2], engine=settings.engine)
+        visibility_matrix(simplified, sets[0][:2], **test_kw)
         base["los_build_seconds"] = time.perf_counter() - t0
         for s, pts in enumerate(sets):
             v_true, t_true = _timed(visibility_matrix, grid, pts, engine=settings.engine, repeats=settings.repeats)
             mask = _pair_mask(pts, settings.max_distance)
             for how in settings.relocations:
                 moved = relocate(pts, simplified, how, offset=settings.offset)
-                v_test, t_test = _timed(
-                    visibility_matrix, simplified, moved, engine=settings.engine, repeats=settings.repeats
-                )
+                v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
                 row = dict(base, set=s, relocation=how, los_seconds=t_test, los_seconds_original=t_true)
                 row.update(agreement(v_true, v_test, mask))
                 rows.append(row)
@@ -220,110 +265,152 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
     return rows
 
 
-def simplified_path(save_dir, terrain: str, method: str, level: int) -> Path:
-    """Where :func:`compare` saves a simplified terrain when given ``save_dir``."""
-    return Path(save_dir) / f"{terrain}__{method}__level{level}.npz"
+def _save(terrain, path: Path) -> None:
+    from .io import save_terrain
 
-
-def save_simplified(terrain, path) -> Path:
-    """Save a HeightGrid (z, xs, ys) or a TIN (vertices, faces) to an ``.npz`` file."""
-    from .terrain import TIN
-
-    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part.npz")
-    if isinstance(terrain, TIN):
-        np.savez_compressed(tmp, kind="tin", vertices=terrain.vertices, faces=terrain.faces)
-    elif isinstance(terrain, HeightGrid):
-        np.savez_compressed(tmp, kind="grid", z=terrain.z, xs=terrain.xs, ys=terrain.ys)
-    else:
-        raise TypeError(f"terrain must be a HeightGrid or a TIN, got {describe(terrain)}")
-    os.replace(tmp, path)  # never leave a half-written file under the final name
-    return path
+    save_terrain(terrain, path)
 
 
-def load_simplified(path):
-    """Read a terrain written by :func:`save_simplified`."""
-    from .terrain import TIN
+# ---------------------------------------------------------------------- plan
+def _names(value, name: str, valid, default) -> tuple:
+    """A tuple of distinct names drawn from ``valid`` (a str is one name; None the default)."""
+    if value is None:
+        return tuple(default)
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, (list, tuple)):
+        raise TypeError(f"{name} must be a list of names, got {describe(value)}")
+    out = []
+    for v in value:
+        if not isinstance(v, str) or v not in valid:
+            raise ValueError(f"{name} must be drawn from {list(valid)}, got {v!r}")
+        if v in out:
+            raise ValueError(f"{name} must not repeat a name, got {v!r} twice")
+        out.append(v)
+    if not out:
+        raise ValueError(f"{name} must name at least one of {list(valid)}, got an empty list")
+    return tuple(out)
 
-    with np.load(path, allow_pickle=False) as data:
-        if str(data["kind"]) == "tin":
-            return TIN(data["vertices"], data["faces"])
-        return HeightGrid.from_coords(data["z"], data["xs"], data["ys"])
+
+def _levels(value, grids: dict) -> tuple:
+    from simplifiers import max_level
+
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        value = [value]
+    if not isinstance(value, (list, tuple)):
+        raise TypeError(f"levels must be an integer or a list of integers, got {describe(value)}")
+    levels = []
+    for v in value:
+        lv = as_int(v, "levels", minimum=1)
+        if lv in levels:
+            raise ValueError(f"levels must not repeat a level, got {lv} twice")
+        levels.append(lv)
+    if not levels:
+        raise ValueError("levels must hold at least one level, got an empty list")
+    for name, grid in grids.items():
+        top = max_level(grid.shape)
+        if max(levels) > top:
+            raise ValueError(
+                f"levels must be at most {top} for terrain {name!r} ({grid.shape[0]}x{grid.shape[1]}: each "
+                f"level needs at least 3 samples per axis), got {max(levels)}"
+            )
+    return tuple(levels)
 
 
-def _frame(rows: list[dict]) -> pd.DataFrame:
-    df = pd.DataFrame(rows)
-    for col in COLUMNS:
-        if col not in df.columns:
-            df[col] = np.nan
-    df["error"] = df["error"].astype(object).fillna("").astype(str)
-    return df[list(COLUMNS)]
+def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, offset, engine,
+              predicate, volume, repeats) -> Settings:
+    from simplifiers import METHODS
 
+    from .visibility import ENGINES
 
-def _read_done(path: Path, settings: _Settings) -> tuple[pd.DataFrame, set]:
-    """Rows already in ``path`` and the keys of the units that finished there without error."""
-    try:
-        old = pd.read_csv(path, keep_default_na=True)
-    except (pd.errors.EmptyDataError, FileNotFoundError):
-        return _frame([]), set()
-    missing = [c for c in COLUMNS if c not in old.columns]
-    if missing:
-        raise ValueError(f"out_csv {str(path)!r} is not a terrainvis results file (missing columns {missing})")
-    old["error"] = old["error"].astype(object).fillna("").astype(str)
-    same = (
-        (old["n_points"] == settings.n_points) & (old["seed"] == settings.seed) & (old["offset"] == settings.offset)
-        & ((old["max_distance"].isna()) if settings.max_distance is None else (old["max_distance"] == settings.max_distance))
+    methods = _names(methods, "methods", list(METHODS), METHODS)
+    engine = choice(engine, "engine", ENGINES)
+    if engine == "grid":
+        tins = [m for m in methods if not METHODS[m].regular]
+        if tins:
+            raise ValueError(
+                f"engine 'grid' works on grids only, but methods {tins} produce TINs; use engine='auto' "
+                "(the grid engine on grids, Embree on TINs) or leave those methods out"
+            )
+    if max_distance is not None:
+        max_distance = float(as_float_array(max_distance, "max_distance"))
+        if not np.isfinite(max_distance) or max_distance <= 0:
+            raise ValueError(f"max_distance must be finite and > 0, got {max_distance!r}")
+    off = as_float_array(offset, "offset")
+    if off.ndim != 0 or not np.isfinite(off):
+        raise ValueError(f"offset must be a finite number, got {describe(offset)}")
+    if not isinstance(volume, (bool, np.bool_)):
+        raise TypeError(f"volume must be True or False, got {describe(volume)}")
+    return Settings(
+        methods=methods, levels=_levels(levels, grids),
+        relocations=_names(relocations, "relocations", RELOCATIONS, RELOCATIONS),
+        n_points=as_int(n_points, "n_points", minimum=2), n_sets=as_int(n_sets, "n_sets", minimum=1),
+        seed=as_int(seed, "seed", minimum=0), max_distance=max_distance, offset=float(off), engine=engine,
+        predicate=choice(predicate, "predicate", PREDICATES), volume=bool(volume),
+        repeats=as_int(repeats, "repeats", minimum=1),
     )
-    if not same.all():
-        raise ValueError(
-            f"out_csv {str(path)!r} was written with other settings (points, seed, offset or max_distance); "
-            "resume with the same settings or write to a new file"
-        )
-    expected = settings.n_sets * len(settings.relocations)
-    done = set()
-    for key, grp in old.groupby(list(_KEY)):
-        complete = (
-            len(grp) == expected and (grp["error"] == "").all()
-            and set(grp["relocation"]) == set(settings.relocations)
-        )
-        if complete:
-            done.add((str(key[0]), str(key[1]), int(key[2])))
-    keep = old[[(str(t), str(m), int(lv)) in done for t, m, lv in zip(old["terrain"], old["method"], old["level"])]]
-    return keep[list(COLUMNS)], done
 
 
-def _append_csv(path: Path, df: pd.DataFrame, header: bool) -> None:
-    buf = _io.StringIO()
-    df.to_csv(buf, index=False, header=header)
-    with open(path, "a", encoding="utf-8") as fh:  # one write per unit, then flush to disk
-        fh.write(buf.getvalue())
-        fh.flush()
-        os.fsync(fh.fileno())
+def _fingerprint(grid: HeightGrid) -> str:
+    """A content hash of a terrain (z, xs, ys), so a resume notices a changed input."""
+    h = hashlib.sha256()
+    for a in (grid.z, grid.xs, grid.ys):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
 
 
-def _worker_init(threads: int) -> None:
-    import numba
+def _units(grids: dict, settings: Settings) -> list[tuple]:
+    """Every (terrain, method, level), the most expensive first so the pool stays busy to the end."""
+    from simplifiers import METHODS
 
-    numba.set_num_threads(max(1, threads))
+    units = [(t, m, lv) for t in grids for m in settings.methods for lv in settings.levels]
+    return sorted(units, key=lambda u: (-grids[u[0]].size, METHODS[u[1]].cost_rank, u[2]))
 
 
+def _order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
+    from simplifiers import METHODS
+
+    rank_t = {t: i for i, t in enumerate(grids)}
+    rank_m = {m: i for i, m in enumerate(METHODS)}
+    rank_r = {r: i for i, r in enumerate(RELOCATIONS)}
+    df = df.assign(
+        _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r)
+    ).sort_values(["_t", "set", "_m", "level", "_r"], kind="stable")
+    return df.drop(columns=["_t", "_m", "_r"]).reset_index(drop=True)
+
+
+def _kernels_cached(settings: Settings) -> bool | None:
+    """Whether numba's on-disk cache already holds the LOS kernels (None when it cannot tell)."""
+    try:
+        import os
+
+        from .visibility import _kernels
+
+        cache = _kernels.grid_matrix._cache
+        return os.path.exists(os.path.join(cache._cache_path, cache._index_name))
+    except Exception:  # numba internals: a best-effort hint only
+        return None
+
+
+# ---------------------------------------------------------------------- compare
 def compare(
     terrains=DEFAULT_TERRAINS,
-    methods=None,
-    levels=(1, 2, 3),
-    relocations=RELOCATIONS,
-    n_points: int = 50,
-    n_sets: int = 6,
-    seed: int = 0,
-    max_distance: float | None = None,
+    *,
+    methods=DEFAULTS.methods,
+    levels=DEFAULTS.levels,
+    relocations=DEFAULTS.relocations,
+    n_points: int = DEFAULTS.n_points,
+    n_sets: int = DEFAULTS.n_sets,
+    seed: int = DEFAULTS.seed,
+    max_distance: float | None = DEFAULTS.max_distance,
+    offset: float = DEFAULTS.offset,
+    engine: str = DEFAULTS.engine,
+    predicate: str = DEFAULTS.predicate,
+    volume: bool = DEFAULTS.volume,
+    repeats: int = DEFAULTS.repeats,
     workers: int | None = None,
     client=None,
-    *,
-    offset: float = 0.0,
-    engine: str = "auto",
-    volume="auto",
-    repeats: int = 3,
     out_csv=None,
     resume: bool = False,
     save_dir=None,
@@ -337,8 +424,8 @@ def compare(
         See :func:`resolve_terrains`. Default: the five bundled 120x120 terrains and the
         central 120x120 window of the Jacksboro DEM.
     methods : list of str, optional
-        Simplifiers (default: all seven, :func:`simplifiers.available`).
-    levels : sequence of int
+        Simplifiers (default: all seven, in the paper's order, :data:`simplifiers.METHODS`).
+    levels : int or sequence of int
         Simplification levels; for 120x120 grids 1, 2, 3 are the paper's 25 %, 6 % and 1.5 %.
     relocations : sequence of str
         Any of ``"identity"``, ``"full"``, ``"half"`` (:func:`terrainvis.relocate`).
@@ -350,6 +437,17 @@ def compare(
     max_distance : float, optional
         Count only the pairs whose horizontal distance is at most this (localized
         visibility tests).
+    offset : float
+        Observer height above the original surface (see :mod:`terrainvis.relocation`).
+    engine : {"auto", "grid", "embree"}
+        Visibility engine (:func:`terrainvis.visibility_matrix`).
+    predicate : {"exact", "paper"}
+        The line-of-sight predicate of the verdicts on S(T) (:data:`PREDICATES`); the
+        verdicts on T are always exact.
+    volume : bool
+        Compute the volume between T and S(T) (:func:`terrainvis.volume_error`).
+    repeats : int
+        Each visibility matrix is timed this many times; the fastest run is kept.
     workers : int, optional
         Processes of the local pool (default: the number of CPUs; 1 runs in this process).
         Workers are started with ``spawn``, which imports the caller's ``__main__``
@@ -357,148 +455,82 @@ def compare(
         ``if __name__ == "__main__":`` (notebooks and the CLI need nothing).
     client : dask.distributed.Client, optional
         Run the units on this cluster instead (needs the ``dask`` extra).
-    offset : float
-        Observer height above the original surface (see :mod:`terrainvis.relocation`).
-    engine : str
-        Visibility engine (:func:`terrainvis.visibility_matrix`).
-    volume : bool or "auto"
-        Compute the volume shape error with manifold3d. It builds closed solids of both
-        terrains, which takes minutes and gigabytes at SRTM sizes; ``"auto"`` computes it
-        for grids of at most :data:`VOLUME_AUTO_LIMIT` samples and leaves NaN above.
-    repeats : int
-        Each visibility matrix is timed this many times; the fastest run is kept.
     out_csv : str or Path, optional
-        Append each finished unit's rows to this CSV as soon as it finishes.
+        Write each finished unit's rows to this CSV at once (atomically; the settings go
+        beside it, see :class:`~terrainvis.results.ResultStore`).
     resume : bool
-        With ``out_csv``: keep the units already completed there and run only the rest.
+        With ``out_csv``: keep the units already completed there (with the same
+        settings) and run only the rest.
     save_dir : str or Path, optional
         Save every simplified terrain there (:func:`simplified_path`,
-        :func:`load_simplified`).
+        :func:`terrainvis.load_terrain`).
     progress : bool
-        Show a tqdm progress bar on stderr.
+        Show a progress bar (and a note when numba compiles its kernels) on stderr.
 
     Returns
     -------
     pandas.DataFrame
         One row per terrain x point set x method x level x relocation, with the columns
-        :data:`COLUMNS`, sorted in that order (terrains as given, methods and
-        relocations in the paper's order). A unit whose simplification failed keeps
-        its rows, with the message in ``error`` and NaN measurements.
+        :data:`COLUMNS`, sorted (terrains as given, methods in the paper's order,
+        relocations identity, full, half). A unit whose simplification failed keeps its
+        rows, with the message in ``error`` and NaN measurements.
+
+    Raises
+    ------
+    terrainvis.runner.Interrupted
+        On Ctrl-C or SIGTERM; the units finished before are in ``out_csv``.
 
     Examples
     --------
     >>> df = compare(["hills"], methods=["lls"], levels=[1], n_points=10, n_sets=1, workers=1)
-    >>> len(df), set(df["relocation"]) == {"identity", "full", "half"}
-    (3, True)
+    >>> len(df), list(df["relocation"])
+    (3, ['identity', 'full', 'half'])
     """
-    from simplifiers import METHODS, method_info
+    from .results import ResultStore, as_table
+    from .runner import check_client, check_workers, run_units
 
+    if terrains is None:
+        raise TypeError("terrains must be a terrain, a list of terrains or a dict of them, got None")
     grids = resolve_terrains(terrains)
-    methods = list(METHODS if methods is None else ([methods] if isinstance(methods, str) else methods))
-    if not methods:
-        raise ValueError("methods must name at least one method, got an empty list")
-    for m in methods:
-        method_info(m)
-    levels = [as_int(lv, "levels", minimum=0) for lv in ([levels] if isinstance(levels, (int, np.integer)) else levels)]
-    relocations = tuple([relocations] if isinstance(relocations, str) else relocations)
-    for how in relocations:
-        if how not in RELOCATIONS:
-            raise ValueError(f"relocations must be drawn from {list(RELOCATIONS)}, got {how!r}")
-    if not relocations:
-        raise ValueError("relocations must name at least one relocation, got an empty list")
-    n_points = as_int(n_points, "n_points", minimum=2)
-    n_sets = as_int(n_sets, "n_sets", minimum=1)
-    seed = as_int(seed, "seed", minimum=0)
-    repeats = as_int(repeats, "repeats", minimum=1)
-    if max_distance is not None:
-        max_distance = float(max_distance)
-        if not np.isfinite(max_distance) or max_distance <= 0:
-            raise ValueError(f"max_distance must be finite and > 0, got {max_distance!r}")
-    if volume not in (True, False, "auto"):
-        raise ValueError(f"volume must be True, False or 'auto', got {volume!r}")
-    settings = _Settings(
-        relocations, n_points, n_sets, seed, max_distance, float(offset), engine, volume, repeats,
-        None if save_dir is None else str(save_dir),
-    )
+    settings = _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, offset,
+                         engine, predicate, volume, repeats)
+    workers = check_workers(workers)
+    client = check_client(client)
+    units = _units(grids, settings)
 
-    units = [(t, m, lv) for t in grids for m in methods for lv in levels]
-    done_rows = _frame([])
-    path = None
+    store = None
     if out_csv is not None:
-        path = Path(out_csv)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if resume and path.exists():
-            done_rows, done = _read_done(path, settings)
-            units = [u for u in units if u not in done]
-            # Rewrite the file with the completed units only (drops failed or partial ones).
-            tmp = path.with_suffix(path.suffix + ".tmp")
-            done_rows.to_csv(tmp, index=False)
-            os.replace(tmp, path)
-        else:
-            _frame([]).to_csv(path, index=False)
+        record = asdict(settings)
+        record["terrains"] = {name: _fingerprint(g) for name, g in grids.items()}
+        per_unit = settings.n_sets * len(settings.relocations)
+        store = ResultStore(out_csv, record, COLUMNS, UNIT_KEY, lambda key: per_unit, resume=resume)
+        units = [u for u in units if u not in store.done]
+    if save_dir is not None:
+        from ._fileio import check_writable_dir
 
-    # Expensive units first keeps the pool busy to the end.
-    units.sort(key=lambda u: (METHODS[u[1]].cost_rank, u[2]))
+        save_dir = str(check_writable_dir(save_dir, "save_dir"))
 
     from tqdm.auto import tqdm
 
+    if progress and units and _kernels_cached(settings) is False:
+        tqdm.write("terrainvis: compiling numba kernels (first run only, about half a minute)...", file=sys.stderr)
     bar = tqdm(total=len(units), desc="compare", unit="unit", file=sys.stderr, disable=not progress)
     new_rows: list[dict] = []
 
-    def collect(rows):
+    def collect(key, rows):
         new_rows.extend(rows)
-        if path is not None:
-            _append_csv(path, _frame(rows), header=False)
+        if store is not None:
+            store.add(rows)
         bar.update(1)
 
+    tasks = [((t, m, lv), (grids[t], t, m, lv, settings, save_dir)) for t, m, lv in units]
     try:
-        if not units:
-            pass
-        elif client is not None:
-            futures = {}
-            scattered = {name: client.scatter(grids[name], broadcast=False) for name in {u[0] for u in units}}
-            for t, m, lv in units:
-                futures[client.submit(_run_unit, scattered[t], t, m, lv, settings, pure=False)] = (t, m, lv)
-            from dask.distributed import as_completed as dask_completed
-
-            for fut in dask_completed(list(futures)):
-                collect(fut.result())
-        else:
-            n_workers = (os.cpu_count() or 1) if workers is None else as_int(workers, "workers", minimum=1)
-            if n_workers == 1 or len(units) == 1:
-                for t, m, lv in units:
-                    collect(_run_unit(grids[t], t, m, lv, settings))
-            else:
-                import multiprocessing as mp
-
-                threads = max(1, (os.cpu_count() or 1) // n_workers)
-                from concurrent.futures.process import BrokenProcessPool
-
-                try:
-                    with ProcessPoolExecutor(
-                        max_workers=min(n_workers, len(units)), mp_context=mp.get_context("spawn"),
-                        initializer=_worker_init, initargs=(threads,),
-                    ) as pool:
-                        futures = {
-                            pool.submit(_run_unit, grids[t], t, m, lv, settings): (t, m, lv) for t, m, lv in units
-                        }
-                        for fut in as_completed(futures):
-                            collect(fut.result())
-                except BrokenProcessPool as exc:
-                    raise RuntimeError(
-                        "compare's worker processes died. They are started with 'spawn', which imports "
-                        "your __main__ module again: in a script, call compare() under "
-                        "`if __name__ == \"__main__\":`, or pass workers=1 to run in this process. "
-                        f"Units finished before the failure are in out_csv if one was given ({exc})"
-                    ) from exc
+        run_units(tasks, _run_unit, on_result=collect, workers=workers, client=client)
     finally:
         bar.close()
 
-    df = pd.concat([done_rows, _frame(new_rows)], ignore_index=True) if len(done_rows) else _frame(new_rows)
-    order_t = {t: i for i, t in enumerate(grids)}
-    order_m = {m: i for i, m in enumerate(METHODS)}
-    order_r = {r: i for i, r in enumerate(RELOCATIONS)}
-    df = df.assign(
-        _t=df["terrain"].map(order_t), _m=df["method"].map(order_m), _r=df["relocation"].map(order_r)
-    ).sort_values(["_t", "set", "_m", "level", "_r"], kind="stable")
-    return df.drop(columns=["_t", "_m", "_r"]).reset_index(drop=True)
+    rows = store.rows() if store is not None else as_table(new_rows, COLUMNS)
+    df = _order(rows[list(COLUMNS)], grids)
+    if store is not None:
+        store.finish(df)
+    return df

@@ -7,10 +7,16 @@ rate of visible and of blocked pairs that stay so, for the identity and half
 relocations at the deepest level. The cost table adds what the paper did not measure:
 the line-of-sight speedup and the memory ratio of S(T) against T.
 
-Rows follow the registry's order: the regular methods (simple, GLS, LLS, feature-aware)
-then the irregular ones (QEC, greedy insertion, greedy cuts), and the relocations in the
-order identity, full, half. Accuracies are in percent. σ is the sample standard
-deviation (ddof = 1).
+Rows follow the paper's order (the registry's): QEC, greedy cuts, greedy insertion,
+simple, GLS, LLS, feature-aware, and the relocations identity, full, half. Accuracies
+are in percent. σ is the sample standard deviation (ddof = 1).
+
+:func:`paper_comparison` puts the paper's published figures (Tables 1-4, shipped as
+``terrainvis/data/alderson_samavati_2012_tables.csv``) beside ours, cell by cell, and
+:func:`findings` checks the paper's qualitative findings as the paper states them.
+
+Reference: T. Alderson and F. Samavati, "Reverse subdivision for optimizing visibility
+tests", GRAPP 2012, pp. 143-150, doi:10.5220/0003851501430150.
 """
 
 from __future__ import annotations
@@ -18,14 +24,24 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["paper_tables", "to_markdown", "findings"]
+__all__ = [
+    "paper_tables", "to_markdown", "findings", "findings_markdown", "paper_reference", "paper_comparison",
+    "comparison_markdown",
+]
 
 _LEVEL_FRACTION = {1: "25%", 2: "6%", 3: "1.5%"}
 
 
-def _ok(df: pd.DataFrame) -> pd.DataFrame:
+def _ok(df: pd.DataFrame, predicate: str | None = None) -> pd.DataFrame:
+    """The rows without an error, of one predicate (the only one present, or ``predicate``)."""
     if "error" in df.columns:
         df = df[df["error"].fillna("").astype(str) == ""]
+    if "predicate" in df.columns:
+        present = sorted(set(df["predicate"].dropna()))
+        if predicate is None and len(present) > 1:
+            raise ValueError(f"df holds rows of several predicates {present}; pass predicate= to choose one")
+        if predicate is not None:
+            df = df[df["predicate"] == predicate]
     return df
 
 
@@ -34,13 +50,15 @@ def _ordered(index_values, order):
     return sorted(index_values, key=lambda v: rank.get(v, len(rank)))
 
 
-def paper_tables(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
+def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str, pd.DataFrame]:
     """Tables 1-3, Table 4 and the cost table.
 
     Parameters
     ----------
     df : pandas.DataFrame
         The result of :func:`terrainvis.compare` (rows with an ``error`` are left out).
+    predicate : str, optional
+        The predicate whose rows to use, when ``df`` holds several.
 
     Returns
     -------
@@ -63,7 +81,7 @@ def paper_tables(df: pd.DataFrame) -> dict[str, pd.DataFrame]:
     missing = {"method", "level", "relocation", "accuracy"} - set(df.columns)
     if missing:
         raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
-    data = _ok(df)
+    data = _ok(df, predicate)
     tables: dict[str, pd.DataFrame] = {}
     levels = sorted(int(v) for v in data["level"].unique())
     for k, level in enumerate(levels, start=1):
@@ -141,76 +159,228 @@ def to_markdown(tables: dict[str, pd.DataFrame]) -> str:
     return "\n".join(out)
 
 
+# ---------------------------------------------------------------------- findings
+#: Differences smaller than this (percentage points) are ties: the tables print two decimals.
+TIE = 0.005
+
+#: The verdicts of :func:`findings`.
+VERDICTS = ("held", "did not hold", "tie", "no data")
+
+
+def _gap_verdict(gap: float) -> str:
+    """``gap`` > 0 supports the claim; within :data:`TIE` of 0 is a tie."""
+    if not np.isfinite(gap):
+        return "no data"
+    if abs(gap) <= TIE:
+        return "tie"
+    return "held" if gap > 0 else "did not hold"
+
+
+def _means(data, by) -> pd.Series:
+    return 100 * data.groupby(by)["accuracy"].mean().dropna()
+
+
+def _list(series: pd.Series) -> str:
+    return ", ".join(f"{k} {v:.2f}" for k, v in series.sort_values(ascending=False).items())
+
+
+def _qec_best(data):
+    parts, verdicts = [], []
+    for level in sorted(data["level"].unique()):
+        m = _means(data[data["level"] == level], "method")
+        if "qec" not in m.index or len(m) < 2:
+            continue
+        others = m.drop("qec")
+        verdicts.append(_gap_verdict(m["qec"] - others.max()))
+        parts.append(f"level {level}: qec {m['qec']:.2f}, best other {others.idxmax()} {others.max():.2f}")
+    if not verdicts:
+        return "no data", "needs QEC and another method"
+    verdict = ("did not hold" if "did not hold" in verdicts else "tie" if "tie" in verdicts else "held")
+    return verdict, "; ".join(parts)
+
+
+def _simple_weakest(data, regular):
+    m = _means(data[data["method"].isin(regular)], "method")
+    if "simple" not in m.index or len(m) < 2:
+        return "no data", "needs simple and another regular method"
+    return _gap_verdict(m.drop("simple").min() - m["simple"]), "mean accuracy over all levels: " + _list(m)
+
+
+def _trio_equal(data):
+    trio = ["gls", "lls", "feature"]
+    sub = data[data["method"].isin(trio)]
+    if set(sub["method"]) != set(trio):
+        return "no data", "needs gls, lls and feature"
+    g = sub.groupby(["level", "relocation", "method"])["accuracy"]
+    mu = 100 * g.mean().unstack("method")
+    sd = (100 * g.std(ddof=1).unstack("method")).dropna(how="any")
+    spread = float((mu.max(axis=1) - mu.min(axis=1)).max())
+    evidence = f"largest gap between their means in any level x relocation: {spread:.2f} points"
+    if not len(sd) or not np.isfinite(spread):
+        return "no data", evidence + "; σ needs at least two terrain x point-set samples per cell"
+    lowest = float((sd.idxmin(axis=1) == "feature").mean())
+    evidence += f"; feature-aware has the lowest σ in {100 * lowest:.0f}% of the level x relocation cells"
+    return ("held" if spread <= 1.0 and lowest > 0.5 else "did not hold"), evidence
+
+
+def _identity_best(data):
+    m = _means(data, "relocation")
+    sd = 100 * data.groupby("relocation")["accuracy"].std(ddof=1).dropna()
+    if "identity" not in m.index or len(m) < 2:
+        return "no data", "needs identity and another relocation"
+    verdict = _gap_verdict(m["identity"] - m.drop("identity").max())
+    evidence = "mean accuracy: " + _list(m)
+    if "identity" in sd.index and len(sd) == len(m):
+        evidence += "; σ: " + ", ".join(f"{k} {v:.2f}" for k, v in sd.sort_values().items())
+        if verdict == "held" and sd.idxmin() != "identity":
+            verdict = "did not hold"
+            evidence += " (identity is best on average, but its σ is not the lowest)"
+    return verdict, evidence
+
+
+def _half_worst(data):
+    deepest = 3 if 3 in set(data["level"]) else None
+    if deepest is None:
+        return "no data", "needs level 3 (1.5 % of the samples)"
+    m = _means(data[data["level"] == deepest], "relocation")
+    if "half" not in m.index or len(m) < 2:
+        return "no data", "needs half and another relocation at level 3"
+    return _gap_verdict(m.drop("half").min() - m["half"]), "level 3 mean accuracy: " + _list(m)
+
+
+def _regular_marginal(data, regular):
+    kinds = data.assign(_k=np.where(data["method"].isin(regular), "regular", "irregular"))
+    m = _means(kinds, "_k")
+    if len(m) < 2:
+        return "no data", "needs regular and irregular methods"
+    gap = m["irregular"] - m["regular"]
+    per_level = _means(kinds, ["level", "_k"]).unstack("_k")
+    evidence = (f"mean accuracy: irregular {m['irregular']:.2f}, regular {m['regular']:.2f} "
+                f"(regular {'poorer' if gap >= 0 else 'better'} by {abs(gap):.2f} points; by level: "
+                + ", ".join(f"{lv}: {r['irregular'] - r['regular']:+.2f}" for lv, r in per_level.iterrows()) + ")")
+    if abs(gap) <= TIE:
+        return "tie", evidence
+    return ("held" if 0 < gap <= 2.0 else "did not hold"), evidence + "; 'marginally' is taken as at most 2 points"
+
+
+#: The paper's qualitative findings, as the paper states them.
+CLAIMS = (
+    "QEC is best at every level",
+    "simple reverse Faber is the weakest regular method",
+    "GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ",
+    "identity is the best relocation overall, with the lowest σ",
+    "half projection is the worst relocation at 1.5%",
+    "regular methods are only marginally poorer than irregular ones",
+)
+
+
 def findings(df: pd.DataFrame) -> list[dict]:
-    """Check the paper's five qualitative findings against a result.
+    """Check the paper's six qualitative findings against a result, for each predicate in it.
 
     Returns
     -------
     list of dict
-        Each with ``claim``, ``held`` (bool, or None when the data cannot tell) and
+        One per claim (:data:`CLAIMS`) and predicate, with ``claim``, ``predicate``,
+        ``verdict`` (one of :data:`VERDICTS`: ``"tie"`` when the decisive difference is
+        below :data:`TIE` points, ``"no data"`` when the result cannot tell) and
         ``evidence`` (the numbers behind the verdict).
     """
-    data = _ok(df)
-    out = []
-    acc = data.groupby(["level", "method"])["accuracy"].mean()
-
-    def add(claim, held, evidence):
-        out.append({"claim": claim, "held": held, "evidence": evidence})
-
-    if 1 in data["level"].values:
-        at1 = acc.loc[1].sort_values(ascending=False)
-        add(
-            "QEC is best at 25%",
-            bool(at1.index[0] == "qec") if "qec" in at1.index else None,
-            "level 1 mean accuracy: " + ", ".join(f"{m} {100 * v:.2f}" for m, v in at1.items()),
-        )
     from simplifiers import METHODS
 
-    regular = [m for m, info in METHODS.items() if info.regular and m in data["method"].values]
-    if len(regular) >= 2 and "simple" in regular:
-        by = data[data["method"].isin(regular)].groupby("method")["accuracy"].mean().sort_values()
-        add(
-            "simple reverse Faber is the weakest regular method",
-            bool(by.index[0] == "simple"),
-            "mean accuracy over all levels: " + ", ".join(f"{m} {100 * v:.2f}" for m, v in by.items()),
-        )
-    trio = [m for m in ("gls", "lls", "feature") if m in data["method"].values]
-    if len(trio) == 3:
-        g = data[data["method"].isin(trio)].groupby(["level", "relocation", "method"])["accuracy"]
-        mu = g.mean().unstack("method")
-        sd = g.std(ddof=1).unstack("method")
-        spread = 100 * (mu.max(axis=1) - mu.min(axis=1)).max()
-        sd = sd.dropna(how="any")  # σ needs at least two terrain x set samples per cell
-        if len(sd):
-            lowest = float((sd.idxmin(axis=1) == "feature").mean())
-            add(
-                "GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ",
-                bool(spread <= 1.0 and lowest > 0.5),
-                f"largest gap between their mean accuracies in any level x relocation: {spread:.2f} points; "
-                f"feature-aware has the lowest σ in {100 * lowest:.0f}% of level x relocation cells",
-            )
-        else:
-            add(
-                "GLS, LLS and feature-aware are about equal, and feature-aware has the lowest σ",
-                None,
-                f"largest gap between their mean accuracies: {spread:.2f} points; σ needs at least two "
-                "terrain x point-set samples per cell",
-            )
-    rel = data.groupby("relocation")["accuracy"].mean().sort_values(ascending=False)
-    if len(rel) >= 2:
-        add(
-            "identity is the best relocation overall",
-            bool(rel.index[0] == "identity") if "identity" in rel.index else None,
-            "mean accuracy: " + ", ".join(f"{r} {100 * v:.2f}" for r, v in rel.items()),
-        )
-    if 3 in data["level"].values and {"half", "identity", "full"} <= set(data["relocation"]):
-        r3 = data[data["level"] == 3].groupby("relocation")["accuracy"].mean()
-        r1 = data[data["level"] == 1].groupby("relocation")["accuracy"].mean() if 1 in data["level"].values else None
-        worst = r3.idxmin()
-        drop = "" if r1 is None else "; drop from level 1: " + ", ".join(f"{r} {100 * (r1[r] - r3[r]):.2f}" for r in r3.index)
-        add(
-            "half projection degrades at 1.5%",
-            bool(worst == "half" or (r1 is not None and (r1 - r3).idxmax() == "half")),
-            "level 3 mean accuracy: " + ", ".join(f"{r} {100 * v:.2f}" for r, v in r3.items()) + drop,
-        )
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"df must be a pandas DataFrame from terrainvis.compare, got {type(df).__name__}")
+    rows = df[df["error"].fillna("").astype(str) == ""] if "error" in df.columns else df
+    rows = rows[rows["accuracy"].notna()]
+    predicates = sorted(set(rows["predicate"])) if "predicate" in rows.columns and len(rows) else ["exact"]
+    regular = [m for m, info in METHODS.items() if info.regular]
+    out = []
+    for pred in predicates:
+        data = rows[rows["predicate"] == pred] if "predicate" in rows.columns else rows
+        checks = (
+            _qec_best(data), _simple_weakest(data, regular), _trio_equal(data), _identity_best(data),
+            _half_worst(data), _regular_marginal(data, regular),
+        ) if len(data) else (("no data", "no row has an accuracy"),) * len(CLAIMS)
+        for claim, (verdict, evidence) in zip(CLAIMS, checks):
+            out.append({"claim": claim, "predicate": pred, "verdict": verdict, "evidence": evidence})
     return out
+
+
+def findings_markdown(found: list[dict]) -> list[str]:
+    """The findings as markdown lines, one section per predicate."""
+    lines = []
+    for pred in dict.fromkeys(f["predicate"] for f in found):
+        lines += ["", f"### The paper's findings on these terrains (predicate: {pred})", ""]
+        lines += [f"- **{f['claim']}**: {f['verdict']}. {f['evidence']}." for f in found if f["predicate"] == pred]
+    return lines
+
+
+# ---------------------------------------------------------------------- the paper side by side
+def paper_reference() -> pd.DataFrame:
+    """The paper's Tables 1-4 as published, one row per cell (in percent).
+
+    Columns ``table``, ``level``, ``size_percent``, ``method``, ``relocation``,
+    ``measure`` (``accuracy``, ``visible_kept``, ``blocked_kept``), ``mu``, ``sigma``.
+    Source: Alderson and Samavati, GRAPP 2012, doi:10.5220/0003851501430150.
+    """
+    from importlib import resources
+
+    with resources.files("terrainvis.data").joinpath("alderson_samavati_2012_tables.csv").open("r") as fh:
+        return pd.read_csv(fh)
+
+
+def _paper_convention(data: pd.DataFrame) -> pd.DataFrame:
+    """Accuracy and visible-kept rates over |P x P| (n², self-pairs agree and are visible), as the paper counts."""
+    n = data["n_points"].astype(float)
+    whole = data["max_distance"].isna() if "max_distance" in data.columns else True
+    vis = data["agree_visible"] + data["false_blocked"]
+    visible_paper = (2 * data["agree_visible"] + n) / (2 * vis + n)
+    return data.assign(
+        accuracy=np.where(whole, data["accuracy_paper"], data["accuracy"]),
+        visible_kept=np.where(whole, visible_paper, data["visible_kept"]),
+    )
+
+
+def paper_comparison(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame:
+    """Ours beside the paper's, for every cell of its Tables 1-4.
+
+    Our figures are converted to the paper's convention first (accuracy over the n²
+    ordered pairs of P x P, where the n self-pairs agree and are visible: ``accuracy_paper``,
+    and the same for Table 4's visible rate), so the difference is about the
+    experiment, not the counting.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Index (table, level, method, relocation, measure) in the paper's order; columns
+        ``ours``, ``paper``, ``difference`` (ours - paper, percentage points) and ``n``
+        (our terrain x set samples). ``attrs["rms"]`` holds the RMS difference over the
+        accuracy cells of Tables 1-3 (63 when all are present) and over Table 4 (28),
+        with the number of cells each.
+    """
+    data = _paper_convention(_ok(df, predicate))
+    ref = paper_reference()
+    rows = []
+    for r in ref.itertuples():
+        sel = data[(data["level"] == r.level) & (data["method"] == r.method) & (data["relocation"] == r.relocation)]
+        vals = sel[r.measure].dropna()
+        ours = 100 * vals.mean() if len(vals) else np.nan
+        rows.append((r.table, r.level, r.method, r.relocation, r.measure, ours, r.mu, ours - r.mu, len(vals)))
+    out = pd.DataFrame(rows, columns=["table", "level", "method", "relocation", "measure", "ours", "paper",
+                                      "difference", "n"]).set_index(["table", "level", "method", "relocation", "measure"])
+    acc = out.loc[[1, 2, 3], "difference"].dropna() if len(out) else pd.Series(dtype=float)
+    t4 = out.loc[[4], "difference"].dropna() if len(out) else pd.Series(dtype=float)
+    out.attrs["rms"] = {
+        "accuracy": (float(np.sqrt((acc**2).mean())) if len(acc) else np.nan, int(acc.size)),
+        "table 4": (float(np.sqrt((t4**2).mean())) if len(t4) else np.nan, int(t4.size)),
+    }
+    out.attrs["title"] = "The paper side by side (the paper's |P x P| convention; difference = ours - paper, points)"
+    return out
+
+
+def comparison_markdown(cmp: pd.DataFrame) -> str:
+    """:func:`paper_comparison` as markdown, with the RMS differences under it."""
+    shown = cmp[cmp["n"] > 0]
+    text = to_markdown({"paper": shown}) if len(shown) else "### The paper side by side\n\nno cell of the paper's tables is in this run\n"
+    rms = cmp.attrs.get("rms", {})
+    lines = [f"- RMS difference over the {n} {what} cells: {v:.2f} points" for what, (v, n) in rms.items() if n]
+    return text + ("\n".join(lines) + "\n" if lines else "")

@@ -1,16 +1,21 @@
-"""compare(): determinism, workers, dask, localized tests, failures, incremental CSV and resume."""
+"""compare(): determinism, workers, dask, localized tests, failures, validation up front, the CSV and resume."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pandas as pd
 import pytest
 
 from terrainvis import HeightGrid, compare, synthetic_terrain
-from terrainvis.experiment import COLUMNS, DEFAULT_TERRAINS, JACKSBORO_WINDOW, resolve_terrains
+from terrainvis.experiment import COLUMNS, DEFAULT_TERRAINS, JACKSBORO_WINDOW, TIMING_COLUMNS, resolve_terrains
+from terrainvis.results import settings_path
 
 MEASURED = ["accuracy", "visible_kept", "blocked_kept", "agree_visible", "agree_blocked", "false_visible",
             "false_blocked", "n_vertices", "nbytes", "max_error", "rms_error", "volume_error"]
+KEYS = ["terrain", "method", "level", "relocation", "set"]
+STABLE = [c for c in COLUMNS if c not in TIMING_COLUMNS]
 
 
 @pytest.fixture(scope="module")
@@ -33,18 +38,21 @@ def test_shape_and_columns(serial):
     assert list(serial.columns) == list(COLUMNS)
     # terrains x sets x methods x levels x relocations
     assert len(serial) == 2 * 2 * 3 * 2 * 3
-    assert (serial["error"] == "").all()
+    assert (serial["error"] == "").all() and (serial["predicate"] == "exact").all()
     assert serial["n_pairs"].eq(12 * 11 // 2).all()
-    assert serial["accuracy"].between(0, 1).all()
+    assert serial["accuracy"].between(0, 1).all() and serial["end_radius"].eq(0).all()
     lv1 = serial[serial["level"] == 1]
     assert lv1["n_vertices"].eq(17 * 17).all() and lv1["size_fraction"].eq(17 * 17 / 33**2).all()
+    # sorted: terrains as given, then set, methods in the paper's order, level, relocation
+    first = serial[(serial.terrain == "a") & (serial.set == 0)]
+    assert list(dict.fromkeys(first["method"])) == ["greedy-insertion", "simple", "lls"]
 
 
 def test_agreement_is_the_one_of_the_matrices(small, serial):
     """Recompute one row by hand from the public pieces."""
     from simplifiers import simplify
 
-    from terrainvis import agreement, relocate, visibility_matrix
+    from terrainvis import agreement, relocate, visibility_matrix, volume_error
     from terrainvis.experiment import point_sets
 
     row = serial[(serial.terrain == "b") & (serial.method == "lls") & (serial.level == 2)
@@ -54,12 +62,12 @@ def test_agreement_is_the_one_of_the_matrices(small, serial):
     S = simplify(T, "lls", 2)
     a = agreement(visibility_matrix(T, P), visibility_matrix(S, relocate(P, S, "half")))
     assert row["accuracy"] == a["accuracy"] and row["false_blocked"] == a["false_blocked"]
+    assert row["volume_error"] == volume_error(T, S)
 
 
 def test_deterministic_and_pool_equals_serial(small, serial):
     again = compare(small, workers=2, **_kw())
-    pd.testing.assert_frame_equal(again[MEASURED + ["terrain", "method", "level", "relocation", "set"]],
-                                  serial[MEASURED + ["terrain", "method", "level", "relocation", "set"]])
+    pd.testing.assert_frame_equal(again[MEASURED + KEYS], serial[MEASURED + KEYS])
 
 
 def test_point_sets_depend_on_seed_and_name_only(small):
@@ -83,45 +91,146 @@ def test_max_distance_restricts_pairs(small):
     assert df[df["set"] == 0]["n_pairs"].eq(expected).all()
 
 
-def test_failure_is_recorded_and_the_run_goes_on(small):
+def test_failure_is_recorded_and_the_run_goes_on(small, monkeypatch):
+    import simplifiers
+    from terrainvis.errors import SimplificationError
+
+    real = simplifiers.simplify
+
+    def failing(grid, method, level=1, **options):
+        if method == "lls" and level == 2:
+            raise SimplificationError("lls: injected failure")
+        return real(grid, method, level, **options)
+
+    monkeypatch.setattr(simplifiers, "simplify", failing)
+    df = compare({"a": small["a"]}, workers=1, **_kw(methods=["lls"], levels=[1, 2]))
+    bad = df[df["level"] == 2]
+    assert len(bad) == 6 and bad["error"].eq("SimplificationError: lls: injected failure").all()
+    assert bad["accuracy"].isna().all() and (df[df["level"] == 1]["error"] == "").all()
+
+
+def test_everything_is_validated_before_any_unit_runs(small):
+    from terrainvis import TIN  # noqa: F401 (the message names the irregular methods)
+
     tiny = HeightGrid(np.random.default_rng(0).normal(size=(5, 5)))
-    df = compare({"tiny": tiny, "a": small["a"]}, workers=1, **_kw(methods=["lls"], levels=[3]))
-    bad = df[df["terrain"] == "tiny"]
-    assert len(bad) == 6 and bad["error"].str.contains("level must be in \\[0, 2\\]").all()
-    assert bad["accuracy"].isna().all()
-    assert (df[df["terrain"] == "a"]["error"] == "").all()
+    cases = [
+        (dict(levels=[3]), ValueError, r"levels must be at most 2 for terrain 'tiny' \(5x5"),
+        (dict(levels=[1, 1]), ValueError, "levels must not repeat a level, got 1 twice"),
+        (dict(levels=1.0), TypeError, "levels must be an integer or a list of integers, got float 1.0"),
+        (dict(levels=[0]), ValueError, "levels must be >= 1, got 0"),
+        (dict(methods=["lls", "lls"]), ValueError, "methods must not repeat a name, got 'lls' twice"),
+        (dict(methods=["decimate"]), ValueError, r"methods must be drawn from \['qec', 'greedy-cuts'"),
+        (dict(relocations=["full", "full"]), ValueError, "relocations must not repeat a name"),
+        (dict(relocations=["lift"]), ValueError, r"relocations must be drawn from \['identity', 'full', 'half'\]"),
+        (dict(engine="gird"), ValueError, r"engine must be one of \['auto', 'grid', 'embree'\], got 'gird'"),
+        (dict(engine="grid", methods=["lls", "qec"]), ValueError, r"engine 'grid' works on grids only.*\['qec'\]"),
+        (dict(predicate="loose"), ValueError, r"predicate must be one of \['exact', 'paper'\]"),
+        (dict(seed=-1), ValueError, "seed must be >= 0, got -1"),
+        (dict(n_points=1), ValueError, "n_points must be >= 2, got 1"),
+        (dict(n_sets=0), ValueError, "n_sets must be >= 1, got 0"),
+        (dict(max_distance=0.0), ValueError, "max_distance must be finite and > 0"),
+        (dict(client="x"), TypeError, "client must be a dask.distributed.Client, got str 'x'"),
+        (dict(workers=0), ValueError, "workers must be >= 1, got 0"),
+        (dict(volume="auto"), TypeError, "volume must be True or False"),
+    ]
+    for kw, exc, match in cases:
+        with pytest.raises(exc, match=match):
+            compare({"tiny": tiny}, **{**_kw(levels=[1], methods=["lls"]), **kw})
+    with pytest.raises(TypeError, match="terrains must be a terrain, a list of terrains or a dict of them, got None"):
+        compare(None)
 
 
-def test_incremental_csv_and_resume(small, tmp_path, monkeypatch):
+def _interrupt_after(monkeypatch, n_finished: int):
+    """Make the (n_finished + 1)-th unit raise KeyboardInterrupt, as a Ctrl-C would."""
     from terrainvis import experiment
 
-    out = tmp_path / "results.csv"
     calls = []
     real = experiment._run_unit
 
-    def counting(grid, terrain, method, level, settings):
-        calls.append((terrain, method, level))
-        if len(calls) == 3:
-            raise KeyboardInterrupt  # interrupted after two finished units
-        return real(grid, terrain, method, level, settings)
+    def counting(*args):
+        calls.append(args[1:4])
+        if len(calls) == n_finished + 1:
+            raise KeyboardInterrupt
+        return real(*args)
 
     monkeypatch.setattr(experiment, "_run_unit", counting)
+    return calls, real
+
+
+def test_incremental_csv_and_resume(small, tmp_path, monkeypatch, serial):
+    from terrainvis import experiment
+
+    out = tmp_path / "results.csv"
+    calls, real = _interrupt_after(monkeypatch, 2)
     with pytest.raises(KeyboardInterrupt):
         compare(small, workers=1, out_csv=out, **_kw())
     on_disk = pd.read_csv(out)
-    assert len(on_disk) == 2 * 6  # two finished units of 2 sets x 3 relocations are kept
-    finished = set(map(tuple, on_disk[["terrain", "method", "level"]].drop_duplicates().to_numpy().tolist()))
-    calls.clear()
+    assert len(on_disk) == 2 * 6  # the two finished units (2 sets x 3 relocations each) are on disk
+    finished = {tuple(u) for u in on_disk[["terrain", "method", "level"]].drop_duplicates().to_numpy().tolist()}
     monkeypatch.setattr(experiment, "_run_unit", real)
+    rerun = []
+    monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
     df = compare(small, workers=1, out_csv=out, resume=True, **_kw())
+    assert len(rerun) == 12 - 2 and not finished & {tuple(u) for u in rerun}
     assert len(df) == 72 and len(pd.read_csv(out)) == 72
-    assert not df.duplicated(["terrain", "method", "level", "set", "relocation"]).any()
-    # the resumed result equals an uninterrupted run
-    full = compare(small, workers=1, **_kw())
-    pd.testing.assert_frame_equal(df[MEASURED], full[MEASURED], check_dtype=False)
-    with pytest.raises(ValueError, match="other settings"):
-        compare(small, workers=1, out_csv=out, resume=True, **_kw(seed=4))
-    assert finished  # the two finished units were not recomputed: checked by row count above
+    assert not df.duplicated(KEYS).any()
+    pd.testing.assert_frame_equal(df[STABLE], serial[STABLE], check_dtype=False)
+    pd.testing.assert_frame_equal(pd.read_csv(out, dtype={"error": str}).fillna({"error": ""})[STABLE],
+                                  serial[STABLE], check_dtype=False)
+
+
+def test_resume_after_an_interrupt_before_the_first_unit(small, tmp_path, monkeypatch, serial):
+    out = tmp_path / "results.csv"
+    _interrupt_after(monkeypatch, 0)
+    with pytest.raises(KeyboardInterrupt):
+        compare(small, workers=1, out_csv=out, **_kw())
+    assert out.read_text().count("\n") == 1  # the header only
+    monkeypatch.undo()
+    df = compare(small, workers=1, out_csv=out, resume=True, **_kw())
+    pd.testing.assert_frame_equal(df[STABLE], serial[STABLE], check_dtype=False)
+
+
+def test_resume_is_strict_about_settings(small, tmp_path):
+    out = tmp_path / "results.csv"
+    compare({"a": small["a"]}, workers=1, out_csv=out, **_kw(methods=["lls"], levels=[1]))
+    stored = json.loads(settings_path(out).read_text())
+    assert stored["n_points"] == 12 and list(stored["terrains"]) == ["a"]
+    with pytest.raises(ValueError, match=r"other settings \(seed: 3 before, 4 now\).*new output.*same settings"):
+        compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **_kw(methods=["lls"], levels=[1], seed=4))
+    with pytest.raises(ValueError, match=r"methods: \[\"lls\"\] before, \[\"simple\", \"lls\"\] now"):
+        compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **_kw(methods=["simple", "lls"], levels=[1]))
+    with pytest.raises(ValueError, match="terrains: "):
+        compare({"b": small["b"]}, workers=1, out_csv=out, resume=True, **_kw(methods=["lls"], levels=[1]))
+    # the same name with other heights is another terrain
+    changed = small["a"].copy_with(small["a"].z + 1.0)
+    with pytest.raises(ValueError, match="terrains: "):
+        compare({"a": changed}, workers=1, out_csv=out, resume=True, **_kw(methods=["lls"], levels=[1]))
+    settings_path(out).unlink()
+    with pytest.raises(ValueError, match="settings file 'results.settings.json' is missing"):
+        compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **_kw(methods=["lls"], levels=[1]))
+
+
+def test_a_cut_off_last_row_is_dropped_with_a_warning(small, tmp_path, monkeypatch):
+    from terrainvis import experiment
+
+    out = tmp_path / "results.csv"
+    kw = _kw(methods=["simple", "lls"], levels=[1])
+    full = compare({"a": small["a"]}, workers=1, out_csv=out, **kw)
+    text = out.read_text()
+    out.write_text(text[: len(text) - 40])  # a write cut off in the last row (a full disk, a power loss)
+    real = experiment._run_unit
+    rerun = []
+    monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
+    with pytest.warns(RuntimeWarning, match="dropped a cut-off last row"):
+        df = compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **kw)
+    assert rerun == [("a", "lls", 1)]  # only the unit of the damaged row runs again
+    pd.testing.assert_frame_equal(df[STABLE], full[STABLE], check_dtype=False)
+
+
+def test_out_csv_problems_are_clear(small, tmp_path):
+    (tmp_path / "results.csv").mkdir()
+    with pytest.raises(ValueError, match="is a folder"):
+        compare({"a": small["a"]}, workers=1, out_csv=tmp_path / "results.csv", **_kw(methods=["lls"], levels=[1]))
 
 
 def test_dask_local_cluster_matches_serial(small, serial):
@@ -142,13 +251,9 @@ def test_resolve_terrains():
     assert set(DEFAULT_TERRAINS) == {"hills", "mesas", "rough", "mountains", "ridges", "jacksboro"}
 
 
-def test_bad_names_list_the_valid_ones(small):
+def test_bad_terrains_list_the_valid_ones():
     with pytest.raises(ValueError, match=r"bundled terrain \['hills'.*'jacksboro'\]"):
         compare(["everest"], workers=1)
-    with pytest.raises(ValueError, match=r"method must be one of \['simple'"):
-        compare(small, methods=["decimate"], workers=1)
-    with pytest.raises(ValueError, match=r"relocations must be drawn from \['identity', 'full', 'half'\]"):
-        compare(small, relocations=["lift"], workers=1)
     z = np.zeros((5, 5))
     z[0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
@@ -158,13 +263,13 @@ def test_bad_names_list_the_valid_ones(small):
 def test_save_dir_keeps_every_simplified_terrain(small, tmp_path):
     from simplifiers import simplify
 
-    from terrainvis import TIN
-    from terrainvis.experiment import load_simplified, simplified_path
+    from terrainvis import TIN, load_terrain
+    from terrainvis.experiment import simplified_path
 
     compare({"a": small["a"]}, workers=1, save_dir=tmp_path, **_kw(n_sets=1))
     for method in ("simple", "lls", "greedy-insertion"):
         for level in (1, 2):
-            saved = load_simplified(simplified_path(tmp_path, "a", method, level))
+            saved = load_terrain(simplified_path(tmp_path, "a", method, level))
             fresh = simplify(small["a"], method, level)
             if isinstance(fresh, TIN):
                 np.testing.assert_array_equal(saved.vertices, fresh.vertices)
@@ -172,4 +277,21 @@ def test_save_dir_keeps_every_simplified_terrain(small, tmp_path):
             else:
                 np.testing.assert_array_equal(saved.z, fresh.z)
                 np.testing.assert_array_equal(saved.xs, fresh.xs)
-    assert not list(tmp_path.glob("*.part.npz"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        simplified_path(tmp_path, "a", m, lv).name for m in ("simple", "lls", "greedy-insertion") for lv in (1, 2)
+    )  # no temporary files left behind
+
+
+def test_paper_predicate_uses_one_cell_of_the_surface_under_test(small):
+    df = compare({"a": small["a"]}, workers=1, predicate="paper", **_kw(levels=[1, 2]))
+    assert (df["predicate"] == "paper").all()
+    # 33 -> 17 -> 9 samples over 960 m: coarse cells of 60 m and 120 m, for the grids and
+    # for the TINs with the same vertex budget
+    for (method, level), r in df.groupby(["method", "level"])["end_radius"]:
+        assert r.eq(30.0 * 2**level).all(), (method, level)
+    exact = compare({"a": small["a"]}, workers=1, **_kw(levels=[1, 2]))
+    # T's verdicts are exact in both runs: only the S(T) side changes, and it is never stricter
+    assert (df["n_pairs"].to_numpy() == exact["n_pairs"].to_numpy()).all()
+    vis_paper = df["agree_visible"] + df["false_visible"]
+    vis_exact = exact["agree_visible"] + exact["false_visible"]
+    assert (vis_paper.to_numpy() >= vis_exact.to_numpy()).all()

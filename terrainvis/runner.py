@@ -1,0 +1,247 @@
+"""Running independent units of work: in this process, on a local process pool, or on dask.
+
+:func:`run_units` is the one interface the experiments use. It calls ``fn(*args)`` for
+every task, wherever it runs, and hands each result to ``on_result`` in this process as
+soon as it arrives (in completion order), so the caller can save it at once.
+
+Interrupts stop everything promptly and leave no orphan: Ctrl-C (SIGINT to the whole
+process group), SIGINT to this process only (a notebook's interrupt) and SIGTERM all
+end the run within seconds. Pending tasks are cancelled, worker processes are
+terminated, and :class:`Interrupted` (a :class:`KeyboardInterrupt`) is raised after the
+results that arrived before the interrupt have been handed to ``on_result``. Workers
+ignore SIGINT themselves (the parent decides) and exit on their own when the parent
+disappears (SIGKILL, a crash).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import sys
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+
+from ._validate import as_int, describe
+
+__all__ = ["run_units", "Interrupted", "check_client", "check_workers"]
+
+
+class Interrupted(KeyboardInterrupt):
+    """The run was interrupted by SIGINT or SIGTERM; ``signum`` says which."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        self.signum = int(signum)
+        super().__init__(f"interrupted by {signal.Signals(self.signum).name}")
+
+
+def check_workers(workers) -> int | None:
+    """``workers`` as None (one per CPU) or an int >= 1."""
+    return None if workers is None else as_int(workers, "workers", minimum=1)
+
+
+def check_client(client):
+    """``client`` as None or something that looks like a dask.distributed.Client."""
+    if client is not None and not all(hasattr(client, a) for a in ("submit", "scatter", "cancel")):
+        raise TypeError(f"client must be a dask.distributed.Client, got {describe(client)}")
+    return client
+
+
+def run_units(tasks, fn, *, on_result, workers=None, client=None) -> None:
+    """Run ``fn(*args)`` for every ``(key, args)`` in ``tasks``; pass each result to ``on_result(key, result)``.
+
+    Parameters
+    ----------
+    tasks : list of (key, tuple)
+        The units, in the order they should start.
+    fn : callable
+        A module-level function (it is pickled to the workers).
+    on_result : callable
+        Called in this process with ``(key, result)`` as each unit finishes.
+    workers : int, optional
+        Local worker processes (default: the number of CPUs; 1 runs here, serially).
+    client : dask.distributed.Client, optional
+        Run on this cluster instead.
+
+    Raises
+    ------
+    Interrupted
+        On SIGINT or SIGTERM, after cleaning up (see the module docstring).
+    RuntimeError
+        When the worker processes died (e.g. an unguarded script re-imported by spawn).
+    """
+    if not tasks:
+        return
+    signals = _Signals()
+
+    def deliver(key, result):
+        with signals.saving():
+            on_result(key, result)
+
+    with signals.installed():
+        if client is not None:
+            _run_dask(tasks, fn, deliver, client)
+            return
+        n = (os.cpu_count() or 1) if workers is None else workers
+        if n == 1 or len(tasks) == 1:
+            try:
+                for key, args in tasks:
+                    deliver(key, fn(*args))
+            except KeyboardInterrupt as exc:
+                raise _as_interrupted(exc) from None
+            return
+        _run_pool(tasks, fn, deliver, min(n, len(tasks)))
+
+
+class _Signals:
+    """Turn SIGINT and SIGTERM into :class:`Interrupted` while a run lasts.
+
+    Inside :meth:`saving` (while a finished unit is handed to ``on_result``, which writes
+    it to disk) a signal is held back and raised when the block ends, so a unit that
+    finished is never lost half-saved. Only the main thread can install handlers;
+    elsewhere the default behaviour stays.
+    """
+
+    def __init__(self):
+        self.pending = None
+        self.depth = 0
+
+    def handler(self, signum, frame):
+        if self.depth:
+            self.pending = signum
+            return
+        raise Interrupted(signum)
+
+    @contextlib.contextmanager
+    def installed(self):
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+        previous = {}
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(ValueError, OSError):
+                previous[sig] = signal.signal(sig, self.handler)
+        try:
+            yield self
+        finally:
+            for sig, old in previous.items():
+                with contextlib.suppress(ValueError, OSError, TypeError):
+                    signal.signal(sig, old)
+
+    @contextlib.contextmanager
+    def saving(self):
+        self.depth += 1
+        try:
+            yield
+        finally:
+            self.depth -= 1
+        if not self.depth and self.pending is not None:
+            signum, self.pending = self.pending, None
+            raise Interrupted(signum)
+
+
+def _as_interrupted(exc: BaseException) -> Interrupted:
+    return exc if isinstance(exc, Interrupted) else Interrupted(signal.SIGINT)
+
+
+# ---------------------------------------------------------------- local pool
+def _worker_init(threads: int, parent: int) -> None:
+    """Set up a worker: numba threads, ignore SIGINT, die with the parent."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(Exception):  # best effort: the watchdog below covers the rest
+            import ctypes
+
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="terrainvis-watch-parent").start()
+    import numba
+
+    numba.set_num_threads(max(1, threads))
+
+
+def _watch_parent(parent: int) -> None:
+    while True:
+        time.sleep(0.5)
+        if os.getppid() != parent:
+            os._exit(3)
+
+
+def _run_pool(tasks, fn, on_result, n_workers: int) -> None:
+    import multiprocessing as mp
+
+    threads = max(1, (os.cpu_count() or 1) // n_workers)
+    pool = ProcessPoolExecutor(
+        max_workers=n_workers, mp_context=mp.get_context("spawn"), initializer=_worker_init,
+        initargs=(threads, os.getpid()),
+    )
+    futures = {}
+    try:
+        for key, args in tasks:
+            futures[pool.submit(fn, *args)] = key
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            for fut in done:
+                on_result(futures[fut], fut.result())
+    except BrokenProcessPool as exc:
+        _stop_pool(pool, futures)
+        raise RuntimeError(
+            "compare's worker processes died. They are started with 'spawn', which imports "
+            "your __main__ module again: in a script, call compare() under "
+            "`if __name__ == \"__main__\":`, or pass workers=1 to run in this process. "
+            f"Units finished before the failure are in out_csv if one was given ({exc})"
+        ) from exc
+    except BaseException as exc:
+        _stop_pool(pool, futures)
+        if isinstance(exc, KeyboardInterrupt):
+            raise _as_interrupted(exc) from None
+        raise
+    pool.shutdown(wait=True)
+
+
+def _stop_pool(pool: ProcessPoolExecutor, futures) -> None:
+    """Cancel what has not started and terminate the workers now (no waiting for running units)."""
+    for fut in futures:
+        fut.cancel()
+    processes = list(getattr(pool, "_processes", {}).values())
+    for p in processes:
+        with contextlib.suppress(Exception):
+            p.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    deadline = time.monotonic() + 5.0
+    for p in processes:
+        with contextlib.suppress(Exception):
+            p.join(max(0.0, deadline - time.monotonic()))
+            if p.is_alive():
+                p.kill()
+                p.join(1.0)
+
+
+# ---------------------------------------------------------------- dask
+def _run_dask(tasks, fn, on_result, client) -> None:
+    from dask.distributed import as_completed
+
+    futures = {}
+    try:
+        scattered = {}
+        for key, args in tasks:
+            # large inputs (the terrains) are scattered once and shared by their units
+            sent = []
+            for a in args:
+                if hasattr(a, "nbytes") and not isinstance(a, (int, float, str)) and getattr(a, "nbytes", 0) > (1 << 16):
+                    if id(a) not in scattered:
+                        scattered[id(a)] = client.scatter(a, broadcast=False)
+                    sent.append(scattered[id(a)])
+                else:
+                    sent.append(a)
+            futures[client.submit(fn, *sent, pure=False)] = key
+        for fut in as_completed(list(futures)):
+            on_result(futures[fut], fut.result())
+    except BaseException as exc:
+        with contextlib.suppress(Exception):
+            client.cancel(list(futures))
+        if isinstance(exc, KeyboardInterrupt):
+            raise _as_interrupted(exc) from None
+        raise
