@@ -372,21 +372,43 @@ _COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "info": _i
 
 def main(argv=None) -> int:
     """Entry point of the ``terrainvis`` console script."""
-    from .errors import SimplificationError
+    import signal
+
     from .runner import Interrupted
 
-    args = _parser().parse_args(argv)
-    name = f"terrainvis {args.command}"
+    def terminated(signum, frame):
+        raise Interrupted(signum)
+
+    # SIGTERM ends the command like Ctrl-C does (cleanly, with a message), from the start
+    previous = signal.signal(signal.SIGTERM, terminated) if _main_thread() else None
+    name = "terrainvis"
     try:
-        return _COMMANDS[args.command](args)
+        args = _parser().parse_args(argv)
+        name = f"terrainvis {args.command}"
+        return _run(args, name)
     except Interrupted as exc:
-        code = 128 + exc.signum
-        note = " finished units are in results.csv (use --resume)" if args.command == "compare" else ""
+        note = " finished units are in results.csv (use --resume)" if name == "terrainvis compare" else ""
         print(f"{name}: interrupted ({exc});{note}", file=sys.stderr)
-        return code
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _run(args, name: str) -> int:
+    from .errors import SimplificationError
+
+    try:
+        return _COMMANDS[args.command](args)
     except SimplificationError as exc:
         print(f"{name}: failed: {exc}", file=sys.stderr)
         return 1

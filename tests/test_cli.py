@@ -1,0 +1,153 @@
+"""The terrainvis command line: compare, simplify, los, info; one-line errors and exit codes."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from terrainvis.cli import main
+
+from conftest import shared_dem_path
+
+SMALL = ["--terrain", "hills", "--levels", "1", "--methods", "simple", "lls", "--points", "10", "--sets", "2",
+         "--workers", "1", "--repeats", "1"]
+
+
+def _one_line_error(capsys, code_expected, argv):
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == code_expected, err
+    assert "\n" not in err and "Traceback" not in err, err
+    return err
+
+
+def test_compare_writes_results(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["compare", *SMALL, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "Table 1" in text and "identity is the best relocation overall" in text
+    assert "The paper side by side" in text
+    df = pd.read_csv(out / "results.csv")
+    assert len(df) == 1 * 2 * 2 * 3
+    assert (out / "tables.md").read_text().startswith("# terrainvis compare")
+    for png in ("accuracy_vs_size.png", "tradeoff_full.png", "views_hills.png"):
+        assert (out / png).stat().st_size > 1000
+    assert sorted(p.name for p in (out / "simplified").iterdir()) == ["hills__lls__level1.npz", "hills__simple__level1.npz"]
+    # --resume with everything done runs nothing and gives the same rows
+    assert main(["compare", *SMALL, "--out", str(out), "--resume", "--no-plots"]) == 0
+    again = pd.read_csv(out / "results.csv")
+    pd.testing.assert_frame_equal(again[["accuracy", "method"]], df[["accuracy", "method"]])
+    # ... and with other settings it refuses, naming them, in one line
+    err = _one_line_error(capsys, 2, ["compare", *SMALL[:-2], "--repeats", "2", "--out", str(out), "--resume"])
+    assert "repeats: 1 before, 2 now" in err and "another --out" in err
+
+
+def test_compare_errors_are_one_line(tmp_path, capsys):
+    err = _one_line_error(capsys, 2, ["compare", "--terrain", "atlantis", "--out", str(tmp_path)])
+    assert "bundled terrain ['hills'" in err
+    err = _one_line_error(capsys, 2, ["compare", "--terrain", "hills", "--methods", "nope", "--out", str(tmp_path)])
+    assert "methods must be drawn from ['qec', 'greedy-cuts'" in err
+    err = _one_line_error(capsys, 2, ["compare", "--terrain", "hills", "--relocations", "lift", "--out", str(tmp_path)])
+    assert "relocations must be drawn from ['identity', 'full', 'half']" in err
+    # zero is not silently replaced by the default
+    assert "n_points must be >= 2, got 0" in _one_line_error(capsys, 2, ["compare", "--points", "0", "--out", str(tmp_path)])
+    assert "n_sets must be >= 1, got 0" in _one_line_error(capsys, 2, ["compare", "--sets", "0", "--out", str(tmp_path)])
+    assert "levels must be at most 6" in _one_line_error(capsys, 2, ["compare", "--levels", "7", "--out", str(tmp_path)])
+
+
+def test_compare_output_path_problems(tmp_path, capsys):
+    a_file = tmp_path / "file.txt"
+    a_file.write_text("x")
+    assert "is an existing file" in _one_line_error(capsys, 2, ["compare", *SMALL, "--out", str(a_file)])
+    assert "which is a file" in _one_line_error(capsys, 2, ["compare", *SMALL, "--out", str(a_file / "sub")])
+    (tmp_path / "run" / "results.csv").mkdir(parents=True)
+    assert "is a folder" in _one_line_error(capsys, 2, ["compare", *SMALL, "--out", str(tmp_path / "run")])
+    assert a_file.read_text() == "x"
+
+
+@pytest.mark.slow
+def test_unreachable_scheduler_is_one_line(tmp_path, capsys):
+    pytest.importorskip("distributed", reason="the dask extra is not installed")
+    err = _one_line_error(capsys, 2, ["compare", *SMALL, "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path)])
+    assert "could not be reached" in err
+
+
+def test_no_counted_pair_says_why(tmp_path, capsys):
+    code = main(["compare", *SMALL, "--max-distance", "0.001", "--no-plots", "--out", str(tmp_path)])
+    assert code == 1
+    assert "no pair was counted" in capsys.readouterr().err
+
+
+def test_info(capsys):
+    assert main(["info", "jacksboro"]) == 0
+    out = capsys.readouterr().out
+    assert "120 x 120" in out and "1:        3,600 vertices" in out
+
+
+def test_info_and_nodata_options_on_a_dem_with_holes(tmp_path, capsys):
+    path = shared_dem_path("mount_st_helens_wa")
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "4,151 cells (2.71 %)" in out and "EPSG:26710" in out
+    err = _one_line_error(capsys, 2, ["simplify", str(path), "-m", "lls", "-l", "1", "-o", str(tmp_path / "x.npz")])
+    assert "NaN" in err and "fill_nodata" in err
+    assert main(["simplify", str(path), "-m", "lls", "-l", "1", "--fill", "nearest", "-o", str(tmp_path / "x.npz")]) == 0
+    assert main(["simplify", str(path), "-m", "lls", "-l", "1", "--crop-valid", "-o", str(tmp_path / "y.npz")]) == 0
+
+
+def test_simplify_writes_grids_and_meshes(tmp_path, capsys):
+    from simplifiers import simplify
+
+    from terrainvis import bundled_terrain, load_terrain
+
+    T = bundled_terrain("ridges")
+    assert main(["simplify", "ridges", "-m", "lls", "-l", "2", "-o", str(tmp_path / "r.npz"),
+                 "--option", "weights=derived"]) == 0
+    out = capsys.readouterr().out
+    assert "900 vertices (30 x 30 grid)" in out and "max error" in out
+    np.testing.assert_array_equal(load_terrain(tmp_path / "r.npz").z, simplify(T, "lls", 2, weights="derived").z)
+    assert main(["simplify", "ridges", "-m", "greedy-insertion", "-l", "3", "-o", str(tmp_path / "r.ply")]) == 0
+    import trimesh
+
+    mesh = trimesh.load(tmp_path / "r.ply", process=False)
+    assert len(mesh.vertices) == 225
+    assert main(["simplify", "ridges", "-m", "greedy-insertion", "-l", "3", "-o", str(tmp_path / "r_tin.npz")]) == 0
+    assert load_terrain(tmp_path / "r_tin.npz").n_vertices == 225
+    err = _one_line_error(capsys, 2, ["simplify", "ridges", "-m", "qec", "-o", str(tmp_path / "q.tif")])
+    assert "-o must end in one of ['.npz', '.ply'" in err and "TIN" in err
+    err = _one_line_error(capsys, 2, ["simplify", "ridges", "-m", "lls", "-o", str(tmp_path / "q.npz"), "--option", "x"])
+    assert "--option must be KEY=VALUE" in err
+    err = _one_line_error(capsys, 2, ["simplify", "ridges", "-m", "lls", "-o", str(tmp_path / "q.npz"),
+                                      "--option", "weights=bogus"])
+    assert "weights must be one of" in err
+
+
+def test_los_prints_the_verdict_and_where_it_is_decided(tmp_path, capsys):
+    from terrainvis import bundled_terrain, line_of_sight
+    from terrainvis.visibility.profile import lowest_point
+
+    T = bundled_terrain("ridges")
+    a, b = (100.0, 200.0), (3000.0, 3300.0)
+    assert main(["los", "ridges", "--from", *map(str, a), "--to", *map(str, b)]) == 0
+    out = capsys.readouterr().out
+    pa = np.array([[*a, T.height_at([a])[0] + 1.7]])
+    pb = np.array([[*b, T.height_at([b])[0]]])
+    verdict = "visible" if line_of_sight(T, pa, pb)[0] else "blocked"
+    low = lowest_point(T, pa[0], pb[0])
+    assert f": {verdict}; lowest clearance" in out and f"at ({low['x']:.6g}, {low['y']:.6g})" in out
+    pairs = tmp_path / "pairs.csv"
+    pd.DataFrame({"x1": [100.0, 50.0], "y1": [200.0, 60.0], "x2": [3000.0, 70.0], "y2": [3300.0, 80.0]}).to_csv(pairs)
+    assert main(["los", "ridges", "--pairs", str(pairs)]) == 0
+    assert capsys.readouterr().out.count("lowest clearance") == 2
+    err = _one_line_error(capsys, 2, ["los", "ridges", "--from", "0", "0", "--to", "1e7", "0"])
+    assert "outside the DEM's valid surface" in err
+    assert "give --from X Y and --to X Y" in _one_line_error(capsys, 2, ["los", "ridges", "--from", "0", "0"])
+
+
+def test_missing_dem_file(capsys):
+    assert "does not exist" in _one_line_error(capsys, 2, ["info", "no/such/dem.tif"])

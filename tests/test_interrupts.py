@@ -1,0 +1,98 @@
+"""Fault injection: interrupt ``terrainvis compare`` at random moments, resume, and get the same table.
+
+Every kind of stop a user meets: Ctrl-C (SIGINT to the whole process group), a notebook's
+interrupt (SIGINT to the main process only), SIGTERM (a scheduler or ``kill``) and SIGKILL
+(nothing can be cleaned up). After each, no worker process may survive, and ``--resume``
+must finish the run; the final ``results.csv`` must equal an uninterrupted run's on every
+column that is not a timing.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from terrainvis.experiment import COLUMNS, TIMING_COLUMNS
+
+psutil = pytest.importorskip("psutil", reason="psutil (installed with the dask extra) lists the worker processes")
+
+ARGS = ["compare", "--terrain", "hills", "ridges", "--levels", "1", "2", "--methods", "simple", "lls",
+        "greedy-insertion", "--points", "10", "--sets", "2", "--repeats", "1", "--no-plots", "--no-volume",
+        "--workers", "2"]
+STABLE = [c for c in COLUMNS if c not in TIMING_COLUMNS]
+
+
+def _start(out, resume: bool):
+    cmd = [sys.executable, "-m", "terrainvis.cli", *ARGS, "--out", str(out)] + (["--resume"] if resume else [])
+    return subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def _family(p):
+    try:
+        return psutil.Process(p.pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+def _stop(p, how: str, after: float):
+    """Wait ``after`` seconds, send the signal, and return (exit code, the processes that were running)."""
+    time.sleep(after)
+    children = _family(p)
+    if how == "ctrl-c":
+        os.killpg(p.pid, signal.SIGINT)
+    elif how == "sigint":
+        p.send_signal(signal.SIGINT)
+    elif how == "sigterm":
+        p.send_signal(signal.SIGTERM)
+    else:
+        p.kill()
+    try:
+        p.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        pytest.fail(f"terrainvis compare did not stop within 20 s of {how}")
+    return p.returncode, children
+
+
+def _table(path):
+    df = pd.read_csv(path, dtype={"error": str}).fillna({"error": ""})
+    return df[STABLE].sort_values(["terrain", "method", "level", "set", "relocation"]).reset_index(drop=True)
+
+
+@pytest.mark.slow
+def test_interrupted_runs_resume_to_the_uninterrupted_result(tmp_path):
+    t0 = time.perf_counter()
+    ref = _start(tmp_path / "ref", resume=False)
+    assert ref.wait(timeout=300) == 0, ref.stderr.read()
+    whole = time.perf_counter() - t0
+    expected = _table(tmp_path / "ref" / "results.csv")
+
+    out = tmp_path / "run"
+    rng = np.random.default_rng(20261123)
+    codes = {"ctrl-c": 130, "sigint": 130, "sigterm": 143, "sigkill": -signal.SIGKILL}
+    interrupted = []
+    for how in ("ctrl-c", "sigterm", "sigkill", "sigint"):
+        p = _start(out, resume=True)
+        # between a third and four fifths of an uninterrupted run: start-up included, so
+        # some units finish before the signal and some do not
+        code, children = _stop(p, how, after=float(rng.uniform(0.35, 0.8)) * whole)
+        err = p.stderr.read()
+        if code == 0:  # the run finished before the signal: nothing left to interrupt
+            break
+        interrupted.append(how)
+        assert code == codes[how], (how, code, err)
+        if how != "sigkill":
+            assert "interrupted" in err and "Traceback" not in err, err
+        _, alive = psutil.wait_procs(children, timeout=10)
+        assert not alive, f"worker processes survived {how}: {alive}"
+    assert len(interrupted) >= 2, f"only {interrupted} stopped a run before it finished; the test proved little"
+    final = _start(out, resume=True)
+    assert final.wait(timeout=300) == 0, final.stderr.read()
+    pd.testing.assert_frame_equal(_table(out / "results.csv"), expected, check_dtype=False)

@@ -1,0 +1,64 @@
+"""The figures, and matplotlib kept inside terrainvis.plot."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import pytest
+from matplotlib.figure import Figure
+
+from terrainvis import compare, plot, synthetic_terrain
+
+
+@pytest.fixture(scope="module")
+def df():
+    g = {"r": synthetic_terrain("ridges", size=33, seed=2)}
+    return compare(g, methods=["simple", "lls", "greedy-insertion"], levels=[1, 2], n_points=10, n_sets=2, workers=1,
+                   repeats=1)
+
+
+def test_figures(df):
+    from simplifiers import METHODS, simplify
+
+    g = synthetic_terrain("ridges", size=33, seed=2)
+    views = {"lls": simplify(g, "lls", 1), "gi": simplify(g, "greedy-insertion", 1)}
+    figs = [
+        plot.hillshade(g), plot.hillshade(views["gi"]), plot.terrain_views(g, views),
+        plot.accuracy_vs_size(df), plot.tradeoff(df, relocation="half"),
+    ]
+    from terrainvis import sample_points, visibility_matrix
+
+    P = sample_points(g, 10, seed=0)
+    V = visibility_matrix(g, P)
+    W = V.copy()
+    W[0, 1] = W[1, 0] = not V[0, 1]
+    figs.append(plot.los_pairs(g, P, V, W))
+    assert all(isinstance(f, Figure) for f in figs)
+    legend = [t.get_text() for t in figs[-1].axes[0].get_legend().get_texts()]
+    changed = "false blocked (1)" if V[0, 1] else "false visible (1)"
+    assert changed in legend
+    # every method is drawn in its registry colour
+    lines = {ln.get_label(): ln.get_color() for ln in figs[3].axes[0].get_lines()}
+    assert lines["lls"] == METHODS["lls"].style[0] and lines["greedy-insertion"] == METHODS["greedy-insertion"].style[0]
+    with pytest.raises(ValueError, match="no rows"):
+        plot.tradeoff(df[df.relocation == "full"], relocation="half")
+
+
+def test_only_plot_imports_matplotlib():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "import terrainvis as tv, simplifiers\n"
+        "from terrainvis import experiment, report, cli, relocation, metrics, io, visibility, deviation, runner\n"
+        "g = tv.sample_dem('jacksboro').crop(rows=(0, 40), cols=(0, 40))\n"
+        "for m in simplifiers.available(): simplifiers.simplify(g, m, 1)\n"
+        "P = tv.sample_points(g, 5)\n"
+        "tv.visibility_matrix(g, P); tv.visibility_matrix(g.to_tin(), P)\n"
+        "print('matplotlib' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -1,0 +1,126 @@
+"""paper_tables, findings (as the paper states them), and the paper side by side."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from terrainvis import compare, report, synthetic_terrain
+
+
+@pytest.fixture(scope="module")
+def df():
+    grids = {"m": synthetic_terrain("mountains", size=33, seed=1), "r": synthetic_terrain("ridges", size=33, seed=2)}
+    return compare(grids, methods=["simple", "lls", "greedy-insertion"], levels=[1, 2, 3], n_points=15, n_sets=2,
+                   workers=1, repeats=1)
+
+
+def test_paper_tables_values(df):
+    t = report.paper_tables(df)
+    assert list(t) == ["Table 1", "Table 2", "Table 3", "Table 4", "Cost"]
+    t1 = t["Table 1"]
+    # the paper's row order: irregular methods first
+    assert list(t1.index) == [(m, r) for m in ("greedy-insertion", "simple", "lls") for r in ("identity", "full", "half")]
+    sel = df[(df.level == 1) & (df.method == "lls") & (df.relocation == "half")]["accuracy"]
+    assert t1.loc[("lls", "half"), "mu"] == pytest.approx(100 * sel.mean())
+    assert t1.loc[("lls", "half"), "sigma"] == pytest.approx(100 * sel.std(ddof=1))
+    assert t1["n"].eq(4).all()  # 2 terrains x 2 sets
+    t4 = t["Table 4"]
+    sel = df[(df.level == 3) & (df.method == "simple") & (df.relocation == "identity")]["visible_kept"]
+    assert t4.loc["simple", ("identity", "visible_kept")] == pytest.approx(100 * sel.mean())
+    cost = t["Cost"]
+    assert cost.loc[("lls", 1), "memory_ratio"] == pytest.approx(
+        df[(df.method == "lls") & (df.level == 1)]["nbytes"].iloc[0] / df["nbytes_original"].iloc[0])
+    assert cost.loc[("lls", 2), "size"] == pytest.approx(100 * 81 / 33**2)
+    md = report.to_markdown(t)
+    assert "### Table 1: accuracy (%) at level 1 (25%)" in md and "| lls | half |" in md
+
+
+def test_errors_are_left_out_of_tables(df):
+    bad = df.copy()
+    bad.loc[bad.index[:3], "error"] = "RuntimeError: boom"
+    bad.loc[bad.index[:3], "accuracy"] = np.nan
+    assert np.isfinite(report.paper_tables(bad)["Table 1"]["mu"]).all()
+    with pytest.raises(ValueError, match="missing"):
+        report.paper_tables(df.drop(columns=["accuracy"]))
+
+
+def test_several_predicates_need_a_choice(df):
+    both = pd.concat([df, df.assign(predicate="paper")])
+    with pytest.raises(ValueError, match=r"several predicates \['exact', 'paper'\]; pass predicate="):
+        report.paper_tables(both)
+    assert report.paper_tables(both, predicate="paper")["Table 1"]["n"].eq(4).all()
+    assert {f["predicate"] for f in report.findings(both)} == {"exact", "paper"}
+
+
+def test_findings_report_each_claim(df):
+    found = report.findings(df)
+    assert [f["claim"] for f in found] == list(report.CLAIMS)
+    by = {f["claim"]: f for f in found}
+    assert all(f["verdict"] in report.VERDICTS for f in found)
+    rel = 100 * df.groupby("relocation")["accuracy"].mean()
+    sd = 100 * df.groupby("relocation")["accuracy"].std(ddof=1)
+    identity = by["identity is the best relocation overall, with the lowest σ"]
+    expected = "held" if rel.idxmax() == "identity" and sd.idxmin() == "identity" else "did not hold"
+    assert identity["verdict"] == expected and f"identity {rel['identity']:.2f}" in identity["evidence"]
+    assert by["QEC is best at every level"]["verdict"] == "no data"  # QEC was not run
+    half = by["half projection is the worst relocation at 1.5%"]
+    r3 = df[df.level == 3].groupby("relocation")["accuracy"].mean()
+    assert half["verdict"] == ("held" if r3.idxmin() == "half" else "did not hold")
+    md = report.findings_markdown(found)
+    assert any("predicate: exact" in line for line in md)
+
+
+def _synthetic(acc: dict) -> pd.DataFrame:
+    """Rows with chosen accuracies: {(method, level, relocation): [values]}."""
+    rows = []
+    for (m, lv, r), values in acc.items():
+        for s, a in enumerate(values):
+            rows.append({"terrain": "t", "set": s, "method": m, "level": lv, "relocation": r, "accuracy": a,
+                         "predicate": "exact", "error": ""})
+    return pd.DataFrame(rows)
+
+
+def test_findings_ties_and_no_data_are_not_did_not_hold():
+    tie = _synthetic({("qec", 1, "full"): [0.9, 0.92], ("lls", 1, "full"): [0.9, 0.92],
+                      ("qec", 1, "half"): [0.8, 0.8], ("lls", 1, "half"): [0.8, 0.8]})
+    by = {f["claim"]: f["verdict"] for f in report.findings(tie)}
+    assert by["QEC is best at every level"] == "tie"
+    assert by["half projection is the worst relocation at 1.5%"] == "no data"  # no level 3
+    assert by["identity is the best relocation overall, with the lowest σ"] == "no data"  # no identity rows
+    allnan = tie.assign(accuracy=np.nan)
+    assert {f["verdict"] for f in report.findings(allnan)} == {"no data"}
+    worse = _synthetic({("qec", 1, "full"): [0.8], ("lls", 1, "full"): [0.9], ("qec", 2, "full"): [0.95],
+                        ("lls", 2, "full"): [0.9]})
+    assert {f["claim"]: f["verdict"] for f in report.findings(worse)}["QEC is best at every level"] == "did not hold"
+
+
+def test_paper_reference_is_the_published_csv():
+    ref = report.paper_reference()
+    assert len(ref) == 63 + 28
+    row = ref[(ref.table == 1) & (ref.method == "qec") & (ref.relocation == "identity")].iloc[0]
+    assert (row.mu, row.sigma) == (98.2, 1.2)
+    assert list(dict.fromkeys(ref["method"])) == ["qec", "greedy-cuts", "greedy-insertion", "simple", "gls", "lls",
+                                                    "feature"]
+
+
+def test_paper_comparison_uses_the_papers_convention(df):
+    cmp = report.paper_comparison(df)
+    cell = cmp.loc[(1, 1, "lls", "half", "accuracy")]
+    sel = df[(df.level == 1) & (df.method == "lls") & (df.relocation == "half")]
+    # the paper's |P x P|: 2 * agreeing distinct pairs + the n self-pairs, over n²
+    n = 15
+    paper_way = (2 * (sel["agree_visible"] + sel["agree_blocked"]) + n) / n**2
+    assert cell["ours"] == pytest.approx(100 * paper_way.mean())
+    assert cell["paper"] == 96.1 and cell["difference"] == pytest.approx(cell["ours"] - 96.1)
+    vis = cmp.loc[(4, 3, "simple", "identity", "visible_kept")]
+    s3 = df[(df.level == 3) & (df.method == "simple") & (df.relocation == "identity")]
+    expected = (2 * s3["agree_visible"] + n) / (2 * (s3["agree_visible"] + s3["false_blocked"]) + n)
+    assert vis["ours"] == pytest.approx(100 * expected.mean())
+    rms, count = cmp.attrs["rms"]["accuracy"]
+    diffs = cmp.loc[[1, 2, 3], "difference"].dropna()
+    assert count == len(diffs) == 3 * 3 * 3 and rms == pytest.approx(np.sqrt((diffs**2).mean()))
+    assert cmp.loc[(1, 1, "qec", "full", "accuracy"), "n"] == 0  # not run: no figure of ours
+    text = report.comparison_markdown(cmp)
+    assert "| 1 | 1 | lls | half | accuracy |" in text and "RMS difference over the 27 accuracy cells" in text
