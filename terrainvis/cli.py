@@ -64,13 +64,17 @@ def _parser() -> argparse.ArgumentParser:
                    help=f"simplification levels (default: {' '.join(map(str, DEFAULTS.levels))})")
     c.add_argument("--methods", nargs="+", default=None, metavar="M", help=f"methods (default: all of {', '.join(METHODS)})")
     c.add_argument("--relocations", nargs="+", default=None, metavar="R",
-                   help=f"relocations (default: {' '.join(RELOCATIONS)})")
+                   help=f"relocations (default: {' '.join(RELOCATIONS)}; add 'oracle' for the upper bound)")
     c.add_argument("--points", type=int, default=None, help=f"points per set (default {DEFAULTS.n_points})")
     c.add_argument("--sets", type=int, default=None, help=f"point sets per terrain (default {DEFAULTS.n_sets})")
     c.add_argument("--seed", type=int, default=DEFAULTS.seed, help=f"seed of the point sets (default {DEFAULTS.seed})")
     c.add_argument("--offset", type=float, default=DEFAULTS.offset,
                    help=f"observer height above the surface (default {DEFAULTS.offset:g})")
-    c.add_argument("--max-distance", type=float, default=None, help="count only pairs within this horizontal distance")
+    c.add_argument("--max-distance", nargs="+", type=_distance, default=None, metavar="D",
+                   help="count only pairs within this horizontal distance; several give a sweep from the same "
+                        "verdicts ('all' for every pair)")
+    c.add_argument("--distance-unit", choices=["world", "cells"], default=DEFAULTS.distance_unit,
+                   help="unit of --max-distance: world units or cells of the terrain (default world)")
     c.add_argument("--predicate", choices=PREDICATES, default=DEFAULTS.predicate,
                    help="line-of-sight predicate on S(T): exact, or paper (ignore one cell of S(T) around each end)")
     c.add_argument("--engine", choices=["auto", "grid", "embree"], default=DEFAULTS.engine, help="visibility engine")
@@ -138,6 +142,15 @@ def _terrain(name: str, args=None):
     return label, grid
 
 
+def _distance(text: str):
+    if text.lower() in ("all", "inf", "none"):
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a distance or 'all', got {text!r}") from None
+
+
 def _option_value(text: str):
     for conv in (int, float):
         try:
@@ -190,12 +203,19 @@ def _compare(args) -> int:
     t0 = time.perf_counter()
     df = compare(
         grids, methods=args.methods, levels=levels, relocations=args.relocations, n_points=points, n_sets=sets,
-        seed=args.seed, max_distance=args.max_distance, offset=args.offset, engine=args.engine,
+        seed=args.seed, max_distance=DEFAULTS.max_distance if args.max_distance is None else args.max_distance,
+        distance_unit=args.distance_unit, offset=args.offset, engine=args.engine,
         predicate=args.predicate, volume=not args.no_volume, repeats=args.repeats, workers=args.workers,
         client=client, out_csv=out / "results.csv", resume=args.resume, save_dir=out / "simplified", progress=True,
     )
     seconds = time.perf_counter() - t0
-    text = report.to_markdown(report.paper_tables(df)) + "\n" + report.comparison_markdown(report.paper_comparison(df))
+    extra = {}
+    if (df["relocation"] == "oracle").any():
+        extra["oracle"] = report.oracle_gap(df)
+    if df["max_distance"].nunique(dropna=False) > 1:
+        extra["localized"] = report.localized(df)
+    text = (report.to_markdown({**report.paper_tables(df), **extra}) + "\n"
+            + report.comparison_markdown(report.paper_comparison(df)))
     lines = report.findings_markdown(report.findings(df))
     failed = df[df["error"] != ""].drop_duplicates(["terrain", "method", "level"])
     if len(failed):
@@ -240,6 +260,8 @@ def _write_plots(df, grids, out: Path) -> None:
     save(plot.accuracy_vs_size(ok), "accuracy_vs_size.png", 110)
     for rel in sorted(set(ok["relocation"])):
         save(plot.tradeoff(ok, relocation=rel), f"tradeoff_{rel}.png", 110)
+    if ok["max_distance"].nunique(dropna=True) >= 1:
+        save(plot.accuracy_vs_distance(ok), "accuracy_vs_distance.png", 110)
     level = int(ok["level"].min())
     for name, grid in grids.items():
         views = {}

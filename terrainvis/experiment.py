@@ -34,12 +34,12 @@ import numpy as np
 import pandas as pd
 
 from ._validate import as_float_array, as_int, choice, describe
-from .relocation import RELOCATIONS
+from .relocation import ORACLE, RELOCATIONS
 from .terrain import HeightGrid
 
 __all__ = [
     "compare", "Settings", "DEFAULTS", "resolve_terrains", "point_sets", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW",
-    "COLUMNS", "PREDICATES", "simplified_path", "end_radius_for",
+    "COLUMNS", "PREDICATES", "DISTANCE_UNITS", "simplified_path", "end_radius_for",
 ]
 
 #: The default terrains: the five bundled 120x120 terrains and a 120x120 window of the real Jacksboro DEM.
@@ -49,6 +49,10 @@ DEFAULT_TERRAINS = ("hills", "mesas", "rough", "mountains", "ridges", "jacksboro
 #: central 120x120 window at the native 74.57 m x 92.47 m cells (8.9 km x 11.0 km). A
 #: window keeps the real sampling; resampling the whole DEM to 120x120 would smooth it.
 JACKSBORO_WINDOW = ((112, 232), (141, 261))
+
+#: Units of ``max_distance``: world units (metres), or cells of the original terrain
+#: (its larger cell side), so one sweep means the same on terrains of different resolution.
+DISTANCE_UNITS = ("world", "cells")
 
 #: Line-of-sight predicates for the verdicts on S(T) (verdicts on T are always exact):
 #: ``"exact"`` tests the whole segment; ``"paper"`` ignores the surface within one cell
@@ -63,7 +67,7 @@ COLUMNS = (
     "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
     "max_error", "rms_error", "volume_error", "end_radius",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
-    "seed", "max_distance", "offset", "error",
+    "seed", "max_distance", "distance_unit", "offset", "error",
 )
 #: Columns that identify a unit.
 UNIT_KEY = ("terrain", "method", "level")
@@ -76,7 +80,8 @@ class Settings:
     """Everything that determines the rows of a :func:`compare` run, with the defaults.
 
     The defaults are the paper's protocol; the CLI takes its defaults from here too
-    (:data:`DEFAULTS`). ``methods=None`` means every registered method.
+    (:data:`DEFAULTS`). ``methods=None`` means every registered method. After
+    validation ``max_distance`` is a tuple of distances (None: unlimited).
     """
 
     methods: tuple | None = None
@@ -85,7 +90,8 @@ class Settings:
     n_points: int = 50
     n_sets: int = 6
     seed: int = 0
-    max_distance: float | None = None
+    max_distance: float | None | tuple = None
+    distance_unit: str = "world"
     offset: float = 0.0
     engine: str = "auto"
     predicate: str = "exact"
@@ -193,11 +199,13 @@ def end_radius_for(simplified, original: HeightGrid, level: int, predicate: str)
     return float(max((xmax - xmin) / max(cols - 1, 1), (ymax - ymin) / max(rows - 1, 1)))
 
 
-def _pair_mask(points: np.ndarray, max_distance):
+def _pair_mask(points: np.ndarray, max_distance, grid: HeightGrid, unit: str):
+    """The pairs within ``max_distance`` (in ``unit``) of each other, or None for every pair."""
     if max_distance is None:
         return None
+    limit = max_distance * (max(grid.dx, grid.dy) if unit == "cells" else 1.0)
     d = np.hypot(points[:, None, 0] - points[None, :, 0], points[:, None, 1] - points[None, :, 1])
-    return d <= max_distance
+    return d <= limit
 
 
 def _timed(fn, *args, repeats: int = 3, **kwargs):
@@ -227,7 +235,7 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
     base = {
         "terrain": terrain, "method": method, "kind": METHODS[method].kind, "level": level,
         "predicate": settings.predicate, "n_points": settings.n_points, "n_vertices_original": grid.size,
-        "nbytes_original": grid.nbytes, "seed": settings.seed, "max_distance": settings.max_distance,
+        "nbytes_original": grid.nbytes, "seed": settings.seed, "distance_unit": settings.distance_unit,
         "offset": settings.offset, "error": "",
     }
     sets = point_sets(grid, terrain, settings.n_points, settings.n_sets, settings.seed, settings.offset)
@@ -252,17 +260,32 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
         base["los_build_seconds"] = time.perf_counter() - t0
         for s, pts in enumerate(sets):
             v_true, t_true = _timed(visibility_matrix, grid, pts, engine=settings.engine, repeats=settings.repeats)
-            mask = _pair_mask(pts, settings.max_distance)
+            masks = [(d, _pair_mask(pts, d, grid, settings.distance_unit)) for d in settings.max_distance]
             for how in settings.relocations:
+                if how == ORACLE:  # an upper bound, optimised for the pairs each distance counts
+                    for d, mask in masks:
+                        moved = relocate(pts, simplified, how, offset=settings.offset, reference=v_true,
+                                         original=grid, mask=mask, end_radius=radius, engine=settings.engine)
+                        v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
+                        rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
+                    continue
                 moved = relocate(pts, simplified, how, offset=settings.offset)
                 v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
-                row = dict(base, set=s, relocation=how, los_seconds=t_test, los_seconds_original=t_true)
-                row.update(agreement(v_true, v_test, mask))
-                rows.append(row)
+                for d, mask in masks:
+                    rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
     except Exception as exc:  # record the failure in this unit's rows; the run goes on
         message = f"{type(exc).__name__}: {exc}".replace("\n", " ")
-        rows = [dict(base, set=s, relocation=how, error=message) for s in range(settings.n_sets) for how in settings.relocations]
+        rows = [
+            dict(base, set=s, relocation=how, max_distance=d, error=message)
+            for s in range(settings.n_sets) for how in settings.relocations for d in settings.max_distance
+        ]
     return rows
+
+
+def _row(base, s, how, d, t_test, t_true, counts) -> dict:
+    row = dict(base, set=s, relocation=how, max_distance=d, los_seconds=t_test, los_seconds_original=t_true)
+    row.update(counts)
+    return row
 
 
 def _save(terrain, path: Path) -> None:
@@ -318,8 +341,30 @@ def _levels(value, grids: dict) -> tuple:
     return tuple(levels)
 
 
-def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, offset, engine,
-              predicate, volume, repeats) -> Settings:
+def _distances(value) -> tuple:
+    """``max_distance`` as a tuple of distinct distances > 0 (None: unlimited)."""
+    values = list(value) if isinstance(value, (list, tuple)) else [value]
+    out = []
+    for v in values:
+        if v is not None:
+            d = as_float_array(v, "max_distance")
+            if d.ndim != 0:
+                raise TypeError(f"max_distance must hold numbers or None, got {describe(v)}")
+            v = float(d)
+            if v == np.inf:
+                v = None
+            elif not np.isfinite(v) or v <= 0:
+                raise ValueError(f"max_distance must be > 0 (or None / inf for every pair), got {v!r}")
+        if v in out:
+            raise ValueError(f"max_distance must not repeat a distance, got {v!r} twice")
+        out.append(v)
+    if not out:
+        raise ValueError("max_distance must hold at least one distance (None: every pair), got an empty list")
+    return tuple(out)
+
+
+def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, distance_unit, offset,
+              engine, predicate, volume, repeats) -> Settings:
     from simplifiers import METHODS
 
     from .visibility import ENGINES
@@ -333,10 +378,7 @@ def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_d
                 f"engine 'grid' works on grids only, but methods {tins} produce TINs; use engine='auto' "
                 "(the grid engine on grids, Embree on TINs) or leave those methods out"
             )
-    if max_distance is not None:
-        max_distance = float(as_float_array(max_distance, "max_distance"))
-        if not np.isfinite(max_distance) or max_distance <= 0:
-            raise ValueError(f"max_distance must be finite and > 0, got {max_distance!r}")
+    max_distance = _distances(max_distance)
     off = as_float_array(offset, "offset")
     if off.ndim != 0 or not np.isfinite(off):
         raise ValueError(f"offset must be a finite number, got {describe(offset)}")
@@ -344,9 +386,10 @@ def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_d
         raise TypeError(f"volume must be True or False, got {describe(volume)}")
     return Settings(
         methods=methods, levels=_levels(levels, grids),
-        relocations=_names(relocations, "relocations", RELOCATIONS, RELOCATIONS),
+        relocations=_names(relocations, "relocations", RELOCATIONS + (ORACLE,), RELOCATIONS),
         n_points=as_int(n_points, "n_points", minimum=2), n_sets=as_int(n_sets, "n_sets", minimum=1),
-        seed=as_int(seed, "seed", minimum=0), max_distance=max_distance, offset=float(off), engine=engine,
+        seed=as_int(seed, "seed", minimum=0), max_distance=max_distance,
+        distance_unit=choice(distance_unit, "distance_unit", DISTANCE_UNITS), offset=float(off), engine=engine,
         predicate=choice(predicate, "predicate", PREDICATES), volume=bool(volume),
         repeats=as_int(repeats, "repeats", minimum=1),
     )
@@ -373,11 +416,12 @@ def _order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
 
     rank_t = {t: i for i, t in enumerate(grids)}
     rank_m = {m: i for i, m in enumerate(METHODS)}
-    rank_r = {r: i for i, r in enumerate(RELOCATIONS)}
+    rank_r = {r: i for i, r in enumerate(RELOCATIONS + (ORACLE,))}
     df = df.assign(
-        _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r)
-    ).sort_values(["_t", "set", "_m", "level", "_r"], kind="stable")
-    return df.drop(columns=["_t", "_m", "_r"]).reset_index(drop=True)
+        _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r),
+        _d=df["max_distance"].fillna(np.inf),
+    ).sort_values(["_t", "set", "_m", "level", "_r", "_d"], kind="stable")
+    return df.drop(columns=["_t", "_m", "_r", "_d"]).reset_index(drop=True)
 
 
 def _kernels_cached(settings: Settings) -> bool | None:
@@ -403,7 +447,8 @@ def compare(
     n_points: int = DEFAULTS.n_points,
     n_sets: int = DEFAULTS.n_sets,
     seed: int = DEFAULTS.seed,
-    max_distance: float | None = DEFAULTS.max_distance,
+    max_distance=DEFAULTS.max_distance,
+    distance_unit: str = DEFAULTS.distance_unit,
     offset: float = DEFAULTS.offset,
     engine: str = DEFAULTS.engine,
     predicate: str = DEFAULTS.predicate,
@@ -428,15 +473,20 @@ def compare(
     levels : int or sequence of int
         Simplification levels; for 120x120 grids 1, 2, 3 are the paper's 25 %, 6 % and 1.5 %.
     relocations : sequence of str
-        Any of ``"identity"``, ``"full"``, ``"half"`` (:func:`terrainvis.relocate`).
+        Any of ``"identity"``, ``"full"``, ``"half"`` (:func:`terrainvis.relocate`), and
+        ``"oracle"``, the upper bound that needs T's verdicts (not a practical relocation;
+        it costs many visibility queries per point set).
     n_points, n_sets : int
         Each terrain gets ``n_sets`` sets of ``n_points`` uniform random points; every
         method sees the same sets.
     seed : int
         The point sets depend only on ``seed`` and the terrain's name.
-    max_distance : float, optional
+    max_distance : float or None or list of them, optional
         Count only the pairs whose horizontal distance is at most this (localized
-        visibility tests).
+        visibility tests; None or inf: every pair). A list gives one row per distance
+        from the same verdicts (a sweep costs little more than one distance).
+    distance_unit : {"world", "cells"}
+        ``max_distance`` in world units, or in cells of the terrain (its larger cell side).
     offset : float
         Observer height above the original surface (see :mod:`terrainvis.relocation`).
     engine : {"auto", "grid", "embree"}
@@ -470,7 +520,7 @@ def compare(
     Returns
     -------
     pandas.DataFrame
-        One row per terrain x point set x method x level x relocation, with the columns
+        One row per terrain x point set x method x level x relocation (x distance), with the columns
         :data:`COLUMNS`, sorted (terrains as given, methods in the paper's order,
         relocations identity, full, half). A unit whose simplification failed keeps its
         rows, with the message in ``error`` and NaN measurements.
@@ -492,8 +542,8 @@ def compare(
     if terrains is None:
         raise TypeError("terrains must be a terrain, a list of terrains or a dict of them, got None")
     grids = resolve_terrains(terrains)
-    settings = _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, offset,
-                         engine, predicate, volume, repeats)
+    settings = _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, distance_unit,
+                         offset, engine, predicate, volume, repeats)
     workers = check_workers(workers)
     client = check_client(client)
     units = _units(grids, settings)
@@ -502,7 +552,7 @@ def compare(
     if out_csv is not None:
         record = asdict(settings)
         record["terrains"] = {name: _fingerprint(g) for name, g in grids.items()}
-        per_unit = settings.n_sets * len(settings.relocations)
+        per_unit = settings.n_sets * len(settings.relocations) * len(settings.max_distance)
         store = ResultStore(out_csv, record, COLUMNS, UNIT_KEY, lambda key: per_unit, resume=resume)
         units = [u for u in units if u not in store.done]
     if save_dir is not None:

@@ -16,7 +16,7 @@ from matplotlib.ticker import NullFormatter
 from ._validate import as_points, describe
 from .terrain import TIN, HeightGrid, as_terrain
 
-__all__ = ["hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff"]
+__all__ = ["hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance"]
 
 
 def _style(method: str) -> tuple[str, str]:
@@ -158,7 +158,8 @@ def los_pairs(terrain, points, V_true, V_test, *, only_changed: bool = False, ti
     return fig
 
 
-def _check_df(df, needed):
+def _check_df(df, needed, *, sweep: bool = False):
+    """The error-free rows of a compare result; of a distance sweep, the all-pairs rows unless ``sweep``."""
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"df must be a pandas DataFrame from terrainvis.compare, got {describe(df)}")
     missing = set(needed) - set(df.columns)
@@ -166,6 +167,8 @@ def _check_df(df, needed):
         raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
     if "error" in df.columns:
         df = df[df["error"].fillna("").astype(str) == ""]
+    if not sweep and "max_distance" in df.columns and df["max_distance"].nunique(dropna=False) > 1:
+        df = df[df["max_distance"].isna()]
     return df
 
 
@@ -245,4 +248,46 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=(10, 4)) -> 
     ax2.legend(fontsize=8)
     for ax in (ax1, ax2):
         ax.grid(True, which="both", alpha=0.3)
+    return fig
+
+
+_RELOCATION_STYLE = {"identity": ("tab:red", "o"), "full": ("tab:blue", "s"), "half": ("tab:green", "^"),
+                     "oracle": ("k", "*")}
+
+
+def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
+    """Accuracy of localized tests against the pair distance, per relocation (a distance sweep).
+
+    One panel per level; each relocation is a line through the distances of the run
+    (mean over terrains, methods and point sets); the pairs at every distance ("all")
+    are drawn at the right end.
+    """
+    from .relocation import ORACLE, RELOCATIONS
+
+    data = _check_df(df, {"relocation", "accuracy", "level", "max_distance"}, sweep=True)
+    if data["max_distance"].nunique(dropna=True) < 1:
+        raise ValueError("df holds no distance sweep (max_distance is unlimited in every row)")
+    levels = sorted(data["level"].unique())
+    finite = sorted(data["max_distance"].dropna().unique())
+    x_all = finite[-1] * 2.0
+    unit = data["distance_unit"].iloc[0] if "distance_unit" in data.columns else "world"
+    fig = Figure(figsize=figsize or (4.2 * len(levels), 3.8), layout="constrained")
+    axes = fig.subplots(1, len(levels), squeeze=False, sharey=True).ravel()
+    for ax, level in zip(axes, levels):
+        sub = data[data["level"] == level]
+        for rel in [r for r in RELOCATIONS + (ORACLE,) if r in set(sub["relocation"])]:
+            g = sub[sub["relocation"] == rel].assign(_d=lambda t: t["max_distance"].fillna(x_all))
+            mu = 100 * g.groupby("_d")["accuracy"].mean()
+            color, marker = _RELOCATION_STYLE.get(rel, ("k", "o"))
+            ax.plot(mu.index, mu.to_numpy(), marker=marker, color=color, label=rel,
+                    linestyle="--" if rel == ORACLE else "-")
+        ax.set_xscale("log")
+        ticks = finite + [x_all]
+        ax.set_xticks(ticks, [f"{v:g}" for v in finite] + ["all"])
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_title(f"level {level}", fontsize=10)
+        ax.set_xlabel(f"pairs within this distance ({'cells' if unit == 'cells' else 'm'})")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("accuracy (% of pairs agreeing)")
+    axes[-1].legend(fontsize=8, loc="lower left")
     return fig

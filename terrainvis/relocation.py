@@ -10,6 +10,12 @@ S(T). Alderson and Samavati compare three ways of placing them on S(T):
     Every point is moved vertically onto S(T).
 ``"half"``
     Only points below S(T) are moved up onto it; points above it stay where they are.
+``"oracle"`` (not a practical relocation: an upper bound)
+    Each point takes, from a set of candidate heights spanning the local vertical error
+    of S(T) (plus the three heights above), the height whose row of verdicts on S(T)
+    agrees most with the verdicts on T, by coordinate descent until nothing improves.
+    It needs T's verdicts (``reference=``), which a practical relocation does not have,
+    so it bounds how much any relocation of the points alone could recover.
 
 Observer offsets
 ----------------
@@ -28,17 +34,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_float_array, as_points, choice, describe
+from ._validate import as_float_array, as_int, as_nonnegative_finite, as_points, choice, describe
 from .errors import OutsideFootprintError
-from .terrain import as_terrain
+from .terrain import HeightGrid, as_terrain
 
-__all__ = ["relocate", "RELOCATIONS"]
+__all__ = ["relocate", "RELOCATIONS", "ORACLE"]
 
 #: The relocation strategies, in the paper's order.
 RELOCATIONS = ("identity", "full", "half")
+#: The oracle bound (see the module docstring); accepted by :func:`relocate` and compare.
+ORACLE = "oracle"
 
 
-def relocate(points, simplified, how: str, *, offset: float = 0.0) -> np.ndarray:
+def relocate(points, simplified, how: str, *, offset: float = 0.0, reference=None, original=None,
+             mask=None, end_radius: float = 0.0, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
     """Place points on a simplified terrain.
 
     Parameters
@@ -47,10 +56,26 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0) -> np.ndarray
         Points on (or ``offset`` above) the original terrain. Never modified.
     simplified : HeightGrid or TIN
         The simplified terrain.
-    how : {"identity", "full", "half"}
+    how : {"identity", "full", "half", "oracle"}
         See the module docstring.
     offset : float
         The observer height that ``points`` carry above their ground point.
+    reference : (n, n) bool, optional
+        ``"oracle"`` only (required): the verdicts on the original terrain T.
+    original : HeightGrid, optional
+        ``"oracle"`` only: T itself, so the candidate heights of a point span the
+        vertical error of S(T) around it (T's samples within one coarse cell); without
+        it they span ``[-max_error, max_error]`` of ``simplified.attrs``.
+    mask : (n, n) bool, optional
+        ``"oracle"`` only: the pairs that count (e.g. within a distance).
+    end_radius : float
+        ``"oracle"`` only: the end radius of the verdicts on S(T)
+        (:func:`terrainvis.line_of_sight`).
+    engine : str
+        ``"oracle"`` only: the visibility engine on S(T).
+    n_candidates : int
+        ``"oracle"`` only: candidate heights per point spanning the local error (the
+        original, full and half heights are always candidates too).
 
     Returns
     -------
@@ -69,11 +94,13 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0) -> np.ndarray
     """
     pts = as_points(points, "points", 3)
     as_terrain(simplified, "simplified")
-    how = choice(how, "how", RELOCATIONS)
+    how = choice(how, "how", RELOCATIONS + (ORACLE,))
     off = as_float_array(offset, "offset")
     if off.ndim != 0 or not np.isfinite(off):
         raise ValueError(f"offset must be a finite scalar, got {describe(offset)}")
     off = float(off)
+    if how == ORACLE:
+        return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates)
     out = pts.copy()
     if how == "identity" or pts.shape[0] == 0:
         return out
@@ -90,4 +117,100 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0) -> np.ndarray
     else:
         below = pts[:, 2] - off < ground
         out[below, 2] = ground[below] + off
+    return out
+
+
+def _ground(simplified, pts):
+    ground = simplified.height_at(pts[:, :2])
+    outside = np.isnan(ground)
+    if outside.any():
+        first = int(np.flatnonzero(outside)[0])
+        raise OutsideFootprintError(
+            f"points must lie inside the simplified terrain's footprint, but {int(outside.sum())} of "
+            f"{pts.shape[0]} do not (first at index {first})"
+        )
+    return ground
+
+
+def _candidates(pts, simplified, ground, off, original, k):
+    """(n, m) candidate heights per point: the local error span of S(T), and identity / full / half."""
+    n = pts.shape[0]
+    probs = np.linspace(0.0, 1.0, k)
+    if original is not None:
+        # T's samples within one coarse cell of the point: the error of S(T) around it
+        n_s = simplified.size if isinstance(simplified, HeightGrid) else simplified.n_vertices
+        radius = max(original.dx, original.dy) * max(1.0, np.sqrt(original.size / max(n_s, 1)))
+        errors = original.z - simplified.height_on_grid(original.xs, original.ys)
+        span = np.empty((n, k))
+        for i in range(n):
+            x, y = pts[i, 0], pts[i, 1]
+            cs = slice(np.searchsorted(original.xs, x - radius), np.searchsorted(original.xs, x + radius, "right"))
+            rs = slice(np.searchsorted(original.ys, y - radius), np.searchsorted(original.ys, y + radius, "right"))
+            local = errors[rs, cs]
+            local = local[np.isfinite(local)]
+            span[i] = np.quantile(local, probs) if local.size else 0.0
+    else:
+        if "max_error" not in simplified.attrs:
+            raise ValueError(
+                "relocate(..., 'oracle') needs original= (the original terrain) or a simplified terrain whose "
+                "attrs hold max_error (as simplifiers.simplify records)"
+            )
+        e = float(simplified.attrs["max_error"])
+        span = np.broadcast_to(np.linspace(-e, e, k), (n, k))
+    base = (ground + off)[:, None]
+    practical = np.column_stack([pts[:, 2], ground + off, np.maximum(pts[:, 2], ground + off)])
+    return np.concatenate([practical, base + span], axis=1)
+
+
+def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates):
+    from .visibility import line_of_sight, visibility_matrix
+
+    n = pts.shape[0]
+    if reference is None:
+        raise TypeError("relocate(..., 'oracle') needs reference=, the (n, n) verdicts on the original terrain")
+    ref = np.asarray(reference)
+    if ref.shape != (n, n) or ref.dtype != bool:
+        raise ValueError(f"reference must be an ({n}, {n}) boolean matrix, got {describe(ref)}")
+    if original is not None and not isinstance(original, HeightGrid):
+        raise TypeError(f"original must be a terrainvis.HeightGrid, got {describe(original)}")
+    counted = np.ones((n, n), dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    if counted.shape != (n, n):
+        raise ValueError(f"mask must have shape ({n}, {n}), got {counted.shape}")
+    counted = counted | counted.T
+    np.fill_diagonal(counted, False)
+    k = as_int(n_candidates, "n_candidates", minimum=2)
+    radius = as_nonnegative_finite(end_radius, "end_radius")
+    los_kw = {"engine": engine} | ({"end_radius": radius} if radius > 0 else {})
+    if n < 2:
+        return pts.copy()
+    ground = _ground(simplified, pts)
+    cand = _candidates(pts, simplified, ground, off, original, k)
+    # start from the best practical relocation (so the bound is never below it)
+    best_z, best_score = None, -1
+    for j in range(3):
+        trial = pts.copy()
+        trial[:, 2] = cand[:, j]
+        score = int((visibility_matrix(simplified, trial, **los_kw) == ref)[counted].sum())
+        if score > best_score:
+            best_z, best_score = cand[:, j].copy(), score
+    out = pts.copy()
+    out[:, 2] = best_z
+    m = cand.shape[1]
+    for _ in range(50):  # each sweep raises the agreement or stops; 50 is a safety bound
+        changed = False
+        for i in range(n):
+            others = np.flatnonzero(counted[i])
+            if others.size == 0:
+                continue
+            a = np.repeat(np.column_stack([np.repeat(pts[i:i + 1, :2], m, axis=0), cand[i]]), others.size, axis=0)
+            b = np.tile(out[others], (m, 1))
+            vis = line_of_sight(simplified, a, b, **los_kw).reshape(m, others.size)
+            score = (vis == ref[i, others]).sum(axis=1)
+            current = int(np.flatnonzero(cand[i] == out[i, 2])[0]) if (cand[i] == out[i, 2]).any() else -1
+            j = int(np.argmax(score))
+            if current < 0 or score[j] > score[current]:
+                out[i, 2] = cand[i, j]
+                changed = True
+        if not changed:
+            break
     return out

@@ -26,14 +26,18 @@ import pandas as pd
 
 __all__ = [
     "paper_tables", "to_markdown", "findings", "findings_markdown", "paper_reference", "paper_comparison",
-    "comparison_markdown",
+    "comparison_markdown", "oracle_gap", "localized",
 ]
 
 _LEVEL_FRACTION = {1: "25%", 2: "6%", 3: "1.5%"}
 
 
 def _ok(df: pd.DataFrame, predicate: str | None = None) -> pd.DataFrame:
-    """The rows without an error, of one predicate (the only one present, or ``predicate``)."""
+    """The rows without an error, of one predicate and one distance.
+
+    The predicate is the only one present, or ``predicate``. Of a distance sweep, the
+    rows counting every pair are used (or the only distance present).
+    """
     if "error" in df.columns:
         df = df[df["error"].fillna("").astype(str) == ""]
     if "predicate" in df.columns:
@@ -42,6 +46,13 @@ def _ok(df: pd.DataFrame, predicate: str | None = None) -> pd.DataFrame:
             raise ValueError(f"df holds rows of several predicates {present}; pass predicate= to choose one")
         if predicate is not None:
             df = df[df["predicate"] == predicate]
+    if "max_distance" in df.columns and df["max_distance"].nunique(dropna=False) > 1:
+        if not df["max_distance"].isna().any():
+            raise ValueError(
+                f"df holds a distance sweep without the all-pairs rows {sorted(df['max_distance'].unique())}; "
+                "select one distance first"
+            )
+        df = df[df["max_distance"].isna()]
     return df
 
 
@@ -287,10 +298,14 @@ def findings(df: pd.DataFrame) -> list[dict]:
     """
     from simplifiers import METHODS
 
+    from .relocation import RELOCATIONS
+
     if not isinstance(df, pd.DataFrame):
         raise TypeError(f"df must be a pandas DataFrame from terrainvis.compare, got {type(df).__name__}")
     rows = df[df["error"].fillna("").astype(str) == ""] if "error" in df.columns else df
-    rows = rows[rows["accuracy"].notna()]
+    if "max_distance" in rows.columns and rows["max_distance"].nunique(dropna=False) > 1:
+        rows = rows[rows["max_distance"].isna()]
+    rows = rows[rows["accuracy"].notna() & rows["relocation"].isin(RELOCATIONS)]
     predicates = sorted(set(rows["predicate"])) if "predicate" in rows.columns and len(rows) else ["exact"]
     regular = [m for m, info in METHODS.items() if info.regular]
     out = []
@@ -384,3 +399,62 @@ def comparison_markdown(cmp: pd.DataFrame) -> str:
     rms = cmp.attrs.get("rms", {})
     lines = [f"- RMS difference over the {n} {what} cells: {v:.2f} points" for what, (v, n) in rms.items() if n]
     return text + ("\n".join(lines) + "\n" if lines else "")
+
+
+# ---------------------------------------------------------------------- beyond the paper
+def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame:
+    """How much relocation could recover: the oracle bound against the best practical relocation.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Index (method, level); columns ``oracle`` (mean accuracy, %, of the
+        ``"oracle"`` relocation: an upper bound that needs T's verdicts), ``best``
+        (the best practical relocation's name), ``best_accuracy`` and ``gap`` (oracle -
+        best, points). Empty when the result has no oracle rows.
+    """
+    from simplifiers import METHODS
+
+    from .relocation import ORACLE, RELOCATIONS
+
+    data = _ok(df, predicate)
+    mu = 100 * data.groupby(["method", "level", "relocation"])["accuracy"].mean().unstack("relocation")
+    if ORACLE not in mu.columns:
+        return pd.DataFrame(columns=["oracle", "best", "best_accuracy", "gap"])
+    practical = mu[[r for r in RELOCATIONS if r in mu.columns]]
+    out = pd.DataFrame({
+        "oracle": mu[ORACLE], "best": practical.idxmax(axis=1), "best_accuracy": practical.max(axis=1),
+    })
+    out["gap"] = out["oracle"] - out["best_accuracy"]
+    idx = [(m, lv) for m in _ordered({i[0] for i in out.index}, METHODS) for lv in sorted({i[1] for i in out.index})
+           if (m, lv) in out.index]
+    out = out.loc[idx]
+    out.attrs["title"] = "Oracle bound: the best any relocation of the points could do (needs T's verdicts), against the best practical one (accuracy %)"
+    return out
+
+
+def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame:
+    """Mean accuracy (%) against the pair distance, per level and relocation (a distance sweep).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Index (level, relocation); one column per distance (in the run's
+        ``distance_unit``), ``all`` for every pair.
+    """
+    from .relocation import ORACLE, RELOCATIONS
+
+    data = df[df["error"].fillna("").astype(str) == ""] if "error" in df.columns else df
+    if predicate is not None:
+        data = data[data["predicate"] == predicate]
+    elif "predicate" in data.columns and data["predicate"].nunique() > 1:
+        raise ValueError(f"df holds rows of several predicates {sorted(set(data['predicate']))}; pass predicate=")
+    d = data["max_distance"].fillna(np.inf)
+    mu = 100 * data.assign(_d=d).groupby(["level", "relocation", "_d"])["accuracy"].mean().unstack("_d")
+    mu.columns = ["all" if c == np.inf else _fmt(float(c)) for c in mu.columns]
+    order = list(RELOCATIONS) + [ORACLE]
+    idx = [(lv, r) for lv in sorted({i[0] for i in mu.index}) for r in order if (lv, r) in mu.index]
+    mu = mu.loc[idx]
+    unit = data["distance_unit"].iloc[0] if "distance_unit" in data.columns and len(data) else "world"
+    mu.attrs["title"] = f"Localized tests: mean accuracy (%) of the pairs within each distance ({unit} units)"
+    return mu

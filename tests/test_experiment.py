@@ -295,3 +295,29 @@ def test_paper_predicate_uses_one_cell_of_the_surface_under_test(small):
     vis_paper = df["agree_visible"] + df["false_visible"]
     vis_exact = exact["agree_visible"] + exact["false_visible"]
     assert (vis_paper.to_numpy() >= vis_exact.to_numpy()).all()
+
+
+def test_a_distance_sweep_equals_separate_runs(small):
+    kw = _kw(methods=["lls"], levels=[2])
+    sweep = compare({"a": small["a"]}, workers=1, max_distance=[300.0, None], **kw)
+    assert len(sweep) == 2 * 3 * 2
+    for d in (300.0, None):
+        one = compare({"a": small["a"]}, workers=1, max_distance=d, **kw)
+        part = sweep[sweep["max_distance"].isna()] if d is None else sweep[sweep["max_distance"] == d]
+        pd.testing.assert_frame_equal(part[MEASURED + ["n_pairs"]].reset_index(drop=True),
+                                      one[MEASURED + ["n_pairs"]].reset_index(drop=True))
+    cells = compare({"a": small["a"]}, workers=1, max_distance=10, distance_unit="cells", **kw)
+    metres = compare({"a": small["a"]}, workers=1, max_distance=300.0, **kw)  # 10 cells of 30 m
+    assert (cells["n_pairs"].to_numpy() == metres["n_pairs"].to_numpy()).all()
+    assert (cells["distance_unit"] == "cells").all() and (cells["max_distance"] == 10).all()
+    with pytest.raises(ValueError, match="max_distance must not repeat a distance"):
+        compare({"a": small["a"]}, max_distance=[5.0, 5.0], **kw)
+    with pytest.raises(ValueError, match=r"distance_unit must be one of \['world', 'cells'\]"):
+        compare({"a": small["a"]}, distance_unit="km", **kw)
+
+
+def test_oracle_rows_bound_the_practical_ones(small):
+    df = compare({"a": small["a"]}, workers=1, relocations=["identity", "full", "half", "oracle"],
+                 **_kw(methods=["lls"], levels=[3], n_sets=1))
+    acc = df.set_index("relocation")["accuracy"]
+    assert acc["oracle"] >= acc[["identity", "full", "half"]].max()

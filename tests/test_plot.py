@@ -62,3 +62,16 @@ def test_only_plot_imports_matplotlib():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_accuracy_vs_distance():
+    g = {"h": synthetic_terrain("hills", size=33, seed=4)}
+    df = compare(g, methods=["lls"], levels=[1, 2], n_points=12, n_sets=1, workers=1, repeats=1,
+                 max_distance=[5, 10, None], distance_unit="cells")
+    fig = plot.accuracy_vs_distance(df)
+    assert len(fig.axes) == 2
+    ax = fig.axes[0]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["5", "10", "all"]
+    assert {ln.get_label() for ln in ax.get_lines()} == {"identity", "full", "half"}
+    with pytest.raises(ValueError, match="no distance sweep"):
+        plot.accuracy_vs_distance(df[df["max_distance"].isna()])

@@ -55,7 +55,7 @@ def test_properties_on_real_simplifications(seed, method):
 def test_bad_input():
     S = _plane()
     P = np.array([[1.0, 1.0, 8.0]])
-    with pytest.raises(ValueError, match=r"how must be one of \['identity', 'full', 'half'\], got 'up'"):
+    with pytest.raises(ValueError, match=r"how must be one of \['identity', 'full', 'half', 'oracle'\], got 'up'"):
         relocate(P, S, "up")
     with pytest.raises(OutsideFootprintError, match=r"1 of 2 do not \(first at index 1\)"):
         relocate(np.array([[1.0, 1.0, 0.0], [50.0, 1.0, 0.0]]), S, "full")
@@ -64,3 +64,64 @@ def test_bad_input():
     with pytest.raises(TypeError, match="simplified must be"):
         relocate(P, np.zeros((3, 3)), "full")
     assert relocate(np.empty((0, 3)), S, "half").shape == (0, 3)
+
+
+# ----------------------------------------------------------------- the oracle bound
+def _oracle_case(method="lls", level=3, seed=0):
+    from simplifiers import simplify
+
+    from terrainvis import visibility_matrix
+
+    T = synthetic_terrain("hills", size=33, seed=seed)
+    S = simplify(T, method, level)
+    P = sample_points(T, 25, seed=seed)
+    return T, S, P, visibility_matrix(T, P)
+
+
+def _agree(V, S, Q, mask=None):
+    from terrainvis import agreement, visibility_matrix
+
+    return agreement(V, visibility_matrix(S, Q), mask)["accuracy"]
+
+
+@pytest.mark.parametrize("method", ["lls", "greedy-insertion"])
+def test_oracle_is_an_upper_bound_of_the_practical_relocations(method):
+    T, S, P, V = _oracle_case(method)
+    best = max(_agree(V, S, relocate(P, S, how)) for how in ("identity", "full", "half"))
+    O = relocate(P, S, "oracle", reference=V, original=T)
+    np.testing.assert_array_equal(O[:, :2], P[:, :2])
+    assert _agree(V, S, O) >= best
+    # deterministic, and it never modifies its input
+    before = P.copy()
+    np.testing.assert_array_equal(relocate(P, S, "oracle", reference=V, original=T), O)
+    np.testing.assert_array_equal(P, before)
+
+
+def test_oracle_is_a_local_optimum_of_its_candidates():
+    """No single point can improve the agreement by moving to another of its candidates."""
+    from terrainvis.relocation import _candidates
+
+    T, S, P, V = _oracle_case("simple", 2, seed=3)
+    O = relocate(P, S, "oracle", reference=V, original=T)
+    score = _agree(V, S, O)
+    cand = _candidates(P, S, S.height_at(P[:, :2]), 0.0, T, 9)
+    for i in range(0, P.shape[0], 5):
+        for h in cand[i]:
+            Q = O.copy()
+            Q[i, 2] = h
+            assert _agree(V, S, Q) <= score + 1e-12
+
+
+def test_oracle_respects_the_mask_and_needs_its_reference():
+    T, S, P, V = _oracle_case()
+    d = np.hypot(*(P[:, None, :2] - P[None, :, :2]).transpose(2, 0, 1))
+    mask = d <= 400.0
+    O = relocate(P, S, "oracle", reference=V, original=T, mask=mask)
+    best = max(_agree(V, S, relocate(P, S, how), mask) for how in ("identity", "full", "half"))
+    assert _agree(V, S, O, mask) >= best
+    with pytest.raises(TypeError, match="needs reference="):
+        relocate(P, S, "oracle")
+    with pytest.raises(ValueError, match=r"reference must be an \(25, 25\) boolean matrix"):
+        relocate(P, S, "oracle", reference=V[:3, :3])
+    with pytest.raises(TypeError, match="original must be a terrainvis.HeightGrid"):
+        relocate(P, S, "oracle", reference=V, original=S.to_tin())

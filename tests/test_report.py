@@ -124,3 +124,23 @@ def test_paper_comparison_uses_the_papers_convention(df):
     assert cmp.loc[(1, 1, "qec", "full", "accuracy"), "n"] == 0  # not run: no figure of ours
     text = report.comparison_markdown(cmp)
     assert "| 1 | 1 | lls | half | accuracy |" in text and "RMS difference over the 27 accuracy cells" in text
+
+
+def test_oracle_gap_and_localized_tables():
+    g = {"h": synthetic_terrain("hills", size=33, seed=4)}
+    df = compare(g, methods=["lls"], levels=[2], n_points=15, n_sets=2, workers=1, repeats=1,
+                 relocations=["identity", "full", "half", "oracle"], max_distance=[5, 10, None], distance_unit="cells")
+    gap = report.oracle_gap(df)
+    allpairs = df[df["max_distance"].isna()]
+    mu = 100 * allpairs.groupby("relocation")["accuracy"].mean()
+    row = gap.loc[("lls", 2)]
+    assert row["oracle"] == pytest.approx(mu["oracle"])
+    assert row["best"] == mu[["identity", "full", "half"]].idxmax()
+    assert row["gap"] == pytest.approx(mu["oracle"] - mu[["identity", "full", "half"]].max()) and row["gap"] >= 0
+    loc = report.localized(df)
+    assert list(loc.columns) == ["5.00", "10.00", "all"]
+    sel = df[(df["relocation"] == "half") & (df["max_distance"] == 10)]["accuracy"]
+    assert loc.loc[(2, "half"), "10.00"] == pytest.approx(100 * sel.mean())
+    # the main tables and the findings use the all-pairs rows of a sweep
+    assert report.paper_tables(df)["Table 1"]["n"].eq(2).all()
+    assert "oracle" not in report.findings(df)[3]["evidence"]
