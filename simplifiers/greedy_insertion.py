@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from terrainvis._validate import as_int, as_nonnegative_finite, describe
+from terrainvis._mesh import signed_area2
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
 
@@ -214,10 +215,7 @@ class GreedyInserter:
         rows = self._vy[:n]
         vertices = np.column_stack([g.xs[cols], g.ys[rows], g.z[rows, cols]])
         faces = self._tri[: 3 * self.n_triangles].reshape(-1, 3).astype(np.int32)
-        a = vertices[faces[:, 0], :2]
-        b = vertices[faces[:, 1], :2]
-        c = vertices[faces[:, 2], :2]
-        nz = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+        nz = signed_area2(vertices, faces)
         if not (nz > 0).all():
             raise SimplificationError(
                 f"{_NAME}: {int((nz <= 0).sum())} of {nz.size} faces fold over when the index-space "

@@ -166,17 +166,17 @@ def resolve_terrains(terrains) -> dict[str, HeightGrid]:
     return out
 
 
-def _set_seed(seed: int, terrain: str, index: int) -> np.random.SeedSequence:
+def _set_seed(seed: int, name: str, index: int) -> np.random.SeedSequence:
     # Keyed on the terrain's name, not its position, so adding a terrain changes nothing else.
-    return np.random.SeedSequence([int(seed), zlib.crc32(terrain.encode()), int(index)])
+    return np.random.SeedSequence([int(seed), zlib.crc32(name.encode()), int(index)])
 
 
-def point_sets(grid: HeightGrid, terrain: str, n_points: int, n_sets: int, seed: int, offset: float):
-    """The ``n_sets`` point sets of a terrain (deterministic for a seed and terrain name)."""
+def point_sets(grid: HeightGrid, name: str, n_points: int, n_sets: int, seed: int, offset: float):
+    """The ``n_sets`` point sets of the terrain called ``name`` (deterministic for a seed and name)."""
     from .sampling import sample_points
 
     return [
-        sample_points(grid, n_points, seed=np.random.default_rng(_set_seed(seed, terrain, s)), offset=offset)
+        sample_points(grid, n_points, seed=np.random.default_rng(_set_seed(seed, name, s)), offset=offset)
         for s in range(n_sets)
     ]
 
@@ -218,13 +218,13 @@ def _timed(fn, *args, repeats: int = 3, **kwargs):
     return out, best
 
 
-def simplified_path(save_dir, terrain: str, method: str, level: int) -> Path:
-    """Where :func:`compare` saves a simplified terrain when given ``save_dir``."""
-    return Path(save_dir) / f"{terrain}__{method}__level{level}.npz"
+def simplified_path(save_dir, name: str, method: str, level: int) -> Path:
+    """Where :func:`compare` saves the simplified terrain of terrain ``name`` when given ``save_dir``."""
+    return Path(save_dir) / f"{name}__{method}__level{level}.npz"
 
 
-def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings: Settings, save_dir) -> list[dict]:
-    """Simplify once, then every point set and relocation: the rows of one unit."""
+def _run_unit(grid: HeightGrid, name: str, method: str, level: int, settings: Settings, save_dir) -> list[dict]:
+    """Simplify once, then every point set and relocation: the rows of one unit (terrain ``name``)."""
     from simplifiers import METHODS, simplify
 
     from .deviation import volume_error
@@ -233,17 +233,17 @@ def _run_unit(grid: HeightGrid, terrain: str, method: str, level: int, settings:
     from .visibility import visibility_matrix
 
     base = {
-        "terrain": terrain, "method": method, "kind": METHODS[method].kind, "level": level,
+        "terrain": name, "method": method, "kind": METHODS[method].kind, "level": level,
         "predicate": settings.predicate, "n_points": settings.n_points, "n_vertices_original": grid.size,
         "nbytes_original": grid.nbytes, "seed": settings.seed, "distance_unit": settings.distance_unit,
         "offset": settings.offset, "error": "",
     }
-    sets = point_sets(grid, terrain, settings.n_points, settings.n_sets, settings.seed, settings.offset)
+    sets = point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
     rows = []
     try:
         simplified = simplify(grid, method, level)
         if save_dir is not None:
-            _save(simplified, simplified_path(save_dir, terrain, method, level))
+            _save(simplified, simplified_path(save_dir, name, method, level))
         meta = simplified.attrs
         radius = end_radius_for(simplified, grid, level, settings.predicate)
         base.update(
