@@ -33,7 +33,7 @@ from terrainvis.terrain import HeightGrid
 from .levels import coarse_coords, coarse_length
 from .registry import METHODS, method_info
 
-__all__ = ["simplify_dask", "simplify_grid_blockwise", "blockwise_methods"]
+__all__ = ["simplify_dask", "simplify_grid_blockwise", "simplify_dataarray", "blockwise_methods"]
 
 
 def blockwise_methods() -> list[str]:
@@ -141,3 +141,91 @@ def simplify_grid_blockwise(grid: HeightGrid, method: str = "lls", level: int = 
     zc = simplify_dask(da.from_array(grid.z, chunks=chunks), method, level, **options).compute()
     level = as_int(level, "level", minimum=0)
     return HeightGrid.from_coords(zc, coarse_coords(grid.xs, level), coarse_coords(grid.ys, level), attrs=grid.attrs)
+
+
+def simplify_dataarray(da, method: str = "lls", level: int = 1, *, x=None, y=None, chunks=1024, **options):
+    """:func:`simplify_dask` on an :class:`xarray.DataArray`: a lazy DataArray with the coarse coordinates.
+
+    Parameters
+    ----------
+    da : xarray.DataArray, dims (y, x) in either order
+        Heights, dask-backed (computed block by block, never loaded whole) or in memory
+        (then split into ``chunks``). Dims are found as in
+        :meth:`terrainvis.HeightGrid.from_xarray`; a descending coordinate (raster order)
+        is handled by running the operator in the HeightGrid order (increasing
+        coordinates), so the result equals :func:`simplifiers.simplify` on
+        ``HeightGrid.from_xarray(da)``, returned in ``da``'s own order. Raw values with
+        ``_FillValue``/``nodata`` and ``scale_factor``/``add_offset`` attributes are masked
+        and scaled first. NaN is not checked (that would compute the array): it spreads
+        to the coarse samples whose operator window holds it.
+    method : {"simple", "lls", "gls"}
+        See :func:`simplify_dask`.
+    level : int
+        Number of reduction steps.
+    x, y : str, optional
+        The names of the x and y dims.
+    chunks : int or tuple, optional
+        Chunks for an in-memory ``da`` (ignored for a dask-backed one).
+    **options
+        Passed to the operator (``weights=`` for ``"lls"``).
+
+    Returns
+    -------
+    xarray.DataArray
+        Lazy (dask-backed) coarse heights with the dims of ``da``, the coarse coordinates
+        (:func:`simplifiers.levels.coarse_coords`: evenly spaced for odd lengths, the last
+        gap 3 fine cells wide for even ones), ``da``'s scalar coordinates (a rioxarray
+        ``spatial_ref`` without its now stale ``GeoTransform``) and ``attrs`` with
+        ``method`` and ``level`` added.
+
+    Examples
+    --------
+    >>> import numpy as np, xarray as xr
+    >>> z = np.add.outer(np.arange(9.0), np.arange(9.0))
+    >>> da = xr.DataArray(z, dims=("y", "x"), coords={"y": np.arange(9.0)[::-1], "x": np.arange(9.0)})
+    >>> out = simplify_dataarray(da, "lls", 1, chunks=4)
+    >>> out.shape, out.y.values.tolist()
+    ((5, 5), [8.0, 6.0, 4.0, 2.0, 0.0])
+    """
+    import dask.array as dsa
+
+    from terrainvis._xarray import find_dims, raw_to_heights, xarray_module
+
+    xr = xarray_module()
+    if not isinstance(da, xr.DataArray):
+        raise TypeError(f"da must be an xarray.DataArray, got {describe(da)}")
+    level = as_int(level, "level", minimum=0)
+    dims = da.dims
+    xdim, ydim, flat = find_dims(da, x, y)
+    flat = flat.transpose(ydim, xdim)
+    xs = np.asarray(flat.coords[xdim].values, dtype=np.float64)
+    ys = np.asarray(flat.coords[ydim].values, dtype=np.float64)
+    data = flat.data if isinstance(flat.data, dsa.Array) else dsa.from_array(np.asarray(flat.data), chunks=chunks)
+    attrs = flat.attrs
+    nodata = next((attrs[k] for k in ("_FillValue", "nodata", "missing_value") if k in attrs), None)
+    data = raw_to_heights(
+        data, None if nodata is None else float(nodata), float(attrs.get("scale_factor", 1.0)),
+        float(attrs.get("add_offset", 0.0)),
+    )
+    flip_y = ys.size >= 2 and ys[-1] < ys[0]
+    flip_x = xs.size >= 2 and xs[-1] < xs[0]
+    if flip_y:
+        data, ys = data[::-1], ys[::-1]
+    if flip_x:
+        data, xs = data[:, ::-1], xs[::-1]
+    out = simplify_dask(data, method, level, **options)
+    cx, cy = coarse_coords(xs, level), coarse_coords(ys, level)
+    if flip_y:
+        out, cy = out[::-1], cy[::-1]
+    if flip_x:
+        out, cx = out[:, ::-1], cx[::-1]
+    coords = {ydim: cy, xdim: cx}
+    for key, coord in flat.coords.items():
+        if coord.ndim == 0:
+            kept = coord.copy()
+            kept.attrs = {k: v for k, v in coord.attrs.items() if k != "GeoTransform"}
+            coords[key] = kept
+    new_attrs = {k: v for k, v in attrs.items() if k not in ("_FillValue", "nodata", "missing_value", "scale_factor", "add_offset")}
+    new_attrs.update(method=method, level=level)
+    result = xr.DataArray(out, dims=(ydim, xdim), coords=coords, attrs=new_attrs, name=da.name if da.name is not None else "z")
+    return result.transpose(*[d for d in dims if d in (xdim, ydim)])

@@ -152,9 +152,25 @@ def bundled_terrain(name: str) -> HeightGrid:
     ----------
     name : str
         One of :data:`BUNDLED`.
+
+    Returns
+    -------
+    HeightGrid
+        Read with the same reader as :func:`terrainvis.io.load_terrain` (the files are in
+        the terrainvis ``.npz`` format); ``attrs`` are ``name``, ``seed``, ``synthetic``
+        and ``bundled``.
+
+    Examples
+    --------
+    >>> g = bundled_terrain("hills")
+    >>> g.shape, g.dx, g.attrs["name"]
+    ((120, 120), 30.0, 'hills')
     """
+    from .io import _read_npz
+
     if not isinstance(name, str) or name not in BUNDLED:
         raise ValueError(f"name must be one of the bundled terrains {list(BUNDLED)}, got {name!r}")
-    with np.load(_data_dir() / f"{name}.npz", allow_pickle=False) as data:
-        grid = HeightGrid.from_coords(data["z"], data["xs"], data["ys"], attrs={"name": name, "bundled": True})
+    grid = _read_npz(_data_dir() / f"{name}.npz")
+    if not isinstance(grid, HeightGrid):
+        raise ValueError(f"data/{name}.npz must hold a grid, got a {type(grid).__name__}; reinstall terrainvis")
     return grid

@@ -18,8 +18,19 @@ Rows and north
 --------------
 ``z[r, c]`` sits at ``(xs[c], ys[r])`` and both coordinate vectors increase, so row 0 is
 the *smallest* y. A north-up raster (row 0 is north) is therefore flipped by
-:func:`terrainvis.load_dem`: raster row ``i`` becomes grid row ``rows - 1 - i`` and y
-grows northwards. The :class:`HeightGrid` constructors themselves never flip anything.
+:func:`terrainvis.load_dem` (and :meth:`HeightGrid.from_xarray` flips a descending ``y``):
+raster row ``i`` becomes grid row ``rows - 1 - i`` and y grows northwards. The
+:class:`HeightGrid` constructors themselves never flip anything, and the terrainvis
+``.npz`` format stores this order and says so (``orientation = "y_increasing"``; see
+:mod:`terrainvis.io`).
+
+Metadata
+--------
+``attrs`` is a plain dict carried over by :meth:`HeightGrid.crop`,
+:meth:`HeightGrid.subsample`, :meth:`HeightGrid.fill_nodata` and the regular
+simplifiers. Georeferencing lives there (``crs``, ``geographic``, ``xy_to_native``: see
+:mod:`terrainvis._georef`), and it stays valid through all of these because it maps
+coordinates rather than describing one raster.
 """
 
 from __future__ import annotations
@@ -61,7 +72,14 @@ def _check_coords(values, name: str, length: int) -> np.ndarray:
 
 
 def _check_z(z) -> np.ndarray:
-    arr = as_float_array(z, "z")
+    if np.ma.isMaskedArray(z):
+        # Masked samples are nodata, so NaN (np.asarray would expose the values under the mask).
+        arr = as_float_array(np.ma.getdata(z), "z")
+        mask = np.ma.getmaskarray(z)
+        if mask.any():
+            arr = np.where(mask, np.nan, arr)
+    else:
+        arr = as_float_array(z, "z")
     if arr.ndim != 2:
         raise ValueError(f"z must be a 2-D array (rows, cols), got {arr.ndim}-D with shape {arr.shape}")
     if arr.shape[0] < 2 or arr.shape[1] < 2:
@@ -83,7 +101,8 @@ class HeightGrid:
     Parameters
     ----------
     z : (rows, cols) array_like
-        Heights, copied to a read-only float64 array. Never flipped.
+        Heights, copied to a read-only float64 array. Never flipped. NaN marks nodata,
+        and so does the mask of a :class:`numpy.ma.MaskedArray`.
     dx, dy : float
         Uniform sample spacing along x (columns) and y (rows).
     origin : (float, float)
@@ -111,7 +130,18 @@ class HeightGrid:
         if not (math.isfinite(ox) and math.isfinite(oy)):
             raise ValueError(f"origin must be finite, got {origin!r}")
         rows, cols = zz.shape
-        self._init(zz, ox + dx * np.arange(cols, dtype=np.float64), oy + dy * np.arange(rows, dtype=np.float64), attrs)
+        xs = ox + dx * np.arange(cols, dtype=np.float64)
+        ys = oy + dy * np.arange(rows, dtype=np.float64)
+        for name, v, o, d in (("x", xs, ox, dx), ("y", ys, oy, dy)):
+            if not np.isfinite(v[-1]):
+                raise ValueError(f"origin {name}0 = {o!r} plus d{name} = {d!r} times {v.size - 1} overflows float64")
+            if (np.diff(v) <= 0).any():
+                raise ValueError(
+                    f"d{name} = {d!r} is too small for origin {name}0 = {o!r}: float64 numbers near "
+                    f"{abs(v[-1]):.3g} are {np.spacing(abs(v[-1])):.3g} apart, so the {name} coordinates would not "
+                    "be strictly increasing; use a larger spacing or an origin nearer 0"
+                )
+        self._init(zz, xs, ys, attrs)
 
     @classmethod
     def from_coords(cls, z, xs, ys, *, attrs=None) -> "HeightGrid":
@@ -123,6 +153,66 @@ class HeightGrid:
         obj = cls.__new__(cls)
         obj._init(zz, xx, yy, attrs)
         return obj
+
+    @classmethod
+    def from_xarray(cls, da, *, x=None, y=None, crs=None) -> "HeightGrid":
+        """A grid from a 2-D :class:`xarray.DataArray` (needs xarray; rioxarray is used when installed).
+
+        Parameters
+        ----------
+        da : xarray.DataArray, dims (y, x) in either order
+            Heights with 1-D coordinates on both dims. The dims are found by name
+            (``x``/``lon``/``longitude``/``easting`` and ``y``/``lat``/``latitude``/
+            ``northing``) unless ``x`` and ``y`` name them. A descending coordinate (the
+            usual raster order, y from north to south) is flipped into the HeightGrid
+            order. A length-1 ``band`` dim (``rioxarray.open_rasterio``) is dropped. A
+            dask-backed array is computed.
+        x, y : str, optional
+            The names of the x and y dims.
+        crs : str, optional
+            The CRS when ``da`` records none (``da.rio.crs``, ``da.attrs["crs"]`` or a
+            ``spatial_ref`` coordinate). A lon/lat CRS converts the coordinates to local
+            metres, as :func:`terrainvis.load_dem` does.
+
+        Returns
+        -------
+        HeightGrid
+            ``attrs`` are ``da.attrs`` (without ``_FillValue``/``nodata``/``missing_value``,
+            which mark nodata, and ``scale_factor``/``add_offset``, which are applied) plus
+            the georeferencing (``crs``, ``geographic``, ``xy_to_native``) when the CRS is
+            known.
+
+        Examples
+        --------
+        >>> import xarray as xr
+        >>> da = xr.DataArray([[3.0, 4.0], [1.0, 2.0]], dims=("y", "x"), coords={"y": [10.0, 0.0], "x": [0.0, 10.0]})
+        >>> HeightGrid.from_xarray(da).z.tolist()  # y ascending now: row 0 is y = 0
+        [[1.0, 2.0], [3.0, 4.0]]
+        """
+        from ._xarray import grid_from_dataarray
+
+        return grid_from_dataarray(da, x=x, y=y, crs=crs)
+
+    def to_xarray(self, *, name: str = "z"):
+        """This grid as an :class:`xarray.DataArray` with dims ``("y", "x")`` (needs xarray).
+
+        The coordinates are ``xs`` and ``ys`` (increasing: row 0 is the smallest y),
+        ``attrs`` a copy of :attr:`attrs`. When rioxarray is installed and the grid is
+        projected (its coordinates are in its CRS), the CRS is also written with
+        ``da.rio.write_crs``; a lon/lat grid's coordinates are local metres, so its CRS
+        stays in ``attrs`` only (with ``xy_to_native``). ``HeightGrid.from_xarray`` reads
+        the result back unchanged.
+
+        Examples
+        --------
+        >>> g = HeightGrid([[1.0, 2.0], [3.0, 4.0]], dx=10.0, dy=10.0)
+        >>> da = g.to_xarray()
+        >>> da.dims, da.y.values.tolist()
+        (('y', 'x'), [0.0, 10.0])
+        """
+        from ._xarray import grid_to_dataarray
+
+        return grid_to_dataarray(self, name=name)
 
     def _init(self, z, xs, ys, attrs):
         self.z = _frozen(z)
@@ -312,7 +402,9 @@ class HeightGrid:
         Parameters
         ----------
         rows, cols : slice or (start, stop), optional
-            Index ranges to keep (step 1). ``None`` keeps everything.
+            Index ranges to keep (step 1), with Python's rules: ``None`` for an open
+            end, negative indices count from the end (``rows=(-10, None)`` keeps the last
+            10 rows). ``None`` keeps everything.
         bbox : (xmin, xmax, ymin, ymax), optional
             Keep the samples inside this box instead (inclusive).
 
@@ -338,7 +430,10 @@ class HeightGrid:
             cs = _as_slice(cols, "cols", self.shape[1])
         z = self.z[rs, cs]
         if z.shape[0] < 2 or z.shape[1] < 2:
-            raise ValueError(f"crop must keep at least 2x2 samples, got {z.shape[0]}x{z.shape[1]}")
+            raise ValueError(
+                f"crop must keep at least 2x2 samples of the {self.shape[0]}x{self.shape[1]} grid, got "
+                f"{z.shape[0]}x{z.shape[1]} (rows {rs.start}:{rs.stop}, cols {cs.start}:{cs.stop})"
+            )
         return HeightGrid.from_coords(z, self.xs[cs], self.ys[rs], attrs=self.attrs)
 
     def subsample(self, step: int) -> "HeightGrid":
@@ -381,26 +476,43 @@ class HeightGrid:
 
 
 def _as_slice(value, name: str, length: int) -> slice:
+    """``rows``/``cols`` of :meth:`HeightGrid.crop` as a step-1 slice within ``length`` (Python's rules)."""
     if value is None:
         return slice(0, length)
     if isinstance(value, slice):
         if value.step not in (None, 1):
             raise ValueError(f"{name} must have step 1, got step {value.step}; use subsample() to thin a grid")
-        start, stop, _ = value.indices(length)
-        return slice(start, stop)
-    try:
-        start, stop = value
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a slice or a (start, stop) pair, got {describe(value)}") from exc
-    start, stop, _ = slice(int(start), int(stop)).indices(length)
-    return slice(start, stop)
+        start, stop = value.start, value.stop
+    else:
+        try:
+            start, stop = value
+        except (TypeError, ValueError):
+            raise TypeError(
+                f"{name} must be a slice or a (start, stop) pair of integers or None, got {describe(value)}"
+            ) from None
+    for bound in (start, stop):
+        if bound is not None and (isinstance(bound, (bool, np.bool_)) or not isinstance(bound, (int, np.integer))):
+            raise TypeError(
+                f"{name} bounds must be integers or None (negative counts from the end), got {describe(bound)} "
+                f"in {name}={value!r}"
+            )
+    start, stop, _ = slice(start, stop).indices(length)
+    return slice(start, max(start, stop))
 
 
 def _is_uniform(v: np.ndarray) -> bool:
+    """Evenly spaced to 1e-9 of the step, or to the rounding of the coordinates themselves.
+
+    ``origin + step * arange(n)`` far from 0 is uneven by a few ulps of the largest
+    coordinate (at 5e5 with a 0.05 step that is 1e-10, above 1e-9 of the step), and is
+    still the uniform grid it was built as.
+    """
     if v.size < 3:
         return True
     d = np.diff(v)
-    return bool(np.abs(d - d.mean()).max() <= 1e-9 * max(abs(d.mean()), np.abs(v).max() * 1e-7))
+    step = (v[-1] - v[0]) / (v.size - 1)
+    tol = 1e-9 * abs(step) + 8.0 * np.finfo(np.float64).eps * float(np.abs(v).max())
+    return bool(np.abs(d - step).max() <= tol)
 
 
 @dataclass(frozen=True)

@@ -94,6 +94,55 @@ def test_bad_coords():
         HeightGrid.from_coords(z, [0.0, np.nan, 2.0], [0.0, 1.0])
 
 
+def test_masked_array_keeps_its_mask_as_nodata():
+    data = np.arange(9.0).reshape(3, 3)
+    z = np.ma.masked_array(data, mask=[[True, False, False], [False, False, False], [False, False, True]])
+    g = HeightGrid(z)
+    assert g.n_nodata == 2 and np.isnan(g.z[0, 0]) and np.isnan(g.z[2, 2])
+    np.testing.assert_array_equal(g.z[~np.isnan(g.z)], data[~z.mask])
+    assert not np.isnan(data).any() and z.mask.sum() == 2  # the caller's array is untouched
+    # Integer data, and from_coords, behave the same; an inf under the mask is nodata too.
+    zi = np.ma.masked_equal(np.array([[1, -9999], [3, 4]]), -9999)
+    assert HeightGrid.from_coords(zi, [0.0, 1.0], [0.0, 1.0]).n_nodata == 1
+    zinf = np.ma.masked_invalid(np.array([[1.0, np.inf], [3.0, 4.0]]))
+    assert HeightGrid(zinf).n_nodata == 1
+    assert HeightGrid(np.ma.masked_array(data)).n_nodata == 0  # no mask: nothing is nodata
+
+
+def test_origin_far_from_zero_with_a_tiny_spacing_is_refused():
+    # At 1e16 float64 numbers are 2 apart: xs would be [1e16, 1e16, 1e16 + 2] and heights NaN.
+    with pytest.raises(ValueError, match=r"dx = 1.0 is too small for origin x0 = 1e\+16: .* 2 apart"):
+        HeightGrid(np.zeros((3, 3)), dx=1.0, origin=(1e16, 0.0))
+    with pytest.raises(ValueError, match=r"dy = 0.001 is too small for origin y0 = 50000000000000.0: .* 0.00781 apart"):
+        HeightGrid(np.zeros((3, 3)), dy=1e-3, origin=(0.0, 5e13))
+    with pytest.raises(ValueError, match="overflows float64"):
+        HeightGrid(np.zeros((3, 3)), dx=1e308, origin=(1e308, 0.0))
+    g = HeightGrid(np.zeros((3, 3)), dx=4.0, origin=(1e16, 0.0))  # 4 > 2: fine
+    assert (np.diff(g.xs) == 4.0).all()
+
+
+def test_uniform_far_from_zero_is_uniform():
+    # 524288 + 0.05 * i rounds unevenly by ~1e-10, more than 1e-9 of the step: still uniform.
+    g = HeightGrid(np.zeros((3, 4)), dx=0.05, dy=0.05, origin=(0.0, 524288.0))
+    assert np.ptp(np.diff(g.ys)) > 1e-9 * 0.05 and g.is_uniform
+    assert not HeightGrid.from_coords(np.zeros((3, 3)), [0.0, 1.0, 2.0 + 1e-6], [0.0, 1.0, 2.0]).is_uniform
+
+
+def test_crop_accepts_python_index_rules_and_explains_bad_bounds():
+    g = HeightGrid(np.arange(30.0).reshape(5, 6))
+    np.testing.assert_array_equal(g.crop(rows=(-2, None)).z, g.z[-2:])
+    np.testing.assert_array_equal(g.crop(rows=(None, 3), cols=(1, -1)).z, g.z[:3, 1:-1])
+    np.testing.assert_array_equal(g.crop(rows=slice(-3, None)).z, g.z[-3:])
+    with pytest.raises(TypeError, match=r"rows bounds must be integers or None .*got float 1.5 in rows=\(1.5, 4\)"):
+        g.crop(rows=(1.5, 4))
+    with pytest.raises(TypeError, match="rows must be a slice or a \\(start, stop\\) pair"):
+        g.crop(rows=3)
+    with pytest.raises(ValueError, match=r"at least 2x2 samples of the 5x6 grid, got 1x6 \(rows 4:5, cols 0:6\)"):
+        g.crop(rows=(-1, None))
+    with pytest.raises(ValueError, match=r"got 0x6 \(rows 4:4"):
+        g.crop(rows=(4, 2))
+
+
 # ---------------------------------------------------------------- the surface
 def test_height_at_vertices_and_diagonal_split():
     # One cell whose two triangles disagree with the other diagonal's split.

@@ -1,0 +1,207 @@
+"""Georeferencing of a HeightGrid: its CRS and the map from its (x, y) to native coordinates.
+
+A :class:`~terrainvis.HeightGrid` works in one length unit for x, y and z (metres), so
+a grid read from a lon/lat raster is moved to local metres. Three ``attrs`` keys keep
+what is needed to go back (they are plain values, so ``crop``, ``subsample``,
+``fill_nodata`` and a regular simplification carry them over unchanged, and they stay
+right because they describe a map of coordinates, not a raster):
+
+``crs`` : str
+    The CRS as the source states it: ``"EPSG:26918"``, a WKT string, or text with a
+    remark such as ``"EPSG:4326 (assumed; lon/lat degrees)"`` (the EPSG code in it is
+    used when the whole text is not a CRS).
+``geographic`` : bool
+    True when the native CRS is lon/lat; ``xs`` and ``ys`` are then local metres.
+``xy_to_native`` : (sx, ox, sy, oy) tuple of float
+    The per-axis affine map from the grid's coordinates to native ones:
+    ``x_native = ox + sx * x`` and ``y_native = oy + sy * y`` (``sx``, ``sy`` > 0).
+    ``(1.0, 0.0, 1.0, 0.0)`` on a projected grid, whose coordinates are native already.
+    On a lon/lat grid ``sx = 1 / m_lon`` and ``sy = 1 / m_lat`` (WGS84 metres per degree
+    at the centre latitude, :func:`metres_per_degree`), and ``(ox, oy)`` is the lon/lat
+    of the sample at local (0, 0).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import warnings
+
+import numpy as np
+
+__all__ = [
+    "GEOREF_KEYS", "IDENTITY", "metres_per_degree", "rasterio_module", "parse_crs", "crs_is_geographic",
+    "xy_to_native", "native_axes", "lonlat_to_local", "looks_like_degrees", "warn_if_degrees",
+]
+
+#: The ``attrs`` keys that hold a grid's georeferencing (see the module docstring).
+GEOREF_KEYS = ("crs", "geographic", "xy_to_native")
+#: ``xy_to_native`` of a grid whose coordinates are already native.
+IDENTITY = (1.0, 0.0, 1.0, 0.0)
+
+
+def metres_per_degree(lat_deg: float) -> tuple[float, float]:
+    """WGS84 metres per degree of longitude and of latitude at latitude ``lat_deg``.
+
+    Examples
+    --------
+    >>> [round(v, 1) for v in metres_per_degree(45.0)]
+    [78846.8, 111131.7]
+    """
+    phi = math.radians(lat_deg)
+    lon = 111412.84 * math.cos(phi) - 93.5 * math.cos(3 * phi) + 0.118 * math.cos(5 * phi)
+    lat = 111132.92 - 559.82 * math.cos(2 * phi) + 1.175 * math.cos(4 * phi) - 0.0023 * math.cos(6 * phi)
+    return lon, lat
+
+
+def rasterio_module(purpose: str = "reading and writing GeoTIFF"):
+    """rasterio, or an ImportError with the install hint."""
+    try:
+        import rasterio
+    except ImportError as exc:
+        raise ImportError(f'{purpose} needs rasterio: pip install "terrainvis[geo]"') from exc
+    return rasterio
+
+
+_EPSG = re.compile(r"\bEPSG\s*:\s*(\d+)", re.IGNORECASE)
+
+
+def parse_crs(text, name: str = "crs"):
+    """``text`` as a :class:`rasterio.crs.CRS`.
+
+    The whole text is tried first (EPSG code, WKT, PROJ string); when that fails and the
+    text names one ``EPSG:<code>`` (e.g. ``"EPSG:4326 (assumed; lon/lat degrees)"``),
+    that code is used and the rest is taken as a remark.
+
+    Raises
+    ------
+    ValueError
+        When neither works; the message names ``name`` and the text.
+    """
+    rasterio = rasterio_module("parsing a CRS")
+    from rasterio.crs import CRS
+
+    if not isinstance(text, str) or not text.strip():
+        raise ValueError(f"{name} must be a non-empty CRS string such as 'EPSG:32633', got {text!r}")
+    try:
+        return CRS.from_user_input(text)
+    except (rasterio.errors.CRSError, ValueError, TypeError):
+        pass
+    codes = set(_EPSG.findall(text))
+    if len(codes) == 1:
+        try:
+            return CRS.from_epsg(int(codes.pop()))
+        except (rasterio.errors.CRSError, ValueError) as exc:
+            raise ValueError(f"{name} {text!r} names an EPSG code that rasterio does not know: {exc}") from None
+    raise ValueError(
+        f"{name} {text!r} is not a CRS rasterio can read (tried the whole text, then one EPSG:<code> in it); "
+        "use e.g. 'EPSG:32633' or a WKT string"
+    )
+
+
+def crs_is_geographic(text: str) -> bool:
+    """Whether a CRS string is lon/lat (with rasterio when installed, else from the text)."""
+    try:
+        return bool(parse_crs(text).is_geographic)
+    except ImportError:
+        pass
+    except ValueError:
+        return False
+    head = text.strip().upper()
+    if head.startswith(("GEOGCS", "GEOGCRS", "GEODCRS")):
+        return True
+    codes = _EPSG.findall(text)
+    return bool(codes) and int(codes[0]) in (4326, 4269, 4267, 4258, 4283, 4617)
+
+
+def xy_to_native(attrs: dict):
+    """The validated ``(sx, ox, sy, oy)`` of ``attrs``, identity when absent, None when unknown.
+
+    Unknown means a geographic grid without ``xy_to_native`` (its local metres cannot be
+    mapped back to lon/lat).
+    """
+    value = attrs.get("xy_to_native")
+    if value is None:
+        return None if attrs.get("geographic") else IDENTITY
+    try:
+        sx, ox, sy, oy = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"attrs['xy_to_native'] must be four numbers (sx, ox, sy, oy), got {value!r}"
+        ) from None
+    if not all(math.isfinite(v) for v in (sx, ox, sy, oy)) or sx <= 0 or sy <= 0:
+        raise ValueError(f"attrs['xy_to_native'] must be finite with sx > 0 and sy > 0, got {value!r}")
+    return sx, ox, sy, oy
+
+
+def native_axes(xs: np.ndarray, ys: np.ndarray, affine) -> tuple[np.ndarray, np.ndarray]:
+    """The native coordinates of the sample columns and rows under ``(sx, ox, sy, oy)``."""
+    sx, ox, sy, oy = affine
+    if affine == IDENTITY:
+        return xs.copy(), ys.copy()
+    return ox + sx * xs, oy + sy * ys
+
+
+def _uniform_step(v: np.ndarray) -> float | None:
+    if v.size < 2:
+        return None
+    d = np.diff(v)
+    step = (v[-1] - v[0]) / (v.size - 1)
+    tol = 1e-9 * abs(step) + 8.0 * np.finfo(np.float64).eps * float(np.abs(v).max())
+    return float(step) if np.abs(d - step).max() <= tol else None
+
+
+def lonlat_to_local(lon: np.ndarray, lat: np.ndarray, *, dlon: float | None = None, dlat: float | None = None):
+    """Local metres for increasing lon/lat sample coordinates.
+
+    The spacing is converted with WGS84 metres per degree at the centre latitude and
+    the first sample becomes (0, 0). A uniform axis (or one given its step ``dlon`` /
+    ``dlat``) gets ``index * step * metres_per_degree`` exactly, as the uniform
+    :class:`~terrainvis.HeightGrid` constructor would.
+
+    Returns
+    -------
+    xs : (cols,) float64
+    ys : (rows,) float64
+    affine : (sx, ox, sy, oy)
+        The ``xy_to_native`` map back to lon/lat.
+    """
+    lat_c = 0.5 * (float(lat[0]) + float(lat[-1]))
+    m_lon, m_lat = metres_per_degree(lat_c)
+
+    def axis(v, step, m):
+        step = _uniform_step(v) if step is None else step
+        if step is not None:
+            return np.arange(v.size, dtype=np.float64) * (step * m)
+        return (v - v[0]) * m
+
+    xs = axis(np.asarray(lon, dtype=np.float64), dlon, m_lon)
+    ys = axis(np.asarray(lat, dtype=np.float64), dlat, m_lat)
+    return xs, ys, (1.0 / m_lon, float(lon[0]), 1.0 / m_lat, float(lat[0]))
+
+
+def looks_like_degrees(xs: np.ndarray, ys: np.ndarray) -> bool:
+    """True when coordinates fit lon/lat ranges with cells of at most one arc-minute.
+
+    Projected coordinates of real DEMs are metres or feet with cells of at least a few
+    centimetres and usually large offsets; lon/lat DEMs have cells of 1 to 30 arc-seconds.
+    """
+    if xs.size < 2 or ys.size < 2:
+        return False
+    in_range = xs[0] >= -180.0 and xs[-1] <= 360.0 and ys[0] >= -90.0 and ys[-1] <= 90.0
+    cell = max(float(np.diff(xs).max()), float(np.diff(ys).max()))
+    return bool(in_range and cell <= 1.0 / 60.0 + 1e-12)
+
+
+def warn_if_degrees(xs: np.ndarray, ys: np.ndarray, source: str, stacklevel: int = 4) -> None:
+    """A UserWarning when coordinates without a CRS look like lon/lat degrees."""
+    if looks_like_degrees(xs, ys):
+        cell = max(float(np.diff(xs).max()), float(np.diff(ys).max()))
+        warnings.warn(
+            f"{source} records no CRS, but its coordinates look like lon/lat degrees (x in "
+            f"[{xs[0]:.6g}, {xs[-1]:.6g}], y in [{ys[0]:.6g}, {ys[-1]:.6g}], cells of {cell:.3g}); they are "
+            "read as metres, which makes slopes and line of sight wrong. Pass crs='EPSG:4326' to load_dem "
+            "to convert them to metres.",
+            UserWarning,
+            stacklevel=stacklevel,
+        )
