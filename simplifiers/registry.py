@@ -231,6 +231,8 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options):
     # An error threshold may stop a method before the budget: fewer vertices are
     # expected then, and every other rule still holds.
     check_height_field(tin, grid, method=info.name, budget=None if early else budget)
+    # the result carries the grid's attrs (name, CRS, georeferencing) as a regular one does
+    tin.attrs = {**grid.attrs, **tin.attrs}
     return tin, seconds, level, budget
 
 

@@ -43,6 +43,13 @@ def atomic_path(path, *, suffix: str | None = None):
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix if suffix is None else suffix, dir=folder)
     os.close(fd)
     tmp = Path(tmp)
+    # mkstemp makes the file owner-only (0600); give it the mode a plain open() would
+    # (0666 less the umask), or keep the mode of the file it replaces
+    try:
+        mode = path.stat().st_mode & 0o7777 if path.exists() else 0o666 & ~_umask()
+        os.chmod(tmp, mode)
+    except OSError:
+        pass
     try:
         yield tmp
         _fsync(tmp)
@@ -59,6 +66,12 @@ def atomic_write_text(path, text: str, encoding: str = "utf-8") -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding=encoding)
     return path
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _fsync(path: Path) -> None:

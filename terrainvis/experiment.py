@@ -564,7 +564,7 @@ def compare(
 
     if progress and units and _kernels_cached(settings) is False:
         tqdm.write("terrainvis: compiling numba kernels (first run only, about half a minute)...", file=sys.stderr)
-    bar = tqdm(total=len(units), desc="compare", unit="unit", file=sys.stderr, disable=not progress)
+    bar = tqdm(total=len(units), desc="compare", unit="unit", file=sys.stderr, disable=not (progress and units))
     new_rows: list[dict] = []
 
     def collect(key, rows):

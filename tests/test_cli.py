@@ -19,6 +19,7 @@ SMALL = ["--terrain", "hills", "--levels", "1", "--methods", "simple", "lls", "-
 
 
 def _one_line_error(capsys, code_expected, argv):
+    capsys.readouterr()  # drop what earlier commands printed
     code = main(argv)
     err = capsys.readouterr().err.strip()
     assert code == code_expected, err
@@ -53,7 +54,7 @@ def test_compare_errors_are_one_line(tmp_path, capsys):
     err = _one_line_error(capsys, 2, ["compare", "--terrain", "hills", "--methods", "nope", "--out", str(tmp_path)])
     assert "methods must be drawn from ['qec', 'greedy-cuts'" in err
     err = _one_line_error(capsys, 2, ["compare", "--terrain", "hills", "--relocations", "lift", "--out", str(tmp_path)])
-    assert "relocations must be drawn from ['identity', 'full', 'half']" in err
+    assert "relocations must be drawn from ['identity', 'full', 'half', 'oracle']" in err
     # zero is not silently replaced by the default
     assert "n_points must be >= 2, got 0" in _one_line_error(capsys, 2, ["compare", "--points", "0", "--out", str(tmp_path)])
     assert "n_sets must be >= 1, got 0" in _one_line_error(capsys, 2, ["compare", "--sets", "0", "--out", str(tmp_path)])
