@@ -1,0 +1,139 @@
+"""ESRI ASCII grids (``.asc``) with the CRS in a ``.prj`` beside them."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .._fileio import atomic_path
+from .._georef import parse_crs
+from ..terrain import HeightGrid
+from ._common import _Corrupt
+from ._raster import _georeference, _nodata_value, _uniform_layout
+
+_ASC_KEYS = {"ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize", "dx", "dy", "nodata_value"}
+
+
+def _prj_path(p: Path) -> Path | None:
+    for suffix in (".prj", ".PRJ"):
+        q = p.with_suffix(suffix)
+        if q.exists():
+            return q
+    return None
+
+
+def _read_asc(p: Path, *, crs=None, band=None) -> HeightGrid:
+    header = {}
+    with open(p, "r", encoding="ascii", errors="strict") as fh:
+        lines = fh.read().splitlines()
+    i = 0
+    while i < len(lines):
+        parts = lines[i].split()
+        if not parts:
+            i += 1
+            continue
+        key = parts[0].lower()
+        if key not in _ASC_KEYS:
+            break
+        if len(parts) != 2:
+            raise _Corrupt(f"header line {i + 1} must be 'key value', got {lines[i]!r}")
+        try:
+            header[key] = float(parts[1])
+        except ValueError:
+            raise _Corrupt(f"header line {i + 1}: {parts[0]} must be a number, got {parts[1]!r}") from None
+        i += 1
+    for key in ("ncols", "nrows"):
+        if key not in header:
+            raise _Corrupt(f"header has no {key!r}")
+        v = header[key]
+        if not (math.isfinite(v) and v == int(v) and v >= 2):
+            raise _Corrupt(f"{key} must be a whole number >= 2, got {v!r}")
+    ncols, nrows = int(header["ncols"]), int(header["nrows"])
+    if "cellsize" in header:
+        dx = dy = header["cellsize"]
+    elif "dx" in header and "dy" in header:
+        dx, dy = header["dx"], header["dy"]
+    else:
+        raise _Corrupt("header has neither 'cellsize' nor 'dx' and 'dy'")
+    if not (dx > 0 and dy > 0 and math.isfinite(dx) and math.isfinite(dy)):
+        raise _Corrupt(f"the cell size must be finite and > 0, got dx={dx!r}, dy={dy!r}")
+    try:
+        values = np.array(" ".join(lines[i:]).split(), dtype=np.float64)
+    except ValueError as exc:
+        raise _Corrupt(f"the heights after the header are not all numbers ({exc})") from None
+    if values.size != ncols * nrows:
+        raise _Corrupt(f"expected {nrows}x{ncols} = {nrows * ncols} values, found {values.size}")
+    z = values.reshape(nrows, ncols)
+    if "nodata_value" in header:
+        z[z == header["nodata_value"]] = np.nan
+    x0, y0 = _asc_centre(header, "x", dx), _asc_centre(header, "y", dy)
+    xs = x0 + dx * np.arange(ncols, dtype=np.float64)
+    ys = y0 + dy * np.arange(nrows, dtype=np.float64)
+    prj = _prj_path(p)
+    file_crs = None
+    if prj is not None:
+        file_crs = _crs_from_prj(prj)
+    source = p.name if prj is None else f"{p.name} (with {prj.name})"
+    return _georeference(z[::-1], xs, ys, {}, file_crs, crs, source, dlon=dx, dlat=dy)
+
+
+def _crs_from_prj(prj: Path) -> str:
+    text = prj.read_text(encoding="utf-8", errors="replace").strip()
+    if not text:
+        raise _Corrupt(f"{prj.name} beside it is empty")
+    try:
+        crs = parse_crs(text, prj.name)
+    except ImportError:
+        return text  # kept as WKT; rasterio is needed only to name it
+    except ValueError as exc:
+        raise _Corrupt(str(exc)) from None
+    epsg = crs.to_epsg()
+    return f"EPSG:{epsg}" if epsg else crs.to_wkt()
+
+
+def _asc_centre(header: dict, axis: str, spacing: float) -> float:
+    """The lower-left cell centre along ``axis`` ("x" or "y") from an ESRI ASCII header."""
+    if f"{axis}llcenter" in header:
+        return header[f"{axis}llcenter"]
+    if f"{axis}llcorner" in header:
+        return header[f"{axis}llcorner"] + 0.5 * spacing
+    raise _Corrupt(f"header has neither '{axis}llcorner' nor '{axis}llcenter'")
+
+
+def _write_asc(grid: HeightGrid, p: Path) -> None:
+    z, nx, ny, crs_text, note = _uniform_layout(grid, ".asc")
+    prj_text = None
+    if crs_text:
+        try:
+            prj_text = parse_crs(crs_text, "grid.attrs['crs']").to_wkt(version="WKT1_ESRI")
+        except ImportError:
+            warnings.warn(
+                f"writing the .prj beside {p.name!r} needs rasterio (pip install \"terrainvis[geo]\"); the CRS "
+                f"{crs_text!r} is not written", UserWarning, stacklevel=3,
+            )
+    elif _prj_path(p) is not None:
+        warnings.warn(
+            f"{_prj_path(p).name} beside {p.name!r} is left as it is, but the grid has no CRS: load_dem will read "
+            "that .prj as the CRS of the new file; delete it if it does not apply",
+            UserWarning, stacklevel=3,
+        )
+    rows, cols = z.shape
+    dx = float((nx[-1] - nx[0]) / (cols - 1))
+    dy = float((ny[-1] - ny[0]) / (rows - 1))
+    nodata = _nodata_value(z)
+    body = (z if nodata is None else np.where(np.isnan(z), nodata, z))[::-1]
+    size_lines = f"cellsize {dx!r}\n" if dx == dy else f"dx {dx!r}\ndy {dy!r}\n"
+    header = (
+        f"ncols {cols}\nnrows {rows}\nxllcenter {float(nx[0])!r}\nyllcenter {float(ny[0])!r}\n{size_lines}"
+        + ("" if nodata is None else f"NODATA_value {nodata!r}\n")
+    )
+    if prj_text is not None:
+        prj = p.with_suffix(".prj")
+        with atomic_path(prj) as tmp:
+            tmp.write_text(prj_text, encoding="ascii")
+    with atomic_path(p) as tmp, open(tmp, "w", encoding="ascii") as fh:
+        fh.write(header)
+        np.savetxt(fh, body, fmt="%.17g")

@@ -1,0 +1,105 @@
+"""GeoTIFF (``.tif``, ``.tiff``) through rasterio, with ``attrs`` kept in a tag."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .._fileio import atomic_path
+from .._georef import parse_crs, rasterio_module
+from ..terrain import HeightGrid
+from ._attrs import _attrs_from_json, _attrs_to_json
+from ._common import _Corrupt, _UserError
+from ._raster import _georeference, _nodata_value, _uniform_layout
+
+_ATTRS_TAG = "TERRAINVIS_ATTRS"
+_RESAMPLED_TAG = "TERRAINVIS_RESAMPLED"
+
+
+def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
+    rasterio = rasterio_module()
+    try:
+        with rasterio.open(p) as src:
+            if band is None and src.count != 1:
+                raise _UserError(
+                    f"{p.name!r} has {src.count} bands; a DEM has one: pass band=k (1..{src.count}) to choose one"
+                )
+            b = 1 if band is None else band
+            if b > src.count:
+                raise _UserError(f"band must be in [1, {src.count}] for {p.name!r}, got {b}")
+            data = src.read(b, masked=True)
+            scale, offset = src.scales[b - 1], src.offsets[b - 1]
+            t = src.transform
+            file_crs = src.crs
+            tags = src.tags()
+    except rasterio.errors.RasterioError as exc:
+        raise _Corrupt(str(exc)) from exc
+    if t.b != 0 or t.d != 0:
+        raise _Corrupt(f"rotated rasters are not supported (transform {tuple(t)[:6]})")
+    # Plain arrays, not masked arithmetic (several times slower on large rasters).
+    z = np.asarray(np.ma.getdata(data), dtype=np.float64)  # a fresh buffer from rasterio: changed in place
+    scale = 1.0 if scale is None else float(scale)
+    offset = 0.0 if offset is None else float(offset)
+    if scale != 1.0:
+        z *= scale
+    if offset != 0.0:
+        z += offset
+    mask = np.ma.getmaskarray(data)
+    if mask.any():
+        z[mask] = np.nan
+    rows, cols = z.shape
+    # Sample centres in native coordinates, made increasing (x east, y north).
+    dx, dy = abs(t.a), abs(t.e)
+    x0 = t.c + 0.5 * t.a if t.a > 0 else t.c + t.a * (cols - 0.5)
+    y0 = t.f + t.e * (rows - 0.5) if t.e < 0 else t.f + 0.5 * t.e
+    if t.e < 0:
+        z = z[::-1]  # north-up raster rows -> increasing y
+    if t.a < 0:
+        z = z[:, ::-1]
+    xs = x0 + dx * np.arange(cols, dtype=np.float64)
+    ys = y0 + dy * np.arange(rows, dtype=np.float64)
+    attrs = {}
+    if _ATTRS_TAG in tags:
+        attrs = _attrs_from_json(tags[_ATTRS_TAG])
+    crs_text = None
+    if file_crs:
+        crs_text = file_crs.to_string()
+        stored = attrs.get("crs")
+        if isinstance(stored, str) and stored != crs_text:
+            # Keep the stored text (e.g. with a remark) when it names the same CRS.
+            try:
+                if parse_crs(stored) == file_crs:
+                    crs_text = stored
+            except ValueError:
+                pass
+    for key in ("crs", "geographic", "xy_to_native"):
+        attrs.pop(key, None)  # the file's own georeferencing decides
+    return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy)
+
+
+def _write_tif(grid: HeightGrid, p: Path) -> None:
+    rasterio = rasterio_module()
+    from rasterio.transform import Affine
+
+    z, nx, ny, crs_text, note = _uniform_layout(grid, p.suffix)
+    crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None  # before any file is touched
+    rows, cols = z.shape
+    dx = float((nx[-1] - nx[0]) / (cols - 1))
+    dy = float((ny[-1] - ny[0]) / (rows - 1))
+    transform = Affine(dx, 0.0, float(nx[0]) - 0.5 * dx, 0.0, -dy, float(ny[-1]) + 0.5 * dy)
+    nodata = _nodata_value(z)
+    north_up = z[::-1] if nodata is None else np.where(np.isnan(z), nodata, z)[::-1]
+    attrs = dict(grid.attrs)
+    tags = {}
+    if note is not None:
+        attrs["resampled"] = note
+        tags[_RESAMPLED_TAG] = note
+    tags[_ATTRS_TAG] = _attrs_to_json(attrs)
+    with atomic_path(p) as tmp:
+        with rasterio.open(
+            tmp, "w", driver="GTiff", height=rows, width=cols, count=1, dtype="float64", transform=transform,
+            crs=crs, nodata=nodata,
+        ) as dst:
+            dst.write(north_up, 1)
+            dst.update_tags(**tags)

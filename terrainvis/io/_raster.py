@@ -1,0 +1,114 @@
+"""What the raster formats share: georeferencing a grid read, native coordinates, nodata, uniform layout."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+from .._georef import IDENTITY, crs_is_geographic, lonlat_to_local, native_axes, warn_if_degrees, xy_to_native
+from .._validate import describe
+from ..terrain import HeightGrid, _is_uniform
+from ._common import _UserError
+
+
+def _georeference(z, xs, ys, attrs: dict, file_crs, crs_arg, source: str, *, dlon=None, dlat=None) -> HeightGrid:
+    """A HeightGrid from native sample coordinates (increasing), with its georeferencing attrs."""
+    if file_crs and crs_arg:
+        raise _UserError(f"crs: {source} records the CRS {file_crs!r}; crs= is only for files that record none, got {crs_arg!r}")
+    text = file_crs or crs_arg
+    if not text:
+        warn_if_degrees(xs, ys, source, stacklevel=6)
+        return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+    geographic = crs_is_geographic(text)
+    if geographic:
+        xs, ys, affine = lonlat_to_local(xs, ys, dlon=dlon, dlat=dlat)
+    else:
+        affine = IDENTITY
+    attrs.update(crs=text, geographic=geographic, xy_to_native=affine)
+    return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+
+
+def native_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray]:
+    """The sample coordinates of ``grid`` in its native CRS.
+
+    Parameters
+    ----------
+    grid : HeightGrid
+
+    Returns
+    -------
+    x : (cols,) float64
+    y : (rows,) float64
+        ``ox + sx * grid.xs`` and ``oy + sy * grid.ys`` with ``attrs["xy_to_native"]``
+        (the grid's own coordinates when it is not geographic).
+
+    Raises
+    ------
+    ValueError
+        When the grid is geographic but its map back to lon/lat is unknown.
+
+    Examples
+    --------
+    >>> from terrainvis import HeightGrid
+    >>> g = HeightGrid([[0.0, 0.0], [0.0, 0.0]], dx=2.0, attrs={"geographic": True, "xy_to_native": (0.5, 10.0, 1.0, 40.0)})
+    >>> [v.tolist() for v in native_coords(g)]
+    [[10.0, 11.0], [40.0, 41.0]]
+    """
+    if not isinstance(grid, HeightGrid):
+        raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
+    affine = xy_to_native(grid.attrs)
+    if affine is None:
+        raise ValueError("grid.attrs say the grid is geographic but hold no 'xy_to_native'; its lon/lat are unknown")
+    return native_axes(grid.xs, grid.ys, affine)
+
+
+def _nodata_value(z: np.ndarray) -> float | None:
+    """None without NaN; else -9999 unless it is a real height, else another value that does not occur."""
+    nan = np.isnan(z)
+    if not nan.any():
+        return None
+    finite = z[~nan]
+    for candidate in (-9999.0, -32768.0, -99999.0, -3.4028234663852886e38):
+        if not (finite == candidate).any():
+            return candidate
+    below = float(np.nextafter(finite.min(), -np.inf))  # below every height, so not one of them
+    return below if math.isfinite(below) else float(np.nextafter(finite.max(), np.inf))
+
+
+def _uniform_layout(grid: HeightGrid, suffix: str):
+    """What a uniform raster of ``grid`` holds: heights, native sample axes, CRS text, resampling note."""
+    affine = xy_to_native(grid.attrs)
+    crs_text = grid.attrs.get("crs") or None
+    if crs_text is not None and not isinstance(crs_text, str):
+        raise ValueError(f"grid.attrs['crs'] must be a CRS string, got {describe(crs_text)}")
+    if affine is None:
+        warnings.warn(
+            f"grid.attrs say the grid is geographic (lon/lat) but hold no 'xy_to_native', so its local metres "
+            f"cannot be mapped back to lon/lat; the {suffix} file gets the local metres and no CRS",
+            UserWarning, stacklevel=4,
+        )
+        affine, crs_text = IDENTITY, None
+    xs, ys, z = grid.xs, grid.ys, grid.z
+    note = None
+    if not grid.is_uniform:
+        ux = xs if _is_uniform(xs) else np.linspace(xs[0], xs[-1], xs.size)
+        uy = ys if _is_uniform(ys) else np.linspace(ys[0], ys[-1], ys.size)
+        moved = []
+        for axis, old, new in (("x", xs, ux), ("y", ys, uy)):
+            shift = np.abs(new - old)
+            cell = (old[-1] - old[0]) / (old.size - 1)
+            n = int((shift > 1e-9 * max(abs(cell), 1e-300)).sum())
+            if n:
+                moved.append(f"{n} of {old.size} {axis} positions by up to {shift.max():.6g} ({shift.max() / cell:.3g} cell)")
+        note = (
+            f"{suffix} needs a uniform grid: the rectilinear {grid.shape[0]}x{grid.shape[1]} grid was resampled onto "
+            f"uniform coordinates over the same sample extent with the same number of samples; moved "
+            f"{' and '.join(moved)}; heights there are read from the grid's surface. Save to .npz to keep it exactly."
+        )
+        warnings.warn(note, UserWarning, stacklevel=4)
+        z = grid.height_on_grid(ux, uy)
+        xs, ys = ux, uy
+    nx, ny = native_axes(xs, ys, affine)
+    return z, nx, ny, crs_text, note

@@ -1,0 +1,74 @@
+"""Real DEMs that ship with a dependency, so they need no download."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .._georef import metres_per_degree
+from ..terrain import HeightGrid
+
+_SAMPLES = {"jacksboro": "jacksboro_fault_dem.npz"}
+
+
+def _matplotlib_sample(filename: str) -> Path:
+    """Path of a file in matplotlib's sample data, found without importing matplotlib."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("matplotlib")
+    if spec is None or not spec.submodule_search_locations:
+        raise ImportError("sample_dem needs matplotlib (a core dependency of terrainvis): pip install matplotlib")
+    for root in spec.submodule_search_locations:
+        path = Path(root) / "mpl-data" / "sample_data" / filename
+        if path.exists():
+            return path
+    raise FileNotFoundError(f"matplotlib's sample data has no {filename!r} (looked in {list(spec.submodule_search_locations)})")
+
+
+def sample_dem(name: str = "jacksboro") -> HeightGrid:
+    """A real DEM that ships with matplotlib, so it needs no download.
+
+    Parameters
+    ----------
+    name : {"jacksboro"}
+        ``"jacksboro"``: the USGS 3-arc-second DEM of the Jacksboro fault, Tennessee
+        (344 x 403 samples, 236-1076 m), from matplotlib's sample data. Its lon/lat cells
+        are converted to metres at the centre latitude: 74.57 m (east-west) x 92.47 m
+        (north-south).
+
+    Returns
+    -------
+    HeightGrid
+        Rows flipped so that y grows northwards, origin (0, 0) in local metres; ``attrs``
+        hold the CRS (``"EPSG:4326 (assumed; lon/lat degrees)"``) and ``xy_to_native``,
+        the map back to lon/lat.
+
+    Examples
+    --------
+    >>> g = sample_dem()
+    >>> g.shape, round(g.dx, 2), round(g.dy, 2)
+    ((344, 403), 74.57, 92.47)
+    """
+    if name not in _SAMPLES:
+        raise ValueError(f"name must be one of {list(_SAMPLES)}, got {name!r}")
+    with np.load(_matplotlib_sample(_SAMPLES[name]), allow_pickle=False) as data:
+        z = np.asarray(data["elevation"], dtype=np.float64)
+        dx_deg = float(data["dx"])
+        dy_deg = float(data["dy"])
+        # In this file 'ymin' holds the northern edge and 'ymax' the southern one.
+        lon_w = float(data["xmin"])
+        lat_n = max(float(data["ymin"]), float(data["ymax"]))
+        lat_c = 0.5 * (float(data["ymin"]) + float(data["ymax"]))
+    rows = z.shape[0]
+    m_lon, m_lat = metres_per_degree(lat_c)
+    # local x = (lon - lon of the western sample centres) * m_lon, likewise y from the southern ones
+    affine = (1.0 / m_lon, lon_w + 0.5 * dx_deg, 1.0 / m_lat, lat_n - dy_deg * (rows - 0.5))
+    attrs = {
+        "name": name,
+        "source": "matplotlib sample data jacksboro_fault_dem.npz (USGS 3-arc-second DEM)",
+        "crs": "EPSG:4326 (assumed; lon/lat degrees)",
+        "geographic": True,
+        "xy_to_native": affine,
+    }
+    return HeightGrid(z[::-1], dx=dx_deg * m_lon, dy=dy_deg * m_lat, attrs=attrs)
