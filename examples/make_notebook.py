@@ -60,6 +60,27 @@ tables = tv.report.paper_tables(df)
 tables["Table 1"]"""),
     ("code", """plot.accuracy_vs_size(df)"""),
     ("code", """plot.tradeoff(df, relocation="half")"""),
+    ("md", """## 5. Use a simplification outside terrainvis
+
+`save_terrain` writes a simplified grid as a GeoTIFF in the DEM's own CRS (here lon/lat, so
+it lines up with the original in QGIS), and any result as a mesh that trimesh, Blender or a
+game engine opens. The same from the shell:
+`terrainvis simplify dem.tif -m lls -l 2 -o lls.tif`. An even-sized grid's coarse samples are
+not evenly spaced at the last row and column (reverse Faber keeps both ends), so a GeoTIFF of
+it is resampled onto even spacing, with a warning saying by how much; odd-sized grids (like
+this 161 x 161 window) are written exactly."""),
+    ("code", """import tempfile, pathlib, warnings
+out = pathlib.Path(tempfile.mkdtemp())
+W = dem.crop(rows=(90, 251), cols=(120, 281))          # 161 x 161: the coarse grids are exact
+S_lls = simplifiers.simplify(W, "lls", 2)
+tv.save_terrain(S_lls, out / "lls.tif")
+tv.save_terrain(simplifiers.simplify(W, "greedy-insertion", 2), out / "greedy.ply")
+back = tv.load_terrain(out / "lls.tif")
+print(back, back.attrs["crs"])
+print("same heights:", np.array_equal(back.z, S_lls.z))
+import trimesh
+mesh = trimesh.load(out / "greedy.ply", process=False)
+print(mesh)"""),
 ]
 
 
