@@ -7,8 +7,11 @@ runner adds :func:`volume_error`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from . import _volume_kernels
 from ._mesh import boundary_edges
 from ._validate import describe
 from .terrain import TIN, HeightGrid
@@ -67,27 +70,100 @@ def _solid(vertices: np.ndarray, faces: np.ndarray, floor: float):
     return solid
 
 
-def volume_error(fine: HeightGrid, coarse) -> float:
+#: The methods of :func:`volume_error`.
+VOLUME_METHODS = ("exact", "manifold")
+
+
+def volume_error(fine: HeightGrid, coarse, *, method: str = "exact") -> float:
     """Volume between the fine surface and a simplified one (a shape error, in units³).
 
-    Each terrain is turned into a closed solid with manifold3d (its surface, vertical
-    walls along the footprint boundary and a flat floor below both), and the volume of
-    the symmetric difference, ``vol(A) + vol(B) - 2 vol(A and B)``, is returned. For two height
-    fields over the same footprint this equals the integral of ``|coarse - fine|`` over
-    the footprint; divided by the footprint area it is the mean absolute vertical error.
+    For two height fields over the same footprint this is the integral of
+    ``|coarse(x, y) - fine(x, y)|`` over the footprint; divided by the footprint area it
+    is the mean absolute vertical error.
 
     Parameters
     ----------
     fine : HeightGrid
-        The original terrain (no nodata).
+        The original terrain (no nodata), uniform or rectilinear. Its surface splits each
+        cell along the (r, c)-(r+1, c+1) diagonal.
     coarse : HeightGrid or TIN
-        A simplification over the same extent.
+        A simplification over the same extent: a grid (no nodata; rectilinear grids such
+        as reverse Faber results with a wider last gap are fine) or a TIN whose faces are
+        counter-clockwise and cover the footprint of ``fine``.
+    method : {"exact", "manifold"}
+        ``"exact"`` (the default) integrates ``|coarse - fine|`` in closed form on every
+        piece of the overlay of the two triangulations (numba, parallel over the coarse
+        faces, in a local origin, with compensated sums). ``"manifold"`` turns each
+        terrain into a closed solid with manifold3d (its surface, vertical walls along the
+        footprint boundary and a flat floor below both) and returns the volume of the
+        symmetric difference, ``vol(A) + vol(B) - 2 vol(A and B)``: the independent
+        reference, tens of times slower and far larger in memory.
 
     Returns
     -------
     float
+        The volume, in (x, y units)² times z units.
+
+    Raises
+    ------
+    TypeError
+        When ``fine`` is not a HeightGrid or ``coarse`` is neither a HeightGrid nor a TIN.
+    ValueError
+        When ``method`` is unknown, ``coarse`` does not cover the extent or the footprint
+        of ``fine``, or a face of ``coarse`` is clockwise.
+    terrainvis.errors.NodataError
+        When ``fine`` or a ``coarse`` grid holds NaN.
+
+    Notes
+    -----
+    The exact method runs over the coarse triangles. Each one visits the fine cells of
+    the grid rows it crosses. A fine triangle inside it costs one closed-form integral of
+    the absolute value of a linear function (split where the function changes sign); one
+    crossed by a single coarse edge (93 % of the crossed ones for a 25 % greedy-insertion
+    TIN) is split along that edge in closed form as well; only fine triangles near a
+    coarse vertex are clipped by several edges (Sutherland and Hodgman [1]_) and
+    integrated as a fan. Neighbouring coarse triangles evaluate their shared edge with
+    the same floating-point operations, so the pieces tile the footprint. The sums are
+    compensated (Neumaier [2]_) per chunk of faces and the chunks added exactly
+    (:func:`math.fsum`), so the result does not depend on the thread count. Measured
+    against manifold3d it agrees to 1e-12 relative or better on the bundled terrains, the
+    shared DEM crops and a 1024² terrain (millions of pieces); a 1024² grid against a
+    TIN with 25 % of its vertices takes about 0.6 s of CPU time, manifold3d about 20 s.
+
+    References
+    ----------
+    .. [1] I. E. Sutherland and G. W. Hodgman, "Reentrant polygon clipping",
+       Communications of the ACM 17(1), 32-42, 1974. DOI 10.1145/360767.360802
+    .. [2] A. Neumaier, "Rundungsfehleranalyse einiger Verfahren zur Summation endlicher
+       Summen", ZAMM 54(1), 39-51, 1974. DOI 10.1002/zamm.19740540106
+    .. [3] T. Alderson and F. Samavati, "Reverse subdivision for optimizing visibility
+       tests", GRAPP 2012, pp. 143-150. DOI 10.5220/0003851501430150 (the simplifications
+       whose shape error this measures)
+
+    Examples
+    --------
+    Two parallel planes 2.5 apart over a 30 x 40 footprint:
+
+    >>> import numpy as np
+    >>> from terrainvis import HeightGrid
+    >>> fine = HeightGrid(np.zeros((3, 4)), dx=10.0, dy=20.0)
+    >>> coarse = HeightGrid(np.full((2, 2), 2.5), dx=30.0, dy=40.0)
+    >>> round(volume_error(fine, coarse), 9)
+    3000.0
+
+    A hat of height 6 on a flat plane; its support is six triangles of total area 3:
+
+    >>> peak = np.zeros((3, 3))
+    >>> peak[1, 1] = 6.0
+    >>> flat = HeightGrid(np.zeros((2, 2)), dx=2.0, dy=2.0)
+    >>> round(volume_error(HeightGrid(peak), flat), 9)
+    6.0
+    >>> round(volume_error(HeightGrid(peak), flat, method="manifold"), 9)
+    6.0
     """
     _check_pair(fine, coarse)
+    if not isinstance(method, str) or method not in VOLUME_METHODS:
+        raise ValueError(f"method must be one of {list(VOLUME_METHODS)}, got {method!r}")
     fine.require_finite("volume_error")
     if isinstance(coarse, HeightGrid):
         coarse.require_finite("volume_error")
@@ -96,10 +172,24 @@ def volume_error(fine: HeightGrid, coarse) -> float:
         raise ValueError(f"coarse must cover the extent of fine {fine.extent}, got {coarse.extent}")
     xmin, xmax, ymin, ymax = fine.extent
     area = (xmax - xmin) * (ymax - ymin)
-    if abs(coarse.footprint_area() - area) > 1e-9 * area:
+    vx, vy = _local_xy(fine, coarse)
+    footprint, n_cw, first_cw = _volume_kernels.face_areas(vx, vy, coarse.faces)
+    if n_cw:
         raise ValueError(
-            f"coarse must cover the footprint of fine (area {area:g}), but its faces cover {coarse.footprint_area():g}"
+            f"coarse must have counter-clockwise faces (a height field seen from above), but {n_cw} "
+            f"face(s) are clockwise, the first is face {first_cw}"
         )
+    if abs(footprint - area) > 1e-9 * area:
+        raise ValueError(
+            f"coarse must cover the footprint of fine (area {area:g}), but its faces cover {footprint:g}"
+        )
+    if method == "manifold":
+        return _volume_manifold(fine, coarse)
+    return _volume_exact(fine, coarse)[0]
+
+
+def _volume_manifold(fine: HeightGrid, coarse: TIN) -> float:
+    """|A xor B| of the two closed solids built by :func:`_solid` (the reference)."""
     ft = fine.to_tin()
     # A local origin keeps the coordinates small (UTM northings lose digits otherwise).
     origin = np.array([fine.xs[0], fine.ys[0], 0.0])
@@ -112,3 +202,37 @@ def volume_error(fine: HeightGrid, coarse) -> float:
     # float64 the cancellation costs a few digits of 16 (checked against the two
     # differences to 3e-14 relative on the bundled terrains).
     return float(a.volume() + b.volume() - 2.0 * (a ^ b).volume())
+
+
+def _local_xy(fine: HeightGrid, coarse: TIN) -> tuple[np.ndarray, np.ndarray]:
+    """The x and y of the coarse vertices in a local origin at fine's first sample.
+
+    UTM northings near 5e6 lose digits in the edge tests and areas otherwise.
+    """
+    v = coarse.vertices
+    return v[:, 0] - fine.xs[0], v[:, 1] - fine.ys[0]
+
+
+def _volume_exact(fine: HeightGrid, coarse: TIN) -> tuple[float, float]:
+    """The integral of |coarse - fine| and the area the overlay pieces cover (compensated sums).
+
+    The covered area equals the footprint's when the pieces tile it: the tests check it.
+    """
+    vk = _volume_kernels
+    xs = fine.xs - fine.xs[0]
+    ys = fine.ys - fine.ys[0]
+    vx, vy = _local_xy(fine, coarse)
+    vz = np.ascontiguousarray(coarse.vertices[:, 2])
+    faces = coarse.faces
+    order = vk.faces_by_row(vy, faces, ys)
+    nchunks = int(min(faces.shape[0], _VOLUME_CHUNKS))
+    out = np.zeros((nchunks, vk.N_OUT))
+    vk.volume_between(xs, ys, fine.z, vx, vy, vz, faces, order, nchunks, out)
+    volume = math.fsum(np.concatenate([out[:, vk.VOL], out[:, vk.VOL_C]]))
+    covered = math.fsum(np.concatenate([out[:, vk.AREA], out[:, vk.AREA_C]]))
+    return volume, covered
+
+
+# Chunks of coarse faces in the parallel kernel: a constant, so that the result does not
+# depend on the thread count, and many more than the threads, so that the load balances.
+_VOLUME_CHUNKS = 256
