@@ -95,12 +95,27 @@ TERRAINS = ["hills", "mountains", "rough", "ridges", "mesas"] + [f"dem:{n}" for 
 
 
 # ----------------------------------------------------------------- brute force
-def brute_min_clearance(grid: HeightGrid, a, b) -> np.ndarray:
+def brute_interval(a, b, delta, end_radius):
+    """The tested interval [t0, t1] of the segment a -> b, as the definition writes it
+    (``[max(tau, r / L_h), min(1 - tau, 1 - r / L_h)]``), or None when nothing is tested."""
+    d = b - a
+    length = np.linalg.norm(d)
+    lh = np.hypot(d[0], d[1])
+    if length <= 2 * delta or (end_radius > 0 and lh <= 2 * end_radius):
+        return None
+    tau = delta / length
+    if end_radius == 0:
+        return tau, 1 - tau
+    return max(tau, end_radius / lh), min(1 - tau, 1 - end_radius / lh)
+
+
+def brute_min_clearance(grid: HeightGrid, a, b, end_radius=0.0) -> np.ndarray:
     """Clearance at every crossing with x = xs[c], y = ys[r] and every cell-diagonal line.
 
     Extra points on the segment only add true clearance values, so evaluating at the
     crossings with every diagonal *line* (inside its cell or not) still gives the exact
-    minimum. The surface comes from ``HeightGrid.height_at``.
+    minimum. The surface comes from ``HeightGrid.height_at``. Only crossings inside the
+    tested interval count, plus the interval's two ends.
     """
     delta = trim_length(grid)
     xs, ys = grid.xs, grid.ys
@@ -110,12 +125,12 @@ def brute_min_clearance(grid: HeightGrid, a, b) -> np.ndarray:
     out = np.empty(a.shape[0])
     for i in range(a.shape[0]):
         d = b[i] - a[i]
-        length = np.linalg.norm(d)
-        if length <= 2 * delta:
+        iv = brute_interval(a[i], b[i], delta, end_radius)
+        if iv is None:
             out[i] = np.inf
             continue
-        tau = delta / length
-        ts = [np.array([tau, 1 - tau])]
+        t0, t1 = iv
+        ts = [np.array([t0, t1])]
         with np.errstate(divide="ignore", invalid="ignore"):
             if d[0] != 0:
                 ts.append((xs - a[i, 0]) / d[0])
@@ -125,14 +140,15 @@ def brute_min_clearance(grid: HeightGrid, a, b) -> np.ndarray:
             td = ((a[i, 1] - Y0) / WY - (a[i, 0] - X0) / WX) / den
             ts.append(td[np.isfinite(td)])
         t = np.concatenate(ts)
-        t = t[(t >= tau) & (t <= 1 - tau)]
+        t = t[(t >= t0) & (t <= t1)]
         p = a[i] + t[:, None] * d
         out[i] = (p[:, 2] - grid.height_at(p[:, :2])).min()
     return out
 
 
-def brute_tin_min_clearance(tin: TIN, a, b) -> np.ndarray:
-    """Clearance at every crossing of the ground track with a TIN edge (plus the trimmed ends)."""
+def brute_tin_min_clearance(tin: TIN, a, b, end_radius=0.0) -> np.ndarray:
+    """Clearance at every crossing of the ground track with a TIN edge (plus the ends of
+    the tested interval)."""
     delta = trim_length(tin)
     e = np.concatenate([tin.faces[:, [0, 1]], tin.faces[:, [1, 2]], tin.faces[:, [2, 0]]])
     P = tin.vertices[e[:, 0], :2]
@@ -141,15 +157,18 @@ def brute_tin_min_clearance(tin: TIN, a, b) -> np.ndarray:
     out = np.empty(a.shape[0])
     for i in range(a.shape[0]):
         d = b[i] - a[i]
-        length = np.linalg.norm(d)
-        tau = delta / length
+        iv = brute_interval(a[i], b[i], delta, end_radius)
+        if iv is None:
+            out[i] = np.inf
+            continue
+        t0, t1 = iv
         # a + t d = P + s E  (2-D)
         den = d[0] * E[:, 1] - d[1] * E[:, 0]
         with np.errstate(divide="ignore", invalid="ignore"):
             t = ((P[:, 0] - a[i, 0]) * E[:, 1] - (P[:, 1] - a[i, 1]) * E[:, 0]) / den
             s = ((P[:, 0] - a[i, 0]) * d[1] - (P[:, 1] - a[i, 1]) * d[0]) / den
-        ok = np.isfinite(t) & (s >= -1e-12) & (s <= 1 + 1e-12) & (t >= tau) & (t <= 1 - tau)
-        t = np.concatenate([[tau, 1 - tau], t[ok]])
+        ok = np.isfinite(t) & (s >= -1e-12) & (s <= 1 + 1e-12) & (t >= t0) & (t <= t1)
+        t = np.concatenate([[t0, t1], t[ok]])
         p = a[i] + t[:, None] * d
         h = tin.height_at(p[:, :2])
         out[i] = np.nanmin(p[:, 2] - h)
@@ -529,3 +548,308 @@ def test_morton_sorted_queries_give_the_same_answers(monkeypatch):
     assert sorted(order.tolist()) == list(range(2000)) and (order != np.arange(2000)).any()
     np.testing.assert_array_equal(min_clearance(g, a, b), m_plain)
     np.testing.assert_array_equal(line_of_sight(g, a, b), los_plain)
+
+
+# ----------------------------------------------------------------- end radius
+def _cell(g):
+    """Mean cell width in x (one cell of the surface under test)."""
+    return float(np.diff(g.xs).mean())
+
+
+def _golden_case():
+    """A small rectilinear grid with 24 pairs (a mix of visible and blocked), built from
+    integer arithmetic and numpy's PCG64 stream only, so its answers are reproducible."""
+    r, c = np.mgrid[0:9, 0:11]
+    z = ((r * 7 + c * 13) % 17) * 1.5 + 0.25 * r
+    xs = np.concatenate([[0.0], np.cumsum(np.tile([1.5, 2.0, 2.5, 3.0, 1.0], 2))]) + 100.0
+    ys = np.arange(9) * 2.0 - 7.0
+    g = HeightGrid.from_coords(z, xs, ys)
+    rng = np.random.default_rng(2012)
+    xy = rng.random((2, 24, 2)) * [xs[-1] - xs[0], ys[-1] - ys[0]] + [xs[0], ys[0]]
+    a = np.column_stack([xy[0], g.height_at(xy[0]) + rng.uniform(-1.0, 15.0, 24)])
+    b = np.column_stack([xy[1], g.height_at(xy[1]) + rng.uniform(-1.0, 15.0, 24)])
+    return g, a, b
+
+
+# min_clearance of _golden_case() computed by the code before end_radius existed
+# (commit 9363b43), as float.hex: end_radius = 0 must reproduce these bits.
+_GOLDEN_MIN_CLEARANCE = [
+    "-0x1.2a57ce7fb99c2p+3", "-0x1.0c10f897ae382p+3", "0x1.08c8831398180p-3", "0x1.02a7640948e00p-3",
+    "0x1.254ed561332d8p+2", "0x1.c124dcc3efe40p-3", "0x1.5bfc3ab8be840p+0", "-0x1.7a4ee1f2a6f20p-1",
+    "-0x1.ed684392b3630p+0", "0x1.6dd7de7ccb398p+1", "0x1.3666237d6a550p+2", "-0x1.b05304ac3bb00p-2",
+    "0x1.b11f95705e520p+1", "0x1.b3740ec65d100p-2", "-0x1.f4df6c4df6cd0p+1", "0x1.79e811f67109cp+2",
+    "0x1.08cfb0e4c5c12p+2", "0x1.69d2459d8a4c8p+1", "-0x1.5edde0b394000p-3", "0x1.6b9e0316e7f8cp+2",
+    "-0x1.6084a6240d820p-1", "-0x1.af3765c737e24p+2", "0x1.ca73fd586fb70p+0", "-0x1.183c818095040p+2",
+]
+_GOLDEN_LOS = [0, 0, 1, 1, 1, 1, 1, 0, 0, 1, 1, 0, 1, 1, 0, 1, 1, 1, 0, 1, 0, 0, 1, 0]
+
+
+def test_end_radius_zero_is_bit_identical_to_before():
+    g, a, b = _golden_case()
+    golden = np.array([float.fromhex(h) for h in _GOLDEN_MIN_CLEARANCE])
+    # the invariant beside the golden numbers: they are the exact minima
+    np.testing.assert_allclose(golden, brute_min_clearance(g, a, b), rtol=0, atol=clearance_tolerance(g))
+    for kw in ({}, {"end_radius": 0.0}, {"end_radius": 0}, {"end_radius": np.float32(0.0)}):
+        m = min_clearance(g, a, b, **kw)
+        assert [float(v).hex() for v in m] == _GOLDEN_MIN_CLEARANCE, kw
+        assert min_clearance(g.to_tin(), a, b, **kw).tobytes() == min_clearance(g.to_tin(), a, b).tobytes()
+        for engine in ("grid", "embree"):
+            assert line_of_sight(g, a, b, engine=engine, **kw).astype(int).tolist() == _GOLDEN_LOS, (engine, kw)
+            np.testing.assert_array_equal(
+                visibility_matrix(g, a, engine=engine, **kw), visibility_matrix(g, a, engine=engine)
+            )
+    # a radius shorter than the trim leaves the interval unchanged: the same bits again
+    tiny = 0.5 * trim_length(g) * np.hypot(*(b - a)[:, :2].T).min() / np.linalg.norm(b - a, axis=1).max()
+    assert min_clearance(g, a, b, end_radius=tiny).tobytes() == golden.tobytes()
+
+
+@pytest.mark.parametrize("cells", [1.0, 3.7])
+@pytest.mark.parametrize("name", ["mountains", "rectilinear", "utm", "dem:west_bijou_escarpment_co"])
+def test_end_radius_matches_brute_force(name, cells):
+    g = terrain(name)
+    r = cells * _cell(g)
+    a, b = random_pairs(g, 100, 0.5, seed=15)
+    # short pairs (a few cells, some shorter than 2 r) with ends up to 3 below or above the surface
+    a2 = sample_points(g, 60, seed=16, offset=0.0)
+    xmin, xmax, ymin, ymax = g.extent
+    rng = np.random.default_rng(17)
+    a2[:, 2] += rng.uniform(-3.0, 3.0, 60)
+    xy = np.clip(a2[:, :2] + rng.normal(scale=3 * r, size=(60, 2)), [xmin, ymin], [xmax, ymax])
+    b2 = np.column_stack([xy, g.height_at(xy) + rng.uniform(-3.0, 3.0, 60)])
+    a = np.concatenate([a, a2])
+    b = np.concatenate([b, b2])
+    tol = clearance_tolerance(g)
+    got = min_clearance(g, a, b, end_radius=r)
+    ref = brute_min_clearance(g, a, b, end_radius=r)
+    np.testing.assert_array_equal(np.isinf(got), np.isinf(ref))
+    fin = np.isfinite(ref)
+    np.testing.assert_allclose(got[fin], ref[fin], rtol=0, atol=tol)
+    assert 0 < (~fin).sum() < 60  # some short pairs have nothing to test, most do
+    np.testing.assert_array_equal(line_of_sight(g, a, b, engine="grid", end_radius=r), got >= -tol)
+    # the radius matters on these pairs (it is not a no-op)
+    assert (got > min_clearance(g, a, b) + tol).sum() >= 20
+
+
+def _ridge_grid():
+    """5 x 11 samples, 1 m cells, a 10 m wall along x = 2 (the surface falls to 0 at x = 1 and 3)."""
+    z = np.zeros((5, 11))
+    z[:, 2] = 10.0
+    return HeightGrid(z, dx=1.0, dy=1.0)
+
+
+def _engines(as_tin):
+    return ("auto", "embree") + (() if as_tin else ("grid",))
+
+
+@pytest.mark.parametrize("as_tin", [False, True])
+def test_end_radius_hand_cases_ridge(as_tin):
+    g = _ridge_grid()
+    t = g.to_tin() if as_tin else g
+    # a level segment 1 m high from x = 0 to x = 10 along y = 2; the wall is 2 m from a.
+    # r <= 2 keeps the crest in; r = 2.5 and 2.95 keep part of its far slope (surface
+    # 5 and 0.5); r >= 3 cuts the wall out; r = 5 leaves nothing (L_h = 10 = 2 r).
+    a = np.array([[0.0, 2.0, 1.0]])
+    b = np.array([[10.0, 2.0, 1.0]])
+    radii = [0.0, 1.5, 2.0, 2.5, 2.95, 3.0, 4.9, 5.0]
+    expect = [-9.0, -9.0, -9.0, -4.0, 0.5, 1.0, 1.0, np.inf]
+    # the radius is horizontal: a steep segment from (0, -30) to (10, 50) rises 8 per
+    # metre of x, crosses z = 0 at x = 3.75 and is above the flat ground from there;
+    # as a 3-D length, r = 3.75 would start the test at x = 0.47 instead
+    a2 = np.array([[0.0, 2.0, -30.0]])
+    b2 = np.array([[10.0, 2.0, 50.0]])
+    radii2 = [3.5, 3.75, 4.0]
+    expect2 = [-2.0, 0.0, 2.0]
+    for p, q, rr, ee in ((a, b, radii, expect), (a2, b2, radii2, expect2)):
+        for r, e in zip(rr, ee):
+            for u, v in ((p, q), (q, p)):
+                m = min_clearance(t, u, v, end_radius=r)
+                np.testing.assert_allclose(m, [e], rtol=0, atol=1e-9, err_msg=f"r = {r}")
+                for engine in _engines(as_tin):
+                    assert line_of_sight(t, u, v, engine=engine, end_radius=r).tolist() == [e >= 0], (engine, r)
+
+
+def _slope_grid():
+    """6 x 11 samples, 1 m cells: a 2 m ridge along x = 2 (all rows) and a 5 m wall along
+    x = 6 in rows 3..5 only."""
+    z = np.zeros((6, 11))
+    z[:, 2] = 2.0
+    z[3:, 6] = 5.0
+    return HeightGrid(z, dx=1.0, dy=1.0)
+
+
+@pytest.mark.parametrize("as_tin", [False, True])
+def test_end_radius_point_below_the_surface(as_tin):
+    # The identity-relocation case: a sits 1 m below the ridge crest (x = 2, surface 2) and
+    # looks along +x at b, 1 m above flat ground. The surface falls as 2 (3 - x), so the
+    # segment (z = 1) is underground for x in [2, 2.5): blocked while r < 0.5, visible
+    # (grazing at r = 0.5) once r covers that part. Along y = 4 the wall at x = 6 blocks
+    # whatever r leaves it in.
+    g = _slope_grid()
+    t = g.to_tin() if as_tin else g
+    cases = [
+        # (y, r, expected min clearance)
+        (1.0, 0.25, -0.5),
+        (1.0, 0.5, 0.0),
+        (1.0, 0.75, 0.5),
+        (1.0, 2.0, 1.0),
+        (1.0, 4.0, np.inf),  # L_h = 8 = 2 r
+        (4.0, 0.75, -4.0),
+        (4.0, 3.5, -4.0),
+        (4.0, 3.9, -4.0),  # x in [5.9, 6.1] still holds the wall's crest
+    ]
+    for y, r, e in cases:
+        a = np.array([[2.0, y, 1.0]])
+        b = np.array([[10.0, y, 1.0]])
+        for u, v in ((a, b), (b, a)):
+            np.testing.assert_allclose(min_clearance(t, u, v, end_radius=r), [e], rtol=0, atol=1e-9, err_msg=f"{y} {r}")
+            for engine in _engines(as_tin):
+                assert line_of_sight(t, u, v, engine=engine, end_radius=r).tolist() == [e >= 0], (engine, y, r)
+    # without a radius the point is blocked by the surface right above it (clearance -1
+    # at a, raised by the trim only)
+    a = np.array([[2.0, 1.0, 1.0]])
+    b = np.array([[10.0, 1.0, 1.0]])
+    m0 = min_clearance(t, a, b)[0]
+    assert -1.0 < m0 < -0.999
+    for engine in _engines(as_tin):
+        assert not line_of_sight(t, a, b, engine=engine)[0]
+    # the same pair through the matrix
+    for engine in _engines(as_tin):
+        vm = visibility_matrix(t, np.concatenate([a, b]), engine=engine, end_radius=0.75)
+        assert vm.all()
+
+
+@pytest.mark.parametrize("engine", ["grid", "embree"])
+def test_end_radius_short_segments_are_visible(engine):
+    g = _spike3()
+    # a segment 5 below the ground, 1 m long horizontally: nothing to test once 2 r >= 1
+    a = np.array([[0.5, 1.0, -5.0]])
+    b = np.array([[1.5, 1.0, -5.0]])
+    assert np.isinf(min_clearance(g, a, b, end_radius=0.5)).all()
+    assert line_of_sight(g, a, b, engine=engine, end_radius=0.5).all()
+    assert line_of_sight(g, a, b, engine=engine, end_radius=0.7).all()
+    # just below half the length, the middle of the segment (under the spike) is tested
+    m = min_clearance(g, a, b, end_radius=0.49)[0]
+    assert m == pytest.approx(-15.0, abs=1e-9)  # the spike's crest at x = 1
+    assert not line_of_sight(g, a, b, engine=engine, end_radius=0.49).any()
+    # vertical segments have L_h = 0: nothing to test for any r > 0 (tested for r = 0)
+    v0 = np.array([[0.5, 0.25, -3.0], [1.0, 1.0, 5.0]])
+    v1 = np.array([[0.5, 0.25, 4.0], [1.0, 1.0, 20.0]])
+    assert np.isinf(min_clearance(g, v0, v1, end_radius=1e-9)).all()
+    assert line_of_sight(g, v0, v1, engine=engine, end_radius=1e-9).all()
+    assert not line_of_sight(g, v0, v1, engine=engine).all()
+    # in a matrix, points closer than 2 r (horizontally) see each other
+    pts = np.array([[0.2, 0.2, -9.0], [0.6, 0.3, -9.0], [1.8, 1.9, -9.0]])
+    vm = visibility_matrix(g, pts, engine=engine, end_radius=0.3)
+    np.testing.assert_array_equal(vm, [[1, 1, 0], [1, 1, 0], [0, 0, 1]])
+
+
+@pytest.mark.parametrize("name", ["mountains", "rough", "utm", "dem:mount_st_helens_wa"])
+def test_end_radius_engines_agree_identity_relocation(name):
+    # points of the terrain T, tested on a coarser surface S (every other sample) with
+    # their own heights (the identity relocation), r = one cell of S
+    g = terrain(name)
+    s = g.subsample(2)
+    r = _cell(s)
+    rng = np.random.default_rng(31)
+    xy = sample_points(s, 1200, seed=rng, offset=0.0)[:, :2]
+    pts = np.column_stack([xy, g.height_at(xy)])
+    a, b = pts[:600], pts[600:]
+    tol = clearance_tolerance(s)
+    m0 = min_clearance(s, a, b)
+    m1 = min_clearance(s, a, b, end_radius=r)
+    los = line_of_sight(s, a, b, engine="grid", end_radius=r)
+    np.testing.assert_array_equal(los, m1 >= -tol)
+    emb = line_of_sight(s, a, b, engine="embree", end_radius=r)
+    clear = np.abs(m1) > embree_tolerance(s)
+    bad = np.flatnonzero(clear & (los != emb))
+    assert bad.size == 0, f"{bad.size} non-degenerate disagreements (clearances {m1[bad[:5]]})"
+    assert clear.sum() >= 300
+    # the TIN of S (the exact clipper) gives the same minima
+    np.testing.assert_allclose(min_clearance(s.to_tin(), a, b, end_radius=r), m1, rtol=0, atol=tol)
+    # the tested interval shrinks: no pair gets lower, several blocked pairs become visible
+    assert (m1 >= m0 - tol).all()
+    vis0 = m0 >= -tol
+    assert not (vis0 & ~los).any()
+    print(f"{name}: {int((~vis0 & los).sum())} of 600 pairs become visible with r = {r:g}")
+    assert (~vis0 & los).sum() > 0
+
+
+@pytest.mark.parametrize("engine", ["grid", "embree"])
+def test_matrix_with_end_radius(engine):
+    g = terrain("hills")
+    s = g.subsample(3)
+    xy = sample_points(s, 60, seed=12, offset=0.0)[:, :2]
+    pts = np.column_stack([xy, g.height_at(xy)])
+    r = _cell(s)
+    vm = visibility_matrix(s, pts, engine=engine, end_radius=r)
+    np.testing.assert_array_equal(vm, vm.T)
+    assert vm.diagonal().all()
+    i, j = np.triu_indices(60, 1)
+    np.testing.assert_array_equal(vm[i, j], line_of_sight(s, pts[i], pts[j], engine=engine, end_radius=r))
+    if engine == "grid":
+        vm0 = visibility_matrix(s, pts, engine=engine)
+        assert (vm >= vm0).all() and (vm > vm0).any()
+
+
+def test_end_radius_bad_input():
+    g = _spike3()
+    ok = np.array([[0.5, 0.5, 1.0]])
+    for fn, args in ((min_clearance, (ok, ok)), (line_of_sight, (ok, ok)), (visibility_matrix, (ok,))):
+        for bad in (-1.0, np.nan, np.inf, -np.inf):
+            with pytest.raises(ValueError, match=r"end_radius must be finite and >= 0 \(a horizontal distance"):
+                fn(g, *args, end_radius=bad)
+        for bad in ("1", None, True, [1.0, 2.0]):
+            with pytest.raises(TypeError, match="end_radius must be a real number"):
+                fn(g, *args, end_radius=bad)
+    with pytest.raises(ValueError, match="got -0.5"):
+        line_of_sight(g.to_tin(), ok, ok, end_radius=-0.5)
+
+
+_radius = st.floats(0.0, 12.0)
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(_pt, _pt), min_size=1, max_size=20), _radius, _radius)
+@example([((0.1, 0.5, -2.0), (0.9, 0.5, 1.0))], 0.0, 2.5)
+def test_end_radius_monotone(pairs, r1, r2):
+    """A larger radius tests a sub-interval: the minimum never drops, visible stays visible."""
+    r1, r2 = sorted((r1, r2))
+    a = np.array([_world(_G, p) for p, _ in pairs])
+    b = np.array([_world(_G, q) for _, q in pairs])
+    tol = clearance_tolerance(_G)
+    m1 = min_clearance(_G, a, b, end_radius=r1)
+    m2 = min_clearance(_G, a, b, end_radius=r2)
+    # tol absorbs the rounding of the clearance at the new interval ends
+    assert (m2 >= m1 - tol).all()
+    v1 = line_of_sight(_G, a, b, end_radius=r1)
+    v2 = line_of_sight(_G, a, b, end_radius=r2)
+    assert not (v1 & ~v2).any()
+    np.testing.assert_array_equal(v2, m2 >= -tol)
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(_pt, _pt), min_size=1, max_size=20), _radius)
+@example([((0.0, 0.0, 0.0), (1.0, 1.0, 0.0)), ((0.5, 0.5, -1.0), (0.5, 0.5, 0.0))], 1.0)
+def test_end_radius_symmetric(pairs, r):
+    a = np.array([_world(_G, p) for p, _ in pairs])
+    b = np.array([_world(_G, q) for _, q in pairs])
+    np.testing.assert_array_equal(min_clearance(_G, a, b, end_radius=r), min_clearance(_G, b, a, end_radius=r))
+    tin = _G.to_tin()
+    np.testing.assert_array_equal(min_clearance(tin, a, b, end_radius=r), min_clearance(tin, b, a, end_radius=r))
+    for engine in ("grid", "embree"):
+        np.testing.assert_array_equal(
+            line_of_sight(_G, a, b, engine=engine, end_radius=r), line_of_sight(_G, b, a, engine=engine, end_radius=r)
+        )
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(_pt, _pt), min_size=1, max_size=20), _radius, st.floats(-5000.0, 5000.0))
+@example([((0.0, 0.5, -1.0), (1.0, 0.5, 0.0))], 3.0, 1234.5)
+def test_end_radius_unchanged_by_vertical_shift(pairs, r, shift):
+    a = np.array([_world(_G, p) for p, _ in pairs])
+    b = np.array([_world(_G, q) for _, q in pairs])
+    g2 = HeightGrid.from_coords(_G.z + shift, _G.xs, _G.ys)
+    up = np.array([0.0, 0.0, shift])
+    np.testing.assert_array_equal(
+        line_of_sight(_G, a, b, end_radius=r), line_of_sight(g2, a + up, b + up, end_radius=r)
+    )

@@ -26,6 +26,23 @@ is at least ``-tol`` for every t in [tau, 1 - tau].
 The surface of a HeightGrid is the piecewise-linear surface with every cell split along
 the (r, c)-(r+1, c+1) diagonal, identical to ``grid.to_tin()``.
 
+End radius
+----------
+``end_radius`` r >= 0 (default 0) is a horizontal distance. Around each end of a segment
+the surface is not tested within horizontal distance r of that end; the rest of the
+segment is tested exactly as above, including the underground rule at the ends of the
+tested part (a tested part that starts below the surface is blocked). With ``L_h`` the
+segment's horizontal length, the tested interval is
+
+    [max(tau, r / L_h), min(1 - tau, 1 - r / L_h)].
+
+A segment with ``L_h <= 2 r`` (for r > 0), or no longer than ``2 delta``, is visible and
+its clearance is ``inf``. ``end_radius = 0`` is the exact predicate above, bit for bit.
+This is the predicate of DEM ray casters that test only the cells strictly between
+observer and target (r = one cell). It matters for points lying below the surface under
+test (common after simplification): such a point can see over the surface once r covers
+the part of the segment that runs underground.
+
 Engines
 -------
 ``"grid"`` (HeightGrid only)
@@ -33,15 +50,15 @@ Engines
     clearance is linear between crossings, so checking every crossing is exact),
     accelerated by a min/max pyramid, compiled with numba and parallel over pairs.
 ``"embree"`` (any terrain; a HeightGrid goes through ``grid.to_tin()``)
-    Embree occlusion rays in float32 plus upward vertical rays from both trimmed ends
-    (the underground fix). It agrees with the exact answer on every pair whose minimum
+    Embree occlusion rays in float32 plus upward vertical rays from both ends of the
+    tested part (the underground fix). It agrees with the exact answer on every pair whose minimum
     clearance is farther than :func:`~terrainvis.visibility.embree.embree_tolerance`
     from zero.
 ``"auto"``
     ``"grid"`` for a HeightGrid, ``"embree"`` for a TIN.
 
 :func:`min_clearance` is always exact: the grid walk on a HeightGrid, and on a TIN a
-clip of the ground track against every face it crosses.
+clip of the ground track (over the tested interval) against every face it crosses.
 
 References
 ----------
@@ -53,7 +70,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_points, describe
+from .._validate import as_nonnegative_finite, as_points, describe
 from ..errors import OutsideFootprintError
 from ..terrain import HeightGrid, as_terrain
 
@@ -144,6 +161,12 @@ def _check_engine(engine, terrain) -> str:
     return engine
 
 
+def _check_end_radius(end_radius) -> float:
+    if isinstance(end_radius, (str, bytes)):
+        raise TypeError(f"end_radius must be a real number, got {describe(end_radius)}")
+    return as_nonnegative_finite(end_radius, "end_radius", "a horizontal distance in the terrain's x/y units")
+
+
 def _check_inside(terrain, pts: np.ndarray, name: str) -> None:
     if pts.shape[0] == 0:
         return
@@ -181,8 +204,11 @@ def _prepare_segments(terrain, a, b, operation: str):
 
 
 # ----------------------------------------------------------------- public API
-def min_clearance(terrain, a, b) -> np.ndarray:
-    """Exact minimum clearance of each segment a[i] -> b[i] over t in [tau, 1 - tau].
+def min_clearance(terrain, a, b, *, end_radius: float = 0.0) -> np.ndarray:
+    """Exact minimum clearance of each segment a[i] -> b[i] over its tested interval.
+
+    The tested interval is [tau, 1 - tau], narrowed by ``end_radius`` (see the module
+    docstring).
 
     Parameters
     ----------
@@ -190,13 +216,17 @@ def min_clearance(terrain, a, b) -> np.ndarray:
         A HeightGrid must be free of nodata.
     a, b : (m, 3) array_like
         Segment ends (x, y, z), inside the terrain's footprint.
+    end_radius : float, default 0.0
+        Horizontal distance (x/y units) around each end inside which the surface is not
+        tested. 0 gives the exact predicate.
 
     Returns
     -------
     (m,) float64
-        ``min_t z_seg(t) - surface(x(t), y(t))``; ``inf`` for segments no longer than
-        twice :func:`trim_length`. The segment is visible when this is
-        ``>= -clearance_tolerance(terrain)``.
+        ``min_t z_seg(t) - surface(x(t), y(t))`` over the tested interval; ``inf`` for
+        segments no longer than twice :func:`trim_length` or (for ``end_radius > 0``)
+        with a horizontal length of at most ``2 * end_radius``. The segment is visible
+        when this is ``>= -clearance_tolerance(terrain)``.
 
     Raises
     ------
@@ -211,19 +241,31 @@ def min_clearance(terrain, a, b) -> np.ndarray:
     >>> g = HeightGrid([[0.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 0.0]])
     >>> float(min_clearance(g, [[0.0, 1.0, 1.0]], [[2.0, 1.0, 1.0]])[0])
     -9.0
+
+    A point 1 below a slope (the surface falls from 2 at x = 0 to 0 at x = 1) looking
+    over flat ground: the segment is underground for x < 0.5, so it is blocked unless
+    the end radius covers that part. A radius of 1 leaves nothing to test.
+
+    >>> g = HeightGrid([[2.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    >>> a, b = [[0.0, 0.5, 1.0]], [[2.0, 0.5, 1.0]]
+    >>> [round(float(min_clearance(g, a, b, end_radius=r)[0]), 4) for r in (0.0, 0.25, 0.75, 1.0)]
+    [-1.0, -0.5, 0.5, inf]
     """
     a, b = _prepare_segments(terrain, a, b, "min_clearance")
+    end_radius = _check_end_radius(end_radius)
     delta = trim_length(terrain)
     if isinstance(terrain, HeightGrid):
         from .grid import grid_clearance
 
-        return grid_clearance(terrain, a, b, delta=delta, tol=clearance_tolerance(terrain), los=False)
+        return grid_clearance(
+            terrain, a, b, delta=delta, tol=clearance_tolerance(terrain), los=False, end_radius=end_radius
+        )
     from .tin import tin_clearance
 
-    return tin_clearance(terrain, a, b, delta=delta)
+    return tin_clearance(terrain, a, b, delta=delta, end_radius=end_radius)
 
 
-def line_of_sight(terrain, a, b, *, engine: str = "auto") -> np.ndarray:
+def line_of_sight(terrain, a, b, *, engine: str = "auto", end_radius: float = 0.0) -> np.ndarray:
     """Whether each pair of points a[i], b[i] sees each other.
 
     Parameters
@@ -234,6 +276,9 @@ def line_of_sight(terrain, a, b, *, engine: str = "auto") -> np.ndarray:
     engine : {"auto", "grid", "embree"}
         ``"grid"``: exact grid walk (HeightGrid only). ``"embree"``: Embree rays in
         float32 on the terrain's TIN. ``"auto"``: grid for a HeightGrid, Embree for a TIN.
+    end_radius : float, default 0.0
+        Horizontal distance around each end inside which the surface is not tested (see
+        the module docstring); 0 gives the exact predicate.
 
     Returns
     -------
@@ -248,18 +293,19 @@ def line_of_sight(terrain, a, b, *, engine: str = "auto") -> np.ndarray:
     """
     a, b = _prepare_segments(terrain, a, b, "line_of_sight")
     engine = _check_engine(engine, terrain)
+    end_radius = _check_end_radius(end_radius)
     delta = trim_length(terrain)
     if engine == "grid":
         from .grid import grid_clearance
 
         tol = clearance_tolerance(terrain)
-        return grid_clearance(terrain, a, b, delta=delta, tol=tol, los=True) >= -tol
+        return grid_clearance(terrain, a, b, delta=delta, tol=tol, los=True, end_radius=end_radius) >= -tol
     from .embree import embree_visible
 
-    return embree_visible(terrain, a, b, delta=delta)
+    return embree_visible(terrain, a, b, delta=delta, end_radius=end_radius)
 
 
-def visibility_matrix(terrain, points, *, engine: str = "auto") -> np.ndarray:
+def visibility_matrix(terrain, points, *, engine: str = "auto", end_radius: float = 0.0) -> np.ndarray:
     """Mutual visibility of every pair of points.
 
     Pairs are computed once (i < j) without building per-pair coordinate arrays on the
@@ -271,6 +317,9 @@ def visibility_matrix(terrain, points, *, engine: str = "auto") -> np.ndarray:
     points : (n, 3) array_like
         Points inside the footprint.
     engine : {"auto", "grid", "embree"}
+    end_radius : float, default 0.0
+        Horizontal distance around each end inside which the surface is not tested (see
+        the module docstring); 0 gives the exact predicate.
 
     Returns
     -------
@@ -290,11 +339,12 @@ def visibility_matrix(terrain, points, *, engine: str = "auto") -> np.ndarray:
     pts = np.ascontiguousarray(as_points(points, "points", 3), dtype=np.float64)
     _check_inside(terrain, pts, "points")
     engine = _check_engine(engine, terrain)
+    end_radius = _check_end_radius(end_radius)
     delta = trim_length(terrain)
     if engine == "grid":
         from .grid import grid_matrix
 
-        return grid_matrix(terrain, pts, delta=delta, tol=clearance_tolerance(terrain))
+        return grid_matrix(terrain, pts, delta=delta, tol=clearance_tolerance(terrain), end_radius=end_radius)
     from .embree import embree_matrix
 
-    return embree_matrix(terrain, pts, delta=delta)
+    return embree_matrix(terrain, pts, delta=delta, end_radius=end_radius)

@@ -1,11 +1,13 @@
 """Embree engine: line of sight by occlusion rays (embreex), with the underground fix.
 
-A segment a -> b is blocked when
+A segment a -> b is tested over ``t`` in [t0, 1 - t0], with ``t0 = tau = delta / |b - a|``
+(the trim) or, with an end radius r > 0, ``t0 = max(tau, r / |b - a|_h)`` (the horizontal
+length; nothing is tested when it is at most 2 r). It is blocked when
 
-* the trimmed segment ``a + t (b - a)``, ``t`` in [tau, 1 - tau], crosses the surface
-  (one occlusion ray from ``a + tau (b - a)`` along ``b - a`` with ``tfar = 1 - 2 tau``), or
-* either trimmed end lies below the surface (an upward vertical occlusion ray from that
-  end hits the surface exactly when the end is below it).
+* the tested part ``a + t (b - a)`` crosses the surface (one occlusion ray from
+  ``a + t0 (b - a)`` along ``b - a`` with ``tfar = 1 - 2 t0``), or
+* either end of the tested part lies below the surface (an upward vertical occlusion
+  ray from that end hits the surface exactly when the end is below it).
 
 The second rule catches segments that run underground and meet the surface only at
 their ends, which a surface-crossing query alone reports as visible.
@@ -120,8 +122,12 @@ def _tin_of(terrain):
     return terrain.to_tin() if isinstance(terrain, HeightGrid) else terrain
 
 
-def embree_visible(terrain, a, b, *, delta: float) -> np.ndarray:
-    """(m,) bool: Embree's line of sight for validated segments a[i] -> b[i]."""
+def embree_visible(terrain, a, b, *, delta: float, end_radius: float = 0.0) -> np.ndarray:
+    """(m,) bool: Embree's line of sight for validated segments a[i] -> b[i].
+
+    ``end_radius`` (a validated horizontal distance >= 0) shrinks the tested part as in
+    :func:`terrainvis.visibility.line_of_sight`.
+    """
     m = a.shape[0]
     out = np.ones(m, dtype=np.bool_)
     if m == 0:
@@ -130,11 +136,11 @@ def embree_visible(terrain, a, b, *, delta: float) -> np.ndarray:
     lift = 0.25 * embree_tolerance(terrain)
     for s in range(0, m, _CHUNK):
         e = min(m, s + _CHUNK)
-        out[s:e] = _visible_chunk(sc, a[s:e], b[s:e], delta, lift)
+        out[s:e] = _visible_chunk(sc, a[s:e], b[s:e], delta, end_radius, lift)
     return out
 
 
-def _visible_chunk(sc: EmbreeScene, a, b, delta, lift):
+def _visible_chunk(sc: EmbreeScene, a, b, delta, end_radius, lift):
     # canonical direction (the lexicographically smaller end first), as in the grid engine
     swap = (b[:, 0] < a[:, 0]) | (
         (b[:, 0] == a[:, 0]) & ((b[:, 1] < a[:, 1]) | ((b[:, 1] == a[:, 1]) & (b[:, 2] < a[:, 2])))
@@ -144,12 +150,18 @@ def _visible_chunk(sc: EmbreeScene, a, b, delta, lift):
     d = q - p
     length = np.sqrt((d * d).sum(axis=1))
     live = length > 2.0 * delta
+    if end_radius > 0.0:
+        lh = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+        live &= lh > 2.0 * end_radius
     vis = np.ones(a.shape[0], dtype=np.bool_)
     if not live.any():
         return vis
     p = p[live]
     d = d[live]
+    # start t0 of the tested interval [t0, 1 - t0] (as _kernels.interval_start)
     tau = delta / length[live]
+    if end_radius > 0.0:
+        tau = np.maximum(tau, end_radius / lh[live])
     start = p + tau[:, None] * d
     end = p + (1.0 - tau)[:, None] * d
     start[:, 2] += lift
@@ -166,7 +178,7 @@ def _visible_chunk(sc: EmbreeScene, a, b, delta, lift):
     return vis
 
 
-def embree_matrix(terrain, points, *, delta: float, chunk_pairs: int = _CHUNK) -> np.ndarray:
+def embree_matrix(terrain, points, *, delta: float, end_radius: float = 0.0, chunk_pairs: int = _CHUNK) -> np.ndarray:
     """(n, n) visibility matrix by Embree, pairs i < j in chunks of about ``chunk_pairs``."""
     n = points.shape[0]
     out = np.zeros((n, n), dtype=np.bool_)
@@ -187,7 +199,7 @@ def embree_matrix(terrain, points, *, delta: float, chunk_pairs: int = _CHUNK) -
         ii = np.repeat(rows, n - 1 - rows)
         starts = np.cumsum(n - 1 - rows) - (n - 1 - rows)
         jj = np.arange(ii.size) - np.repeat(starts, n - 1 - rows) + ii + 1
-        vis = _visible_chunk(sc, points[ii], points[jj], delta, lift)
+        vis = _visible_chunk(sc, points[ii], points[jj], delta, end_radius, lift)
         out[ii, jj] = vis
         out[jj, ii] = vis
         i = i2

@@ -143,12 +143,20 @@ def _local(points: np.ndarray, acc: GridAccel) -> np.ndarray:
     return out
 
 
-def grid_clearance(grid, a, b, *, delta: float, tol: float, los: bool) -> np.ndarray:
+def _walk_grid(grid, acc: GridAccel) -> _kernels.WalkGrid:
+    """The arrays the kernels read, grouped (no copies)."""
+    return _kernels.WalkGrid(grid.z, acc.xs, acc.ys, acc.ixw, acc.iyw, acc.pyr, acc.off, acc.nxl, acc.uniform, acc.ltop)
+
+
+def grid_clearance(grid, a, b, *, delta: float, tol: float, los: bool, end_radius: float = 0.0) -> np.ndarray:
     """Clearance of each segment a[i] -> b[i] on a HeightGrid (validated input).
 
-    With ``los`` False: the exact minimum clearance over the trimmed interval. With
-    ``los`` True: a value that is ``>= -tol`` exactly when the segment is visible (the
-    walk stops early). Segments no longer than ``2 * delta`` give ``inf``.
+    The segment is tested over ``[t0, 1 - t0]`` with ``t0 = max(delta / length,
+    end_radius / horizontal length)``. With ``los`` False: the exact minimum clearance
+    over that interval. With ``los`` True: a value that is ``>= -tol`` exactly when the
+    segment is visible (the walk stops early). Segments no longer than ``2 * delta``, or
+    (for ``end_radius > 0``) with a horizontal length of at most ``2 * end_radius``,
+    give ``inf``.
     """
     m = a.shape[0]
     out = np.empty(m, dtype=np.float64)
@@ -162,13 +170,12 @@ def grid_clearance(grid, a, b, *, delta: float, tol: float, los: bool) -> np.nda
     else:
         order = np.arange(m, dtype=np.int64)
     _kernels.grid_pairs(
-        grid.z, acc.xs, acc.ys, acc.ixw, acc.iyw, acc.uniform, acc.pyr, acc.off, acc.nxl, acc.ltop, la, lb, order,
-        float(delta), bool(los), float(tol), out,
+        _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los), float(tol), out
     )
     return out
 
 
-def grid_matrix(grid, points, *, delta: float, tol: float) -> np.ndarray:
+def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0.0) -> np.ndarray:
     """(n, n) visibility matrix of validated points on a HeightGrid (pairs i < j, parallel)."""
     n = points.shape[0]
     out = np.zeros((n, n), dtype=np.bool_)
@@ -177,7 +184,5 @@ def grid_matrix(grid, points, *, delta: float, tol: float) -> np.ndarray:
     acc = grid_accel(grid)
     order = _morton_order(points[:, :2], grid.extent).astype(np.int64)
     p = np.ascontiguousarray(_local(points, acc)[order])
-    _kernels.grid_matrix(
-        grid.z, acc.xs, acc.ys, acc.ixw, acc.iyw, acc.uniform, acc.pyr, acc.off, acc.nxl, acc.ltop, p, order, float(delta), float(tol), out
-    )
+    _kernels.grid_matrix(_walk_grid(grid, acc), p, order, float(delta), float(end_radius), float(tol), out)
     return out

@@ -17,9 +17,11 @@ from . import _kernels
 __all__ = ["tin_clearance"]
 
 
-def tin_clearance(tin, a, b, *, delta: float) -> np.ndarray:
+def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0) -> np.ndarray:
     """(m,) exact minimum clearance of each validated segment a[i] -> b[i] over ``tin``.
 
+    The segment is tested over ``[t0, 1 - t0]`` with ``t0 = max(delta / length,
+    end_radius / horizontal length)``; segments with nothing to test give ``inf``.
     Parts of a segment whose ground track leaves the TIN's faces (possible only on a
     TIN with holes or a non-convex footprint) do not count.
     """
@@ -44,6 +46,6 @@ def tin_clearance(tin, a, b, *, delta: float) -> np.ndarray:
     lb[:, 1] -= y0
     _kernels.tin_pairs(
         vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby,
-        la, lb, float(delta), eps, out,
+        la, lb, float(delta), float(end_radius), eps, out,
     )
     return out
