@@ -47,6 +47,8 @@ def as_points(value, name: str, dim: int, *, finite: bool = True) -> np.ndarray:
 
 
 def as_positive_finite(value, name: str) -> float:
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        raise TypeError(f"{name} must be a real number, got {describe(value)}")
     try:
         out = float(value)
     except (TypeError, ValueError) as exc:
@@ -58,7 +60,7 @@ def as_positive_finite(value, name: str) -> float:
 
 def as_nonnegative_finite(value, name: str, unit: str = "") -> float:
     """A finite real number >= 0 (``unit`` is named in the message, e.g. "z units")."""
-    if isinstance(value, (bool, np.bool_)):
+    if isinstance(value, (str, bytes, bool, np.bool_)):
         raise TypeError(f"{name} must be a real number, got {describe(value)}")
     try:
         out = float(value)

@@ -346,8 +346,8 @@ def _los(args) -> int:
         )
     a = np.column_stack([xy1, z1])
     b = np.column_stack([xy2, z2])
-    visible = line_of_sight(grid, a, b, **({"end_radius": args.end_radius} if args.end_radius else {}))
-    clear = min_clearance(grid, a, b, **({"end_radius": args.end_radius} if args.end_radius else {}))
+    visible = line_of_sight(grid, a, b, end_radius=args.end_radius)
+    clear = min_clearance(grid, a, b, end_radius=args.end_radius)
     print(f"{label}: observer {args.height:g} above the surface, target {args.target_height:g} above it")
     for k in range(a.shape[0]):
         low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius)

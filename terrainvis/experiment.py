@@ -251,9 +251,7 @@ def _run_unit(grid: HeightGrid, name: str, method: str, level: int, settings: Se
             max_error=meta["max_error"], rms_error=meta["rms_error"], simplify_seconds=meta["seconds"],
             volume_error=volume_error(grid, simplified) if settings.volume else np.nan, end_radius=radius,
         )
-        test_kw = {"engine": settings.engine}
-        if radius > 0:
-            test_kw["end_radius"] = radius
+        test_kw = {"engine": settings.engine, "end_radius": radius}
         # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
         t0 = time.perf_counter()
         visibility_matrix(simplified, sets[0][:2], **test_kw)

@@ -180,7 +180,7 @@ def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine,
     np.fill_diagonal(counted, False)
     k = as_int(n_candidates, "n_candidates", minimum=2)
     radius = as_nonnegative_finite(end_radius, "end_radius")
-    los_kw = {"engine": engine} | ({"end_radius": radius} if radius > 0 else {})
+    los_kw = {"engine": engine, "end_radius": radius}
     if n < 2:
         return pts.copy()
     ground = _ground(simplified, pts)
