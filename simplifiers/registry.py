@@ -58,6 +58,9 @@ class Method:
         methods), so that the pool stays busy to the end.
     style : (str, str)
         Matplotlib colour and marker of the method in figures.
+    cascades : bool
+        The method can continue from its own result at a finer level (``start=``), so a
+        comparison may simplify level k+1 from level k instead of from the grid.
     """
 
     name: str
@@ -69,6 +72,7 @@ class Method:
     halo: int | None = None
     cost_rank: int = 9
     style: tuple = ("k", "o")
+    cascades: bool = False
 
     def load(self):
         """The method's operator (regular) or build function (irregular)."""
@@ -87,8 +91,8 @@ METHODS: dict[str, Method] = {
     for m in (
         Method(
             "qec", "irregular", "simplifiers.quadric", "build",
-            "quadric edge collapse (Garland & Heckbert 1997) through pymeshlab",
-            options=("backend",), cost_rank=1, style=("tab:red", "v"),
+            "quadric edge collapse (Garland & Heckbert 1997): pymeshlab, fast-simplification above 1.2 M samples",
+            options=("backend", "start", "tile_samples"), cost_rank=1, style=("tab:red", "v"), cascades=True,
         ),
         Method(
             "greedy-cuts", "irregular", "simplifiers.greedy_cuts", "build",

@@ -7,6 +7,12 @@ dependencies are only touched by the functions that need them.
 from __future__ import annotations
 
 import importlib
+import os
+
+# pymeshlab and embreex ship an older TBB than numba's TBB threading layer accepts; numba
+# then warns once and falls back to OpenMP. Ask for OpenMP first (unless the user chose),
+# so the kernels get the same threads without the warning.
+os.environ.setdefault("NUMBA_THREADING_LAYER_PRIORITY", "omp tbb workqueue")
 
 __version__ = "0.1.0"
 

@@ -11,7 +11,8 @@ The run goes in four stages:
 1. **plan**: every argument is validated up front (methods, levels against each
    terrain's size, relocations, engine, predicate, ...) and the work is split into
    *units*, one per terrain x method x level (a unit simplifies once, then runs every
-   point set and relocation), the most expensive first;
+   point set and relocation), run as tasks of one unit (or, with ``cascade``, of every
+   level of a method that continues from its finer result), the most expensive first;
 2. **resume**: with ``out_csv`` the results go to a :class:`~terrainvis.results.ResultStore`,
    which keeps the complete units of an earlier run with the same settings and refuses
    a resume with other settings;
@@ -65,7 +66,7 @@ COLUMNS = (
     "accuracy", "visible_kept", "blocked_kept", "accuracy_paper",
     "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
     "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
-    "max_error", "rms_error", "volume_error", "end_radius",
+    "max_error", "rms_error", "volume_error", "end_radius", "backend",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
     "seed", "max_distance", "distance_unit", "offset", "error",
 )
@@ -97,6 +98,7 @@ class Settings:
     predicate: str = "exact"
     volume: bool = True
     repeats: int = 3
+    cascade: bool = False
 
 
 #: The defaults of :func:`compare` and ``terrainvis compare``.
@@ -223,8 +225,26 @@ def simplified_path(save_dir, name: str, method: str, level: int) -> Path:
     return Path(save_dir) / f"{name}__{method}__level{level}.npz"
 
 
-def _run_unit(grid: HeightGrid, name: str, method: str, level: int, settings: Settings, save_dir) -> list[dict]:
-    """Simplify once, then every point set and relocation: the rows of one unit (terrain ``name``)."""
+def _run_unit(grid: HeightGrid, name: str, method: str, levels: tuple, settings: Settings, save_dir) -> list[dict]:
+    """The rows of one task: simplify at each level, then every point set and relocation.
+
+    A task is one level, or, with ``settings.cascade`` and a method that can continue
+    from a finer result (:attr:`simplifiers.Method.cascades`), all the levels of a
+    terrain and method, finest first, each simplification starting from the previous one.
+    """
+    from simplifiers import METHODS
+
+    sets = point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
+    rows, previous = [], None
+    for level in levels:
+        start = previous if (settings.cascade and METHODS[method].cascades) else None
+        level_rows, previous = _level_rows(grid, name, method, level, settings, save_dir, sets, start)
+        rows += level_rows
+    return rows
+
+
+def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
+    """The rows of one terrain x method x level, and the simplified terrain (None when it failed)."""
     from simplifiers import METHODS, simplify
 
     from .deviation import volume_error
@@ -238,10 +258,10 @@ def _run_unit(grid: HeightGrid, name: str, method: str, level: int, settings: Se
         "nbytes_original": grid.nbytes, "seed": settings.seed, "distance_unit": settings.distance_unit,
         "offset": settings.offset, "error": "",
     }
-    sets = point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
     rows = []
+    simplified = None
     try:
-        simplified = simplify(grid, method, level)
+        simplified = simplify(grid, method, level, **({} if start is None else {"start": start}))
         if save_dir is not None:
             _save(simplified, simplified_path(save_dir, name, method, level))
         meta = simplified.attrs
@@ -250,6 +270,7 @@ def _run_unit(grid: HeightGrid, name: str, method: str, level: int, settings: Se
             n_vertices=meta["n_vertices"], size_fraction=meta["n_vertices"] / grid.size, nbytes=meta["nbytes"],
             max_error=meta["max_error"], rms_error=meta["rms_error"], simplify_seconds=meta["seconds"],
             volume_error=volume_error(grid, simplified) if settings.volume else np.nan, end_radius=radius,
+            backend=str(meta.get("backend", "")),
         )
         test_kw = {"engine": settings.engine, "end_radius": radius}
         # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
@@ -277,7 +298,8 @@ def _run_unit(grid: HeightGrid, name: str, method: str, level: int, settings: Se
             dict(base, set=s, relocation=how, max_distance=d, error=message)
             for s in range(settings.n_sets) for how in settings.relocations for d in settings.max_distance
         ]
-    return rows
+        simplified = None
+    return rows, simplified
 
 
 def _row(base, s, how, d, t_test, t_true, counts) -> dict:
@@ -362,7 +384,7 @@ def _distances(value) -> tuple:
 
 
 def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, distance_unit, offset,
-              engine, predicate, volume, repeats) -> Settings:
+              engine, predicate, volume, repeats, cascade) -> Settings:
     from simplifiers import METHODS
 
     from .visibility import ENGINES
@@ -380,8 +402,9 @@ def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_d
     off = as_float_array(offset, "offset")
     if off.ndim != 0 or not np.isfinite(off):
         raise ValueError(f"offset must be a finite number, got {describe(offset)}")
-    if not isinstance(volume, (bool, np.bool_)):
-        raise TypeError(f"volume must be True or False, got {describe(volume)}")
+    for flag, value in (("volume", volume), ("cascade", cascade)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{flag} must be True or False, got {describe(value)}")
     return Settings(
         methods=methods, levels=_levels(levels, grids),
         relocations=_names(relocations, "relocations", RELOCATIONS + (ORACLE,), RELOCATIONS),
@@ -389,7 +412,7 @@ def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_d
         seed=as_int(seed, "seed", minimum=0), max_distance=max_distance,
         distance_unit=choice(distance_unit, "distance_unit", DISTANCE_UNITS), offset=float(off), engine=engine,
         predicate=choice(predicate, "predicate", PREDICATES), volume=bool(volume),
-        repeats=as_int(repeats, "repeats", minimum=1),
+        repeats=as_int(repeats, "repeats", minimum=1), cascade=bool(cascade),
     )
 
 
@@ -401,12 +424,24 @@ def _fingerprint(grid: HeightGrid) -> str:
     return h.hexdigest()[:16]
 
 
-def _units(grids: dict, settings: Settings) -> list[tuple]:
-    """Every (terrain, method, level), the most expensive first so the pool stays busy to the end."""
+def _tasks(grids: dict, settings: Settings, done=frozenset()) -> list[tuple]:
+    """The tasks as (terrain, method, levels), the most expensive first so the pool stays busy to the end.
+
+    A task is one level, or all the levels of a method that cascades (``settings.cascade``).
+    Tasks whose every unit is ``done`` are left out; a cascade with some levels done runs
+    them all again (each level starts from the previous one), and their rows are dropped.
+    """
     from simplifiers import METHODS
 
-    units = [(t, m, lv) for t in grids for m in settings.methods for lv in settings.levels]
-    return sorted(units, key=lambda u: (-grids[u[0]].size, METHODS[u[1]].cost_rank, u[2]))
+    tasks = []
+    for t in grids:
+        for m in settings.methods:
+            if settings.cascade and METHODS[m].cascades:
+                groups = [tuple(sorted(settings.levels))]
+            else:
+                groups = [(lv,) for lv in settings.levels]
+            tasks += [(t, m, g) for g in groups if any((t, m, lv) not in done for lv in g)]
+    return sorted(tasks, key=lambda u: (-grids[u[0]].size, METHODS[u[1]].cost_rank, u[2]))
 
 
 def _order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
@@ -452,6 +487,7 @@ def compare(
     predicate: str = DEFAULTS.predicate,
     volume: bool = DEFAULTS.volume,
     repeats: int = DEFAULTS.repeats,
+    cascade: bool = DEFAULTS.cascade,
     workers: int | None = None,
     client=None,
     out_csv=None,
@@ -496,6 +532,11 @@ def compare(
         Compute the volume between T and S(T) (:func:`terrainvis.volume_error`).
     repeats : int
         Each visibility matrix is timed this many times; the fastest run is kept.
+    cascade : bool
+        Simplify each level of a method that can (QEC) from the previous, finer level's
+        result instead of from T: one decimation pass instead of one per level. It
+        changes what those methods compute (see the README for by how much); False, the
+        default, simplifies every level from T as the paper does.
     workers : int, optional
         Processes of the local pool (default: the number of CPUs; 1 runs in this process).
         Workers are started with ``spawn``, which imports the caller's ``__main__``
@@ -541,18 +582,19 @@ def compare(
         raise TypeError("terrains must be a terrain, a list of terrains or a dict of them, got None")
     grids = resolve_terrains(terrains)
     settings = _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, distance_unit,
-                         offset, engine, predicate, volume, repeats)
+                         offset, engine, predicate, volume, repeats, cascade)
     workers = check_workers(workers)
     client = check_client(client)
-    units = _units(grids, settings)
 
     store = None
+    done = frozenset()
     if out_csv is not None:
         record = asdict(settings)
         record["terrains"] = {name: _fingerprint(g) for name, g in grids.items()}
         per_unit = settings.n_sets * len(settings.relocations) * len(settings.max_distance)
         store = ResultStore(out_csv, record, COLUMNS, UNIT_KEY, lambda key: per_unit, resume=resume)
-        units = [u for u in units if u not in store.done]
+        done = frozenset(store.done)
+    tasks = _tasks(grids, settings, done)
     if save_dir is not None:
         from ._fileio import check_writable_dir
 
@@ -560,20 +602,22 @@ def compare(
 
     from tqdm.auto import tqdm
 
-    if progress and units and _kernels_cached(settings) is False:
+    todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
+    if progress and tasks and _kernels_cached(settings) is False:
         tqdm.write("terrainvis: compiling numba kernels (first run only, about half a minute)...", file=sys.stderr)
-    bar = tqdm(total=len(units), desc="compare", unit="unit", file=sys.stderr, disable=not (progress and units))
+    bar = tqdm(total=todo, desc="compare", unit="unit", file=sys.stderr, disable=not (progress and tasks))
     new_rows: list[dict] = []
 
     def collect(key, rows):
+        rows = [r for r in rows if (r["terrain"], r["method"], r["level"]) not in done]
         new_rows.extend(rows)
         if store is not None:
             store.add(rows)
-        bar.update(1)
+        bar.update(len({r["level"] for r in rows}))
 
-    tasks = [((t, m, lv), (grids[t], t, m, lv, settings, save_dir)) for t, m, lv in units]
+    work = [((t, m, g), (grids[t], t, m, g, settings, save_dir)) for t, m, g in tasks]
     try:
-        run_units(tasks, _run_unit, on_result=collect, workers=workers, client=client)
+        run_units(work, _run_unit, on_result=collect, workers=workers, client=client)
     finally:
         bar.close()
 

@@ -166,7 +166,7 @@ def test_incremental_csv_and_resume(small, tmp_path, monkeypatch, serial):
         compare(small, workers=1, out_csv=out, **_kw())
     on_disk = pd.read_csv(out)
     assert len(on_disk) == 2 * 6  # the two finished units (2 sets x 3 relocations each) are on disk
-    finished = {tuple(u) for u in on_disk[["terrain", "method", "level"]].drop_duplicates().to_numpy().tolist()}
+    finished = {(t, m, (lv,)) for t, m, lv in on_disk[["terrain", "method", "level"]].drop_duplicates().to_numpy().tolist()}
     monkeypatch.setattr(experiment, "_run_unit", real)
     rerun = []
     monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
@@ -223,7 +223,7 @@ def test_a_cut_off_last_row_is_dropped_with_a_warning(small, tmp_path, monkeypat
     monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
     with pytest.warns(RuntimeWarning, match="dropped a cut-off last row"):
         df = compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **kw)
-    assert rerun == [("a", "lls", 1)]  # only the unit of the damaged row runs again
+    assert rerun == [("a", "lls", (1,))]  # only the unit of the damaged row runs again
     pd.testing.assert_frame_equal(df[STABLE], full[STABLE], check_dtype=False)
 
 
@@ -321,3 +321,36 @@ def test_oracle_rows_bound_the_practical_ones(small):
                  **_kw(methods=["lls"], levels=[3], n_sets=1))
     acc = df.set_index("relocation")["accuracy"]
     assert acc["oracle"] >= acc[["identity", "full", "half"]].max()
+
+
+def test_cascade_continues_each_qec_level_from_the_previous(small, tmp_path, monkeypatch):
+    from simplifiers import simplify
+
+    from terrainvis import experiment
+
+    kw = _kw(methods=["qec", "lls"], levels=[1, 2], n_sets=1)
+    g = {"a": small["a"]}
+    independent = compare(g, workers=1, **kw)
+    cascaded = compare(g, workers=1, cascade=True, **kw)
+    s1 = simplify(small["a"], "qec", 1)
+    s2 = simplify(small["a"], "qec", 2, start=s1)
+    row = cascaded[(cascaded.method == "qec") & (cascaded.level == 2)].iloc[0]
+    assert (row["n_vertices"], row["max_error"]) == (s2.n_vertices, s2.attrs["max_error"])
+    same = ["lls"]  # methods that cannot cascade are unchanged, and so is QEC's first level
+    pd.testing.assert_frame_equal(cascaded[cascaded.method.isin(same)][MEASURED].reset_index(drop=True),
+                                  independent[independent.method.isin(same)][MEASURED].reset_index(drop=True))
+    assert cascaded[(cascaded.method == "qec") & (cascaded.level == 1)]["max_error"].iloc[0] == s1.attrs["max_error"]
+    # resume after the cascade's first level: the task runs both levels again, rows are not doubled
+    out = tmp_path / "results.csv"
+    full = compare(g, workers=1, cascade=True, out_csv=out, **kw)
+    lines = out.read_text().splitlines()
+    level2 = [i for i, line in enumerate(lines) if ",qec,irregular,2," in line]
+    assert len(level2) == 3  # 1 set x 3 relocations: drop them as if the run had stopped there
+    out.write_text("\n".join(line for i, line in enumerate(lines) if i not in level2) + "\n")
+    rerun = []
+    real = experiment._run_unit
+    monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
+    again = compare(g, workers=1, cascade=True, out_csv=out, resume=True, **kw)
+    assert rerun == [("a", "qec", (1, 2))]
+    assert not again.duplicated(KEYS).any() and len(again) == len(full)
+    pd.testing.assert_frame_equal(again[STABLE], full[STABLE], check_dtype=False)
