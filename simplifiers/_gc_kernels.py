@@ -15,17 +15,46 @@ Data structures
   vertex), ``COVERED`` (in a finished triangle or on the interior of a front edge) or
   ``VERTEX``. A bite may only reach a FREE sample; a COVERED one would overlap the
   finished region or make a T-junction.
-* The front is a set of closed counter-clockwise loops of *nodes* (a doubly linked list:
-  ``vert``, ``nxt``, ``prv``, ``alive``, ``ver``); one vertex may own several nodes when
-  the front touches itself. The free region lies to the left of every front edge
-  ``vert[n] -> vert[nxt[n]]``.
-* A bucket grid (``BS`` x ``BS`` samples per bucket) lists, per bucket, the nodes whose
-  edge's bounding box overlaps it (entries go stale when an edge changes and are skipped).
+* ``nodes`` (n, 6) int64, one row per front node, columns ``VERT`` (its sample), ``NXT``
+  and ``PRV`` (the doubly linked loop), ``ALIVE``, ``VER`` (how often its edge changed)
+  and ``STAMP`` (the last query that met it). The front is a set of closed
+  counter-clockwise loops; one vertex may own several nodes when the front touches
+  itself. The free region lies to the left of every front edge ``VERT[n] ->
+  VERT[NXT[n]]``.
+* A bucket grid (``BS`` x ``BS`` samples per bucket): ``bhead[b]`` starts a linked list
+  in ``pool`` (n, 3) int64 (columns ``P_NODE``, ``P_NEXT``, ``P_VER``) of the nodes
+  whose edge's bounding box overlaps bucket b. An entry records the edge version it was
+  made for; an entry whose node died or whose edge changed since is unlinked when a
+  query meets it, and its row goes to a free list for reuse.
 * A FIFO queue of ``(node, version)``: every edge made or changed is pushed once; an entry
   whose version no longer matches is skipped.
+* ``scr`` (``N_SCR``,) int64: the pool's used rows and free list (``S_USED``,
+  ``S_FREE``), the query counter for the stamps (``S_QID``) and two outputs of an
+  evaluation (``S_BLOCKER``, ``S_APEX_NODE``).
+
+Counters
+--------
+``counts`` (``N_COUNTS``,) int64, read through the named indices: ``N_EARS`` (triangles
+adding no vertex: ears and connections to the front), ``N_BITES`` (triangles adding a
+vertex, fallback insertions included), ``N_SPLITS`` (fallback insertions), ``STATUS``
+(``DONE``; ``STUCK``: an edge found no valid triangle; ``STEP_LIMIT``; ``OVER_BUDGET``:
+stopped early because the vertex count passed ``max_vertices``), ``N_EVAL_EAR``,
+``N_EVAL_BITE``, ``N_EVAL_SPLIT`` (triangles evaluated by each step), ``N_CANDIDATES``
+(fallback candidates gathered), ``N_VERTICES`` (vertices so far: the initial front's
+plus one per bite) and ``N_COVERED`` (samples no longer free: in a finished triangle or
+on the front).
+
+Speed
+-----
+The helpers called in the inner loops allocate nothing and are compiled without the
+Numba runtime (``_nrt=False``): a function that takes arrays otherwise increments and
+decrements an atomic reference count per array on every call, which took half of the
+run time. Only :func:`greedy_cuts_front` and the rarely called growth helpers allocate.
 """
 
 from __future__ import annotations
+
+import math
 
 import numba as nb
 import numpy as np
@@ -36,28 +65,51 @@ VERTEX = 2
 
 BS = 8  # bucket side in samples
 
+# evaluation results
 OK = 0
 ERR = 1
 GEO = 2
 BAD = 3
 
+# columns of ``nodes``
+VERT, NXT, PRV, ALIVE, VER, STAMP = range(6)
+# columns of ``pool``
+P_NODE, P_NEXT, P_VER = range(3)
+# scalar state (indices into ``scr``)
+S_USED, S_FREE, S_QID, S_BLOCKER, S_APEX_NODE = range(5)
+N_SCR = 5
 
-@nb.njit(cache=True, nogil=True)
+# counters (indices into ``counts``)
+(N_EARS, N_BITES, N_SPLITS, STATUS, N_EVAL_EAR, N_EVAL_BITE, N_EVAL_SPLIT, N_CANDIDATES, N_VERTICES,
+ N_COVERED) = range(10)
+N_COUNTS = 10
+
+# values of counts[STATUS]
+DONE = 0
+STUCK = 1
+STEP_LIMIT = 2
+OVER_BUDGET = 3
+
+_HOT = {"cache": True, "nogil": True, "_nrt": False}  # helpers that allocate nothing
+
+
+@nb.njit(**_HOT)
 def _orient(ax, ay, bx, by, cx, cy):
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
 @nb.njit(cache=True, nogil=True)
 def _grow(arr, n):
-    """``arr`` itself when it holds index ``n``, else a copy twice as long."""
+    """``arr`` itself when it has a row ``n``, else a copy with twice the rows."""
     if n < arr.shape[0]:
         return arr
-    new = np.empty(max(2 * arr.shape[0], n + 1), dtype=arr.dtype)
+    shape = (max(2 * arr.shape[0], n + 1),) + arr.shape[1:]
+    new = np.empty(shape, dtype=arr.dtype)
     new[: arr.shape[0]] = arr
     return new
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(**_HOT)
 def _edge_value(u, w, s, gx, gy, zf, cols):
     """Height at sample ``s`` of the segment u-w, computed the same way from either side."""
     p = min(u, w)
@@ -81,6 +133,11 @@ def boundary_chain(ids, gx, gy, zf, cols, eps):
     ----------
     ids : (m,) int64
         Linear sample indices along the side, in order (m >= 2).
+    gx, gy : (cols,), (rows,) float64
+        Plane-space coordinates.
+    zf : (rows * cols,) float64
+        The heights, row-major.
+    cols : int
     eps : (rows * cols,) float64
         Allowed vertical error at each sample.
 
@@ -117,7 +174,68 @@ def boundary_chain(ids, gx, gy, zf, cols, eps):
     return keep[:k].copy()
 
 
+@nb.njit(**_HOT)
+def _chain_segments(z, line, along_rows, coord, eps):
+    """Segments of the greedy longest eps-valid chain along one row (or column) of z.
+
+    The same greedy rule as :func:`boundary_chain`, in O(length): the slopes from the
+    chain's last vertex that keep every sample so far within ``eps`` form an interval,
+    narrowed sample by sample, and the chain ends where the next sample leaves it.
+    """
+    m = coord.shape[0]
+    count = 0
+    i = 0
+    while i < m - 1:
+        zi = z[line, i] if along_rows else z[i, line]
+        smin = -np.inf
+        smax = np.inf
+        j = i + 1
+        while j < m:
+            zj = z[line, j] if along_rows else z[j, line]
+            d = coord[j] - coord[i]
+            s = (zj - zi) / d
+            if s < smin or s > smax:
+                break
+            smin = max(smin, (zj - eps - zi) / d)
+            smax = min(smax, (zj + eps - zi) / d)
+            j += 1
+        i = j - 1
+        count += 1
+    return count
+
+
 @nb.njit(cache=True, nogil=True)
+def line_segments(z, gx, gy, rows, cols, eps):
+    """Total segments of the greedy 1-D eps-chains along the given rows and columns of z.
+
+    Parameters
+    ----------
+    z : (R, C) float64
+    gx, gy : (C,), (R,) float64
+        Plane-space coordinates of the columns and rows.
+    rows, cols : (p,), (q,) int64
+        The rows and the columns to follow.
+    eps : float
+        Allowed vertical error.
+
+    Returns
+    -------
+    (int, int)
+        Segments along the rows, and along the columns. Divided by the lengths walked
+        they are 1-D vertex densities: the estimate of the triangulation's density that
+        :mod:`simplifiers.greedy_cuts` starts its search on ε from.
+    """
+    along_r = 0
+    for k in range(rows.shape[0]):
+        along_r += _chain_segments(z, rows[k], True, gx, eps)
+    along_c = 0
+    for k in range(cols.shape[0]):
+        along_c += _chain_segments(z, cols[k], False, gy, eps)
+    return along_r, along_c
+
+
+# ----------------------------------------------------------------- scan conversion
+@nb.njit(**_HOT)
 def _row_range(y, xa, ya, xb, yb, xc, yc):
     """x-interval of triangle abc on the horizontal line at y (lo > hi when empty)."""
     lo = np.inf
@@ -141,14 +259,30 @@ def _row_range(y, xa, ya, xb, yb, xc, yc):
     return lo, hi
 
 
-@nb.njit(cache=True, nogil=True)
-def _scan(ia, ib, ic, gx, gy, zf, cols, eps, occ, mark):
+@nb.njit(**_HOT)
+def _first_at_least(gx, v, lo, hi):
+    """The first index i in [lo, hi] with gx[i] >= v (hi + 1 when none); gx increasing."""
+    hi += 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if gx[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@nb.njit(**_HOT)
+def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
     """Scan-convert triangle (ia, ib, ic) (counter-clockwise) over the samples.
 
-    With ``mark`` False: True when every sample s in the closed triangle lies within
-    ``eps[s]`` of it (samples on an edge are measured against that edge, the same way from either side;
-    the others against the plane), stopping at the first failure. With ``mark`` True: set
-    every FREE sample of the closed triangle to COVERED and return True.
+    With ``mark`` False: 0 when every sample s in the closed triangle lies within
+    ``eps[s]`` of it (samples on an edge are measured against that edge, the same way
+    from either side; the others against the plane), -1 at the first that does not.
+    With ``mark`` True: set every FREE sample of the closed triangle to COVERED and
+    return how many there were. A row's candidate columns come from its x-interval,
+    widened by a rounding margin (index space) or by one column (world space); exact
+    orientation tests then decide.
     """
     ca = ia % cols
     ra = ia // cols
@@ -166,20 +300,20 @@ def _scan(ia, ib, ic, gx, gy, zf, cols, eps, occ, mark):
     zb = zf[ib]
     zc = zf[ic]
     area2 = _orient(xa, ya, xb, yb, xc, yc)
-    ncols = gx.shape[0]
-    r0 = min(ra, rb, rc)
-    r1 = max(ra, rb, rc)
-    for r in range(r0, r1 + 1):
+    cmin = min(ca, cb, cc)
+    cmax = max(ca, cb, cc)
+    newly = 0
+    for r in range(min(ra, rb, rc), max(ra, rb, rc) + 1):
         y = gy[r]
         lo, hi = _row_range(y, xa, ya, xb, yb, xc, yc)
         if lo > hi:
             continue
-        c0 = np.searchsorted(gx, lo) - 1
-        c1 = np.searchsorted(gx, hi) + 1
-        if c0 < 0:
-            c0 = 0
-        if c1 > ncols - 1:
-            c1 = ncols - 1
+        if index_space:
+            c0 = max(cmin, int(math.ceil(lo - 1e-7)))
+            c1 = min(cmax, int(math.floor(hi + 1e-7)))
+        else:
+            c0 = max(cmin, _first_at_least(gx, lo, cmin, cmax) - 1)
+            c1 = min(cmax, _first_at_least(gx, hi, cmin, cmax))
         for c in range(c0, c1 + 1):
             x = gx[c]
             o1 = _orient(xa, ya, xb, yb, x, y)  # edge ab
@@ -195,6 +329,7 @@ def _scan(ia, ib, ic, gx, gy, zf, cols, eps, occ, mark):
             if mark:
                 if occ[r, c] == FREE:
                     occ[r, c] = COVERED
+                    newly += 1
                 continue
             if s == ia or s == ib or s == ic:
                 continue
@@ -207,16 +342,17 @@ def _scan(ia, ib, ic, gx, gy, zf, cols, eps, occ, mark):
             else:
                 zt = (o2 * za + o3 * zb + o1 * zc) / area2
             if abs(zt - zf[s]) > eps[s]:
-                return False
-    return True
+                return -1
+    return newly
 
 
-@nb.njit(cache=True, nogil=True)
-def _cone_contains(e, wx, wy, vert, nxt, prv, gx, gy, cols):
+# ----------------------------------------------------------------- front queries
+@nb.njit(**_HOT)
+def _cone_contains(e, wx, wy, nodes, gx, gy, cols):
     """True when direction (wx, wy) lies strictly inside the free angle at node e."""
-    v = vert[e]
-    q = vert[nxt[e]]
-    p = vert[prv[e]]
+    v = nodes[e, VERT]
+    q = nodes[nodes[e, NXT], VERT]
+    p = nodes[nodes[e, PRV], VERT]
     vx = gx[v % cols]
     vy = gy[v // cols]
     d1x = gx[q % cols] - vx
@@ -235,8 +371,30 @@ def _cone_contains(e, wx, wy, vert, nxt, prv, gx, gy, cols):
     return c1 > 0.0
 
 
-@nb.njit(cache=True, nogil=True)
-def _node_at(P, ia, ib, vert, nxt, prv, alive, bhead, pool_node, pool_next, nbx, gx, gy, cols):
+@nb.njit(**_HOT)
+def _next_live(b, prev, k, nodes, pool, bhead, scr):
+    """The first live entry of bucket b from entry ``k`` on (-1 at the end).
+
+    ``prev`` is the live entry before ``k`` (-1: k is the head). Stale entries met on
+    the way (their node died or its edge changed since) are unlinked and freed.
+    """
+    while k >= 0:
+        e = pool[k, P_NODE]
+        if nodes[e, ALIVE] != 0 and pool[k, P_VER] == nodes[e, VER]:
+            return k
+        nk = pool[k, P_NEXT]
+        if prev < 0:
+            bhead[b] = nk
+        else:
+            pool[prev, P_NEXT] = nk
+        pool[k, P_NEXT] = scr[S_FREE]
+        scr[S_FREE] = k
+        k = nk
+    return -1
+
+
+@nb.njit(**_HOT)
+def _node_at(P, ia, ib, nodes, pool, bhead, nbx, scr, gx, gy, cols):
     """The front node of vertex P whose free angle holds triangle (ia, ib, P), or -1."""
     cp = P % cols
     rp = P // cols
@@ -245,25 +403,26 @@ def _node_at(P, ia, ib, vert, nxt, prv, alive, bhead, pool_node, pool_next, nbx,
     yp = gy[rp]
     wx = gx[ia % cols] + gx[ib % cols] - 2.0 * xp
     wy = gy[ia // cols] + gy[ib // cols] - 2.0 * yp
-    k = bhead[b]
+    prev = -1
+    k = _next_live(b, -1, bhead[b], nodes, pool, bhead, scr)
     while k >= 0:
-        e = pool_node[k]
-        k = pool_next[k]
-        if alive[e] == 0 or vert[e] != P:
-            continue
-        if _cone_contains(e, wx, wy, vert, nxt, prv, gx, gy, cols):
+        e = pool[k, P_NODE]
+        if nodes[e, VERT] == P and _cone_contains(e, wx, wy, nodes, gx, gy, cols):
             return e
+        prev = k
+        k = _next_live(b, prev, pool[k, P_NEXT], nodes, pool, bhead, scr)
     return -1
 
 
-@nb.njit(cache=True, nogil=True)
-def _geom(ia, ib, ic, vert, nxt, alive, bhead, pool_node, pool_next, nbx, stamp, qid, gx, gy, cols, out):
+@nb.njit(**_HOT)
+def _geom(ia, ib, ic, nodes, pool, bhead, nbx, scr, gx, gy, cols):
     """True when triangle (ia, ib, ic) lies in the free region without touching the front.
 
     Rejects the triangle when a front edge meets its open interior (separating-axis test,
     touching allowed) or a front vertex other than its corners lies in the closed
-    triangle. ``out[0]`` receives the blocking node closest to edge ab in the Delaunay
-    sense (the best vertex to connect to), or -1.
+    triangle. ``scr[S_BLOCKER]`` receives the blocking node closest to edge ab in the
+    Delaunay sense (the best vertex to connect to; ties go to the smaller sample index,
+    then the smaller node), or -1.
     """
     ca = ia % cols
     ra = ia // cols
@@ -288,18 +447,24 @@ def _geom(ia, ib, ic, vert, nxt, alive, bhead, pool_node, pool_next, nbx, stamp,
     r1 = max(ra, rb, rc)
     ok = True
     best_key = np.inf
-    out[0] = -1
+    best_pid = -1
+    best_node = -1
+    scr[S_QID] += 1
+    qid = scr[S_QID]
     for by in range(r0 // BS, r1 // BS + 1):
         for bx in range(c0 // BS, c1 // BS + 1):
-            k = bhead[by * nbx + bx]
+            b = by * nbx + bx
+            prev = -1
+            k = _next_live(b, -1, bhead[b], nodes, pool, bhead, scr)
             while k >= 0:
-                e = pool_node[k]
-                k = pool_next[k]
-                if alive[e] == 0 or stamp[e] == qid:
+                e = pool[k, P_NODE]
+                prev = k
+                k = _next_live(b, prev, pool[k, P_NEXT], nodes, pool, bhead, scr)
+                if nodes[e, STAMP] == qid:
                     continue
-                stamp[e] = qid
-                iu = vert[e]
-                iw = vert[nxt[e]]
+                nodes[e, STAMP] = qid
+                iu = nodes[e, VERT]
+                iw = nodes[nodes[e, NXT], VERT]
                 cu = iu % cols
                 ru = iu // cols
                 cw = iw % cols
@@ -334,60 +499,83 @@ def _geom(ia, ib, ic, vert, nxt, alive, bhead, pool_node, pool_next, nbx, stamp,
                         if (o1 >= 0.0 and o2 >= 0.0 and o3 >= 0.0) or (o1 <= 0.0 and o2 <= 0.0 and o3 <= 0.0):
                             sep = True
                     blocked = not sep
-                if blocked:
-                    ok = False
-                    for j in range(2):
-                        if j == 0:
-                            node = e
-                            px = ux
-                            py = uy
-                            pid = iu
-                        else:
-                            node = nxt[e]
-                            px = wx
-                            py = wy
-                            pid = iw
-                        if pid == ia or pid == ib:
-                            continue
-                        den = (px - mx) * nx + (py - my) * ny
-                        if den <= 0.0:
-                            continue
-                        key = ((px - mx) ** 2 + (py - my) ** 2 - half2) / (2.0 * den)
-                        if key < best_key:
-                            best_key = key
-                            out[0] = node
+                if not blocked:
+                    continue
+                ok = False
+                for j in range(2):
+                    if j == 0:
+                        node = e
+                        px = ux
+                        py = uy
+                        pid = iu
+                    else:
+                        node = nodes[e, NXT]
+                        px = wx
+                        py = wy
+                        pid = iw
+                    if pid == ia or pid == ib:
+                        continue
+                    den = (px - mx) * nx + (py - my) * ny
+                    if den <= 0.0:
+                        continue
+                    key = ((px - mx) ** 2 + (py - my) ** 2 - half2) / (2.0 * den)
+                    tie = key == best_key and (pid < best_pid or (pid == best_pid and node < best_node))
+                    if key < best_key or tie:
+                        best_key = key
+                        best_pid = pid
+                        best_node = node
+    scr[S_BLOCKER] = best_node
     return ok
 
 
-@nb.njit(cache=True, nogil=True)
-def _evaluate(ia, ib, P, occ, zf, eps, vert, nxt, prv, alive, bhead, pool_node, pool_next, nbx, stamp, qid,
-              gx, gy, cols, out):
+@nb.njit(**_HOT)
+def _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr):
     """Status of triangle (ia, ib, P) on front edge ia -> ib.
 
     Returns OK, ERR (a sample is farther than eps), GEO (it leaves the free region or
-    touches the front; ``out[0]`` holds a node to connect to or -1) or BAD (not
-    counter-clockwise). On OK, ``out[1]`` holds the apex node, or -1 for a free sample.
+    touches the front; ``scr[S_BLOCKER]`` holds a node to connect to or -1) or BAD (not
+    counter-clockwise). On OK, ``scr[S_APEX_NODE]`` holds the apex node, or -1 for a
+    free sample.
     """
-    out[0] = -1
-    out[1] = -1
+    scr[S_BLOCKER] = -1
+    scr[S_APEX_NODE] = -1
     if P == ia or P == ib:
         return BAD
     if _orient(gx[ia % cols], gy[ia // cols], gx[ib % cols], gy[ib // cols], gx[P % cols], gy[P // cols]) <= 0.0:
         return BAD
     state = occ[P // cols, P % cols]
-    if not _scan(ia, ib, P, gx, gy, zf, cols, eps, occ, False):
+    if _scan(ia, ib, P, gx, gy, index_space, zf, cols, eps, occ, False) < 0:
         return ERR
     node = -1
     if state == VERTEX:
-        node = _node_at(P, ia, ib, vert, nxt, prv, alive, bhead, pool_node, pool_next, nbx, gx, gy, cols)
-    geo = _geom(ia, ib, P, vert, nxt, alive, bhead, pool_node, pool_next, nbx, stamp, qid, gx, gy, cols, out)
+        node = _node_at(P, ia, ib, nodes, pool, bhead, nbx, scr, gx, gy, cols)
+    geo = _geom(ia, ib, P, nodes, pool, bhead, nbx, scr, gx, gy, cols)
     if not geo or state == COVERED or (state == VERTEX and node < 0):
         return GEO
-    out[1] = node
+    scr[S_APEX_NODE] = node
     return OK
 
 
-@nb.njit(cache=True, nogil=True)
+# ----------------------------------------------------------------- the three steps
+@nb.njit(**_HOT)
+def _ear(na, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr, counts):
+    """Step 1, ear cutting on the edge of node ``na``: the apex sample or -1.
+
+    The apex's node is left in ``scr[S_APEX_NODE]``.
+    """
+    nb_ = nodes[na, NXT]
+    ia = nodes[na, VERT]
+    ib = nodes[nb_, VERT]
+    for side in range(2):
+        nk = nodes[na, PRV] if side == 0 else nodes[nb_, NXT]
+        counts[N_EVAL_EAR] += 1
+        P = nodes[nk, VERT]
+        if _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr) == OK:
+            return P
+    return -1
+
+
+@nb.njit(**_HOT)
 def _apex_at(mc, mr, nc, nr, t, rows, cols):
     pc = int(np.floor(mc + t * nc + 0.5))
     pr = int(np.floor(mr + t * nr + 0.5))
@@ -396,357 +584,393 @@ def _apex_at(mc, mr, nc, nr, t, rows, cols):
     return pr * cols + pc
 
 
+@nb.njit(**_HOT)
+def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead, nbx, scr, counts):
+    """Step 2, greedy biting on the edge of node ``na``: the apex sample or -1.
+
+    The apex walks the inward normal through the edge's midpoint, galloping (t = 1, 2, 4,
+    ...) while the triangle stays valid and then bisecting (8 halvings) between the last
+    valid and the first invalid t. When a triangle is blocked by the front, the blocking
+    front vertex nearest the edge (Delaunay sense) is tried once as the apex; it wins
+    when valid, since connecting to the front adds no vertex. The apex's node is left in
+    ``scr[S_APEX_NODE]``.
+    """
+    ia = nodes[na, VERT]
+    ib = nodes[nodes[na, NXT], VERT]
+    ca = ia % cols
+    ra = ia // cols
+    cb = ib % cols
+    rb = ib // cols
+    mc = 0.5 * (ca + cb)
+    mr = 0.5 * (ra + rb)
+    dl = np.sqrt(float((cb - ca) ** 2 + (rb - ra) ** 2))
+    nc = -(rb - ra) / dl
+    nr = (cb - ca) / dl
+    tmax = float(rows + cols)
+    best = -1
+    best_node = -1
+    lo = 0.0
+    hi = -1.0
+    alt = -1
+    alt_node = -1
+    t = 1.0
+    prev_p = -1
+    while t <= tmax:
+        P = _apex_at(mc, mr, nc, nr, t, rows, cols)
+        if P < 0:
+            hi = t
+            break
+        if P != prev_p:
+            counts[N_EVAL_BITE] += 1
+            st = _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+            if st == OK:
+                best = P
+                best_node = scr[S_APEX_NODE]
+                lo = t
+            elif st == BAD and best < 0:
+                prev_p = P
+                t += 1.0
+                continue
+            else:
+                hi = t
+                if st == GEO and scr[S_BLOCKER] >= 0 and alt < 0:
+                    ob = nodes[scr[S_BLOCKER], VERT]
+                    if _evaluate(ia, ib, ob, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx,
+                                 scr) == OK:
+                        alt = ob
+                        alt_node = scr[S_APEX_NODE]
+                break
+        prev_p = P
+        t *= 2.0
+    if best >= 0 and hi > lo:
+        for _ in range(8):
+            tm = 0.5 * (lo + hi)
+            P = _apex_at(mc, mr, nc, nr, tm, rows, cols)
+            if P < 0 or P == best or P == _apex_at(mc, mr, nc, nr, hi, rows, cols):
+                break
+            st = _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+            if st == OK:
+                best = P
+                best_node = scr[S_APEX_NODE]
+                lo = tm
+            else:
+                hi = tm
+                if st == GEO and scr[S_BLOCKER] >= 0 and alt < 0:
+                    ob = nodes[scr[S_BLOCKER], VERT]
+                    if _evaluate(ia, ib, ob, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx,
+                                 scr) == OK:
+                        alt = ob
+                        alt_node = scr[S_APEX_NODE]
+    if alt >= 0:
+        scr[S_APEX_NODE] = alt_node
+        return alt
+    scr[S_APEX_NODE] = best_node
+    return best
+
+
+@nb.njit(**_HOT)
+def _heap_less(key, ids, i, j):
+    return key[i] < key[j] or (key[i] == key[j] and ids[i] < ids[j])
+
+
+@nb.njit(**_HOT)
+def _sift_down(key, ids, i, m):
+    """Restore the min-heap order (by key, then sample) below position i of the first m."""
+    while True:
+        c = 2 * i + 1
+        if c >= m:
+            return
+        if c + 1 < m and _heap_less(key, ids, c + 1, c):
+            c += 1
+        if not _heap_less(key, ids, c, i):
+            return
+        key[i], key[c] = key[c], key[i]
+        ids[i], ids[c] = ids[c], ids[i]
+        i = c
+
+
+@nb.njit(**_HOT)
+def _split(na, r0, r1, c0, c1, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr, counts,
+           cand_key, cand_id):
+    """Step 3, edge splitting (fallback) on the edge of node ``na``, in the window rows r0..r1, cols c0..c1.
+
+    Candidates are the free samples and front vertices left of the edge in the window,
+    tried in order of the circumcircle through the edge's ends
+    (smallest first, ties by sample index: the constrained-Delaunay choice) through a
+    binary min-heap. Returns the apex (its node in ``scr[S_APEX_NODE]``) or -1. The
+    candidate buffers must hold the window's samples.
+    """
+    ia = nodes[na, VERT]
+    ib = nodes[nodes[na, NXT], VERT]
+    xa = gx[ia % cols]
+    ya = gy[ia // cols]
+    xb = gx[ib % cols]
+    yb = gy[ib // cols]
+    mx = 0.5 * (xa + xb)
+    my = 0.5 * (ya + yb)
+    nx = -(yb - ya)
+    ny = xb - xa
+    half2 = 0.25 * ((xb - xa) ** 2 + (yb - ya) ** 2)
+    m = 0
+    for r in range(r0, r1 + 1):
+        for c in range(c0, c1 + 1):
+            if occ[r, c] == COVERED:
+                continue
+            px = gx[c]
+            py = gy[r]
+            den = (px - mx) * nx + (py - my) * ny
+            if den <= 0.0:
+                continue
+            cand_key[m] = ((px - mx) ** 2 + (py - my) ** 2 - half2) / (2.0 * den)
+            cand_id[m] = r * cols + c
+            m += 1
+    counts[N_CANDIDATES] += m
+    for i in range(m // 2 - 1, -1, -1):
+        _sift_down(cand_key, cand_id, i, m)
+    while m > 0:
+        P = cand_id[0]
+        counts[N_EVAL_SPLIT] += 1
+        if _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr) == OK:
+            return P
+        m -= 1
+        cand_key[0] = cand_key[m]
+        cand_id[0] = cand_id[m]
+        _sift_down(cand_key, cand_id, 0, m)
+    return -1
+
+
+# ----------------------------------------------------------------- front updates
+@nb.njit(**_HOT)
+def _register(e, nodes, pool, bhead, nbx, scr, cols):
+    """List node e's current edge in every bucket its bounding box overlaps.
+
+    ``pool`` must have room for :func:`_n_buckets` new rows past ``scr[S_USED]``.
+    """
+    iu = nodes[e, VERT]
+    iw = nodes[nodes[e, NXT], VERT]
+    for by in range(min(iu // cols, iw // cols) // BS, max(iu // cols, iw // cols) // BS + 1):
+        for bx in range(min(iu % cols, iw % cols) // BS, max(iu % cols, iw % cols) // BS + 1):
+            k = scr[S_FREE]
+            if k >= 0:
+                scr[S_FREE] = pool[k, P_NEXT]
+            else:
+                k = scr[S_USED]
+                scr[S_USED] += 1
+            b = by * nbx + bx
+            pool[k, P_NODE] = e
+            pool[k, P_VER] = nodes[e, VER]
+            pool[k, P_NEXT] = bhead[b]
+            bhead[b] = k
+
+
+@nb.njit(**_HOT)
+def _n_buckets(iu, iw, cols):
+    """Buckets overlapped by the bounding box of the segment between samples iu and iw."""
+    nr = max(iu // cols, iw // cols) // BS - min(iu // cols, iw // cols) // BS + 1
+    nc = max(iu % cols, iw % cols) // BS - min(iu % cols, iw % cols) // BS + 1
+    return nr * nc
+
+
 @nb.njit(cache=True, nogil=True)
-def greedy_cuts_front(gx, gy, z, eps, boundary, max_dt_window):
+def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_vertices):
     """Triangulate the grid with the greedy-cuts advancing front for a fixed eps.
 
     Parameters
     ----------
     gx, gy : (cols,), (rows,) float64
         Plane-space coordinates of the columns and rows (see the module docstring).
+    index_space : bool
+        True when ``gx`` and ``gy`` are the column and row indices themselves.
     z : (rows, cols) float64
     eps : (rows * cols,) float64
         Largest allowed vertical distance between each sample and the triangle over it.
     boundary : (k,) int64
         The initial front: linear sample indices around the grid, counter-clockwise,
         starting at a corner, each boundary segment eps-valid.
-    max_dt_window : int
+    max_window : int
         Largest window half-width (samples) searched by the fallback step.
+    max_vertices : int
+        Stop (``counts[STATUS] = OVER_BUDGET``) as soon as the vertex count exceeds this.
 
     Returns
     -------
     tris : (m, 3) int64
         Counter-clockwise triangles of linear sample indices ``r * cols + c``.
-    counts : (8,) int64
-        Triangles adding no vertex (ears and connections to the front), triangles adding
-        a vertex (bites and fallback insertions), fallback insertions, a status (0 = done,
-        1 = stuck: an edge found no valid triangle, 2 = step limit), then the number of
-        triangles evaluated by ear cutting, by biting and by the fallback, and the number
-        of fallback candidates gathered.
+    counts : (N_COUNTS,) int64
+        The counters (module docstring).
     """
     rows, cols = z.shape
     zf = z.ravel()
+    counts = np.zeros(N_COUNTS, dtype=np.int64)
     occ = np.zeros((rows, cols), dtype=np.int8)
     occ[0, :] = COVERED
     occ[rows - 1, :] = COVERED
     occ[:, 0] = COVERED
     occ[:, cols - 1] = COVERED
+    counts[N_COVERED] = rows * cols - (rows - 2) * (cols - 2)
     nb0 = boundary.shape[0]
     cap = max(1024, 4 * nb0)
-    vert = np.empty(cap, dtype=np.int64)
-    nxt = np.empty(cap, dtype=np.int64)
-    prv = np.empty(cap, dtype=np.int64)
-    alive = np.zeros(cap, dtype=np.int64)
-    ver = np.zeros(cap, dtype=np.int64)
-    stamp = np.zeros(cap, dtype=np.int64)
-    for i in range(nb0):
-        vert[i] = boundary[i]
-        nxt[i] = (i + 1) % nb0
-        prv[i] = (i - 1 + nb0) % nb0
-        alive[i] = 1
-        occ[boundary[i] // cols, boundary[i] % cols] = VERTEX
-    nn = nb0
+    nodes = np.zeros((cap, 6), dtype=np.int64)
     nbx = (cols - 1) // BS + 1
     nby = (rows - 1) // BS + 1
     bhead = np.full(nbx * nby, -1, dtype=np.int64)
-    pool_node = np.empty(16 * cap, dtype=np.int64)
-    pool_next = np.empty(16 * cap, dtype=np.int64)
-    npool = 0
-    qn = np.empty(4 * cap, dtype=np.int64)
-    qv = np.empty(4 * cap, dtype=np.int64)
+    pool = np.empty((4 * cap, 3), dtype=np.int64)
+    scr = np.zeros(N_SCR, dtype=np.int64)
+    scr[S_FREE] = -1
+    queue = np.empty((4 * cap, 2), dtype=np.int64)  # (node, version)
     qhead = 0
     qtail = 0
-    tris = np.empty(3 * cap, dtype=np.int64)
+    tris = np.empty((2 * cap, 3), dtype=np.int64)
     ntri = 0
-    qid = 0
-    out = np.empty(2, dtype=np.int64)
-    counts = np.zeros(8, dtype=np.int64)
     changed = np.empty(3, dtype=np.int64)
-    # register and queue the initial edges
+    cand_key = np.empty(64, dtype=np.float64)
+    cand_id = np.empty(64, dtype=np.int64)
+    # the initial front: one loop, every edge registered and queued
+    for i in range(nb0):
+        nodes[i, VERT] = boundary[i]
+        nodes[i, NXT] = (i + 1) % nb0
+        nodes[i, PRV] = (i - 1 + nb0) % nb0
+        nodes[i, ALIVE] = 1
+        occ[boundary[i] // cols, boundary[i] % cols] = VERTEX
+    counts[N_VERTICES] = nb0
+    nn = nb0
     for e in range(nb0):
-        iu = vert[e]
-        iw = vert[nxt[e]]
-        for by in range(min(iu // cols, iw // cols) // BS, max(iu // cols, iw // cols) // BS + 1):
-            for bx in range(min(iu % cols, iw % cols) // BS, max(iu % cols, iw % cols) // BS + 1):
-                pool_node = _grow(pool_node, npool)
-                pool_next = _grow(pool_next, npool)
-                pool_node[npool] = e
-                pool_next[npool] = bhead[by * nbx + bx]
-                bhead[by * nbx + bx] = npool
-                npool += 1
-        qn = _grow(qn, qtail)
-        qv = _grow(qv, qtail)
-        qn[qtail] = e
-        qv[qtail] = 0
+        pool = _grow(pool, scr[S_USED] + _n_buckets(nodes[e, VERT], nodes[nodes[e, NXT], VERT], cols))
+        _register(e, nodes, pool, bhead, nbx, scr, cols)
+        queue = _grow(queue, qtail)
+        queue[qtail, 0] = e
+        queue[qtail, 1] = 0
         qtail += 1
     max_steps = 8 * rows * cols + 64
     steps = 0
-    cand_key = np.empty(64, dtype=np.float64)
-    cand_id = np.empty(64, dtype=np.int64)
     while qhead < qtail:
         steps += 1
         if steps > max_steps:
-            counts[3] = 2
+            counts[STATUS] = STEP_LIMIT
             break
-        e = qn[qhead]
-        v = qv[qhead]
+        if counts[N_VERTICES] > max_vertices:
+            counts[STATUS] = OVER_BUDGET
+            break
+        na = queue[qhead, 0]
+        v = queue[qhead, 1]
         qhead += 1
-        if alive[e] == 0 or ver[e] != v:
+        if nodes[na, ALIVE] == 0 or nodes[na, VER] != v:
             continue
-        na = e
-        nb_ = nxt[na]
-        ia = vert[na]
-        ib = vert[nb_]
-        apex = -1  # chosen apex sample
-        apex_node = -1  # its node (-1: a new vertex)
-        # 1. ear cutting: the neighbours of the edge
-        for side in range(2):
-            nk = prv[na] if side == 0 else nxt[nb_]
-            counts[4] += 1
-            qid += 1
-            st = _evaluate(ia, ib, vert[nk], occ, zf, eps, vert, nxt, prv, alive, bhead, pool_node, pool_next,
-                           nbx, stamp, qid, gx, gy, cols, out)
-            if st == OK:
-                apex = vert[nk]
-                apex_node = out[1]
-                break
-        # 2. greedy biting along the inward normal of the edge's midpoint
+        nb_ = nodes[na, NXT]
+        ia = nodes[na, VERT]
+        ib = nodes[nb_, VERT]
+        apex = _ear(na, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr, counts)
         if apex < 0:
-            ca = ia % cols
-            ra = ia // cols
-            cb = ib % cols
-            rb = ib // cols
-            mc = 0.5 * (ca + cb)
-            mr = 0.5 * (ra + rb)
-            dl = np.sqrt(float((cb - ca) ** 2 + (rb - ra) ** 2))
-            nc = -(rb - ra) / dl
-            nr = (cb - ca) / dl
-            tmax = float(rows + cols)
-            best = -1
-            best_node = -1
-            lo = 0.0
-            hi = -1.0
-            alt = -1
-            alt_node = -1
-            t = 1.0
-            prev_p = -1
-            while t <= tmax:
-                P = _apex_at(mc, mr, nc, nr, t, rows, cols)
-                if P < 0:
-                    hi = t
-                    break
-                if P != prev_p:
-                    counts[5] += 1
-                    qid += 1
-                    st = _evaluate(ia, ib, P, occ, zf, eps, vert, nxt, prv, alive, bhead, pool_node, pool_next,
-                                   nbx, stamp, qid, gx, gy, cols, out)
-                    if st == OK:
-                        best = P
-                        best_node = out[1]
-                        lo = t
-                    elif st == BAD and best < 0:
-                        prev_p = P
-                        t += 1.0
-                        continue
-                    else:
-                        hi = t
-                        if st == GEO and out[0] >= 0 and alt < 0:
-                            ob = vert[out[0]]
-                            qid += 1
-                            st2 = _evaluate(ia, ib, ob, occ, zf, eps, vert, nxt, prv, alive, bhead, pool_node,
-                                            pool_next, nbx, stamp, qid, gx, gy, cols, out)
-                            if st2 == OK:
-                                alt = ob
-                                alt_node = out[1]
-                        break
-                prev_p = P
-                t *= 2.0
-            if best >= 0 and hi > lo:
-                for _ in range(8):
-                    tm = 0.5 * (lo + hi)
-                    P = _apex_at(mc, mr, nc, nr, tm, rows, cols)
-                    if P < 0 or P == best or P == _apex_at(mc, mr, nc, nr, hi, rows, cols):
-                        break
-                    qid += 1
-                    st = _evaluate(ia, ib, P, occ, zf, eps, vert, nxt, prv, alive, bhead, pool_node, pool_next,
-                                   nbx, stamp, qid, gx, gy, cols, out)
-                    if st == OK:
-                        best = P
-                        best_node = out[1]
-                        lo = tm
-                    else:
-                        hi = tm
-                        if st == GEO and out[0] >= 0 and alt < 0:
-                            ob = vert[out[0]]
-                            qid += 1
-                            st2 = _evaluate(ia, ib, ob, occ, zf, eps, vert, nxt, prv, alive, bhead, pool_node,
-                                            pool_next, nbx, stamp, qid, gx, gy, cols, out)
-                            if st2 == OK:
-                                alt = ob
-                                alt_node = out[1]
-            if alt >= 0:
-                apex = alt
-                apex_node = alt_node
-            elif best >= 0:
-                apex = best
-                apex_node = best_node
-        # 3. edge splitting (fallback): the sample or front vertex left of the edge with
-        #    the smallest circumcircle through a and b (constrained-Delaunay choice)
+            apex = _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead, nbx, scr, counts)
         if apex < 0:
-            xa = gx[ia % cols]
-            ya = gy[ia // cols]
-            xb = gx[ib % cols]
-            yb = gy[ib // cols]
-            mx = 0.5 * (xa + xb)
-            my = 0.5 * (ya + yb)
-            nx = -(yb - ya)
-            ny = xb - xa
-            half2 = 0.25 * ((xb - xa) ** 2 + (yb - ya) ** 2)
-            ca = ia % cols
-            ra = ia // cols
-            cb = ib % cols
-            rb = ib // cols
             w = 2
-            while apex < 0:
-                c0 = max(0, min(ca, cb) - w)
-                c1 = min(cols - 1, max(ca, cb) + w)
-                r0 = max(0, min(ra, rb) - w)
-                r1 = min(rows - 1, max(ra, rb) + w)
-                m = 0
-                for r in range(r0, r1 + 1):
-                    for c in range(c0, c1 + 1):
-                        if occ[r, c] == COVERED:
-                            continue
-                        px = gx[c]
-                        py = gy[r]
-                        den = (px - mx) * nx + (py - my) * ny
-                        if den <= 0.0:
-                            continue
-                        if m >= cand_key.shape[0]:
-                            cand_key = _grow(cand_key, m)
-                            cand_id = _grow(cand_id, m)
-                        cand_key[m] = ((px - mx) ** 2 + (py - my) ** 2 - half2) / (2.0 * den)
-                        cand_id[m] = r * cols + c
-                        m += 1
-                counts[7] += m
-                order = np.argsort(cand_key[:m], kind="mergesort")
-                for j in range(m):
-                    P = cand_id[order[j]]
-                    counts[6] += 1
-                    qid += 1
-                    st = _evaluate(ia, ib, P, occ, zf, eps, vert, nxt, prv, alive, bhead, pool_node, pool_next,
-                                   nbx, stamp, qid, gx, gy, cols, out)
-                    if st == OK:
-                        apex = P
-                        apex_node = out[1]
-                        break
-                if apex >= 0:
-                    break
-                if w >= max_dt_window or (c0 == 0 and r0 == 0 and c1 == cols - 1 and r1 == rows - 1):
+            while True:  # windows of half-width 2, 4, 8, ... around the edge
+                c0 = max(0, min(ia % cols, ib % cols) - w)
+                c1 = min(cols - 1, max(ia % cols, ib % cols) + w)
+                r0 = max(0, min(ia // cols, ib // cols) - w)
+                r1 = min(rows - 1, max(ia // cols, ib // cols) + w)
+                span = (r1 - r0 + 1) * (c1 - c0 + 1)
+                if span > cand_key.shape[0]:
+                    cand_key = _grow(cand_key, span)
+                    cand_id = _grow(cand_id, span)
+                apex = _split(na, r0, r1, c0, c1, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx,
+                              scr, counts, cand_key, cand_id)
+                if apex >= 0 or w >= max_window or (c0 == 0 and r0 == 0 and c1 == cols - 1 and r1 == rows - 1):
                     break
                 w *= 2
             if apex >= 0:
-                counts[2] += 1
+                counts[N_SPLITS] += 1
         if apex < 0:
-            counts[3] = 1
+            counts[STATUS] = STUCK
             break
-        # apply: emit the triangle, update the front
-        tris = _grow(tris, 3 * ntri + 2)
-        tris[3 * ntri] = ia
-        tris[3 * ntri + 1] = ib
-        tris[3 * ntri + 2] = apex
+        apex_node = scr[S_APEX_NODE]
+        # emit the triangle and cover its samples
+        if ntri >= tris.shape[0]:
+            tris = _grow(tris, ntri)
+        tris[ntri, 0] = ia
+        tris[ntri, 1] = ib
+        tris[ntri, 2] = apex
         ntri += 1
-        _scan(ia, ib, apex, gx, gy, zf, cols, eps, occ, True)
+        counts[N_COVERED] += _scan(ia, ib, apex, gx, gy, index_space, zf, cols, eps, occ, True)
+        # update the front
+        if nn >= nodes.shape[0]:
+            nodes = _grow(nodes, nn)
         nch = 0
-        if apex_node < 0:
-            # bite: a -> P -> b
-            counts[1] += 1
+        if apex_node < 0:  # a bite: a -> P -> b, one new vertex
+            counts[N_BITES] += 1
+            counts[N_VERTICES] += 1
             occ[apex // cols, apex % cols] = VERTEX
-            vert = _grow(vert, nn)
-            nxt = _grow(nxt, nn)
-            prv = _grow(prv, nn)
-            alive = _grow(alive, nn)
-            ver = _grow(ver, nn)
-            stamp = _grow(stamp, nn)
             npn = nn
             nn += 1
-            vert[npn] = apex
-            alive[npn] = 1
-            ver[npn] = 0
-            stamp[npn] = 0
-            nxt[na] = npn
-            prv[npn] = na
-            nxt[npn] = nb_
-            prv[nb_] = npn
+            nodes[npn, VERT] = apex
+            nodes[npn, ALIVE] = 1
+            nodes[na, NXT] = npn
+            nodes[npn, PRV] = na
+            nodes[npn, NXT] = nb_
+            nodes[nb_, PRV] = npn
             changed[0] = na
             changed[1] = npn
             nch = 2
-        elif apex_node == prv[na]:
-            counts[0] += 1
+        elif apex_node == nodes[na, PRV]:  # an ear with the previous vertex
+            counts[N_EARS] += 1
             k = apex_node
-            alive[na] = 0
-            nxt[k] = nb_
-            prv[nb_] = k
-            if nxt[nb_] == k:
-                alive[k] = 0
-                alive[nb_] = 0
+            nodes[na, ALIVE] = 0
+            nodes[k, NXT] = nb_
+            nodes[nb_, PRV] = k
+            if nodes[nb_, NXT] == k:  # the loop was this triangle: it closes
+                nodes[k, ALIVE] = 0
+                nodes[nb_, ALIVE] = 0
             else:
                 changed[0] = k
                 nch = 1
-        elif apex_node == nxt[nb_]:
-            counts[0] += 1
+        elif apex_node == nodes[nb_, NXT]:  # an ear with the next vertex
+            counts[N_EARS] += 1
             k = apex_node
-            alive[nb_] = 0
-            nxt[na] = k
-            prv[k] = na
-            if nxt[k] == na:
-                alive[k] = 0
-                alive[na] = 0
+            nodes[nb_, ALIVE] = 0
+            nodes[na, NXT] = k
+            nodes[k, PRV] = na
+            if nodes[k, NXT] == na:
+                nodes[k, ALIVE] = 0
+                nodes[na, ALIVE] = 0
             else:
                 changed[0] = na
                 nch = 1
-        else:
-            counts[0] += 1
+        else:  # a connection to another front vertex: the loop splits in two
+            counts[N_EARS] += 1
             k = apex_node
-            vert = _grow(vert, nn)
-            nxt = _grow(nxt, nn)
-            prv = _grow(prv, nn)
-            alive = _grow(alive, nn)
-            ver = _grow(ver, nn)
-            stamp = _grow(stamp, nn)
             n2 = nn
             nn += 1
-            y = nxt[k]
-            vert[n2] = vert[k]
-            alive[n2] = 1
-            ver[n2] = 0
-            stamp[n2] = 0
-            nxt[na] = n2
-            prv[n2] = na
-            nxt[n2] = y
-            prv[y] = n2
-            nxt[k] = nb_
-            prv[nb_] = k
+            y = nodes[k, NXT]
+            nodes[n2, VERT] = nodes[k, VERT]
+            nodes[n2, ALIVE] = 1
+            nodes[na, NXT] = n2
+            nodes[n2, PRV] = na
+            nodes[n2, NXT] = y
+            nodes[y, PRV] = n2
+            nodes[k, NXT] = nb_
+            nodes[nb_, PRV] = k
             changed[0] = na
             changed[1] = n2
             changed[2] = k
             nch = 3
+        need = scr[S_USED]
+        for j in range(nch):
+            need += _n_buckets(nodes[changed[j], VERT], nodes[nodes[changed[j], NXT], VERT], cols)
+        if need > pool.shape[0]:
+            pool = _grow(pool, need)
+        if qtail + nch > queue.shape[0]:
+            if 2 * qhead >= queue.shape[0]:  # the live part fits below qhead: move it down
+                m = qtail - qhead
+                queue[:m] = queue[qhead:qtail]
+                qhead = 0
+                qtail = m
+            else:
+                queue = _grow(queue, qtail + nch)
         for j in range(nch):
             e2 = changed[j]
-            ver[e2] += 1
-            iu = vert[e2]
-            iw = vert[nxt[e2]]
-            for by in range(min(iu // cols, iw // cols) // BS, max(iu // cols, iw // cols) // BS + 1):
-                for bx in range(min(iu % cols, iw % cols) // BS, max(iu % cols, iw % cols) // BS + 1):
-                    pool_node = _grow(pool_node, npool)
-                    pool_next = _grow(pool_next, npool)
-                    pool_node[npool] = e2
-                    pool_next[npool] = bhead[by * nbx + bx]
-                    bhead[by * nbx + bx] = npool
-                    npool += 1
-            qn = _grow(qn, qtail)
-            qv = _grow(qv, qtail)
-            qn[qtail] = e2
-            qv[qtail] = ver[e2]
+            nodes[e2, VER] += 1
+            _register(e2, nodes, pool, bhead, nbx, scr, cols)
+            queue[qtail, 0] = e2
+            queue[qtail, 1] = nodes[e2, VER]
             qtail += 1
-    return tris[: 3 * ntri].reshape(ntri, 3).copy(), counts
+    return tris[:ntri].copy(), counts

@@ -9,9 +9,10 @@ from hypothesis import strategies as st
 
 import simplifiers
 from conftest import DEM_NAMES, shared_dem_120
+from simplifiers import _gc_kernels as K
 from simplifiers import budget_tolerance, check_height_field, vertex_budget
-from simplifiers.greedy_cuts import build, greedy_cuts
-from terrainvis import HeightGrid
+from simplifiers.greedy_cuts import _Triangulator, build, greedy_cuts
+from terrainvis import HeightGrid, synthetic_terrain
 from terrainvis.errors import NodataError, SimplificationError
 from terrainvis.synthetic import KINDS, bundled_terrain
 
@@ -22,29 +23,33 @@ def brute_force_errors(tin, grid):
 
     For every face, every sample in its bounding box is tested with barycentric
     coordinates in world space (inclusive, to 1e-12); a sample in several faces (on a
-    shared edge) keeps its largest error. Returns the (rows, cols) errors (NaN where no
-    face covers the sample).
+    shared edge) keeps its largest error. All faces at once: the bounding boxes' samples
+    are listed face by face. Returns the (rows, cols) errors (NaN where no face covers
+    the sample).
     """
     xs, ys, z = grid.xs, grid.ys, grid.z
-    v = tin.vertices
-    err = np.full(grid.shape, np.nan)
-    for f in tin.faces:
-        p = v[f]
-        c0 = np.searchsorted(xs, p[:, 0].min())
-        c1 = np.searchsorted(xs, p[:, 0].max(), side="right")
-        r0 = np.searchsorted(ys, p[:, 1].min())
-        r1 = np.searchsorted(ys, p[:, 1].max(), side="right")
-        X, Y = np.meshgrid(xs[c0:c1], ys[r0:r1])
-        (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = p
-        det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        l1 = ((X - x0) * (y2 - y0) - (x2 - x0) * (Y - y0)) / det
-        l2 = ((x1 - x0) * (Y - y0) - (X - x0) * (y1 - y0)) / det
-        l0 = 1.0 - l1 - l2
-        inside = (l0 >= -1e-12) & (l1 >= -1e-12) & (l2 >= -1e-12)
-        e = np.abs(l0 * z0 + l1 * z1 + l2 * z2 - z[r0:r1, c0:c1])
-        block = err[r0:r1, c0:c1]
-        block[inside] = np.fmax(block[inside], e[inside])
-    return err
+    p = tin.vertices[tin.faces]  # (F, 3 corners, xyz)
+    c0 = np.searchsorted(xs, p[:, :, 0].min(axis=1))
+    c1 = np.searchsorted(xs, p[:, :, 0].max(axis=1), side="right")
+    r0 = np.searchsorted(ys, p[:, :, 1].min(axis=1))
+    r1 = np.searchsorted(ys, p[:, :, 1].max(axis=1), side="right")
+    width, count = c1 - c0, (c1 - c0) * (r1 - r0)
+    f = np.repeat(np.arange(len(p)), count)
+    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    r = r0[f] + local // width[f]
+    c = c0[f] + local % width[f]
+    X, Y = xs[c], ys[r]
+    (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = (p[f, k].T for k in range(3))
+    det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    l1 = ((X - x0) * (y2 - y0) - (x2 - x0) * (Y - y0)) / det
+    l2 = ((x1 - x0) * (Y - y0) - (X - x0) * (y1 - y0)) / det
+    l0 = 1.0 - l1 - l2
+    inside = (l0 >= -1e-12) & (l1 >= -1e-12) & (l2 >= -1e-12)
+    e = np.abs(l0 * z0 + l1 * z1 + l2 * z2 - z[r, c])
+    err = np.full(grid.size, -np.inf)
+    np.maximum.at(err, (r * grid.shape[1] + c)[inside], e[inside])
+    err[np.isneginf(err)] = np.nan
+    return err.reshape(grid.shape)
 
 
 def vertex_cells(tin, grid):
@@ -272,27 +277,193 @@ def test_deterministic(bundled):
 
 def test_vertices_override_and_epsilon_guess(bundled):
     g = bundled["hills"]
-    tin = simplifiers.simplify(g, "greedy-cuts", None, vertices=500)
+    tin = simplifiers.simplify(g, "greedy-cuts", None, n_vertices=500)
     assert abs(tin.n_vertices - 500) <= budget_tolerance(500)
-    guessed = build(g, 500, epsilon=tin.attrs["epsilon"])
+    guessed = build(g, 500, epsilon_guess=tin.attrs["epsilon"])
     assert guessed.attrs["runs"] == 1  # the given ε is tried first and lands at once
     np.testing.assert_array_equal(guessed.faces, tin.faces)
+
+
+def test_a_larger_grid(rng):
+    """256^2 at level 2 (4,096 vertices): bucket-pool reuse, queue compaction and array growth."""
+    g = synthetic_terrain("mountains", 256, seed=3)
+    tin = _check_simplified(g, 2)
+    assert tin.attrs["search_stage"] in ("bracket", "mixed", "probe")
+
+
+# ------------------------------------------------------------- max_error: the meaning greedy insertion gives it
+def test_max_error_stops_early_with_the_fixed_tolerance_tin(bundled):
+    g = bundled["hills"]
+    budget = vertex_budget(g.shape, 2)
+    loose = 3.0  # far fewer vertices than 900 are needed for 3 m on hills
+    tin = build(g, budget, max_error=loose)
+    assert tin.attrs["stopped_by"] == "max_error" and tin.attrs["search_stage"] == "max_error"
+    assert tin.n_vertices < budget - budget_tolerance(budget) and tin.attrs["runs"] == 1
+    assert tin.attrs["epsilon"] == tin.attrs["max_error_threshold"] == loose
+    assert assert_guarantee(tin, g, loose) <= loose
+    fixed = greedy_cuts(g, loose)
+    np.testing.assert_array_equal(tin.faces, fixed.faces)
+    np.testing.assert_array_equal(tin.vertices, fixed.vertices)
+    # through the registry, which accepts fewer vertices when stopped by max_error
+    reg = simplifiers.simplify(g, "greedy-cuts", 2, max_error=loose)
+    assert reg.attrs["stopped_by"] == "max_error" and reg.attrs["max_error"] <= loose
+    assert reg.n_vertices == tin.n_vertices and reg.attrs["budget"] == budget
+
+
+def test_max_error_too_tight_searches_for_the_budget(bundled):
+    g = bundled["hills"]
+    tight = 0.05  # needs far more than 900 vertices
+    tin = build(g, 900, max_error=tight)
+    assert tin.attrs["stopped_by"] == "budget" and tin.attrs["search_stage"] != "max_error"
+    assert abs(tin.n_vertices - 900) <= budget_tolerance(900)
+    assert tin.attrs["epsilon"] > tight and tin.attrs["max_error_threshold"] == tight
+    assert_guarantee(tin, g, tin.attrs["epsilon"])
+    assert greedy_cuts(g, tight).n_vertices > 900 + budget_tolerance(900)
+
+
+def test_max_error_landing_in_the_window_is_a_budget_result(bundled):
+    g = bundled["hills"]
+    ref = build(g, 900)
+    n = ref.n_vertices  # the fixed-tolerance TIN at ref's ε has n vertices
+    if n > 900:  # over the budget but inside the window: it is the budget's result
+        tin = build(g, 900, max_error=ref.attrs["epsilon"])
+        assert tin.attrs["stopped_by"] == "budget" and tin.attrs["runs"] == 1
+    else:  # at or under the budget: stopped by max_error
+        tin = build(g, 900, max_error=ref.attrs["epsilon"])
+        assert tin.attrs["stopped_by"] == "max_error" and tin.attrs["runs"] == 1
+    np.testing.assert_array_equal(tin.faces, ref.faces)
+
+
+# ------------------------------------------------------------- kernel state, early stops, mixed tolerance
+def test_kernel_counters_by_name(bundled):
+    g = bundled["mountains"]
+    run = _Triangulator(g).run(5.0)
+    c = run.counts
+    assert c[K.STATUS] == K.DONE and run.complete
+    assert c[K.N_VERTICES] == np.unique(run.tris).size == run.n
+    assert c[K.N_COVERED] == g.size  # every sample ends in a triangle
+    assert c[K.N_EARS] + c[K.N_BITES] == run.tris.shape[0]
+    assert c[K.N_SPLITS] <= c[K.N_BITES] and c[K.N_EVAL_SPLIT] <= c[K.N_CANDIDATES]
+    assert c[K.N_EVAL_EAR] >= run.tris.shape[0] and c[K.N_EVAL_BITE] > 0  # every step tries an ear first
+    # Euler: a triangulated disk with V vertices, B of them on its boundary, has 2V - B - 2 faces
+    tin = _Triangulator(g).tin(run)
+    xmin, xmax, ymin, ymax = g.extent
+    v = tin.vertices
+    b = ((v[:, 0] == xmin) | (v[:, 0] == xmax) | (v[:, 1] == ymin) | (v[:, 1] == ymax)).sum()
+    assert tin.n_faces == 2 * tin.n_vertices - b - 2
+
+
+def test_a_run_stops_once_over_the_limit(bundled):
+    g = bundled["rough"]
+    tri = _Triangulator(g)
+    full = tri.run(10.0)
+    same = tri.run(10.0, max_vertices=full.n)  # never passes the limit: the same run
+    assert same.complete
+    np.testing.assert_array_equal(same.tris, full.tris)
+    limit = full.n // 2
+    part = tri.run(10.0, max_vertices=limit)
+    assert not part.complete and part.counts[K.STATUS] == K.OVER_BUDGET
+    assert part.counts[K.N_VERTICES] == limit + 1
+    # the stopped run made exactly the first triangles of the full run
+    np.testing.assert_array_equal(part.tris, full.tris[: part.tris.shape[0]])
+    assert part.counts[K.N_COVERED] < g.size
+    # its extrapolated count is a fair estimate of the full one
+    assert limit < part.n and 0.6 * full.n < part.n < 1.4 * full.n
+    assert tri.runs == 3
+
+
+def test_mixed_tolerance_keeps_each_samples_own_tolerance(bundled):
+    g = bundled["hills"]
+    tri = _Triangulator(g)
+    k = g.size // 3
+    order = np.random.default_rng(1).permutation(g.size)
+    run = tri.run(0.5, eps_rest=0.1, k=k, order=order, order_name="test order")
+    tin = tri.tin(run)
+    assert tin.attrs["epsilon"] == 0.5 and tin.attrs["epsilon_rest"] == 0.1
+    assert tin.attrs["n_samples_at_epsilon"] == k and tin.attrs["mixed_order"] == "test order"
+    err = brute_force_errors(tin, g).ravel()
+    loose = np.zeros(g.size, dtype=bool)
+    loose[order[:k]] = True
+    assert err[~loose].max() <= 0.1 + 1e-12
+    assert 0.1 < err[loose].max() <= 0.5 + 1e-12  # the loose samples use their larger allowance
+    assert_rules(tin, g)
+
+
+def test_quantised_heights_need_the_mixed_tolerance(bundled):
+    """Whole-metre heights: many samples are exactly 1 off, and the count jumps over the
+    window at ε = 1; the mixed tolerance lets only some of them be 1 off."""
+    g = HeightGrid(np.round(bundled["hills"].z), dx=30.0)
+    tin = _check_simplified(g, 2)
+    a = tin.attrs
+    assert a["search_stage"] == "mixed" and a["mixed_order"] == "row-major"
+    assert a["epsilon_rest"] < 1.0 <= a["epsilon"] < 1.001
+    assert a["max_error"] == pytest.approx(1.0, abs=1e-9)  # met with ties exactly at 1
+    assert greedy_cuts(g, 1.0).n_vertices < 900 - 9 < 900 + 9 < greedy_cuts(g, a["epsilon_rest"]).n_vertices
+    err = brute_force_errors(tin, g).ravel()
+    assert (err[a["n_samples_at_epsilon"]:] <= a["epsilon_rest"] + 1e-12).all()  # row-major: the rest
+
+
+# ------------------------------------------------------------- the search's parts
+def test_line_segments_match_the_boundary_chain():
+    """The O(length) 1-D chain of the first guess against the O(length^3) boundary chain."""
+    rng = np.random.default_rng(11)
+    for trial in range(40):
+        rows, cols = rng.integers(2, 40, size=2)
+        z = np.cumsum(rng.normal(size=(rows, cols)), axis=1) + rng.normal(size=(rows, cols))
+        gx = np.cumsum(rng.uniform(0.2, 3.0, cols)) if trial % 2 else np.arange(cols, dtype=float)
+        gy = np.cumsum(rng.uniform(0.2, 3.0, rows)) if trial % 2 else np.arange(rows, dtype=float)
+        eps = float(rng.uniform(0.05, 3.0))
+        r_idx = np.arange(rows, dtype=np.int64)
+        c_idx = np.arange(cols, dtype=np.int64)
+        along_r, along_c = K.line_segments(z, gx, gy, r_idx, c_idx, eps)
+        idx = np.arange(z.size).reshape(z.shape)
+        eps_map = np.full(z.size, eps)
+        ref_r = sum(K.boundary_chain(idx[r].copy(), gx, gy, z.ravel(), cols, eps_map).size - 1 for r in range(rows))
+        ref_c = sum(K.boundary_chain(idx[:, c].copy(), gx, gy, z.ravel(), cols, eps_map).size - 1 for c in range(cols))
+        assert (along_r, along_c) == (ref_r, ref_c)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_first_guess_is_close(bundled, kind):
+    from simplifiers.greedy_cuts import _first_guess, _Search
+
+    g = bundled[kind]
+    tin = build(g, 900)
+    search = _Search(_Triangulator(g), 900)
+    assert 0.6 < _first_guess(search) / tin.attrs["epsilon"] < 1.6
+
+
+# golden searches: (terrain, level) -> vertices, ε, runs, landing stage (the invariants are checked above)
+GOLDEN = [
+    ("hills", 2, 897, 0.7250886861302522, 3, "bracket"),
+    ("rough", 2, 900, 26.526873075754295, 13, "probe"),
+    ("ridges", 3, 226, 52.90765292081152, 12, "mixed"),
+    ("mesas", 1, 3603, 1.0435705702007743, 2, "bracket"),
+]
+
+
+@pytest.mark.parametrize("kind, level, n, eps, runs, stage", GOLDEN)
+def test_golden_searches(bundled, kind, level, n, eps, runs, stage):
+    tin = build(bundled[kind], vertex_budget((120, 120), level))
+    a = tin.attrs
+    assert (tin.n_vertices, a["runs"], a["search_stage"]) == (n, runs, stage)
+    assert a["epsilon"] == pytest.approx(eps, rel=1e-12)
 
 
 # ------------------------------------------------------------- bad input
 @pytest.mark.parametrize("budget", [3, 120 * 120 + 1, -5])
 def test_bad_budget(bundled, budget):
-    with pytest.raises(ValueError, match="vertex budget"):
-        simplifiers.simplify(bundled["hills"], "greedy-cuts", None, vertices=budget)
+    with pytest.raises(ValueError, match="n_vertices must be in"):
+        simplifiers.simplify(bundled["hills"], "greedy-cuts", None, n_vertices=budget)
 
 
 def test_bad_arguments(bundled):
     g = bundled["hills"]
-    with pytest.raises(ValueError, match="epsilon"):
+    with pytest.raises(ValueError, match="max_error"):
         greedy_cuts(g, -1.0)
-    with pytest.raises(ValueError, match="epsilon"):
+    with pytest.raises(ValueError, match="max_error"):
         greedy_cuts(g, float("nan"))
-    with pytest.raises(TypeError, match="epsilon"):
+    with pytest.raises(TypeError, match="max_error"):
         greedy_cuts(g, "big")
     with pytest.raises(TypeError, match="grid"):
         greedy_cuts(g.z, 1.0)
@@ -300,9 +471,17 @@ def test_bad_arguments(bundled):
     z[3, 4] = np.nan
     with pytest.raises(NodataError):
         greedy_cuts(HeightGrid(z), 1.0)
-    with pytest.raises(TypeError, match="epsilon"):
-        simplifiers.simplify(g, "greedy-cuts", 1, epsilon="x")
-    with pytest.raises(ValueError, match="n_vertices"):
+    with pytest.raises(NodataError):
+        build(HeightGrid(z), 100)
+    with pytest.raises(TypeError, match="unexpected option.*epsilon"):
+        simplifiers.simplify(g, "greedy-cuts", 1, epsilon=1.0)
+    with pytest.raises(TypeError, match="max_error"):
+        simplifiers.simplify(g, "greedy-cuts", 1, max_error="x")
+    with pytest.raises(ValueError, match="max_error"):
+        build(g, 100, max_error=-2.0)
+    with pytest.raises(ValueError, match="epsilon_guess"):
+        build(g, 100, epsilon_guess=float("inf"))
+    with pytest.raises(ValueError, match=r"n_vertices must be in \[4, 14400\] for a 120x120 grid, got 3"):
         build(g, 3)
     with pytest.raises(TypeError, match="n_vertices"):
         build(g, 100.5)
@@ -310,6 +489,13 @@ def test_bad_arguments(bundled):
 
 def test_unreachable_budget_on_a_flat_grid():
     g = HeightGrid(np.full((10, 10), 3.0))
-    with pytest.raises(SimplificationError, match="greedy-cuts"):
-        simplifiers.simplify(g, "greedy-cuts", None, vertices=50)
-    assert simplifiers.simplify(g, "greedy-cuts", None, vertices=4).n_vertices == 4
+    with pytest.raises(SimplificationError, match="greedy-cuts: the grid is flat"):
+        simplifiers.simplify(g, "greedy-cuts", None, n_vertices=50)
+    assert simplifiers.simplify(g, "greedy-cuts", None, n_vertices=4).n_vertices == 4
+
+
+def test_planar_parts_make_a_large_budget_unreachable():
+    z = np.zeros((20, 20))
+    z[5, 5] = 1.0  # one bump on a plane: at most a handful of vertices at any ε
+    with pytest.raises(SimplificationError, match="even epsilon = 0 gives only"):
+        build(HeightGrid(z), 200)
