@@ -74,45 +74,66 @@ def run_units(tasks, fn, *, on_result, workers=None, client=None) -> None:
     """
     if not tasks:
         return
-    signals = _Signals()
-
-    def deliver(key, result):
-        with signals.saving():
-            on_result(key, result)
-
-    with signals.installed():
-        if client is not None:
-            _run_dask(tasks, fn, deliver, client)
-            return
-        n = (os.cpu_count() or 1) if workers is None else workers
-        if n == 1 or len(tasks) == 1:
+    if client is not None:
+        signals = _Signals(defer=True)
+        with signals.installed():
+            _run_dask(tasks, fn, _deliver(on_result, signals), client, signals)
+        return
+    n = (os.cpu_count() or 1) if workers is None else workers
+    if n == 1 or len(tasks) == 1:
+        # the units run here: a signal interrupts them at once (outside a save)
+        signals = _Signals(defer=False)
+        deliver = _deliver(on_result, signals)
+        with signals.installed():
             try:
                 for key, args in tasks:
                     deliver(key, fn(*args))
             except KeyboardInterrupt as exc:
                 raise _as_interrupted(exc) from None
-            return
-        _run_pool(tasks, fn, deliver, min(n, len(tasks)))
+        return
+    signals = _Signals(defer=True)
+    with signals.installed():
+        _run_pool(tasks, fn, _deliver(on_result, signals), min(n, len(tasks)), signals)
+
+
+def _deliver(on_result, signals):
+    def deliver(key, result):
+        with signals.saving():
+            on_result(key, result)
+    return deliver
 
 
 class _Signals:
-    """Turn SIGINT and SIGTERM into :class:`Interrupted` while a run lasts.
+    """SIGINT and SIGTERM during a run become :class:`Interrupted`.
 
-    Inside :meth:`saving` (while a finished unit is handed to ``on_result``, which writes
-    it to disk) a signal is held back and raised when the block ends, so a unit that
-    finished is never lost half-saved. Only the main thread can install handlers;
-    elsewhere the default behaviour stays.
+    ``defer=False`` (units running in this thread): the handler raises at once, except
+    inside :meth:`saving` (a finished unit being written), where the signal waits for
+    the block to end, so a finished unit is never lost half-saved.
+
+    ``defer=True`` (units running elsewhere, this thread waiting for them): the handler
+    only records the signal, and the waiting loop calls :meth:`check` between waits.
+    Raising inside the executors' own waits could leave their locks held and hang the
+    clean-up; checking between waits never does.
+
+    Only the main thread can install handlers; elsewhere the default behaviour stays.
     """
 
-    def __init__(self):
+    def __init__(self, defer: bool):
+        self.defer = defer
         self.pending = None
         self.depth = 0
 
     def handler(self, signum, frame):
-        if self.depth:
+        if self.defer or self.depth:
             self.pending = signum
             return
         raise Interrupted(signum)
+
+    def check(self) -> None:
+        """Raise :class:`Interrupted` when a signal arrived (outside a save)."""
+        if self.pending is not None and not self.depth:
+            signum, self.pending = self.pending, None
+            raise Interrupted(signum)
 
     @contextlib.contextmanager
     def installed(self):
@@ -137,9 +158,7 @@ class _Signals:
             yield
         finally:
             self.depth -= 1
-        if not self.depth and self.pending is not None:
-            signum, self.pending = self.pending, None
-            raise Interrupted(signum)
+        self.check()
 
 
 def _as_interrupted(exc: BaseException) -> Interrupted:
@@ -168,7 +187,7 @@ def _watch_parent(parent: int) -> None:
             os._exit(3)
 
 
-def _run_pool(tasks, fn, on_result, n_workers: int) -> None:
+def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
     import multiprocessing as mp
 
     threads = max(1, (os.cpu_count() or 1) // n_workers)
@@ -180,11 +199,13 @@ def _run_pool(tasks, fn, on_result, n_workers: int) -> None:
     try:
         for key, args in tasks:
             futures[pool.submit(fn, *args)] = key
+            signals.check()
         pending = set(futures)
         while pending:
-            done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
             for fut in done:
                 on_result(futures[fut], fut.result())
+            signals.check()
     except BrokenProcessPool as exc:
         _stop_pool(pool, futures)
         raise RuntimeError(
@@ -220,8 +241,8 @@ def _stop_pool(pool: ProcessPoolExecutor, futures) -> None:
 
 
 # ---------------------------------------------------------------- dask
-def _run_dask(tasks, fn, on_result, client) -> None:
-    from dask.distributed import as_completed
+def _run_dask(tasks, fn, on_result, client, signals: _Signals) -> None:
+    from dask.distributed import wait as dask_wait
 
     futures = {}
     try:
@@ -237,8 +258,17 @@ def _run_dask(tasks, fn, on_result, client) -> None:
                 else:
                     sent.append(a)
             futures[client.submit(fn, *sent, pure=False)] = key
-        for fut in as_completed(list(futures)):
-            on_result(futures[fut], fut.result())
+            signals.check()
+        pending = set(futures)
+        while pending:
+            try:
+                done, pending = dask_wait(list(pending), timeout=0.2, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                done = set()
+            for fut in done:
+                on_result(futures[fut], fut.result())
+            pending = set(pending)
+            signals.check()
     except BaseException as exc:
         with contextlib.suppress(Exception):
             client.cancel(list(futures))
