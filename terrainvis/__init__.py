@@ -31,6 +31,7 @@ _API = {
     "min_clearance": "terrainvis.visibility",
     "line_of_sight": "terrainvis.visibility",
     "visibility_matrix": "terrainvis.visibility",
+    "viewshed": "terrainvis.visibility",
     "relocate": "terrainvis.relocation",
     "agreement": "terrainvis.metrics",
     "vertical_errors": "terrainvis.deviation",

@@ -85,6 +85,8 @@ __all__ = [
     "clearance_tolerance",
     "terrain_scale",
     "embree_tolerance",
+    "viewshed",
+    "lowest_point",
 ]
 
 #: Valid values of the ``engine`` argument.
@@ -348,3 +350,8 @@ def visibility_matrix(terrain, points, *, engine: str = "auto", end_radius: floa
     from .embree import embree_matrix
 
     return embree_matrix(terrain, pts, delta=delta, end_radius=end_radius)
+
+
+# Region visibility and the clearance profile build on the definitions above.
+from .profile import lowest_point  # noqa: E402
+from .viewshed import viewshed  # noqa: E402
