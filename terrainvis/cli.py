@@ -8,6 +8,7 @@
   result as a grid (``.tif``, ``.asc``, ``.npz``) or a mesh (``.ply``, ``.obj``, ``.stl``,
   ``.glb``; TINs also ``.npz``).
 * ``terrainvis los DEM --from X Y --to X Y`` checks lines of sight.
+* ``terrainvis viewshed DEM --observer X Y -o viewshed.tif`` writes an observer's viewshed.
 * ``terrainvis info DEM`` describes a terrain.
 
 User mistakes end with one line on stderr and exit status 2; a run that produced no
@@ -78,6 +79,12 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--predicate", choices=PREDICATES, default=DEFAULTS.predicate,
                    help="line-of-sight predicate on S(T): exact, or paper (ignore one cell of S(T) around each end)")
     c.add_argument("--engine", choices=["auto", "grid", "embree"], default=DEFAULTS.engine, help="visibility engine")
+    c.add_argument("--measure", choices=["pairs", "viewshed"], default=DEFAULTS.measure,
+                   help="pairs: the paper's visibility matrices; viewshed: each observer's viewshed of every sample")
+    c.add_argument("--observers", type=int, default=DEFAULTS.n_observers,
+                   help=f"observers per terrain for --measure viewshed (default {DEFAULTS.n_observers})")
+    c.add_argument("--target-height", type=float, default=DEFAULTS.target_height,
+                   help="viewshed targets' height above the surface under test (default 0)")
     c.add_argument("--repeats", type=int, default=DEFAULTS.repeats, help="timings per visibility matrix (the fastest is kept)")
     c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")
@@ -123,6 +130,22 @@ def _parser() -> argparse.ArgumentParser:
     los.add_argument("--target-height", type=float, default=0.0, help="target height above the surface (default 0)")
     los.add_argument("--end-radius", type=float, default=0.0, help="ignore the surface within this distance of each end")
     _add_nodata(los)
+
+    v = sub.add_parser(
+        "viewshed", help="which samples of a DEM an observer sees",
+        description=(
+            "Compute the exact viewshed of one observer on a DEM (every sample as a target, on the piecewise-linear "
+            "surface) and write it as a GeoTIFF aligned with the DEM (CRS and transform kept; 1 visible, 0 not, "
+            "255 nodata), an .npz, or a .png drawn over the hillshade."
+        ),
+    )
+    v.add_argument("dem", help="DEM file or bundled name")
+    v.add_argument("--observer", nargs=2, type=float, required=True, metavar=("X", "Y"), help="observer position")
+    v.add_argument("--height", type=float, default=1.7, help="eye height above the surface (default 1.7)")
+    v.add_argument("--target-height", type=float, default=0.0, help="target height above the surface (default 0)")
+    v.add_argument("--max-distance", type=float, default=None, help="only samples within this distance")
+    v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
+    _add_nodata(v)
 
     i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
     i.add_argument("terrain", help="bundled name or DEM file")
@@ -209,6 +232,7 @@ def _compare(args) -> int:
         seed=args.seed, max_distance=DEFAULTS.max_distance if args.max_distance is None else args.max_distance,
         distance_unit=args.distance_unit, offset=args.offset, engine=args.engine,
         predicate=args.predicate, volume=not args.no_volume, repeats=args.repeats, cascade=args.cascade,
+        measure=args.measure, n_observers=args.observers, target_height=args.target_height,
         workers=args.workers,
         client=client, out_csv=out / "results.csv", resume=args.resume, save_dir=out / "simplified", progress=True,
     )
@@ -218,9 +242,15 @@ def _compare(args) -> int:
         extra["oracle"] = report.oracle_gap(df)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
-    text = (report.to_markdown({**report.paper_tables(df), **extra}) + "\n"
-            + report.comparison_markdown(report.paper_comparison(df)))
-    lines = report.findings_markdown(report.findings(df))
+    if args.measure == "viewshed":
+        if df["accuracy"].notna().any():
+            extra["viewsheds"] = report.viewshed_table(df)
+        text = report.to_markdown({**report.paper_tables(df), **extra})
+        lines = []  # the paper's findings are about pairs
+    else:
+        text = (report.to_markdown({**report.paper_tables(df), **extra}) + "\n"
+                + report.comparison_markdown(report.paper_comparison(df)))
+        lines = report.findings_markdown(report.findings(df))
     fast = sorted(set(df[(df["method"] == "qec") & (df["backend"] == "fast-simplification")]["terrain"]))
     if fast:
         from simplifiers.quadric import AUTO_MAX_SAMPLES
@@ -369,6 +399,61 @@ def _los(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ viewshed
+def _viewshed(args) -> int:
+    import numpy as np
+
+    from .visibility import viewshed
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in (".tif", ".tiff", ".npz", ".png"):
+        raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
+    if not out.parent.exists():
+        raise UsageError(f"-o {str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    label, grid = _terrain(args.dem, args)
+    t0 = time.perf_counter()
+    vis = viewshed(grid, tuple(args.observer), observer_height=args.height, target_height=args.target_height,
+                   max_distance=args.max_distance)
+    seconds = time.perf_counter() - t0
+    valid = np.isfinite(grid.z)
+    n_vis = int(vis[valid].sum())
+    _write_viewshed(grid, vis, out, suffix, args, label)
+    print(f"{label}: observer ({args.observer[0]:.6g}, {args.observer[1]:.6g}), eye {args.height:g} above the surface")
+    print(f"  visible {n_vis:,} of {int(valid.sum()):,} samples ({100 * n_vis / max(int(valid.sum()), 1):.2f} %), "
+          f"{seconds:.2f} s")
+    print(f"  wrote {out}")
+    return 0
+
+
+def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None:
+    import numpy as np
+
+    from ._fileio import atomic_path
+
+    if suffix == ".png":
+        from . import plot
+
+        fig = plot.viewshed(grid, vis, observer=tuple(args.observer), title=f"{label}: viewshed")
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=110, format="png")
+        return
+    if suffix == ".npz":
+        from .io import save_terrain
+
+        from .terrain import HeightGrid
+
+        # a grid of the same samples: 1 visible, 0 not, NaN nodata (with the DEM's georeferencing)
+        z = np.where(np.isfinite(grid.z), vis.astype(np.float64), np.nan)
+        attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in args.observer],
+                 "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height)}
+        save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
+        return
+    from .io import write_mask_geotiff
+
+    write_mask_geotiff(grid, vis, out, nodata_mask=~np.isfinite(grid.z))
+
+
 # ------------------------------------------------------------------ info
 def _info(args) -> int:
     import numpy as np
@@ -399,7 +484,7 @@ def _info(args) -> int:
 
 
 # ------------------------------------------------------------------ main
-_COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "info": _info}
+_COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "viewshed": _viewshed, "info": _info}
 
 
 def main(argv=None) -> int:

@@ -40,7 +40,7 @@ from .terrain import HeightGrid
 
 __all__ = [
     "compare", "Settings", "DEFAULTS", "resolve_terrains", "point_sets", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW",
-    "COLUMNS", "PREDICATES", "DISTANCE_UNITS", "simplified_path", "end_radius_for",
+    "COLUMNS", "PREDICATES", "DISTANCE_UNITS", "MEASURES", "simplified_path", "end_radius_for",
 ]
 
 #: The default terrains: the five bundled 120x120 terrains and a 120x120 window of the real Jacksboro DEM.
@@ -55,6 +55,10 @@ JACKSBORO_WINDOW = ((112, 232), (141, 261))
 #: (its larger cell side), so one sweep means the same on terrains of different resolution.
 DISTANCE_UNITS = ("world", "cells")
 
+#: What a run measures: ``"pairs"`` (the paper's visibility matrices of point sets) or
+#: ``"viewshed"`` (each observer's viewshed of every sample of T).
+MEASURES = ("pairs", "viewshed")
+
 #: Line-of-sight predicates for the verdicts on S(T) (verdicts on T are always exact):
 #: ``"exact"`` tests the whole segment; ``"paper"`` ignores the surface within one cell
 #: of S(T) around each end (see :func:`end_radius_for`).
@@ -62,8 +66,8 @@ PREDICATES = ("exact", "paper")
 
 #: Columns of the result table, in order.
 COLUMNS = (
-    "terrain", "set", "method", "kind", "level", "relocation", "predicate",
-    "accuracy", "visible_kept", "blocked_kept", "accuracy_paper",
+    "terrain", "set", "method", "kind", "level", "relocation", "measure", "predicate",
+    "accuracy", "visible_kept", "blocked_kept", "accuracy_paper", "visible_area_ratio",
     "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
     "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
     "max_error", "rms_error", "volume_error", "end_radius", "backend",
@@ -99,6 +103,9 @@ class Settings:
     volume: bool = True
     repeats: int = 3
     cascade: bool = False
+    measure: str = "pairs"
+    n_observers: int = 20
+    target_height: float = 0.0
 
 
 #: The defaults of :func:`compare` and ``terrainvis compare``.
@@ -234,7 +241,8 @@ def _run_unit(grid: HeightGrid, name: str, method: str, levels: tuple, settings:
     """
     from simplifiers import METHODS
 
-    sets = point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
+    sets = _observers(grid, name, settings) if settings.measure == "viewshed" else point_sets(
+        grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
     rows, previous = [], None
     for level in levels:
         start = previous if (settings.cascade and METHODS[method].cascades) else None
@@ -243,63 +251,121 @@ def _run_unit(grid: HeightGrid, name: str, method: str, levels: tuple, settings:
     return rows
 
 
+def _observers(grid: HeightGrid, name: str, settings: Settings) -> list:
+    """The observers of the viewshed measure: ``n_observers`` eyes ``offset`` above T, one per row."""
+    from .sampling import sample_points
+
+    rng = np.random.default_rng(_set_seed(settings.seed, name, 10**6))  # apart from the pair sets
+    return list(sample_points(grid, settings.n_observers, seed=rng, offset=settings.offset))
+
+
 def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
     """The rows of one terrain x method x level, and the simplified terrain (None when it failed)."""
     from simplifiers import METHODS, simplify
 
     from .deviation import volume_error
-    from .metrics import agreement
-    from .relocation import relocate
-    from .visibility import visibility_matrix
 
     base = {
-        "terrain": name, "method": method, "kind": METHODS[method].kind, "level": level,
-        "predicate": settings.predicate, "n_points": settings.n_points, "n_vertices_original": grid.size,
-        "nbytes_original": grid.nbytes, "seed": settings.seed, "distance_unit": settings.distance_unit,
-        "offset": settings.offset, "error": "",
+        "terrain": name, "method": method, "kind": METHODS[method].kind, "level": level, "measure": settings.measure,
+        "predicate": settings.predicate, "n_points": settings.n_points if settings.measure == "pairs" else 1,
+        "n_vertices_original": grid.size, "nbytes_original": grid.nbytes, "seed": settings.seed,
+        "distance_unit": settings.distance_unit, "offset": settings.offset, "error": "",
     }
-    rows = []
     simplified = None
     try:
         simplified = simplify(grid, method, level, **({} if start is None else {"start": start}))
         if save_dir is not None:
             _save(simplified, simplified_path(save_dir, name, method, level))
         meta = simplified.attrs
-        radius = end_radius_for(simplified, grid, level, settings.predicate)
         base.update(
             n_vertices=meta["n_vertices"], size_fraction=meta["n_vertices"] / grid.size, nbytes=meta["nbytes"],
             max_error=meta["max_error"], rms_error=meta["rms_error"], simplify_seconds=meta["seconds"],
-            volume_error=volume_error(grid, simplified) if settings.volume else np.nan, end_radius=radius,
+            volume_error=volume_error(grid, simplified) if settings.volume else np.nan,
+            end_radius=end_radius_for(simplified, grid, level, settings.predicate),
             backend=str(meta.get("backend", "")),
         )
-        test_kw = {"engine": settings.engine, "end_radius": radius}
-        # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
-        t0 = time.perf_counter()
-        visibility_matrix(simplified, sets[0][:2], **test_kw)
-        base["los_build_seconds"] = time.perf_counter() - t0
-        for s, pts in enumerate(sets):
-            v_true, t_true = _timed(visibility_matrix, grid, pts, engine=settings.engine, repeats=settings.repeats)
-            masks = [(d, _pair_mask(pts, d, grid, settings.distance_unit)) for d in settings.max_distance]
-            for how in settings.relocations:
-                if how == ORACLE:  # an upper bound, optimised for the pairs each distance counts
-                    for d, mask in masks:
-                        moved = relocate(pts, simplified, how, offset=settings.offset, reference=v_true,
-                                         original=grid, mask=mask, end_radius=radius, engine=settings.engine)
-                        v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
-                        rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
-                    continue
-                moved = relocate(pts, simplified, how, offset=settings.offset)
-                v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
-                for d, mask in masks:
-                    rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
+        measure = _viewshed_rows if settings.measure == "viewshed" else _pair_rows
+        rows = measure(grid, simplified, base, settings, sets)
     except Exception as exc:  # record the failure in this unit's rows; the run goes on
         message = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         rows = [
             dict(base, set=s, relocation=how, max_distance=d, error=message)
-            for s in range(settings.n_sets) for how in settings.relocations for d in settings.max_distance
+            for s in range(len(sets)) for how in settings.relocations for d in settings.max_distance
         ]
         simplified = None
     return rows, simplified
+
+
+def _pair_rows(grid, simplified, base, settings, sets) -> list[dict]:
+    """The pair measure: visibility matrices of each point set on T and on S(T), per relocation."""
+    from .metrics import agreement
+    from .relocation import relocate
+    from .visibility import visibility_matrix
+
+    radius = base["end_radius"]
+    test_kw = {"engine": settings.engine, "end_radius": radius}
+    # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
+    t0 = time.perf_counter()
+    visibility_matrix(simplified, sets[0][:2], **test_kw)
+    base = dict(base, los_build_seconds=time.perf_counter() - t0)
+    rows = []
+    for s, pts in enumerate(sets):
+        v_true, t_true = _timed(visibility_matrix, grid, pts, engine=settings.engine, repeats=settings.repeats)
+        masks = [(d, _pair_mask(pts, d, grid, settings.distance_unit)) for d in settings.max_distance]
+        for how in settings.relocations:
+            if how == ORACLE:  # an upper bound, optimised for the pairs each distance counts
+                for d, mask in masks:
+                    moved = relocate(pts, simplified, how, offset=settings.offset, reference=v_true,
+                                     original=grid, mask=mask, end_radius=radius, engine=settings.engine)
+                    v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
+                    rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
+                continue
+            moved = relocate(pts, simplified, how, offset=settings.offset)
+            v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
+            for d, mask in masks:
+                rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
+    return rows
+
+
+def _viewshed_rows(grid, simplified, base, settings, observers) -> list[dict]:
+    """The viewshed measure: each observer's viewshed of T's samples on T and on S(T), per relocation.
+
+    The observer is relocated onto S(T) as the points of the pair measure are; the targets
+    are T's samples, standing ``target_height`` above the surface under test. A cell
+    counts as a pair (observer, cell), so the agreement counts read as in the pair measure.
+    """
+    from .relocation import relocate
+    from .visibility import viewshed
+
+    kw = {"target_height": settings.target_height, "engine": settings.engine}
+    X, Y = np.meshgrid(grid.xs, grid.ys)
+    rows = []
+    for s, eye in enumerate(observers):
+        eye = eye[None, :]
+        v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, **kw)
+        dist = np.hypot(X - eye[0, 0], Y - eye[0, 1])
+        for how in settings.relocations:
+            moved = relocate(eye, simplified, how, offset=settings.offset)[0]
+            v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, **kw)
+            for d in settings.max_distance:
+                limit = np.inf if d is None else d * (max(grid.dx, grid.dy) if settings.distance_unit == "cells" else 1.0)
+                counted = dist <= limit
+                rows.append(_row(base, s, how, d, t_test, t_true, _cell_agreement(v_true, v_test, counted)))
+    return rows
+
+
+def _cell_agreement(v_true, v_test, counted) -> dict:
+    """How many cells of a viewshed keep their verdict (the agreement counts of one observer)."""
+    t, s = v_true[counted], v_test[counted]
+    av, ab = int(np.count_nonzero(t & s)), int(np.count_nonzero(~t & ~s))
+    fv, fb = int(np.count_nonzero(~t & s)), int(np.count_nonzero(t & ~s))
+    n = int(t.size)
+    return {
+        "n_pairs": n, "agree_visible": av, "agree_blocked": ab, "false_visible": fv, "false_blocked": fb,
+        "accuracy": (av + ab) / n if n else np.nan, "visible_kept": av / (av + fb) if av + fb else np.nan,
+        "blocked_kept": ab / (ab + fv) if ab + fv else np.nan, "accuracy_paper": np.nan,
+        "visible_area_ratio": (av + fv) / (av + fb) if av + fb else np.nan,
+    }
 
 
 def _row(base, s, how, d, t_test, t_true, counts) -> dict:
@@ -383,8 +449,16 @@ def _distances(value) -> tuple:
     return tuple(out)
 
 
-def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, distance_unit, offset,
-              engine, predicate, volume, repeats, cascade) -> Settings:
+def _finite(value, name: str) -> float:
+    arr = as_float_array(value, name)
+    if arr.ndim != 0 or not np.isfinite(arr):
+        raise ValueError(f"{name} must be a finite number, got {describe(value)}")
+    return float(arr)
+
+
+def _settings(grids, *, methods, levels, relocations, n_points, n_sets, seed, max_distance, distance_unit, offset,
+              engine, predicate, volume, repeats, cascade, measure, n_observers, target_height) -> Settings:
+    """Validate every option of :func:`compare` (before any unit runs) into :class:`Settings`."""
     from simplifiers import METHODS
 
     from .visibility import ENGINES
@@ -398,21 +472,28 @@ def _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_d
                 f"engine 'grid' works on grids only, but methods {tins} produce TINs; use engine='auto' "
                 "(the grid engine on grids, Embree on TINs) or leave those methods out"
             )
-    max_distance = _distances(max_distance)
-    off = as_float_array(offset, "offset")
-    if off.ndim != 0 or not np.isfinite(off):
-        raise ValueError(f"offset must be a finite number, got {describe(offset)}")
     for flag, value in (("volume", volume), ("cascade", cascade)):
         if not isinstance(value, (bool, np.bool_)):
             raise TypeError(f"{flag} must be True or False, got {describe(value)}")
+    relocations = _names(relocations, "relocations", RELOCATIONS + (ORACLE,), RELOCATIONS)
+    measure = choice(measure, "measure", MEASURES)
+    predicate = choice(predicate, "predicate", PREDICATES)
+    target_height = _finite(target_height, "target_height")
+    if measure == "viewshed":
+        if predicate != "exact":
+            raise ValueError(f"measure 'viewshed' supports predicate 'exact' only, got {predicate!r}")
+        if ORACLE in relocations:
+            raise ValueError("measure 'viewshed' does not support the 'oracle' relocation (it bounds pair verdicts)")
+        if target_height < 0:
+            raise ValueError(f"target_height must be >= 0, got {target_height!r}")
     return Settings(
-        methods=methods, levels=_levels(levels, grids),
-        relocations=_names(relocations, "relocations", RELOCATIONS + (ORACLE,), RELOCATIONS),
+        methods=methods, levels=_levels(levels, grids), relocations=relocations,
         n_points=as_int(n_points, "n_points", minimum=2), n_sets=as_int(n_sets, "n_sets", minimum=1),
-        seed=as_int(seed, "seed", minimum=0), max_distance=max_distance,
-        distance_unit=choice(distance_unit, "distance_unit", DISTANCE_UNITS), offset=float(off), engine=engine,
-        predicate=choice(predicate, "predicate", PREDICATES), volume=bool(volume),
-        repeats=as_int(repeats, "repeats", minimum=1), cascade=bool(cascade),
+        seed=as_int(seed, "seed", minimum=0), max_distance=_distances(max_distance),
+        distance_unit=choice(distance_unit, "distance_unit", DISTANCE_UNITS), offset=_finite(offset, "offset"),
+        engine=engine, predicate=predicate, volume=bool(volume), repeats=as_int(repeats, "repeats", minimum=1),
+        cascade=bool(cascade), measure=measure, n_observers=as_int(n_observers, "n_observers", minimum=1),
+        target_height=target_height,
     )
 
 
@@ -488,6 +569,9 @@ def compare(
     volume: bool = DEFAULTS.volume,
     repeats: int = DEFAULTS.repeats,
     cascade: bool = DEFAULTS.cascade,
+    measure: str = DEFAULTS.measure,
+    n_observers: int = DEFAULTS.n_observers,
+    target_height: float = DEFAULTS.target_height,
     workers: int | None = None,
     client=None,
     out_csv=None,
@@ -537,6 +621,18 @@ def compare(
         result instead of from T: one decimation pass instead of one per level. It
         changes what those methods compute (see the README for by how much); False, the
         default, simplifies every level from T as the paper does.
+    measure : {"pairs", "viewshed"}
+        ``"pairs"``: the paper's visibility matrices of the point sets. ``"viewshed"``:
+        for ``n_observers`` random observers per terrain (``offset`` above T, relocated
+        onto S(T) like the points), the viewshed of every sample of T on T and on S(T)
+        (targets ``target_height`` above the surface under test); each row is one
+        observer and counts cells as pairs (observer, cell), with the share of cells
+        whose verdict survives in ``accuracy`` and the visible-area ratio S(T) / T in
+        ``visible_area_ratio``. ``n_points`` and ``n_sets`` apply to pairs only.
+    n_observers : int
+        Observers per terrain of the viewshed measure.
+    target_height : float
+        Height of the viewshed measure's targets above the surface under test.
     workers : int, optional
         Processes of the local pool (default: the number of CPUs; 1 runs in this process).
         Workers are started with ``spawn``, which imports the caller's ``__main__``
@@ -581,8 +677,12 @@ def compare(
     if terrains is None:
         raise TypeError("terrains must be a terrain, a list of terrains or a dict of them, got None")
     grids = resolve_terrains(terrains)
-    settings = _settings(grids, methods, levels, relocations, n_points, n_sets, seed, max_distance, distance_unit,
-                         offset, engine, predicate, volume, repeats, cascade)
+    settings = _settings(
+        grids, methods=methods, levels=levels, relocations=relocations, n_points=n_points, n_sets=n_sets, seed=seed,
+        max_distance=max_distance, distance_unit=distance_unit, offset=offset, engine=engine, predicate=predicate,
+        volume=volume, repeats=repeats, cascade=cascade, measure=measure, n_observers=n_observers,
+        target_height=target_height,
+    )
     workers = check_workers(workers)
     client = check_client(client)
 
@@ -591,7 +691,8 @@ def compare(
     if out_csv is not None:
         record = asdict(settings)
         record["terrains"] = {name: _fingerprint(g) for name, g in grids.items()}
-        per_unit = settings.n_sets * len(settings.relocations) * len(settings.max_distance)
+        sets = settings.n_observers if settings.measure == "viewshed" else settings.n_sets
+        per_unit = sets * len(settings.relocations) * len(settings.max_distance)
         store = ResultStore(out_csv, record, COLUMNS, UNIT_KEY, lambda key: per_unit, resume=resume)
         done = frozenset(store.done)
     tasks = _tasks(grids, settings, done)

@@ -16,7 +16,9 @@ from matplotlib.ticker import NullFormatter
 from ._validate import as_points, describe
 from .terrain import TIN, HeightGrid, as_terrain
 
-__all__ = ["hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance"]
+__all__ = [
+    "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance", "viewshed",
+]
 
 
 def _style(method: str) -> tuple[str, str]:
@@ -290,4 +292,43 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")
     axes[-1].legend(fontsize=8, loc="lower left")
+    return fig
+
+
+def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None = None, figsize=(6, 5)) -> Figure:
+    """A viewshed drawn over the terrain's hillshade.
+
+    Parameters
+    ----------
+    terrain : HeightGrid
+        The grid whose samples ``visible`` refers to (normally the terrain the viewshed
+        was computed for, or the ``at`` grid of a viewshed on a simplification).
+    visible : (rows, cols) bool
+        :func:`terrainvis.viewshed`'s result.
+    observer : (x, y), optional
+        Marked with a star.
+    title : str, optional
+    """
+    as_terrain(terrain)
+    if not isinstance(terrain, HeightGrid):
+        raise TypeError(f"terrain must be the HeightGrid of the viewshed's samples, got {describe(terrain)}")
+    vis = np.asarray(visible, dtype=bool)
+    if vis.shape != terrain.shape:
+        raise ValueError(f"visible must have the terrain's shape {terrain.shape}, got {vis.shape}")
+    from matplotlib.patches import Patch
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title or "viewshed")
+    xmin, xmax, ymin, ymax = terrain.extent
+    valid = np.isfinite(terrain.z)
+    rgba = np.zeros(terrain.shape + (4,))
+    rgba[valid & vis] = (1.0, 0.83, 0.0, 0.55)  # visible: yellow
+    rgba[valid & ~vis] = (0.05, 0.05, 0.15, 0.55)  # hidden: dark
+    ax.imshow(rgba, origin="lower", extent=(xmin, xmax, ymin, ymax), interpolation="nearest")
+    handles = [Patch(color=(1.0, 0.83, 0.0, 0.8), label=f"visible ({100 * vis[valid].mean():.1f} %)"),
+               Patch(color=(0.05, 0.05, 0.15, 0.8), label="hidden")]
+    if observer is not None:
+        ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
     return fig

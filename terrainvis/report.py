@@ -26,7 +26,7 @@ import pandas as pd
 
 __all__ = [
     "paper_tables", "to_markdown", "findings", "findings_markdown", "paper_reference", "paper_comparison",
-    "comparison_markdown", "oracle_gap", "localized",
+    "comparison_markdown", "oracle_gap", "localized", "viewshed_table",
 ]
 
 _LEVEL_FRACTION = {1: "25%", 2: "6%", 3: "1.5%"}
@@ -93,6 +93,8 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
     if missing:
         raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
     data = _ok(df, predicate)
+    viewsheds = "measure" in data.columns and (data["measure"] == "viewshed").any()
+    what = "cells whose viewshed verdict survives (%)" if viewsheds else "accuracy (%)"
     tables: dict[str, pd.DataFrame] = {}
     levels = sorted(int(v) for v in data["level"].unique())
     for k, level in enumerate(levels, start=1):
@@ -106,7 +108,7 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
             if (m, r) in t.index
         ]
         t = t.loc[idx]
-        t.attrs["title"] = f"Table {k}: accuracy (%) at level {level} ({_LEVEL_FRACTION.get(level, f'level {level}')})"
+        t.attrs["title"] = f"Table {k}: {what} at level {level} ({_LEVEL_FRACTION.get(level, f'level {level}')})"
         tables[f"Table {k}"] = t
     if levels:
         deepest = levels[-1]
@@ -458,3 +460,30 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
     unit = data["distance_unit"].iloc[0] if "distance_unit" in data.columns and len(data) else "world"
     mu.attrs["title"] = f"Localized tests: mean accuracy (%) of the pairs within each distance ({unit} units)"
     return mu
+
+
+def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
+    """What simplification does to viewsheds: per method, level and relocation (means, %).
+
+    Columns ``cells_kept`` (share of cells whose verdict survives), ``visible_kept``,
+    ``blocked_kept`` and ``area_ratio`` (visible area on S(T) / on T, as a ratio), over
+    terrains and observers, for a result of ``compare(..., measure="viewshed")``.
+    """
+    from simplifiers import METHODS
+
+    from .relocation import RELOCATIONS
+
+    data = _ok(df)
+    if "measure" not in data.columns or not (data["measure"] == "viewshed").any():
+        raise ValueError("df holds no viewshed rows (run compare with measure='viewshed')")
+    data = data[data["measure"] == "viewshed"]
+    g = data.groupby(["method", "level", "relocation"])
+    t = pd.DataFrame({
+        "cells_kept": 100 * g["accuracy"].mean(), "visible_kept": 100 * g["visible_kept"].mean(),
+        "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].mean(), "n": g.size(),
+    })
+    idx = [(m, lv, r) for m in _ordered({i[0] for i in t.index}, METHODS) for lv in sorted({i[1] for i in t.index})
+           for r in RELOCATIONS if (m, lv, r) in t.index]
+    t = t.loc[idx]
+    t.attrs["title"] = "Viewsheds: cells whose verdict survives, visible and blocked cells kept (%), visible-area ratio"
+    return t

@@ -152,3 +152,36 @@ def test_los_prints_the_verdict_and_where_it_is_decided(tmp_path, capsys):
 
 def test_missing_dem_file(capsys):
     assert "does not exist" in _one_line_error(capsys, 2, ["info", "no/such/dem.tif"])
+
+
+def test_viewshed_writes_rasters_aligned_with_the_dem(tmp_path, capsys):
+    rasterio = pytest.importorskip("rasterio", reason="the geo extra is not installed")
+    from terrainvis import load_dem, load_terrain, viewshed
+
+    dem = shared_dem_path("green_mountains_vt", ".tif")
+    obs = ["675000", "4887000"]
+    assert main(["viewshed", str(dem), "--observer", *obs, "-o", str(tmp_path / "v.tif")]) == 0
+    assert "visible" in capsys.readouterr().out
+    expected = viewshed(load_dem(dem), (675000.0, 4887000.0))
+    with rasterio.open(tmp_path / "v.tif") as out, rasterio.open(dem) as src:
+        assert out.crs == src.crs and out.transform == src.transform and out.shape == src.shape
+        np.testing.assert_array_equal(out.read(1)[::-1], expected.astype(np.uint8))  # north-up rows
+    assert main(["viewshed", str(dem), "--observer", *obs, "--height", "10", "-o", str(tmp_path / "v.npz")]) == 0
+    saved = load_terrain(tmp_path / "v.npz")
+    np.testing.assert_array_equal(saved.z, viewshed(load_dem(dem), (675000.0, 4887000.0), observer_height=10.0))
+    assert saved.attrs["viewshed_observer_height"] == 10.0
+    assert main(["viewshed", "hills", "--observer", "900", "900", "-o", str(tmp_path / "v.png")]) == 0
+    assert (tmp_path / "v.png").stat().st_size > 1000
+    err = _one_line_error(capsys, 2, ["viewshed", str(dem), "--observer", "0", "0", "-o", str(tmp_path / "w.tif")])
+    assert "outside the terrain's footprint" in err
+    assert "-o must end in .tif, .npz or .png" in _one_line_error(
+        capsys, 2, ["viewshed", "hills", "--observer", "900", "900", "-o", str(tmp_path / "v.txt")])
+
+
+def test_compare_viewsheds(tmp_path, capsys):
+    assert main(["compare", "--terrain", "hills", "--levels", "1", "--methods", "lls", "--measure", "viewshed",
+                 "--observers", "2", "--offset", "1.7", "--workers", "1", "--repeats", "1", "--no-plots",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "Viewsheds: cells whose verdict survives" in out and "The paper side by side" not in out
+    assert len(pd.read_csv(tmp_path / "results.csv")) == 2 * 3

@@ -354,3 +354,32 @@ def test_cascade_continues_each_qec_level_from_the_previous(small, tmp_path, mon
     assert rerun == [("a", "qec", (1, 2))]
     assert not again.duplicated(KEYS).any() and len(again) == len(full)
     pd.testing.assert_frame_equal(again[STABLE], full[STABLE], check_dtype=False)
+
+
+def test_viewshed_measure(small):
+    from simplifiers import simplify
+
+    from terrainvis import relocate, viewshed
+    from terrainvis.experiment import Settings, _observers
+
+    g = {"a": small["a"]}
+    kw = dict(methods=["lls", "greedy-insertion"], levels=[2], seed=3, repeats=1, measure="viewshed", n_observers=3,
+              offset=1.7)
+    df = compare(g, workers=1, **kw)
+    assert len(df) == 2 * 3 * 3 and (df["measure"] == "viewshed").all() and (df["error"] == "").all()
+    assert df["n_pairs"].eq(33 * 33).all()  # every sample of T is a target
+    # one row by hand: observer 1 relocated by half onto the TIN, its viewshed of T's samples there
+    T = small["a"]
+    eye = _observers(T, "a", Settings(n_observers=3, seed=3, offset=1.7))[1]
+    S = simplify(T, "greedy-insertion", 2)
+    v_t = viewshed(T, eye)
+    v_s = viewshed(S, relocate(eye[None], S, "half", offset=1.7)[0], at=T)
+    row = df[(df.method == "greedy-insertion") & (df.set == 1) & (df.relocation == "half")].iloc[0]
+    assert row["accuracy"] == (v_t == v_s).mean()
+    assert row["false_blocked"] == int((v_t & ~v_s).sum())
+    assert row["visible_area_ratio"] == pytest.approx(v_s.sum() / v_t.sum())
+    with pytest.raises(ValueError, match="measure 'viewshed' supports predicate 'exact' only"):
+        compare(g, predicate="paper", **kw)
+    with pytest.raises(ValueError, match=r"measure must be one of \['pairs', 'viewshed'\]"):
+        compare(g, **{**kw, "measure": "rays"})
+

@@ -75,3 +75,15 @@ def test_accuracy_vs_distance():
     assert {ln.get_label() for ln in ax.get_lines()} == {"identity", "full", "half"}
     with pytest.raises(ValueError, match="no distance sweep"):
         plot.accuracy_vs_distance(df[df["max_distance"].isna()])
+
+
+def test_viewshed_figure():
+    from terrainvis import viewshed
+
+    g = synthetic_terrain("ridges", size=33, seed=2)
+    v = viewshed(g, (400.0, 500.0))
+    fig = plot.viewshed(g, v, observer=(400.0, 500.0))
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert legend[0] == f"visible ({100 * v.mean():.1f} %)"
+    with pytest.raises(ValueError, match="visible must have the terrain's shape"):
+        plot.viewshed(g, v[:3])

@@ -144,3 +144,16 @@ def test_oracle_gap_and_localized_tables():
     # the main tables and the findings use the all-pairs rows of a sweep
     assert report.paper_tables(df)["Table 1"]["n"].eq(2).all()
     assert "oracle" not in report.findings(df)[3]["evidence"]
+
+
+def test_viewshed_table():
+    g = {"h": synthetic_terrain("hills", size=33, seed=4)}
+    df = compare(g, methods=["lls"], levels=[1, 2], workers=1, repeats=1, measure="viewshed", n_observers=3,
+                 offset=1.7)
+    t = report.viewshed_table(df)
+    sel = df[(df.level == 2) & (df.relocation == "full")]
+    assert t.loc[("lls", 2, "full"), "cells_kept"] == pytest.approx(100 * sel["accuracy"].mean())
+    assert t.loc[("lls", 2, "full"), "area_ratio"] == pytest.approx(sel["visible_area_ratio"].mean())
+    assert "cells whose viewshed verdict survives" in report.paper_tables(df)["Table 1"].attrs["title"]
+    with pytest.raises(ValueError, match="no viewshed rows"):
+        report.viewshed_table(compare(g, methods=["lls"], levels=[1], n_points=5, n_sets=1, workers=1, repeats=1))

@@ -125,7 +125,7 @@ from .._validate import describe
 from ..terrain import TIN, HeightGrid, as_terrain
 from ._asc import _read_asc, _write_asc
 from ._common import FORMAT, FORMAT_VERSION, _check_band, _check_crs_arg, _check_nodata, _check_path, _Corrupt, _UserError
-from ._geotiff import _read_tif, _write_tif
+from ._geotiff import _read_tif, _write_tif, write_mask_geotiff
 from ._meshfile import _read_mesh, _write_mesh
 from ._npy import _read_npy, _write_npy
 from ._npz import _read_npz, _write_npz
@@ -145,7 +145,8 @@ from ._sample import sample_dem
 #   _sample    sample_dem
 
 __all__ = [
-    "load_terrain", "save_terrain", "load_dem", "save_dem", "sample_dem", "native_coords", "metres_per_degree",
+    "load_terrain", "write_mask_geotiff", "save_terrain", "load_dem", "save_dem", "sample_dem", "native_coords",
+    "metres_per_degree",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",
 ]
 

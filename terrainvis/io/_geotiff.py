@@ -80,14 +80,11 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
 
 def _write_tif(grid: HeightGrid, p: Path) -> None:
     rasterio = rasterio_module()
-    from rasterio.transform import Affine
 
     z, nx, ny, crs_text, note = _uniform_layout(grid, p.suffix)
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None  # before any file is touched
     rows, cols = z.shape
-    dx = float((nx[-1] - nx[0]) / (cols - 1))
-    dy = float((ny[-1] - ny[0]) / (rows - 1))
-    transform = Affine(dx, 0.0, float(nx[0]) - 0.5 * dx, 0.0, -dy, float(ny[-1]) + 0.5 * dy)
+    transform = _north_up_transform(nx, ny)
     nodata = _nodata_value(z)
     north_up = z[::-1] if nodata is None else np.where(np.isnan(z), nodata, z)[::-1]
     attrs = dict(grid.attrs)
@@ -103,3 +100,53 @@ def _write_tif(grid: HeightGrid, p: Path) -> None:
         ) as dst:
             dst.write(north_up, 1)
             dst.update_tags(**tags)
+
+
+def _north_up_transform(nx: np.ndarray, ny: np.ndarray):
+    """The GDAL transform of a north-up raster whose sample centres are the native axes nx, ny."""
+    from rasterio.transform import Affine
+
+    dx = float((nx[-1] - nx[0]) / (nx.size - 1))
+    dy = float((ny[-1] - ny[0]) / (ny.size - 1))
+    return Affine(dx, 0.0, float(nx[0]) - 0.5 * dx, 0.0, -dy, float(ny[-1]) + 0.5 * dy)
+
+
+def write_mask_geotiff(grid: HeightGrid, mask: np.ndarray, path, *, nodata_mask=None) -> Path:
+    """Write a boolean raster over ``grid``'s samples as a uint8 GeoTIFF aligned with it.
+
+    1 where ``mask`` is True, 0 where False, 255 (the nodata value) where ``nodata_mask``
+    is True; the grid's CRS and the transform of its own coordinates, as
+    :func:`~terrainvis.save_dem` writes them, so the file overlays the grid's GeoTIFF.
+    A viewshed is the intended use.
+
+    Parameters
+    ----------
+    grid : HeightGrid
+        A uniform grid (a rectilinear one cannot be one raster; save an ``.npz`` then).
+    mask : (rows, cols) bool
+    path : str or Path
+        A ``.tif`` or ``.tiff`` file, written atomically.
+    nodata_mask : (rows, cols) bool, optional
+    """
+    rasterio = rasterio_module()
+    p = Path(path)
+    if not isinstance(grid, HeightGrid):
+        raise TypeError(f"grid must be a terrainvis.HeightGrid, got {type(grid).__name__}")
+    m = np.asarray(mask, dtype=bool)
+    if m.shape != grid.shape:
+        raise ValueError(f"mask must have the grid's shape {grid.shape}, got {m.shape}")
+    if not grid.is_uniform:
+        raise ValueError("a GeoTIFF needs a uniform grid, and this one is rectilinear: write the raster as .npz")
+    _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix)
+    crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
+    data = m.astype(np.uint8)
+    if nodata_mask is not None:
+        data[np.asarray(nodata_mask, dtype=bool)] = 255
+    rows, cols = data.shape
+    with atomic_path(p) as tmp:
+        with rasterio.open(
+            tmp, "w", driver="GTiff", height=rows, width=cols, count=1, dtype="uint8",
+            transform=_north_up_transform(nx, ny), crs=crs, nodata=255,
+        ) as dst:
+            dst.write(data[::-1], 1)
+    return p
