@@ -19,5 +19,5 @@ def test_explore_notebook_runs():
     assert not [o for o in outputs if o.get("output_type") == "error"]
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     tables = [o for o in outputs if "text/html" in o.get("data", {})]
-    assert len(images) == 5  # hillshade, views, LOS pairs, accuracy against size, trade-off
+    assert len(images) == 6  # hillshade, views, LOS pairs, accuracy against size, trade-off, viewshed
     assert len(tables) == 1  # Table 1
