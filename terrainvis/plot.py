@@ -39,11 +39,7 @@ def _shade_image(terrain, resolution: int | None = None):
         n = resolution or 400
         xs = np.linspace(xmin, xmax, n)
         ys = np.linspace(ymin, ymax, max(2, int(round(n * (ymax - ymin) / (xmax - xmin)))))
-        if isinstance(terrain, TIN):
-            z = terrain.height_on_grid(xs, ys)
-        else:
-            X, Y = np.meshgrid(xs, ys)
-            z = terrain.height_at(np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
+        z = terrain.height_on_grid(xs, ys)
         dx, dy = xs[1] - xs[0], ys[1] - ys[0]
     zf = np.where(np.isnan(z), np.nanmin(z), z)
     import matplotlib as mpl
@@ -56,15 +52,19 @@ def _shade_image(terrain, resolution: int | None = None):
     return rgb, (xmin, xmax, ymin, ymax)
 
 
-def _draw_terrain(ax, terrain, *, wireframe: bool = True, title: str | None = None):
+def _draw_terrain(ax, terrain, *, wireframe: bool = True, title: str | None = None, axes: bool = True):
     rgb, extent = _shade_image(terrain)
     ax.imshow(rgb, origin="lower", extent=extent, interpolation="nearest")
     if isinstance(terrain, TIN) and wireframe:
         v = terrain.vertices
         ax.triplot(v[:, 0], v[:, 1], terrain.faces, color="k", lw=0.25, alpha=0.5)
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    if axes:
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+    else:  # a panel of many: the picture alone (ticks cost most of the drawing time)
+        ax.set_xticks([])
+        ax.set_yticks([])
     if title:
         ax.set_title(title, fontsize=9)
 
@@ -100,12 +100,15 @@ def terrain_views(original: HeightGrid, simplified: dict, *, ncols: int = 4, pan
         raise TypeError(f"simplified must be a dict of title -> terrain, got {describe(simplified)}")
     panels = [("original", original)] + list(simplified.items())
     nrows = int(np.ceil(len(panels) / ncols))
-    fig = Figure(figsize=(panel_size * ncols, panel_size * nrows), layout="constrained")
+    fig = Figure(figsize=(panel_size * ncols, panel_size * nrows))
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.93, wspace=0.04, hspace=0.12)
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    xmin, xmax, ymin, ymax = original.extent
     for ax, (title, t) in zip(axes, panels):
         as_terrain(t, f"simplified[{title!r}]")
         n = t.size if isinstance(t, HeightGrid) else t.n_vertices
-        _draw_terrain(ax, t, title=f"{title} ({n} vertices)")
+        _draw_terrain(ax, t, title=f"{title} ({n} vertices)", axes=False)
+    axes[0].set_xlabel(f"{xmax - xmin:.4g} m x {ymax - ymin:.4g} m", fontsize=8)
     for ax in axes[len(panels):]:
         ax.set_axis_off()
     return fig
@@ -160,6 +163,19 @@ def los_pairs(terrain, points, V_true, V_test, *, only_changed: bool = False, ti
     return fig
 
 
+def _panels(n: int, width: float, height: float, figsize=None, sharey: bool = True):
+    """A figure of ``n`` panels in a row with fixed margins.
+
+    A layout engine measures every tick label and costs more than the drawing itself;
+    these figures have a known shape, so fixed margins serve as well.
+    """
+    fig = Figure(figsize=figsize or (width * n, height))
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=0.95 / w, right=1 - 0.15 / w, bottom=0.55 / h, top=1 - 0.35 / h,
+                        wspace=0.3 if not sharey else 0.08)
+    return fig, fig.subplots(1, n, squeeze=False, sharey=sharey).ravel()
+
+
 def _check_df(df, needed, *, sweep: bool = False):
     """The error-free rows of a compare result; of a distance sweep, the all-pairs rows unless ``sweep``."""
     if not isinstance(df, pd.DataFrame):
@@ -186,8 +202,7 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
 
     data = _check_df(df, {"method", "relocation", "size_fraction", "accuracy", "level"})
     rels = [r for r in RELOCATIONS if r in set(data["relocation"])]
-    fig = Figure(figsize=figsize or (4.2 * max(1, len(rels)), 3.8), layout="constrained")
-    axes = fig.subplots(1, max(1, len(rels)), squeeze=False, sharey=True).ravel()
+    fig, axes = _panels(max(1, len(rels)), 4.2, 3.8, figsize)
     for ax, rel in zip(axes, rels):
         sub = data[data["relocation"] == rel]
         for m in [m for m in METHODS if m in set(sub["method"])]:
@@ -212,7 +227,7 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
     return fig
 
 
-def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=(10, 4)) -> Figure:
+def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Figure:
     """What simplification buys against what it costs.
 
     Left: LOS speedup (time on T / time on S(T)) against accuracy lost; right: memory
@@ -230,13 +245,15 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=(10, 4)) -> 
         memory=data["nbytes"] / data["nbytes_original"],
     )
     g = data.groupby(["method", "level"]).agg(lost=("lost", "mean"), speedup=("speedup", "median"), memory=("memory", "median"))
-    fig = Figure(figsize=figsize, layout="constrained")
-    ax1, ax2 = fig.subplots(1, 2)
-    for (m, lv), row in g.iterrows():
+    fig, (ax1, ax2) = _panels(2, 5.0, 4.0, figsize, sharey=False)
+    from simplifiers import METHODS
+
+    for m in [m for m in METHODS if m in g.index.get_level_values(0)]:
         color, marker = _style(m)
-        for ax, col in ((ax1, "speedup"), (ax2, "memory")):
-            ax.scatter(row["lost"], row[col], color=color, marker=marker, label=m if lv == g.loc[m].index.min() else None)
-            ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        for k, (lv, row) in enumerate(g.loc[m].iterrows()):
+            for ax, col in ((ax1, "speedup"), (ax2, "memory")):
+                ax.scatter(row["lost"], row[col], color=color, marker=marker, label=m if k == 0 else None)
+                ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, xytext=(3, 3), textcoords="offset points")
     ax1.set_yscale("log")
     ax2.set_yscale("log")
     ax1.axhline(1.0, color="k", lw=0.5)
@@ -273,8 +290,7 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     finite = sorted(data["max_distance"].dropna().unique())
     x_all = finite[-1] * 2.0
     unit = data["distance_unit"].iloc[0] if "distance_unit" in data.columns else "world"
-    fig = Figure(figsize=figsize or (4.2 * len(levels), 3.8), layout="constrained")
-    axes = fig.subplots(1, len(levels), squeeze=False, sharey=True).ravel()
+    fig, axes = _panels(len(levels), 4.2, 3.8, figsize)
     for ax, level in zip(axes, levels):
         sub = data[data["level"] == level]
         for rel in [r for r in RELOCATIONS + (ORACLE,) if r in set(sub["relocation"])]:
