@@ -545,8 +545,7 @@ def _kernels_cached(settings: Settings) -> bool | None:
 
         from .visibility import _kernels
 
-        cache = _kernels.grid_matrix._cache
-        return os.path.exists(os.path.join(cache._cache_path, cache._index_name))
+        return os.path.exists(_kernels.grid_matrix._cache._cache_file._index_path)
     except Exception:  # numba internals: a best-effort hint only
         return None
 
