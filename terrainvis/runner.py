@@ -168,7 +168,9 @@ def _as_interrupted(exc: BaseException) -> Interrupted:
 # ---------------------------------------------------------------- local pool
 def _worker_init(threads: int, parent: int) -> None:
     """Set up a worker: numba threads, ignore SIGINT, die with the parent."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # already ignored since exec (see above)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending one is dropped
     if sys.platform.startswith("linux"):
         with contextlib.suppress(Exception):  # best effort: the watchdog below covers the rest
             import ctypes
@@ -197,9 +199,10 @@ def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
     )
     futures = {}
     try:
-        for key, args in tasks:
-            futures[pool.submit(fn, *args)] = key
-            signals.check()
+        with _workers_start_ignoring_sigint():
+            for key, args in tasks:  # the pool starts its workers inside submit()
+                futures[pool.submit(fn, *args)] = key
+        signals.check()
         pending = set(futures)
         while pending:
             done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
@@ -208,6 +211,8 @@ def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
             signals.check()
     except BrokenProcessPool as exc:
         _stop_pool(pool, futures)
+        if signals.pending is not None:  # the same signal reached a worker too: the user's stop
+            raise Interrupted(signals.pending) from None
         raise RuntimeError(
             "compare's worker processes died. They are started with 'spawn', which imports "
             "your __main__ module again: in a script, call compare() under "
@@ -220,6 +225,30 @@ def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
             raise _as_interrupted(exc) from None
         raise
     pool.shutdown(wait=True)
+
+
+@contextlib.contextmanager
+def _workers_start_ignoring_sigint():
+    """Start processes in this block with SIGINT ignored from their first instruction.
+
+    A worker sets SIGINT aside in its initializer, but that runs only after it has
+    imported terrainvis (seconds on a fresh install): a Ctrl-C in between would kill it
+    with a KeyboardInterrupt traceback and break the pool. An ignored disposition
+    survives exec, so the spawned interpreter starts with SIGINT ignored. Here SIGINT is
+    blocked meanwhile, so one that arrives in the block stays pending (Linux never
+    discards a blocked signal) and reaches this process's handler on the way out.
+    """
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+        if signal.SIGINT not in blocked:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _stop_pool(pool: ProcessPoolExecutor, futures) -> None:

@@ -96,3 +96,48 @@ def test_interrupted_runs_resume_to_the_uninterrupted_result(tmp_path):
     final = _start(out, resume=True)
     assert final.wait(timeout=300) == 0, final.stderr.read()
     pd.testing.assert_frame_equal(_table(out / "results.csv"), expected, check_dtype=False)
+
+
+_POOL_SCRIPT = """
+import sys, time
+from terrainvis.runner import Interrupted, run_units
+
+def nap(i):
+    time.sleep(60)
+    return i
+
+if __name__ == "__main__":
+    print("running", flush=True)
+    try:
+        run_units([(i, (i,)) for i in range(4)], nap, on_result=lambda key, result: None, workers=2)
+    except Interrupted as exc:
+        print(exc, file=sys.stderr)
+        sys.exit(130)
+"""
+
+
+def test_ctrl_c_while_the_workers_are_still_starting(tmp_path):
+    """Ctrl-C before the workers have imported terrainvis: an interrupt, not a broken pool."""
+    script = tmp_path / "pool.py"
+    script.write_text(_POOL_SCRIPT)
+    p = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, start_new_session=True)
+    assert p.stdout.readline().strip() == "running"
+    deadline = time.monotonic() + 30
+    workers = []
+    while len(workers) < 2 and time.monotonic() < deadline:  # both spawned, neither ready yet
+        workers = [c for c in _family(p) if "spawn_main" in " ".join(c.cmdline())]
+        time.sleep(0.005)
+    assert len(workers) == 2, "the pool did not start its workers"
+    assert not any(w.status() == psutil.STATUS_ZOMBIE for w in workers)
+    os.killpg(p.pid, signal.SIGINT)
+    try:
+        p.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        pytest.fail("the pool did not stop within 20 s of Ctrl-C")
+    err = p.stderr.read()
+    assert p.returncode == 130, err
+    assert "interrupted by SIGINT" in err and "Traceback" not in err, err
+    _, alive = psutil.wait_procs(workers, timeout=10)
+    assert not alive, f"worker processes survived: {alive}"
