@@ -25,6 +25,7 @@ The run goes in four stages:
 from __future__ import annotations
 
 import hashlib
+import os
 import sys
 import time
 import zlib
@@ -538,6 +539,59 @@ def _order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
     return df.drop(columns=["_t", "_m", "_r", "_d"]).reset_index(drop=True)
 
 
+def _call(fn, *args):
+    """``fn(*args)``: lets one pool run both units and warm-up parts."""
+    return fn(*args)
+
+
+def _warm_up_parts(tasks, grids: dict) -> list[tuple]:
+    """What a run must compile, as parts that two workers can compile side by side.
+
+    With a cold numba cache every worker would compile every kernel it meets (about 80 s
+    of compilation each for a full run). Compiled once by whichever worker takes the part,
+    a kernel is loaded from the on-disk cache by the others. The parts: each method's
+    kernels, and the measurements on a grid and on a TIN (line of sight, relocation, volume,
+    viewshed). Greedy cuts' kernels take the longest to compile (about 30 s) and go first,
+    the rest follow in the order the pool takes them.
+    """
+    from simplifiers import METHODS
+
+    methods = sorted({m for _, m, _ in tasks}, key=lambda m: METHODS[m].cost_rank)
+    kinds = sorted({"grid" if METHODS[m].regular else "tin" for m in methods})
+    # Regular methods switch to parallel kernels above a size: warm them on a grid as
+    # large as the run's largest (capped; they take milliseconds), the rest on a small one.
+    largest = max(g.size for g in grids.values())
+    side = min(1024, max(33, int(np.ceil(np.sqrt(largest)))))
+    parts = [("method", m, side if METHODS[m].regular else 33) for m in methods]
+    return parts[:1] + [("measure", k, 33) for k in kinds] + parts[1:]
+
+
+def _warm_up(part: tuple, settings: Settings) -> list:
+    """Compile (or load) the kernels of one part by running it on a synthetic grid of the part's size."""
+    from dataclasses import replace
+
+    from simplifiers import simplify
+
+    from .deviation import volume_error
+    from .synthetic import synthetic_terrain
+
+    what, name, side = part
+    grid = synthetic_terrain("hills", size=side, seed=0)
+    if what == "method":
+        simplify(grid, name, 1)
+        return []
+    small = replace(settings, n_points=6, n_sets=1, n_observers=1, repeats=1)
+    simplified = simplify(grid, "simple", 1) if name == "grid" else grid.to_tin()
+    if small.volume:
+        volume_error(grid, simplified)
+    base = {"end_radius": end_radius_for(simplified, grid, 1, small.predicate)}
+    if small.measure == "viewshed":
+        _viewshed_rows(grid, simplified, base, small, _observers(grid, "warm-up", small))
+    else:
+        _pair_rows(grid, simplified, base, small, point_sets(grid, "warm-up", 6, 1, small.seed, small.offset))
+    return []
+
+
 def _kernels_cached(settings: Settings) -> bool | None:
     """Whether numba's on-disk cache already holds the LOS kernels (None when it cannot tell)."""
     try:
@@ -703,21 +757,27 @@ def compare(
     from tqdm.auto import tqdm
 
     todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
-    if progress and tasks and _kernels_cached(settings) is False:
-        tqdm.write("terrainvis: compiling numba kernels (first run only, about half a minute)...", file=sys.stderr)
+    cold = bool(tasks) and _kernels_cached(settings) is False
+    if progress and cold:
+        tqdm.write("terrainvis: compiling numba kernels (first run only, under a minute)...", file=sys.stderr)
     bar = tqdm(total=todo, desc="compare", unit="unit", file=sys.stderr, disable=not (progress and tasks))
     new_rows: list[dict] = []
 
     def collect(key, rows):
+        if key[0] == "warm-up":
+            return
         rows = [r for r in rows if (r["terrain"], r["method"], r["level"]) not in done]
         new_rows.extend(rows)
         if store is not None:
             store.add(rows)
         bar.update(len({r["level"] for r in rows}))
 
-    work = [((t, m, g), (grids[t], t, m, g, settings, save_dir)) for t, m, g in tasks]
+    work = [((t, m, g), (_run_unit, grids[t], t, m, g, settings, save_dir)) for t, m, g in tasks]
+    n_local = (os.cpu_count() or 1) if workers is None else workers
+    if cold and client is None and n_local > 1 and len(work) > 1:
+        work = [(("warm-up", part), (_warm_up, part, settings)) for part in _warm_up_parts(tasks, grids)] + work
     try:
-        run_units(work, _run_unit, on_result=collect, workers=workers, client=client)
+        run_units(work, _call, on_result=collect, workers=workers, client=client)
     finally:
         bar.close()
 

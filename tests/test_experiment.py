@@ -383,3 +383,40 @@ def test_viewshed_measure(small):
     with pytest.raises(ValueError, match=r"measure must be one of \['pairs', 'viewshed'\]"):
         compare(g, **{**kw, "measure": "rays"})
 
+
+
+_WARM_UP_SCRIPT = """
+import sys
+from numba.core import event
+import terrainvis as tv
+from terrainvis import experiment
+
+measure, predicate = sys.argv[1:]
+grids = experiment.resolve_terrains(["hills"])
+settings = experiment._settings(
+    grids, methods=None, levels=[1], relocations=["identity", "full", "half"] + (["oracle"] if measure == "pairs" else []), n_points=8, n_sets=1,
+    seed=0, max_distance=[None, 500.0], distance_unit="world", offset=1.0, engine="auto", predicate=predicate,
+    volume=True, repeats=1, cascade=False, measure=measure, n_observers=1, target_height=0.0)
+tasks = experiment._tasks(grids, settings)
+for part in experiment._warm_up_parts(tasks, grids):
+    experiment._warm_up(part, settings)
+with event.install_recorder("numba:compile") as rec:
+    for t, m, levels in tasks:
+        rows = experiment._run_unit(grids[t], t, m, levels, settings, None)
+        assert not any(r["error"] for r in rows), rows[0]["error"]
+compiled = sorted({ev.data["dispatcher"].py_func.__qualname__ for _, ev in rec.buffer if "dispatcher" in ev.data})
+print(compiled)
+"""
+
+
+@pytest.mark.parametrize("measure, predicate", [("pairs", "paper"), ("pairs", "exact"), ("viewshed", "exact")])
+def test_the_warm_up_compiles_everything_the_units_need(measure, predicate, tmp_path):
+    """A cold run compiles in warm-up parts spread over the workers: the units must then compile nothing."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "warm.py"
+    script.write_text(_WARM_UP_SCRIPT)
+    out = subprocess.run([sys.executable, str(script), measure, predicate], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]", f"compiled after the warm-up: {out.stdout}"
