@@ -80,6 +80,7 @@ import time
 
 import numpy as np
 
+from terrainvis._memory import release_freed_memory
 from terrainvis._mesh import boundary_edges
 from terrainvis._validate import as_int, describe
 from terrainvis.errors import SimplificationError
@@ -367,6 +368,7 @@ def _pymeshlab_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: i
     v = np.array(m.vertex_matrix(), dtype=np.float64) * unit
     f = np.array(m.face_matrix(), dtype=np.int64)
     del m, ms
+    release_freed_memory()
     return _compact(v, f)
 
 
@@ -396,6 +398,7 @@ def _fast_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int, s
         if faces.shape[0] - f.shape[0] >= asked / 2 or attempt == _FAST_RESCALES:
             break
         unit *= 10.0
+    release_freed_memory()
     return _compact(np.asarray(v, dtype=np.float64) * unit, np.asarray(f, dtype=np.int64).reshape(-1, 3))
 
 

@@ -19,6 +19,7 @@ finished units have been written.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -502,7 +503,8 @@ def main(argv=None) -> int:
     try:
         args = _parser().parse_args(argv)
         name = f"terrainvis {args.command}"
-        return _run(args, name)
+        with _one_line_warnings(name):
+            return _run(args, name)
     except Interrupted as exc:
         note = " finished units are in results.csv (use --resume)" if name == "terrainvis compare" else ""
         print(f"{name}: interrupted ({exc});{note}", file=sys.stderr)
@@ -513,6 +515,19 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+@contextlib.contextmanager
+def _one_line_warnings(name: str):
+    """Warnings as one line each, prefixed with the command (no source file and line)."""
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"{name}: warning: {message}", file=sys.stderr if file is None else file)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _main_thread() -> bool:

@@ -540,8 +540,13 @@ def _order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
 
 
 def _call(fn, *args):
-    """``fn(*args)``: lets one pool run both units and warm-up parts."""
-    return fn(*args)
+    """``fn(*args)``, then freed memory back to the OS: lets one pool run both units and warm-up parts."""
+    from ._memory import release_freed_memory
+
+    try:
+        return fn(*args)
+    finally:
+        release_freed_memory()
 
 
 def _warm_up_parts(tasks, grids: dict) -> list[tuple]:

@@ -185,3 +185,14 @@ def test_compare_viewsheds(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "Viewsheds: cells whose verdict survives" in out and "The paper side by side" not in out
     assert len(pd.read_csv(tmp_path / "results.csv")) == 2 * 3
+
+
+def test_warnings_are_one_line(tmp_path, capsys):
+    """An even-sized grid's LLS result is rectilinear: writing it to .tif resamples, with one warning line."""
+    from terrainvis import bundled_terrain, save_dem
+
+    dem = tmp_path / "even.npz"
+    save_dem(bundled_terrain("hills").crop(rows=(0, 40), cols=(0, 40)), dem)
+    assert main(["simplify", str(dem), "-m", "lls", "-l", "1", "-o", str(tmp_path / "s.tif")]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("terrainvis simplify: warning: .tif needs a uniform grid"), err
