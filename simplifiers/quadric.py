@@ -57,7 +57,11 @@ coarser level from the previous one took 0.40 of the time of three independent r
 levels start from quadrics of the finer TIN, not of the grid; their RMS errors moved by
 -8 % to +1 % on 1024² and by -28 % to +30 % on single 120² terrains (on average 5-10 %
 lower with pymeshlab, +-1 % with fast-simplification); see ``benchmarks/bench_quadric.py
---cascade``. Independent runs are the default.
+--cascade``. ``simplify`` runs every level independently unless given ``start``;
+``terrainvis.compare`` cascades on grids above
+:data:`terrainvis.experiment.CASCADE_AUTO_MIN_SAMPLES` samples (``cascade="auto"``),
+where on 1024² "mountains" it moved QEC's accuracies by at most 0.1 points and
+lowered its RMS errors by 6-8 %.
 
 References
 ----------

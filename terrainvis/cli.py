@@ -45,7 +45,7 @@ def _add_nodata(p) -> None:
 def _parser() -> argparse.ArgumentParser:
     from simplifiers import METHODS
 
-    from .experiment import DEFAULT_TERRAINS, DEFAULTS, PREDICATES
+    from .experiment import CASCADE_AUTO_MIN_SAMPLES, DEFAULT_TERRAINS, DEFAULTS, PREDICATES
     from .relocation import RELOCATIONS
 
     p = argparse.ArgumentParser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
@@ -90,9 +90,13 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")
     c.add_argument("--no-volume", action="store_true", help="skip the volume between T and S(T)")
-    c.add_argument("--cascade", action="store_true",
-                   help="simplify each QEC level from the previous level's result (one decimation instead of three; "
-                        "changes QEC's results slightly, see the README)")
+    cc = c.add_mutually_exclusive_group()
+    cc.add_argument("--cascade", dest="cascade", action="store_const", const=True, default=DEFAULTS.cascade,
+                    help="simplify each QEC level from the previous level's result (one decimation instead of three; "
+                         "changes QEC's results slightly, see the README). Default: only on grids of more than "
+                         f"{CASCADE_AUTO_MIN_SAMPLES:,} samples")
+    cc.add_argument("--no-cascade", dest="cascade", action="store_const", const=False,
+                    help="simplify every level from the terrain itself, as the paper does, whatever its size")
     c.add_argument("--no-plots", action="store_true", help="do not write the figures")
     c.add_argument("--quick", action="store_true",
                    help="a run of seconds for smoke tests: terrains hills and ridges, levels 1 and 3, 2 sets of 20 points")

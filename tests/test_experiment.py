@@ -330,8 +330,15 @@ def test_cascade_continues_each_qec_level_from_the_previous(small, tmp_path, mon
 
     kw = _kw(methods=["qec", "lls"], levels=[1, 2], n_sets=1)
     g = {"a": small["a"]}
-    independent = compare(g, workers=1, **kw)
+    independent = compare(g, workers=1, cascade=False, **kw)
     cascaded = compare(g, workers=1, cascade=True, **kw)
+    assert list(cascaded.groupby(["method", "level"])["cascaded"].all()) == [False, False, False, True]
+    assert not independent["cascaded"].any()
+    # "auto" (the default) cascades above a grid size only
+    pd.testing.assert_frame_equal(compare(g, workers=1, **kw)[STABLE], independent[STABLE])
+    monkeypatch.setattr(experiment, "CASCADE_AUTO_MIN_SAMPLES", small["a"].size - 1)
+    pd.testing.assert_frame_equal(compare(g, workers=1, **kw)[STABLE], cascaded[STABLE])
+    monkeypatch.undo()
     s1 = simplify(small["a"], "qec", 1)
     s2 = simplify(small["a"], "qec", 2, start=s1)
     row = cascaded[(cascaded.method == "qec") & (cascaded.level == 2)].iloc[0]
