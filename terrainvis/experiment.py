@@ -292,7 +292,8 @@ def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
     }
     simplified = None
     try:
-        simplified = simplify(grid, method, level, **({} if start is None else {"start": start}))
+        simplified = _simplify_level(grid, method, level, start)
+        base["cascaded"] = bool(simplified.attrs.get("cascaded", False))
         if save_dir is not None:
             _save(simplified, simplified_path(save_dir, name, method, level))
         meta = simplified.attrs
@@ -313,6 +314,31 @@ def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
         ]
         simplified = None
     return rows, simplified
+
+
+def _simplify_level(grid, method, level, start):
+    """``simplify`` at one level, from ``start`` (a finer result of a cascade) when given.
+
+    A cascade level that the method cannot finish (fast-simplification returned a
+    non-manifold mesh from a cascaded 3601² level 2, for example) is simplified from the
+    grid instead; ``attrs["cascaded"]`` says which happened.
+    """
+    from simplifiers import simplify
+
+    from .errors import SimplificationError
+
+    if start is not None:
+        try:
+            out = simplify(grid, method, level, start=start)
+            out.attrs["cascaded"] = True
+            return out
+        except SimplificationError as exc:
+            cause = str(exc)
+    out = simplify(grid, method, level)
+    out.attrs["cascaded"] = False
+    if start is not None:
+        out.attrs["cascade_failed"] = cause
+    return out
 
 
 def _pair_rows(grid, simplified, base, settings, sets) -> list[dict]:
@@ -591,7 +617,19 @@ def _warm_up_parts(tasks, grids: dict) -> list[tuple]:
 
 
 def _warm_up(part: tuple, settings: Settings) -> list:
-    """Compile (or load) the kernels of one part by running it on a synthetic grid of the part's size."""
+    """Compile (or load) the kernels of one part by running it on a synthetic grid of the part's size.
+
+    Best effort: a part that fails leaves its kernels to be compiled by the units that
+    need them (which report their own errors).
+    """
+    import contextlib
+
+    with contextlib.suppress(Exception):
+        _warm_up_part(part, settings)
+    return []
+
+
+def _warm_up_part(part: tuple, settings: Settings) -> None:
     from dataclasses import replace
 
     from simplifiers import simplify
@@ -603,7 +641,7 @@ def _warm_up(part: tuple, settings: Settings) -> list:
     grid = synthetic_terrain("hills", size=side, seed=0)
     if what == "method":
         simplify(grid, name, 1)
-        return []
+        return
     small = replace(settings, n_points=6, n_sets=1, n_observers=1, repeats=1)
     simplified = simplify(grid, "simple", 1) if name == "grid" else grid.to_tin()
     if small.volume:
@@ -613,7 +651,6 @@ def _warm_up(part: tuple, settings: Settings) -> list:
         _viewshed_rows(grid, simplified, base, small, _observers(grid, "warm-up", small))
     else:
         _pair_rows(grid, simplified, base, small, point_sets(grid, "warm-up", 6, 1, small.seed, small.offset))
-    return []
 
 
 def _kernels_cached(settings: Settings) -> bool | None:

@@ -463,11 +463,13 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
 
 
 def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
-    """What simplification does to viewsheds: per method, level and relocation (means, %).
+    """What simplification does to viewsheds: per method, level and relocation.
 
     Columns ``cells_kept`` (share of cells whose verdict survives), ``visible_kept``,
-    ``blocked_kept`` and ``area_ratio`` (visible area on S(T) / on T, as a ratio), over
-    terrains and observers, for a result of ``compare(..., measure="viewshed")``.
+    ``blocked_kept`` (means over terrains and observers, %) and ``area_ratio`` (visible
+    area on S(T) / on T, the median: an observer who sees little of T can see many times
+    more of S(T), and a few such ratios would dominate a mean), for a result of
+    ``compare(..., measure="viewshed")``.
     """
     from simplifiers import METHODS
 
@@ -480,10 +482,11 @@ def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
     g = data.groupby(["method", "level", "relocation"])
     t = pd.DataFrame({
         "cells_kept": 100 * g["accuracy"].mean(), "visible_kept": 100 * g["visible_kept"].mean(),
-        "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].mean(), "n": g.size(),
+        "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].median(), "n": g.size(),
     })
     idx = [(m, lv, r) for m in _ordered({i[0] for i in t.index}, METHODS) for lv in sorted({i[1] for i in t.index})
            for r in RELOCATIONS if (m, lv, r) in t.index]
     t = t.loc[idx]
-    t.attrs["title"] = "Viewsheds: cells whose verdict survives, visible and blocked cells kept (%), visible-area ratio"
+    t.attrs["title"] = ("Viewsheds: cells whose verdict survives, visible and blocked cells kept (%), "
+                        "visible-area ratio S(T) / T (median)")
     return t

@@ -406,7 +406,7 @@ settings = experiment._settings(
     volume=True, repeats=1, cascade=False, measure=measure, n_observers=1, target_height=0.0)
 tasks = experiment._tasks(grids, settings)
 for part in experiment._warm_up_parts(tasks, grids):
-    experiment._warm_up(part, settings)
+    experiment._warm_up_part(part, settings)  # not _warm_up: a failure must show here
 with event.install_recorder("numba:compile") as rec:
     for t, m, levels in tasks:
         rows = experiment._run_unit(grids[t], t, m, levels, settings, None)
@@ -427,3 +427,23 @@ def test_the_warm_up_compiles_everything_the_units_need(measure, predicate, tmp_
     out = subprocess.run([sys.executable, str(script), measure, predicate], capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]", f"compiled after the warm-up: {out.stdout}"
+
+
+def test_a_cascade_level_that_fails_is_simplified_from_the_grid(small, monkeypatch):
+    import simplifiers
+    from terrainvis.errors import SimplificationError
+
+    kw = _kw(methods=["qec"], levels=[1, 2], n_sets=1)
+    g = {"a": small["a"]}
+    independent = compare(g, workers=1, cascade=False, **kw)
+    real = simplifiers.simplify
+
+    def no_cascade(grid, method, level=1, **options):
+        if "start" in options:
+            raise SimplificationError("qec (fast-simplification backend) produced a mesh that is not a disk")
+        return real(grid, method, level, **options)
+
+    monkeypatch.setattr(simplifiers, "simplify", no_cascade)
+    fallback = compare(g, workers=1, cascade=True, **kw)
+    assert (fallback["error"] == "").all() and not fallback["cascaded"].any()
+    pd.testing.assert_frame_equal(fallback[STABLE], independent[STABLE])
