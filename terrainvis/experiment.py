@@ -252,9 +252,9 @@ def _run_unit(grid: HeightGrid, name: str, method: str, levels: tuple, settings:
     return rows
 
 
-#: ``cascade="auto"`` cascades on grids of more than this many samples (1024² and up:
-#: three independent QEC decimations there take minutes and, on two workers at once,
-#: 2.9 GB; the paper's 120² terrains stay independent).
+#: ``cascade="auto"`` cascades on grids of more than this many samples (above about
+#: 724²; at 1024² three independent QEC decimations take minutes and, two at once on two
+#: workers, 2.9 GB; the paper's 120² terrains stay independent).
 CASCADE_AUTO_MIN_SAMPLES = 1 << 19
 
 
@@ -538,8 +538,8 @@ def _settings(grids, *, methods, levels, relocations, n_points, n_sets, seed, ma
         seed=as_int(seed, "seed", minimum=0), max_distance=_distances(max_distance),
         distance_unit=choice(distance_unit, "distance_unit", DISTANCE_UNITS), offset=_finite(offset, "offset"),
         engine=engine, predicate=predicate, volume=bool(volume), repeats=as_int(repeats, "repeats", minimum=1),
-        cascade=cascade if isinstance(cascade, str) else bool(cascade), measure=measure, n_observers=as_int(n_observers, "n_observers", minimum=1),
-        target_height=target_height,
+        cascade=cascade if isinstance(cascade, str) else bool(cascade), measure=measure,
+        n_observers=as_int(n_observers, "n_observers", minimum=1), target_height=target_height,
     )
 
 
