@@ -50,6 +50,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ._kernels import _locate
+
 _INF = np.inf
 
 #: Codes of the sweep's output (int8 per sample).
@@ -109,25 +111,7 @@ def _direction(p):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def locate(v, iw, uniform, x):
     """Index i in [0, len(v) - 2] with v[i] <= x < v[i+1] (clamped); v local, from 0."""
-    hi = v.shape[0] - 1
-    if uniform:
-        i = int(x * iw[0]) if x > 0.0 else 0
-        if i > hi - 1:
-            i = hi - 1
-        while i > 0 and v[i] > x:
-            i -= 1
-        while i < hi - 1 and v[i + 1] <= x:
-            i += 1
-        return i
-    a = 0
-    b = hi
-    while b - a > 1:
-        mid = (a + b) >> 1
-        if v[mid] <= x:
-            a = mid
-        else:
-            b = mid
-    return a
+    return _locate(v, iw, 0, v.shape[0] - 1, uniform, x)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -785,18 +769,25 @@ def _fill_run(z, xs, ys, ex, ey, ez, q, r0, c0, dr, dc, i0, i1, s0, p0, s1, p1):
 BLOCK = 16
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _wedge_value(arr, p, bsz, glo):
-    """Value of the wedge holding pseudo-angle p (the larger of both near a boundary)."""
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _wedge_slot(p, bsz, glo):
+    """Local index of the wedge holding pseudo-angle p, and whether p lies on its lower or
+    upper boundary (within rounding), where the neighbouring wedge counts too."""
     k4 = bsz * 0.25
     gb = p * k4
     g = int(np.floor(gb))
-    i = g - glo
-    v = arr[i]
     fr = gb - g
-    if fr < 1e-9 * k4:
+    return g - glo, fr < 1e-9 * k4, fr > 1.0 - 1e-9 * k4
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _wedge_value(arr, p, bsz, glo):
+    """Value of the wedge holding pseudo-angle p (the larger of both near a boundary)."""
+    i, at_lo, at_hi = _wedge_slot(p, bsz, glo)
+    v = arr[i]
+    if at_lo:
         v = max(v, arr[i - 1])
-    if fr > 1.0 - 1e-9 * k4:
+    if at_hi:
         v = max(v, arr[i + 1])
     return v
 
@@ -805,15 +796,11 @@ def _wedge_value(arr, p, bsz, glo):
 def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h):
     """Whether the lower bound of the target's wedge proves it blocked, and its slope and
     slack: ``(blocked, s_T, slack)``."""
-    k4 = bsz * 0.25
-    gb = p * k4
-    g = int(np.floor(gb))
-    i_b = g - glo
+    i_b, at_lo, at_hi = _wedge_slot(p, bsz, glo)
     lbv = lb[i_b]
-    fr = gb - g
-    if fr < 1e-9 * k4:
+    if at_lo:
         lbv = min(lbv, lb[i_b - 1])
-    if fr > 1.0 - 1e-9 * k4:
+    if at_hi:
         lbv = min(lbv, lb[i_b + 1])
     st = nt / dist
     slack = 2.0 * e_h / dist + _REL * abs(st)

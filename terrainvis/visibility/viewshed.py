@@ -73,12 +73,12 @@ from .._validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..terrain import TIN, HeightGrid, as_terrain
 from . import _viewshed_kernels as _vk
-from . import clearance_tolerance, trim_length
+from . import ENGINES, _check_engine, clearance_tolerance, trim_length
 
 __all__ = ["viewshed", "VIEWSHED_ENGINES"]
 
 #: Valid values of the ``engine`` argument.
-VIEWSHED_ENGINES = ("auto", "grid", "embree")
+VIEWSHED_ENGINES = ENGINES
 
 # Sweep layout (see the module docstring): sectors (a multiple of 4), wedges near the eye
 # (a power of 2, a multiple of the sectors), first ring where the wedges double (a multiple
@@ -241,18 +241,6 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
 
 
 # ----------------------------------------------------------------- validation
-def _check_engine(engine, terrain) -> str:
-    if not isinstance(engine, str) or engine not in VIEWSHED_ENGINES:
-        raise ValueError(f"engine must be one of {list(VIEWSHED_ENGINES)}, got {engine!r}")
-    if engine == "auto":
-        return "grid" if isinstance(terrain, HeightGrid) else "embree"
-    if engine == "grid" and not isinstance(terrain, HeightGrid):
-        raise ValueError(
-            f"engine 'grid' needs a HeightGrid, got {describe(terrain)}; use engine='embree' or 'auto' for a TIN"
-        )
-    return engine
-
-
 def _as_observer(observer) -> tuple[float, float, float | None]:
     """(x, y, z or None) of an observer given as (x, y) or as its eye (x, y, z)."""
     try:
