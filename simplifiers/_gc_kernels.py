@@ -634,11 +634,8 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
             else:
                 hi = t
                 if st == GEO and scr[S_BLOCKER] >= 0 and alt < 0:
-                    ob = nodes[scr[S_BLOCKER], VERT]
-                    if _evaluate(ia, ib, ob, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx,
-                                 scr) == OK:
-                        alt = ob
-                        alt_node = scr[S_APEX_NODE]
+                    alt = _blocker_apex(ia, ib, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+                    alt_node = scr[S_APEX_NODE]
                 break
         prev_p = P
         t *= 2.0
@@ -656,16 +653,23 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
             else:
                 hi = tm
                 if st == GEO and scr[S_BLOCKER] >= 0 and alt < 0:
-                    ob = nodes[scr[S_BLOCKER], VERT]
-                    if _evaluate(ia, ib, ob, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx,
-                                 scr) == OK:
-                        alt = ob
-                        alt_node = scr[S_APEX_NODE]
+                    alt = _blocker_apex(ia, ib, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+                    alt_node = scr[S_APEX_NODE]
     if alt >= 0:
         scr[S_APEX_NODE] = alt_node
         return alt
     scr[S_APEX_NODE] = best_node
     return best
+
+
+@nb.njit(**_HOT)
+def _blocker_apex(ia, ib, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr):
+    """The vertex that blocked the last evaluation (``scr[S_BLOCKER]``) as the apex, when
+    that evaluates OK (``scr[S_APEX_NODE]`` is then its node); -1 otherwise."""
+    ob = nodes[scr[S_BLOCKER], VERT]
+    if _evaluate(ia, ib, ob, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr) == OK:
+        return ob
+    return -1
 
 
 @nb.njit(**_HOT)
