@@ -50,7 +50,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._kernels import _locate
+from ._kernels import _canonical, _locate, interval_start
 
 _INF = np.inf
 
@@ -329,20 +329,12 @@ def walk_targets(z, xs, ys, ixw, iyw, uniform, has_nan, ex, ey, ez, tx, ty, tz, 
     nodata (the pair engine needs a NaN-free grid)."""
     m = tx.shape[0]
     for i in range(m):
-        ax, ay, az = ex, ey, ez
-        bx, by, bz = tx[i], ty[i], tz[i]
-        if (bx < ax) or (bx == ax and (by < ay or (by == ay and bz < az))):
-            ax, bx = bx, ax
-            ay, by = by, ay
-            az, bz = bz, az
-        dx = bx - ax
-        dy = by - ay
-        dz = bz - az
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        if length <= 2.0 * delta:
+        seg, length = _canonical((ex, ey, ez), (tx[i], ty[i], tz[i]))
+        tau = interval_start(seg, length, delta, 0.0)
+        if tau < 0.0:
             out[i] = _INF
             continue
-        tau = delta / length
+        ax, ay, az, dx, dy, dz = seg
         out[i] = walk_min(z, xs, ys, ixw, iyw, uniform, has_nan, ax, ay, az, dx, dy, dz, tau, 1.0 - tau, -tol)
 
 
