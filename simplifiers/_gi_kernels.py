@@ -330,14 +330,17 @@ def init_state(z, W, H, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pm
 
 @nb.njit(cache=True, nogil=True)
 def run(z, W, ratio, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pmark, stack, counts,
-        n_target, max_error):
+        n_target, max_error, stop):
     """Insert the worst candidate until there are ``n_target`` vertices, no candidate is left,
-    or the worst error is <= ``max_error`` (ignored when negative).
+    the worst error is <= ``max_error`` (ignored when negative) or the stop flag ``stop[0]``
+    is set (:mod:`terrainvis._interrupt`; checked before every insertion).
 
     Returns the largest vertical error of the current TIN over all grid samples.
     """
     while counts[NV] < n_target and counts[NH] > 0:
         if max_error >= 0.0 and hval[0] <= max_error:
+            break
+        if stop[0] != 0:
             break
         t = heap[0]
         _heap_remove(heap, hval, pos, counts, t)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from terrainvis._interrupt import call
 from terrainvis._validate import as_nonnegative_finite, describe
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
@@ -126,8 +127,9 @@ class _Triangulator:
             eps_map[slice(0, k) if order is None else order[:k]] = eps
         boundary = self._boundary(eps_map)
         limit = np.iinfo(np.int64).max if max_vertices is None else int(max_vertices)
-        tris, counts = K.greedy_cuts_front(
-            self.gx, self.gy, self.space == "index", self.z, eps_map, boundary, 2 * max(self.z.shape), limit
+        tris, counts = call(
+            K.greedy_cuts_front, self.gx, self.gy, self.space == "index", self.z, eps_map, boundary,
+            2 * max(self.z.shape), limit, work=size,
         )
         status = int(counts[K.STATUS])
         if status == K.OVER_BUDGET:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from terrainvis._interrupt import call
 from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis._mesh import signed_area2
 from terrainvis.errors import SimplificationError
@@ -168,10 +169,10 @@ class GreedyInserter:
         while True:
             goal = min(target, self._vcap)
             self._max_error = float(
-                K.run(
-                    self._z, self._W, self._ratio, self._vx, self._vy, self._tri, self._half, self._cand,
+                call(
+                    K.run, self._z, self._W, self._ratio, self._vx, self._vy, self._tri, self._half, self._cand,
                     self._terr, self._heap, self._hval, self._pos, self._pend, self._pmark, self._stack,
-                    self._counts, goal, -1.0 if eps is None else eps,
+                    self._counts, goal, -1.0 if eps is None else eps, work=self._z.size,
                 )
             )
             done_error = eps is not None and self._max_error <= eps

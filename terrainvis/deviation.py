@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from . import _volume_kernels
+from ._interrupt import call
 from ._mesh import boundary_edges
 from ._validate import describe
 from .terrain import TIN, HeightGrid
@@ -227,7 +228,8 @@ def _volume_exact(fine: HeightGrid, coarse: TIN) -> tuple[float, float]:
     order = vk.faces_by_row(vy, faces, ys)
     nchunks = int(min(faces.shape[0], _VOLUME_CHUNKS))
     out = np.zeros((nchunks, vk.N_OUT))
-    vk.volume_between(xs, ys, fine.z, vx, vy, vz, faces, order, nchunks, out)
+    # work: the fine cells and the coarse faces visited
+    call(vk.volume_between, xs, ys, fine.z, vx, vy, vz, faces, order, nchunks, out, work=fine.size + faces.shape[0])
     volume = math.fsum(np.concatenate([out[:, vk.VOL], out[:, vk.VOL_C]]))
     covered = math.fsum(np.concatenate([out[:, vk.AREA], out[:, vk.AREA_C]]))
     return volume, covered

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels
+from ._interrupt import call
 from ._mesh import signed_area2
 from ._validate import as_float_array, as_int, as_points, as_positive_finite, describe
 from .errors import NodataError
@@ -343,7 +344,7 @@ class HeightGrid:
         qx = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
         qy = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((qy.size, qx.size), np.nan)
-        _kernels.grid_on_grid(self.xs, self.ys, self.z, qx, qy, out)
+        call(_kernels.grid_on_grid, self.xs, self.ys, self.z, qx, qy, out, work=out.size)
         return out
 
     def sample_xy(self) -> np.ndarray:
@@ -391,7 +392,7 @@ class HeightGrid:
         """``(rows, cols)`` slices of the largest axis-aligned window without nodata."""
         if not self.n_nodata:
             return slice(0, self.shape[0]), slice(0, self.shape[1])
-        r0, r1, c0, c1 = _kernels.largest_valid_rectangle(np.isfinite(self.z))
+        r0, r1, c0, c1 = call(_kernels.largest_valid_rectangle, np.isfinite(self.z), work=self.size)
         if r1 - r0 < 2 or c1 - c0 < 2:
             raise ValueError(f"z has no NaN-free window of at least 2x2 samples ({self.n_nodata} NaN cells)")
         return slice(int(r0), int(r1)), slice(int(c0), int(c1))
@@ -662,10 +663,11 @@ class TIN:
             return out
         bk = self._buckets()
         v = self.vertices
-        _kernels.locate_heights(
+        call(
+            _kernels.locate_heights,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
             self.faces, bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10,
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10, work=pts.shape[0],
         )
         return out
 
@@ -675,9 +677,10 @@ class TIN:
         ys = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((ys.size, xs.size), np.nan)
         v = self.vertices
-        _kernels.rasterize_tin(
+        call(
+            _kernels.rasterize_tin,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
-            self.faces, xs, ys, out, 1e-10,
+            self.faces, xs, ys, out, 1e-10, work=out.size + self.n_faces,
         )
         return out
 

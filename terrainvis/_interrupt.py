@@ -1,0 +1,160 @@
+"""Interrupting long numba kernels: Ctrl-C and SIGTERM stop them within about a second.
+
+numba's compiled code never runs Python's signal handlers, so a kernel that runs for a
+minute ignores Ctrl-C for a minute; worse, the handler then runs while numba turns the
+kernel's result into Python objects, and the interrupt surfaces as a ``SystemError``
+("returned a result with an exception set") or a segmentation fault. Module-level
+arrays are frozen into a kernel as constants, so a kernel cannot watch a global flag.
+This module is the one mechanism every long kernel uses instead:
+
+1. The kernel takes a *stop flag*, a ``(1,)`` int64 array, as its last argument, and at a
+   bounded interval (an outer loop iteration, a chunk of a ``prange``) checks
+   ``if stop[0] != 0`` and returns early. Its partial result is never used.
+2. The Python wrapper runs it with :func:`call` (``call(kernel, *args, work=n)``), which
+   appends a fresh flag. Above :data:`THREAD_MIN_WORK` units of work, and only in the
+   main thread (the only one that receives signals), :func:`call` runs the kernel in a
+   helper thread (the kernels are ``nogil``) while the main thread waits in short
+   joins, where Python runs its signal handlers. When the wait raises (the
+   ``KeyboardInterrupt`` of SIGINT, the :class:`terrainvis.runner.Interrupted` that the
+   CLI's SIGTERM handler raises, or anything else), :func:`call` sets the flag, waits
+   for the kernel to return and re-raises the same exception. The result is boxed in
+   the helper thread, where no signal handler runs, so an interrupt can no longer land
+   inside numba's boxing.
+3. Small calls run directly in the calling thread: starting a thread costs about
+   0.1 ms, far more than a kernel over a few thousand samples.
+
+Libraries in C++ (pymeshlab, fast-simplification) take no flag: :func:`call_detached`
+runs such a call in a helper thread and, on an interrupt, re-raises at once without
+waiting for it (the library's pass finishes in the background and is dropped). That
+helps only a library that releases the GIL while it works (pymeshlab); one that holds
+it (fast-simplification) is interrupted when the call returns, between its passes.
+
+A kernel that calls other kernels passes its flag down to the ones that loop long. A
+``prange`` kernel checks the flag at the start of each chunk and skips the chunk's
+work when it is set (a ``prange`` cannot be left early), so chunks must be small enough
+to end in well under a second. The flag is read where the loop also writes memory, so
+the compiler cannot hoist the read out of the loop; the tests in
+``tests/test_interrupt_kernels.py`` interrupt every long kernel in a subprocess and
+check that it stops.
+
+Examples
+--------
+>>> import numba, numpy as np
+>>> @numba.njit(nogil=True)
+... def total(a, stop):
+...     s = 0.0
+...     for i in range(a.shape[0]):
+...         if i % 4096 == 0 and stop[0] != 0:
+...             return s
+...         s += a[i]
+...     return s
+>>> call(total, np.ones(10), work=10)
+10.0
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+__all__ = ["call", "call_detached", "new_flag", "THREAD_MIN_WORK"]
+
+#: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
+#: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
+THREAD_MIN_WORK = 1 << 18
+
+#: Seconds between two wakes of the waiting main thread (signals wake it at once anyway).
+_JOIN_STEP = 0.25
+
+
+def new_flag() -> np.ndarray:
+    """A fresh stop flag: a ``(1,)`` int64 array holding 0 (go on)."""
+    return np.zeros(1, dtype=np.int64)
+
+
+def call(kernel, *args, work: int):
+    """``kernel(*args, stop)``, interruptible by SIGINT and SIGTERM (see the module docstring).
+
+    Parameters
+    ----------
+    kernel : numba dispatcher
+        A ``nogil`` kernel whose last parameter is the stop flag.
+    *args
+        Its other arguments.
+    work : int
+        The size of the call (samples, faces: any count proportional to its time).
+        Calls of at least :data:`THREAD_MIN_WORK` run in a helper thread.
+
+    Returns
+    -------
+    What the kernel returns.
+
+    Raises
+    ------
+    BaseException
+        Whatever interrupted the wait (``KeyboardInterrupt``,
+        :class:`terrainvis.runner.Interrupted`), after the kernel has returned; or the
+        kernel's own exception.
+    """
+    stop = new_flag()
+    if work < THREAD_MIN_WORK or threading.current_thread() is not threading.main_thread():
+        return kernel(*args, stop)
+    box = {}
+
+    def target():
+        try:
+            box["value"] = kernel(*args, stop)
+        except BaseException as exc:  # handed to the caller's thread below
+            box["error"] = exc
+
+    thread = threading.Thread(target=target, name="terrainvis-kernel", daemon=True)
+    try:
+        thread.start()
+        while thread.is_alive():
+            thread.join(_JOIN_STEP)
+    except BaseException:
+        stop[0] = 1
+        _join_after_stop(thread)
+        raise
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def call_detached(fn, *args, work: int, **kwargs):
+    """``fn(*args, **kwargs)`` for a library call that cannot be told to stop (C++ code).
+
+    Above :data:`THREAD_MIN_WORK` and in the main thread, ``fn`` runs in a daemon helper
+    thread while the main thread waits in short joins. An interrupt is re-raised at once
+    *without* waiting for ``fn``: when the library releases the GIL (pymeshlab does), the
+    caller gets its ``KeyboardInterrupt`` within the join step, and the library finishes
+    its pass in the background and its result is dropped (a command-line process simply
+    exits). A library that holds the GIL (fast-simplification) cannot be interrupted by
+    any thread: the interrupt then arrives when the call returns, as without this.
+    """
+    if work < THREAD_MIN_WORK or threading.current_thread() is not threading.main_thread():
+        return fn(*args, **kwargs)
+    box = {}
+
+    def target():
+        try:
+            box["value"] = fn(*args, **kwargs)
+        except BaseException as exc:  # handed to the caller's thread below
+            box["error"] = exc
+
+    thread = threading.Thread(target=target, name="terrainvis-library", daemon=True)
+    thread.start()
+    while thread.is_alive():
+        thread.join(_JOIN_STEP)
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def _join_after_stop(thread: threading.Thread) -> None:
+    """Wait for a stopped kernel to return; a second interrupt meanwhile is not lost but ends the wait."""
+    if thread.ident is None:  # never started
+        return
+    while thread.is_alive():
+        thread.join(_JOIN_STEP)
