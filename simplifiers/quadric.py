@@ -84,7 +84,6 @@ import time
 
 import numpy as np
 
-from terrainvis._interrupt import call_detached
 from terrainvis._memory import release_freed_memory
 from terrainvis._mesh import boundary_edges
 from terrainvis._validate import as_int, describe
@@ -458,7 +457,7 @@ def _tiled_mesh(grid: HeightGrid, origin: np.ndarray, budget: int, decimate, til
             target = int(2 * share + n_border - 2)  # F = 2V - B - 2 with V = share + B
             placed = None
             if target < f.shape[0] - 1:
-                dv, df = call_detached(decimate, v, f, max(target, 2), keep_border=True, work=f.shape[0])
+                dv, df = decimate(v, f, max(target, 2), keep_border=True)
                 placed = _tile_border(dv, df, lx, ly, n_border, tiny)
                 if placed is None:  # the library lost or moved part of the border: keep the tile as it is
                     fallbacks += 1
@@ -579,7 +578,7 @@ class _BudgetSearch:
             self.target = target
             t0 = time.perf_counter()
             try:
-                v, f = call_detached(self.decimate, base_v, base_f, target, work=base_f.shape[0])
+                v, f = self.decimate(base_v, base_f, target)
             except (MemoryError, KeyboardInterrupt):
                 raise
             except Exception as exc:  # the library failed: name it and the cause

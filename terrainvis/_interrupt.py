@@ -23,11 +23,10 @@ This module is the one mechanism every long kernel uses instead:
 3. Small calls run directly in the calling thread: starting a thread costs about
    0.1 ms, far more than a kernel over a few thousand samples.
 
-Libraries in C++ (pymeshlab, fast-simplification) take no flag: :func:`call_detached`
-runs such a call in a helper thread and, on an interrupt, re-raises at once without
-waiting for it (the library's pass finishes in the background and is dropped). That
-helps only a library that releases the GIL while it works (pymeshlab); one that holds
-it (fast-simplification) is interrupted when the call returns, between its passes.
+Libraries in C++ (pymeshlab, fast-simplification) take no flag, and are interrupted
+between their passes, when the call returns. Leaving such a call running in an
+abandoned thread is not safe: a process that exits while pymeshlab still works in
+another thread was seen to wait for it and then abort on a corrupted heap.
 
 A kernel that calls other kernels passes its flag down to the ones that loop long. A
 ``prange`` kernel checks the flag at the start of each chunk and skips the chunk's
@@ -58,7 +57,7 @@ import threading
 
 import numpy as np
 
-__all__ = ["call", "call_detached", "new_flag", "THREAD_MIN_WORK"]
+__all__ = ["call", "new_flag", "THREAD_MIN_WORK"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
@@ -117,36 +116,6 @@ def call(kernel, *args, work: int):
         stop[0] = 1
         _join_after_stop(thread)
         raise
-    if "error" in box:
-        raise box["error"]
-    return box["value"]
-
-
-def call_detached(fn, *args, work: int, **kwargs):
-    """``fn(*args, **kwargs)`` for a library call that cannot be told to stop (C++ code).
-
-    Above :data:`THREAD_MIN_WORK` and in the main thread, ``fn`` runs in a daemon helper
-    thread while the main thread waits in short joins. An interrupt is re-raised at once
-    *without* waiting for ``fn``: when the library releases the GIL (pymeshlab does), the
-    caller gets its ``KeyboardInterrupt`` within the join step, and the library finishes
-    its pass in the background and its result is dropped (a command-line process simply
-    exits). A library that holds the GIL (fast-simplification) cannot be interrupted by
-    any thread: the interrupt then arrives when the call returns, as without this.
-    """
-    if work < THREAD_MIN_WORK or threading.current_thread() is not threading.main_thread():
-        return fn(*args, **kwargs)
-    box = {}
-
-    def target():
-        try:
-            box["value"] = fn(*args, **kwargs)
-        except BaseException as exc:  # handed to the caller's thread below
-            box["error"] = exc
-
-    thread = threading.Thread(target=target, name="terrainvis-library", daemon=True)
-    thread.start()
-    while thread.is_alive():
-        thread.join(_JOIN_STEP)
     if "error" in box:
         raise box["error"]
     return box["value"]
