@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from terrainvis._memory import check_memory
 from terrainvis._mesh import NotADiskError, boundary_loop, signed_area2
 from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis.deviation import vertical_errors
@@ -62,6 +63,11 @@ class Method:
     cascades : bool
         The method can continue from its own result at a finer level (``start=``), so a
         comparison may simplify level k+1 from level k instead of from the grid.
+    memory : (int, int, int or None)
+        Peak bytes the method adds per grid sample (for at most the third entry's samples;
+        the rest cost :data:`_BYTES_PER_SAMPLE_BEYOND`) and per vertex of the result, the
+        errors' evaluation included: the estimate :func:`simplify` checks against the
+        memory available before it starts (:meth:`memory_need`).
     """
 
     name: str
@@ -74,6 +80,13 @@ class Method:
     cost_rank: int = 9
     style: tuple = ("k", "o")
     cascades: bool = False
+    memory: tuple = (32, 0, None)
+
+    def memory_need(self, n_samples: int, n_vertices: int) -> int:
+        """Estimated peak bytes of simplifying ``n_samples`` grid samples to ``n_vertices`` vertices."""
+        per_sample, per_vertex, cap = self.memory
+        heavy = n_samples if cap is None else min(n_samples, cap)
+        return per_sample * heavy + _BYTES_PER_SAMPLE_BEYOND * (n_samples - heavy) + per_vertex * n_vertices
 
     def load(self):
         """The method's operator (regular) or build function (irregular)."""
@@ -86,6 +99,9 @@ class Method:
 
 _RF = "simplifiers.reverse_faber"
 
+#: Bytes per grid sample past a method's ``memory`` cap (QEC's tiles): the grid's mesh and the errors.
+_BYTES_PER_SAMPLE_BEYOND = 72
+
 #: Every method, in the paper's row order (irregular first, then regular).
 METHODS: dict[str, Method] = {
     m.name: m
@@ -94,16 +110,20 @@ METHODS: dict[str, Method] = {
             "qec", "irregular", "simplifiers.quadric", "build",
             "quadric edge collapse (Garland & Heckbert 1997): pymeshlab, fast-simplification above 1.2 M samples",
             options=("backend", "start", "tile_samples"), cost_rank=1, style=("tab:red", "v"), cascades=True,
+            # pymeshlab holds about 1 kB per sample of the mesh it decimates; tiles of 2^22 samples at most
+            memory=(1000, 48, 2**22),
         ),
         Method(
             "greedy-cuts", "irregular", "simplifiers.greedy_cuts", "build",
             "greedy cuts (Silva, Mitchell & Kaufman 1995)",
-            cost_rank=0, style=("tab:purple", "X"),
+            # heights, tolerances, occupancy, errors; front nodes, buckets, queue and triangles
+            cost_rank=0, style=("tab:purple", "X"), memory=(56, 300, None),
         ),
         Method(
             "greedy-insertion", "irregular", "simplifiers.greedy_insertion", "build",
             "greedy insertion (Garland & Heckbert 1995, Algorithm III)",
-            cost_rank=3, style=("tab:orange", "P"),
+            # heights and errors; 166 bytes of state per vertex, twice while an array grows, and the TIN
+            cost_rank=3, style=("tab:orange", "P"), memory=(32, 400, None),
         ),
         Method("simple", "regular", _RF, "simple", "reverse Faber: keep the coarse samples",
                halo=2, cost_rank=6, style=("tab:gray", "o")),
@@ -195,6 +215,7 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
         level = 1
     if info.regular:
         level = check_level(grid.shape, 0 if level is None else level)
+        check_memory(info.memory_need(grid.size, 0), f"simplify({method!r}) of a {grid.shape[0]}x{grid.shape[1]} grid")
         t0 = time.perf_counter()
         if target is None:
             out, extra = _apply_regular(grid, info, level, options), {}
@@ -239,6 +260,9 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
     else:
         level = check_level(grid.shape, level)
         budget = vertex_budget(grid.shape, level)
+    # an error target's count is unknown: the per-sample part alone is checked then
+    need = info.memory_need(grid.size, budget if target is None else 0)
+    check_memory(need, f"simplify({info.name!r}) of a {grid.shape[0]}x{grid.shape[1]} grid to {budget:,} vertices")
     t0 = time.perf_counter()
     extra = {}
     if grid.shape == (2, 2) or (budget == grid.size and target is None):

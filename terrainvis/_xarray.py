@@ -146,7 +146,8 @@ def grid_from_dataarray(da, *, x=None, y=None, crs=None):
         return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
     text = _crs_of(da, crs)
     if text is None:
-        warn_if_degrees(xs, ys, "the DataArray", stacklevel=4)
+        named = str(xdim).lower() in ("lon", "longitude") and str(ydim).lower() in ("lat", "latitude")
+        warn_if_degrees(xs, ys, "the DataArray", stacklevel=4, named=named, fix="HeightGrid.from_xarray")
         return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
     geographic = crs_is_geographic(text)
     affine = IDENTITY

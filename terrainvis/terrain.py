@@ -671,6 +671,38 @@ class TIN:
         )
         return out
 
+    def to_grid(self, like: "HeightGrid") -> "HeightGrid":
+        """This TIN's surface sampled at every sample of ``like``: a raster of it (NaN outside the TIN).
+
+        Parameters
+        ----------
+        like : HeightGrid
+            The grid whose coordinates (and georeferencing: ``crs``, ``geographic``,
+            ``xy_to_native``) the raster takes, usually the DEM the TIN was simplified
+            from. Samples outside the TIN's faces are nodata (NaN).
+
+        Returns
+        -------
+        HeightGrid
+            ``attrs`` are this TIN's, with ``like``'s georeferencing and
+            ``sampled_from_tin`` (the TIN's vertex count).
+
+        Examples
+        --------
+        >>> g = HeightGrid([[0.0, 1.0, 2.0], [1.0, 2.0, 3.0], [2.0, 3.0, 4.0]])
+        >>> coarse = TIN([[0, 0, 0], [2, 0, 2], [2, 2, 4], [0, 2, 2]], [[0, 1, 2], [0, 2, 3]])
+        >>> coarse.to_grid(g).z.tolist() == g.z.tolist()  # a plane is sampled exactly
+        True
+        """
+        if not isinstance(like, HeightGrid):
+            raise TypeError(f"like must be a terrainvis.HeightGrid (the grid to sample on), got {describe(like)}")
+        from ._georef import GEOREF_KEYS
+
+        z = self.height_on_grid(like.xs, like.ys)
+        attrs = {k: v for k, v in self.attrs.items() if k not in GEOREF_KEYS}
+        attrs.update({k: like.attrs[k] for k in GEOREF_KEYS if k in like.attrs}, sampled_from_tin=self.n_vertices)
+        return HeightGrid.from_coords(z, like.xs, like.ys, attrs=attrs)
+
     def height_on_grid(self, xs, ys) -> np.ndarray:
         """Heights at every node of a rectilinear grid, shape (len(ys), len(xs)); NaN outside."""
         xs = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
