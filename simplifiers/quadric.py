@@ -84,6 +84,7 @@ import time
 
 import numpy as np
 
+from terrainvis._interrupt import import_library
 from terrainvis._memory import release_freed_memory
 from terrainvis._mesh import boundary_edges
 from terrainvis._validate import as_int, describe
@@ -358,8 +359,7 @@ def _pymeshlab_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: i
     pymeshlab sees the mesh in units of its longest edge (see the module notes). With
     ``keep_border`` no border vertex is removed or moved.
     """
-    import pymeshlab
-
+    pymeshlab = import_library("pymeshlab")  # an interrupt during its import would become an ImportError
     unit = _longest_edge(vertices, faces) or 1.0
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices / unit, face_matrix=np.asarray(faces, dtype=np.int32)))
@@ -389,8 +389,7 @@ def _fast_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int, s
     threshold (errors far above 1e5 squared units, e.g. a grid in millimetres): it is
     repeated in units ten times larger, up to :data:`_FAST_RESCALES` times.
     """
-    import fast_simplification
-
+    fast_simplification = import_library("fast_simplification")
     faces = np.ascontiguousarray(faces, dtype=np.int32)  # the library copies its input
     asked = faces.shape[0] - int(target_faces)
     unit = 1.0

@@ -53,11 +53,16 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
+import importlib
+import os
+import signal
+import sys
 import threading
 
 import numpy as np
 
-__all__ = ["call", "new_flag", "THREAD_MIN_WORK"]
+__all__ = ["call", "new_flag", "THREAD_MIN_WORK", "deferred_signals", "import_library"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
@@ -127,3 +132,43 @@ def _join_after_stop(thread: threading.Thread) -> None:
         return
     while thread.is_alive():
         thread.join(_JOIN_STEP)
+
+
+@contextlib.contextmanager
+def deferred_signals():
+    """Hold SIGINT and SIGTERM until the block ends, then deliver them to the handlers that were installed.
+
+    For code that turns an interrupt into something else: ``import pymeshlab`` interrupted
+    by Ctrl-C fails with "ImportError: initialization failed", which would be reported as
+    a broken install instead of the user's stop. Only the main thread can change signal
+    handlers; elsewhere the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(ValueError, OSError, TypeError):
+            previous[sig] = signal.signal(sig, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            with contextlib.suppress(ValueError, OSError, TypeError):
+                signal.signal(sig, old)
+        for signum in caught[:1]:
+            old = previous.get(signum)
+            if callable(old):
+                old(signum, sys._getframe())
+            elif old == signal.SIG_DFL:
+                os.kill(os.getpid(), signum)  # the default action, now that it is back
+
+
+def import_library(name: str):
+    """``importlib.import_module(name)`` with interrupts held until the import ends (:func:`deferred_signals`)."""
+    module = sys.modules.get(name)
+    if module is not None:
+        return module
+    with deferred_signals():
+        return importlib.import_module(name)

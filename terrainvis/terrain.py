@@ -190,9 +190,10 @@ class HeightGrid:
         >>> HeightGrid.from_xarray(da).z.tolist()  # y ascending now: row 0 is y = 0
         [[1.0, 2.0], [3.0, 4.0]]
         """
-        from ._xarray import grid_from_dataarray
+        from ._xarray import dataarray_parts
 
-        return grid_from_dataarray(da, x=x, y=y, crs=crs)
+        z, xs, ys, attrs = dataarray_parts(da, x=x, y=y, crs=crs)
+        return cls.from_coords(z, xs, ys, attrs=attrs)
 
     def to_xarray(self, *, name: str = "z"):
         """This grid as an :class:`xarray.DataArray` with dims ``("y", "x")`` (needs xarray).

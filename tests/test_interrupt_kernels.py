@@ -24,7 +24,7 @@ import time
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.slow
+
 
 _HEAD = """
 import sys, time
@@ -135,6 +135,7 @@ def _run_and_signal(cmd, sig, *, after: float | None = None, env=None, ready="re
     return p, out, err, sent, whole
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(_CASES))
 def test_sigint_stops_the_kernel_promptly(tmp_path, name):
     script, measure = _script(tmp_path, name)
@@ -171,6 +172,7 @@ def _cli(*args) -> list[str]:
             "sys.exit(main(sys.argv[1:]))", *args]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_cli_simplify_stops_on_a_signal(tmp_path, sig, code):
     """``terrainvis simplify`` in greedy cuts: exit 130 on SIGINT, 143 on SIGTERM, one line, no traceback."""
@@ -185,6 +187,7 @@ def test_cli_simplify_stops_on_a_signal(tmp_path, sig, code):
     assert time.perf_counter() - t0 < 40.0
 
 
+@pytest.mark.slow
 def test_compare_with_one_worker_does_not_swallow_the_interrupt(tmp_path):
     """``compare --workers 1`` runs the units here: an interrupt in greedy cuts is the user's stop, not a failed unit."""
     dem = _big_dem(tmp_path, 1536)
@@ -195,3 +198,25 @@ def test_compare_with_one_worker_does_not_swallow_the_interrupt(tmp_path):
     assert p.returncode == 130, (p.returncode, out, err[-2000:])
     assert time.time() - sent < 3.0
     assert "Traceback" not in err and "SystemError" not in err, err
+
+
+_IMPORT_SCRIPT = """
+import os, signal, sys, threading, time
+from terrainvis._interrupt import import_library
+threading.Timer(0.05, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+try:
+    import_library("pymeshlab")
+    time.sleep(0.5)
+except KeyboardInterrupt:
+    print("KeyboardInterrupt", "pymeshlab" in sys.modules)
+    sys.exit(130)
+"""
+
+
+def test_ctrl_c_while_a_library_is_imported_is_an_interrupt(tmp_path):
+    """Ctrl-C during ``import pymeshlab`` made it fail with "ImportError: initialization failed"."""
+    script = tmp_path / "imp.py"
+    script.write_text(_IMPORT_SCRIPT)
+    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 130, (p.stdout, p.stderr[-2000:])
+    assert p.stdout.split() == ["KeyboardInterrupt", "True"]
