@@ -223,15 +223,15 @@ def greedy_cuts(grid: HeightGrid, max_error: float) -> TIN:
 def _kappa(density: float) -> float:
     """Vertices of the triangulation per product of the row and column 1-D densities.
 
-    Measured on the bundled terrains, the shared DEMs and a 1024^2 tile at the budgets
-    of levels 1-3: about 2.85 at a quarter of the samples, rising to about 3.7 at a
-    sixteenth and below (the spread is about +-25 %; the search corrects it).
+    An empirical fit (2.85 at a quarter of the samples, 3.7 at a sixteenth and below;
+    how it was measured is in docs/simplifiers-and-files.md): a first guess only, which
+    the search corrects.
     """
     return float(np.clip(2.85 * (0.25 / density) ** 0.19, 2.0, 3.7))
 
 
 def _slope(density: float) -> float:
-    """Typical -d log(count) / d log(ε) at this vertex density (1.3 at 1/8, 1.63 at 1/32)."""
+    """Typical -d log(count) / d log(ε) at this vertex density (an empirical fit, as :func:`_kappa`)."""
     return float(np.clip(1.3 + 0.165 * math.log2(0.125 / density), 1.0, 2.0))
 
 
