@@ -193,14 +193,24 @@ def looks_like_degrees(xs: np.ndarray, ys: np.ndarray) -> bool:
     return bool(in_range and cell <= 1.0 / 60.0 + 1e-12)
 
 
-def warn_if_degrees(xs: np.ndarray, ys: np.ndarray, source: str, stacklevel: int = 4) -> None:
-    """A UserWarning when coordinates without a CRS look like lon/lat degrees."""
-    if looks_like_degrees(xs, ys):
+def warn_if_degrees(xs: np.ndarray, ys: np.ndarray, source: str, stacklevel: int = 4, *,
+                    named: bool = False, fix: str = "load_dem") -> None:
+    """A UserWarning when coordinates without a CRS look like lon/lat degrees.
+
+    ``named`` says that the coordinates are *called* lon/lat (xarray dims ``lon``/``lat``):
+    then any coordinates within lon/lat ranges warn, whatever their cell size. ``fix``
+    names the function whose ``crs=`` converts them.
+    """
+    if xs.size < 2 or ys.size < 2:
+        return
+    in_range = xs[0] >= -180.0 and xs[-1] <= 360.0 and ys[0] >= -90.0 and ys[-1] <= 90.0
+    if looks_like_degrees(xs, ys) or (named and in_range):
         cell = max(float(np.diff(xs).max()), float(np.diff(ys).max()))
+        why = "are named lon/lat" if named else "look like lon/lat degrees"
         warnings.warn(
-            f"{source} records no CRS, but its coordinates look like lon/lat degrees (x in "
+            f"{source} records no CRS, but its coordinates {why} (x in "
             f"[{xs[0]:.6g}, {xs[-1]:.6g}], y in [{ys[0]:.6g}, {ys[-1]:.6g}], cells of {cell:.3g}); they are "
-            "read as metres, which makes slopes and line of sight wrong. Pass crs='EPSG:4326' to load_dem "
+            f"read as metres, which makes slopes and line of sight wrong. Pass crs='EPSG:4326' to {fix} "
             "to convert them to metres.",
             UserWarning,
             stacklevel=stacklevel,

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels
+from ._interrupt import call
 from ._mesh import signed_area2
 from ._validate import as_float_array, as_int, as_points, as_positive_finite, describe
 from .errors import NodataError
@@ -189,9 +190,10 @@ class HeightGrid:
         >>> HeightGrid.from_xarray(da).z.tolist()  # y ascending now: row 0 is y = 0
         [[1.0, 2.0], [3.0, 4.0]]
         """
-        from ._xarray import grid_from_dataarray
+        from ._xarray import dataarray_parts
 
-        return grid_from_dataarray(da, x=x, y=y, crs=crs)
+        z, xs, ys, attrs = dataarray_parts(da, x=x, y=y, crs=crs)
+        return cls.from_coords(z, xs, ys, attrs=attrs)
 
     def to_xarray(self, *, name: str = "z"):
         """This grid as an :class:`xarray.DataArray` with dims ``("y", "x")`` (needs xarray).
@@ -343,7 +345,7 @@ class HeightGrid:
         qx = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
         qy = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((qy.size, qx.size), np.nan)
-        _kernels.grid_on_grid(self.xs, self.ys, self.z, qx, qy, out)
+        call(_kernels.grid_on_grid, self.xs, self.ys, self.z, qx, qy, out, work=out.size)
         return out
 
     def sample_xy(self) -> np.ndarray:
@@ -391,7 +393,7 @@ class HeightGrid:
         """``(rows, cols)`` slices of the largest axis-aligned window without nodata."""
         if not self.n_nodata:
             return slice(0, self.shape[0]), slice(0, self.shape[1])
-        r0, r1, c0, c1 = _kernels.largest_valid_rectangle(np.isfinite(self.z))
+        r0, r1, c0, c1 = call(_kernels.largest_valid_rectangle, np.isfinite(self.z), work=self.size)
         if r1 - r0 < 2 or c1 - c0 < 2:
             raise ValueError(f"z has no NaN-free window of at least 2x2 samples ({self.n_nodata} NaN cells)")
         return slice(int(r0), int(r1)), slice(int(c0), int(c1))
@@ -662,12 +664,45 @@ class TIN:
             return out
         bk = self._buckets()
         v = self.vertices
-        _kernels.locate_heights(
+        call(
+            _kernels.locate_heights,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
             self.faces, bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10,
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10, work=pts.shape[0],
         )
         return out
+
+    def to_grid(self, like: "HeightGrid") -> "HeightGrid":
+        """This TIN's surface sampled at every sample of ``like``: a raster of it (NaN outside the TIN).
+
+        Parameters
+        ----------
+        like : HeightGrid
+            The grid whose coordinates (and georeferencing: ``crs``, ``geographic``,
+            ``xy_to_native``) the raster takes, usually the DEM the TIN was simplified
+            from. Samples outside the TIN's faces are nodata (NaN).
+
+        Returns
+        -------
+        HeightGrid
+            ``attrs`` are this TIN's, with ``like``'s georeferencing and
+            ``sampled_from_tin`` (the TIN's vertex count).
+
+        Examples
+        --------
+        >>> g = HeightGrid([[0.0, 1.0, 2.0], [1.0, 2.0, 3.0], [2.0, 3.0, 4.0]])
+        >>> coarse = TIN([[0, 0, 0], [2, 0, 2], [2, 2, 4], [0, 2, 2]], [[0, 1, 2], [0, 2, 3]])
+        >>> coarse.to_grid(g).z.tolist() == g.z.tolist()  # a plane is sampled exactly
+        True
+        """
+        if not isinstance(like, HeightGrid):
+            raise TypeError(f"like must be a terrainvis.HeightGrid (the grid to sample on), got {describe(like)}")
+        from ._georef import GEOREF_KEYS
+
+        z = self.height_on_grid(like.xs, like.ys)
+        attrs = {k: v for k, v in self.attrs.items() if k not in GEOREF_KEYS}
+        attrs.update({k: like.attrs[k] for k in GEOREF_KEYS if k in like.attrs}, sampled_from_tin=self.n_vertices)
+        return HeightGrid.from_coords(z, like.xs, like.ys, attrs=attrs)
 
     def height_on_grid(self, xs, ys) -> np.ndarray:
         """Heights at every node of a rectilinear grid, shape (len(ys), len(xs)); NaN outside."""
@@ -675,9 +710,10 @@ class TIN:
         ys = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((ys.size, xs.size), np.nan)
         v = self.vertices
-        _kernels.rasterize_tin(
+        call(
+            _kernels.rasterize_tin,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
-            self.faces, xs, ys, out, 1e-10,
+            self.faces, xs, ys, out, 1e-10, work=out.size + self.n_faces,
         )
         return out
 
