@@ -14,7 +14,8 @@ are inlined at numba IR level (``inline="always"``) into the parallel pair loops
 separate calls they cost 1-4 % of the LOS throughput against the earlier kernels that
 took two dozen positional arrays (every call updates the reference counts of the named
 tuples' arrays); inlined, ``line_of_sight`` is 9-17 % faster than with those kernels,
-with the same bits (docs/visibility.md, "Performance").
+with the same bits (docs/visibility.md, "Performance"). The TIN clipper reads its mesh
+and bucket grid through a :data:`TinMesh`.
 
 Tested interval
 ---------------
@@ -452,9 +453,22 @@ def grid_matrix(g, p, perm, delta, end_radius, tol, out):
 
 
 # --------------------------------------------------------------------------- TIN
+#: A TIN as the clip kernel reads it, in local coordinates (origin at the bucket grid's
+#: corner): ``vx``, ``vy``, ``vz`` (n,) float64 vertex coordinates; ``faces`` (f, 3)
+#: vertex indices; the uniform bucket grid of ``TIN._buckets()``: ``starts``
+#: (nbx * nby + 1,) and ``items`` the faces of each bucket (CSR), ``x0``, ``y0`` its
+#: corner, ``bw``, ``bh`` its bucket sizes, ``nbx``, ``nby`` its buckets per row and column.
+TinMesh = namedtuple("TinMesh", ["vx", "vy", "vz", "faces", "starts", "items", "x0", "y0", "bw", "bh", "nbx", "nby"])
+
+
 @nb.njit(cache=True, nogil=True)
-def _face_clip_min(vx, vy, vz, i0, i1, i2, ax, ay, az, dx, dy, dz, t0, t1, eps):
-    """Min clearance of the segment over the part of [t0, t1] whose ground track is in the face."""
+def _face_clip_min(mesh, f, seg, t0, t1, eps):
+    """Min clearance of the segment over the part of [t0, t1] whose ground track is in face f."""
+    vx, vy, vz = mesh.vx, mesh.vy, mesh.vz
+    i0 = mesh.faces[f, 0]
+    i1 = mesh.faces[f, 1]
+    i2 = mesh.faces[f, 2]
+    ax, ay, az, dx, dy, dz = seg
     x0 = vx[i0]
     y0 = vy[i0]
     x1 = vx[i1]
@@ -515,15 +529,58 @@ def _face_clip_min(vx, vy, vz, i0, i1, i2, ax, ay, az, dx, dy, dz, t0, t1, eps):
     return best
 
 
+@nb.njit(cache=True, nogil=True)
+def _tin_segment_min(mesh, seg, t0, t1, eps):
+    """Exact minimum clearance of the segment ``seg`` over [t0, t1] on the :data:`TinMesh`.
+
+    The buckets whose rows and columns the ground track passes through (plus one bucket
+    of margin) are visited; every face in them is clipped against the track and the
+    clearance is evaluated at the clip points (the minimum of a piecewise-linear function
+    is at a breakpoint).
+    """
+    x0, y0, bw, bh, nbx, nby = mesh.x0, mesh.y0, mesh.bw, mesh.bh, mesh.nbx, mesh.nby
+    starts, items = mesh.starts, mesh.items
+    ax, ay, dx, dy = seg[0], seg[1], seg[3], seg[4]
+    ya = ay + t0 * dy
+    yb = ay + t1 * dy
+    ymin = min(ya, yb)
+    ymax = max(ya, yb)
+    by0 = max(int(np.floor((ymin - y0) / bh)) - 1, 0)
+    by1 = min(int(np.floor((ymax - y0) / bh)) + 1, nby - 1)
+    best = _INF
+    for rb in range(by0, by1 + 1):
+        # part of the track inside this bucket row (with a margin of one bucket row)
+        lo = t0
+        hi = t1
+        if dy != 0.0:
+            ta = (y0 + (rb - 1) * bh - ay) / dy
+            tb = (y0 + (rb + 2) * bh - ay) / dy
+            if ta > tb:
+                ta, tb = tb, ta
+            lo = max(lo, ta)
+            hi = min(hi, tb)
+            if lo > hi:
+                continue
+        xa = ax + lo * dx
+        xb = ax + hi * dx
+        bx0 = max(int(np.floor((min(xa, xb) - x0) / bw)) - 1, 0)
+        bx1 = min(int(np.floor((max(xa, xb) - x0) / bw)) + 1, nbx - 1)
+        for cb in range(bx0, bx1 + 1):
+            bk = rb * nbx + cb
+            for s in range(starts[bk], starts[bk + 1]):
+                c = _face_clip_min(mesh, items[s], seg, t0, t1, eps)
+                if c < best:
+                    best = c
+    return best
+
+
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_pairs(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, a, b, delta, end_radius, eps, out):
+def tin_pairs(mesh, a, b, delta, end_radius, eps, out):
     """Exact minimum clearance of each segment over a TIN (clip against every face crossed).
 
-    The segment is tested over the interval of :func:`interval_start`. The buckets whose
-    rows and columns the ground track passes through (plus one bucket of margin) are
-    visited; every face in them is clipped against the track and the clearance is
-    evaluated at the clip points (the minimum of a piecewise-linear function is at a
-    breakpoint).
+    ``mesh`` is a :data:`TinMesh`; ``a``, ``b`` (m, 3) float64 in its local coordinates.
+    The segment is tested over the interval of :func:`interval_start` (see
+    :func:`_tin_segment_min`).
     """
     m = a.shape[0]
     for i in nb.prange(m):
@@ -532,38 +589,4 @@ def tin_pairs(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, a, b, 
         if t0 < 0.0:
             out[i] = _INF
             continue
-        ax, ay, az, dx, dy, dz = seg
-        t1 = 1.0 - t0
-        ya = ay + t0 * dy
-        yb = ay + t1 * dy
-        ymin = min(ya, yb)
-        ymax = max(ya, yb)
-        by0 = max(int(np.floor((ymin - y0) / bh)) - 1, 0)
-        by1 = min(int(np.floor((ymax - y0) / bh)) + 1, nby - 1)
-        best = _INF
-        for rb in range(by0, by1 + 1):
-            # part of the track inside this bucket row (with a margin of one bucket row)
-            lo = t0
-            hi = t1
-            if dy != 0.0:
-                ta = (y0 + (rb - 1) * bh - ay) / dy
-                tb = (y0 + (rb + 2) * bh - ay) / dy
-                if ta > tb:
-                    ta, tb = tb, ta
-                lo = max(lo, ta)
-                hi = min(hi, tb)
-                if lo > hi:
-                    continue
-            xa = ax + lo * dx
-            xb = ax + hi * dx
-            bx0 = max(int(np.floor((min(xa, xb) - x0) / bw)) - 1, 0)
-            bx1 = min(int(np.floor((max(xa, xb) - x0) / bw)) + 1, nbx - 1)
-            for cb in range(bx0, bx1 + 1):
-                bk = rb * nbx + cb
-                for s in range(starts[bk], starts[bk + 1]):
-                    f = items[s]
-                    c = _face_clip_min(vx, vy, vz, faces[f, 0], faces[f, 1], faces[f, 2],
-                                       ax, ay, az, dx, dy, dz, t0, t1, eps)
-                    if c < best:
-                        best = c
-        out[i] = best
+        out[i] = _tin_segment_min(mesh, seg, t0, 1.0 - t0, eps)

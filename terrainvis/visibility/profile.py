@@ -15,13 +15,12 @@ import numpy as np
 
 from .._validate import as_nonnegative_finite, as_points
 from ..terrain import HeightGrid, as_terrain
+from .predicate import trim_length
 
 __all__ = ["lowest_point", "clearance_profile"]
 
 
 def _interval(terrain, a, b, end_radius):
-    from . import trim_length
-
     d = b - a
     length = float(np.sqrt((d * d).sum()))
     horizontal = float(np.hypot(d[0], d[1]))

@@ -44,8 +44,6 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0) -> np.nda
     lb[:, 0] -= x0
     la[:, 1] -= y0
     lb[:, 1] -= y0
-    _kernels.tin_pairs(
-        vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby,
-        la, lb, float(delta), float(end_radius), eps, out,
-    )
+    mesh = _kernels.TinMesh(vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby)
+    _kernels.tin_pairs(mesh, la, lb, float(delta), float(end_radius), eps, out)
     return out

@@ -72,8 +72,8 @@ import numpy as np
 from .._validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..terrain import TIN, HeightGrid, as_terrain
-from . import _viewshed_kernels as _vk
-from . import ENGINES, _check_engine, clearance_tolerance, trim_length
+from . import _sweep_kernels as _vk
+from .predicate import ENGINES, _check_engine, clearance_tolerance, trim_length
 
 __all__ = ["viewshed", "VIEWSHED_ENGINES"]
 
@@ -285,8 +285,7 @@ def _surface_at(terrain, x: float, y: float) -> float:
         return math.nan
     lx = min(max(x, xs[0]), xs[-1]) - xs[0]
     ly = min(max(y, ys[0]), ys[-1]) - ys[0]
-    acc = _local_axes(terrain)
-    return float(_vk.surface_height(terrain.z, acc[0], acc[1], acc[2], acc[3], acc[4], lx, ly))
+    return float(_vk.surface_height(_sweep_grid(terrain), lx, ly))
 
 
 def _touches_present(z: np.ndarray, r: int, c: int) -> bool:
@@ -324,6 +323,12 @@ def _local_axes(grid: HeightGrid):
     return acc
 
 
+def _sweep_grid(grid: HeightGrid) -> _vk.SweepGrid:
+    """The grid as the sweep kernels read it (local coordinates; no copies of the heights)."""
+    xs, ys, ixw, iyw, uniform = _local_axes(grid)
+    return _vk.SweepGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0))
+
+
 def _max_slope(grid: HeightGrid) -> float:
     """Largest |slope| of any edge of the grid's surface (cached)."""
     g = grid._cache.get("viewshed_max_slope")
@@ -352,13 +357,14 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, h_t: float, dmax: f
     they are ``at``'s samples standing on the grid's surface, sorted into buckets by sector
     and ring first. Without ``sweep`` every target goes to the exact walk.
     """
-    xs, ys, ixw, iyw, uniform = _local_axes(grid)
+    sg = _sweep_grid(grid)
+    xs, ys, ixw, iyw, uniform = sg.xs, sg.ys, sg.ixw, sg.iyw, sg.uniform
     ex = eye[0] - grid.xs[0]
     ey = eye[1] - grid.ys[0]
     ez = float(eye[2])
     delta = trim_length(grid)
     tol = clearance_tolerance(grid)
-    has_nan = grid.n_nodata > 0
+    has_nan = sg.has_nan
     # targets: a code per sample of ``at`` (own: the grid's samples)
     rows, cols = at.shape
     code = np.full((rows, cols), _vk.UNDECIDED, dtype=np.int8)
@@ -407,13 +413,17 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, h_t: float, dmax: f
             tz = np.ascontiguousarray(zt.ravel()[idx] + h_t)
             tstart = np.zeros(_N_SECTORS * (jstop + 2) + 1, dtype=np.int64)
             torder = np.empty(idx.size, dtype=np.int64)
-            _vk.bucket_targets(xs, ys, ixw, iyw, uniform, re, ce, ex, ey, tx, ty, _N_SECTORS, jstop, tstart, torder)
+            _vk.bucket_targets(sg, _vk.Eye(re, ce, ex, ey, ez), tx, ty, _N_SECTORS, jstop, tstart, torder)
             tcode = np.full(idx.size, _vk.UNDECIDED, dtype=np.int8)
             scode = np.zeros((1, 1), dtype=np.int8)
         _vk.sweep(
-            grid.z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, h_t, delta, tol, marg, e_h,
-            r_excl, r_lb, diag2, _N_SECTORS, _B0, _R1, _J_NEAR, jstop, dmax, perm, own, scode,
-            tx, ty, tz, tstart, torder, tcode, stats,
+            sg,
+            _vk.Eye(re, ce, ex, ey, ez),
+            _vk.Rules(h_t, delta, tol, marg, e_h, r_excl, r_lb, diag2, dmax),
+            _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
+            _vk.Targets(own, scode, tx, ty, tz, tstart, torder, tcode),
+            perm,
+            stats,
         )
         if not own:
             code.ravel()[idx] = tcode
@@ -439,10 +449,9 @@ def _exact(grid: HeightGrid, eye, tx, ty, tz, delta: float, tol: float) -> np.nd
         a[:] = eye
         b = np.column_stack([tx, ty, tz])
         return grid_clearance(grid, a, b, delta=delta, tol=tol, los=True) >= -tol
-    xs, ys, ixw, iyw, uniform = _local_axes(grid)
     out = np.empty(m)
     _vk.walk_targets(
-        grid.z, xs, ys, ixw, iyw, uniform, True, eye[0] - grid.xs[0], eye[1] - grid.ys[0], float(eye[2]),
+        _sweep_grid(grid), (eye[0] - grid.xs[0], eye[1] - grid.ys[0], float(eye[2])),
         np.ascontiguousarray(tx - grid.xs[0]), np.ascontiguousarray(ty - grid.ys[0]), np.ascontiguousarray(tz),
         float(delta), float(tol), out,
     )

@@ -1,6 +1,6 @@
-"""Numba loops for exact viewsheds on a HeightGrid (see :mod:`terrainvis.visibility.viewshed`).
+"""Numba loops for exact viewsheds on a HeightGrid (see :mod:`terrainvis.visibility.sweep`).
 
-Kernels loop and never validate: :func:`terrainvis.visibility.viewshed.viewshed` checks
+Kernels loop and never validate: :func:`terrainvis.visibility.sweep.viewshed` checks
 its input, shifts coordinates to the grid's local origin and passes plain arrays.
 
 Geometry used throughout
@@ -43,9 +43,32 @@ undecided and the caller answers them with the pair engine itself.
 walked exactly; then it is visible if its slope is at least the upper bound, and
 otherwise the blocks of rings whose bound reaches its slope are walked exactly too (so
 only the parts of the ray near its horizon are walked).
+
+Kernel arguments
+----------------
+The kernels read their state through named tuples built by
+:mod:`terrainvis.visibility.sweep` (no function takes more than about ten arguments):
+
+* :data:`SweepGrid` the surface (heights, local coordinate vectors, inverse widths,
+  ``uniform``, ``has_nan``);
+* :data:`Eye` the eye's cell ``(re, ce)`` and position ``(ex, ey, ez)``;
+* :data:`Rules` the predicate's numbers and the bounds' margins (target height, trim,
+  tolerance, rounding margin and error bound, exclusion radii, largest squared cell
+  diagonal, maximum distance);
+* :data:`Layout` the sectors and wedges (sectors, wedges near the eye, first refining
+  ring, last edge-clipped ring, last ring);
+* :data:`Targets` the targets and their output codes;
+* :data:`Wedges` one sector's wedge bounds (``ubp``, ``blk``, ``lb``, ``hist``).
+
+A ray or segment is the 6-tuple ``(ex, ey, ez, dx, dy, dz)`` of the points
+``E + t d``; a window of wedges is ``(glo, nloc, bsz)`` (first global wedge index held,
+wedges held, wedges around the full turn); the limits of an edge update are
+``(r_excl, r_lb, e_h, tolm)``.
 """
 
 from __future__ import annotations
+
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
@@ -66,6 +89,35 @@ _REL = 1e-13
 _PEPS = 1e-12
 #: Slack on clipping parameters along an edge.
 _LEPS = 1e-9
+
+#: The surface, in local coordinates (origin at the grid's first sample): ``z`` (rows,
+#: cols) float64 heights (NaN = nodata); ``xs`` (cols,), ``ys`` (rows,) float64
+#: coordinates; ``ixw`` (cols - 1,), ``iyw`` (rows - 1,) inverse cell widths; ``uniform``
+#: (both spacings uniform) and ``has_nan`` (the grid holds nodata), bools.
+SweepGrid = namedtuple("SweepGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan"])
+#: The eye: its cell ``(re, ce)`` (ints) and its position ``(ex, ey, ez)`` (local coordinates).
+Eye = namedtuple("Eye", ["re", "ce", "ex", "ey", "ez"])
+#: The predicate's numbers and the bounds' margins (floats): ``ht`` target height above
+#: the surface; ``delta`` trim length; ``tol`` clearance tolerance; ``marg`` the margin
+#: kept from ``-tol`` by every decision; ``e_h`` bound of the absolute rounding error of a
+#: computed height; ``r_excl`` radius around the eye inside every target's trimmed end;
+#: ``r_lb`` smallest distance of a point used by a lower bound; ``diag2`` largest squared
+#: cell diagonal; ``dmax`` maximum distance of a target (inf: none).
+Rules = namedtuple("Rules", ["ht", "delta", "tol", "marg", "e_h", "r_excl", "r_lb", "diag2", "dmax"])
+#: The sweep's layout (ints): ``nsec`` sectors (a multiple of 4), ``b0`` wedges near the
+#: eye, ``r1`` first ring where the wedges double, ``jnear`` last ring clipped edge by
+#: edge, ``jstop`` last ring swept.
+Layout = namedtuple("Layout", ["nsec", "b0", "r1", "jnear", "jstop"])
+#: The targets: ``own`` (bool) the grid's own samples, with ``code`` (rows, cols) int8
+#: their codes; otherwise ``tx``, ``ty``, ``tz`` (m,) float64 (local coordinates, ``tz``
+#: the target's height) sorted by :func:`bucket_targets` into ``tstart`` / ``torder``, with
+#: ``tcode`` (m,) int8 their codes.
+Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "torder", "tcode"])
+#: One sector's wedge bounds, each (nfin + 2,) float64 (local wedge index i is global
+#: ``s * n - 1 + i``): ``ubp`` upper bounds over the completed blocks of rings, ``blk``
+#: over the current block, ``lb`` lower bounds of the horizon over all rings swept, and
+#: ``hist`` (blocks, nfin + 2) the upper bounds of each completed block.
+Wedges = namedtuple("Wedges", ["ubp", "blk", "lb", "hist"])
 
 
 # --------------------------------------------------------------------------- geometry
@@ -129,12 +181,13 @@ def _tri_present(z, r, c, upper):
     return _finite(z[r, c + 1])
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _tri_height(z, xs, ys, ixw, iyw, r, c, upper, x, y):
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _tri_height(g, r, c, upper, x, y):
     """Height of the plane of one triangle of cell (r, c) at (x, y) (the same formulas as
     the pair engine's ``_cell_height``, without its clamping)."""
-    u = (x - xs[c]) * ixw[c]
-    v = (y - ys[r]) * iyw[r]
+    z = g.z
+    u = (x - g.xs[c]) * g.ixw[c]
+    v = (y - g.ys[r]) * g.iyw[r]
     z00 = z[r, c]
     z11 = z[r + 1, c + 1]
     if not upper:
@@ -145,98 +198,102 @@ def _tri_height(z, xs, ys, ixw, iyw, r, c, upper, x, y):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def surface_height(z, xs, ys, ixw, iyw, uniform, x, y):
-    """Height of the surface at (x, y) (local coordinates), NaN on an absent triangle."""
-    c = locate(xs, ixw, uniform, x)
-    r = locate(ys, iyw, uniform, y)
-    u = (x - xs[c]) * ixw[c]
-    v = (y - ys[r]) * iyw[r]
+def surface_height(g, x, y):
+    """Height of the surface of the :data:`SweepGrid` ``g`` at (x, y) (local
+    coordinates), NaN on an absent triangle."""
+    c = locate(g.xs, g.ixw, g.uniform, x)
+    r = locate(g.ys, g.iyw, g.uniform, y)
+    u = (x - g.xs[c]) * g.ixw[c]
+    v = (y - g.ys[r]) * g.iyw[r]
     upper = v > u
-    if not _tri_present(z, r, c, upper):
+    if not _tri_present(g.z, r, c, upper):
         return np.nan
-    return _tri_height(z, xs, ys, ixw, iyw, r, c, upper, x, y)
+    return _tri_height(g, r, c, upper, x, y)
 
 
 # --------------------------------------------------------------------------- exact walk
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _clear(z, xs, ys, ixw, iyw, r, c, upper, ex, ey, ez, dx, dy, dz, t):
-    return ez + t * dz - _tri_height(z, xs, ys, ixw, iyw, r, c, upper, ex + t * dx, ey + t * dy)
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _clear(g, r, c, upper, ray, t):
+    """Clearance of the ray at t over the plane of one triangle of cell (r, c)."""
+    ex, ey, ez, dx, dy, dz = ray
+    return ez + t * dz - _tri_height(g, r, c, upper, ex + t * dx, ey + t * dy)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _edge_clear(z, xs, ys, ixw, iyw, kind, r, c, ex, ey, ez, dx, dy, dz, t):
+def _edge_clear(g, kind, r, c, ray, t):
     """Clearance on a grid line (kind 0: x = xs[c], rows r..r+1; kind 1: y = ys[r])."""
+    z = g.z
+    ex, ey, ez, dx, dy, dz = ray
     x = ex + t * dx
     y = ey + t * dy
     if kind == 0:
-        v = (y - ys[r]) * iyw[r]
+        v = (y - g.ys[r]) * g.iyw[r]
         return ez + t * dz - (z[r, c] + v * (z[r + 1, c] - z[r, c]))
-    u = (x - xs[c]) * ixw[c]
+    u = (x - g.xs[c]) * g.ixw[c]
     return ez + t * dz - (z[r, c] + u * (z[r, c + 1] - z[r, c]))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _absent_piece(z, xs, ys, ixw, iyw, r, c, upper, ex, ey, ez, dx, dy, dz, ta, tb):
+def _absent_piece(g, r, c, upper, ray, ta, tb):
     """Min clearance of a piece lying in an absent triangle: only where the piece runs
     along a boundary shared with a present triangle (a ray exactly on a grid line or a
     cell diagonal); inf otherwise."""
+    z, xs, ys = g.z, g.xs, g.ys
+    ex, ey, ez, dx, dy, dz = ray
     nr, nc = z.shape
     best = _INF
     if dx == 0.0:
         if ex == xs[c] and (_tri_present(z, r, c, True) or (c > 0 and _tri_present(z, r, c - 1, False))):
-            best = min(_edge_clear(z, xs, ys, ixw, iyw, 0, r, c, ex, ey, ez, dx, dy, dz, ta),
-                       _edge_clear(z, xs, ys, ixw, iyw, 0, r, c, ex, ey, ez, dx, dy, dz, tb))
+            best = min(_edge_clear(g, 0, r, c, ray, ta), _edge_clear(g, 0, r, c, ray, tb))
         elif ex == xs[c + 1] and (_tri_present(z, r, c, False) or (c + 1 < nc - 1 and _tri_present(z, r, c + 1, True))):
-            best = min(_edge_clear(z, xs, ys, ixw, iyw, 0, r, c + 1, ex, ey, ez, dx, dy, dz, ta),
-                       _edge_clear(z, xs, ys, ixw, iyw, 0, r, c + 1, ex, ey, ez, dx, dy, dz, tb))
+            best = min(_edge_clear(g, 0, r, c + 1, ray, ta), _edge_clear(g, 0, r, c + 1, ray, tb))
     if dy == 0.0:
         if ey == ys[r] and (_tri_present(z, r, c, False) or (r > 0 and _tri_present(z, r - 1, c, True))):
-            best = min(best, _edge_clear(z, xs, ys, ixw, iyw, 1, r, c, ex, ey, ez, dx, dy, dz, ta),
-                       _edge_clear(z, xs, ys, ixw, iyw, 1, r, c, ex, ey, ez, dx, dy, dz, tb))
+            best = min(best, _edge_clear(g, 1, r, c, ray, ta), _edge_clear(g, 1, r, c, ray, tb))
         elif ey == ys[r + 1] and (_tri_present(z, r, c, True) or (r + 1 < nr - 1 and _tri_present(z, r + 1, c, False))):
-            best = min(best, _edge_clear(z, xs, ys, ixw, iyw, 1, r + 1, c, ex, ey, ez, dx, dy, dz, ta),
-                       _edge_clear(z, xs, ys, ixw, iyw, 1, r + 1, c, ex, ey, ez, dx, dy, dz, tb))
+            best = min(best, _edge_clear(g, 1, r + 1, c, ray, ta), _edge_clear(g, 1, r + 1, c, ray, tb))
     other = not upper
     if _tri_present(z, r, c, other):
         # on the diagonal (both ends), the other triangle's plane is the surface there
-        ua = (ex + ta * dx - xs[c]) * ixw[c]
-        va = (ey + ta * dy - ys[r]) * iyw[r]
-        ub = (ex + tb * dx - xs[c]) * ixw[c]
-        vb = (ey + tb * dy - ys[r]) * iyw[r]
+        ua = (ex + ta * dx - xs[c]) * g.ixw[c]
+        va = (ey + ta * dy - ys[r]) * g.iyw[r]
+        ub = (ex + tb * dx - xs[c]) * g.ixw[c]
+        vb = (ey + tb * dy - ys[r]) * g.iyw[r]
         if abs(ua - va) <= 1e-12 and abs(ub - vb) <= 1e-12:
-            best = min(best, _clear(z, xs, ys, ixw, iyw, r, c, other, ex, ey, ez, dx, dy, dz, ta),
-                       _clear(z, xs, ys, ixw, iyw, r, c, other, ex, ey, ez, dx, dy, dz, tb))
+            best = min(best, _clear(g, r, c, other, ray, ta), _clear(g, r, c, other, ray, tb))
     return best
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _cell_piece(z, xs, ys, ixw, iyw, has_nan, r, c, ex, ey, ez, dx, dy, dz, ta, tb, with_ta):
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cell_piece(g, r, c, ray, ta, tb, with_ta):
     """Exact min clearance over [ta, tb] inside cell (r, c) (ends and diagonal crossing)."""
+    xs, ys, ixw, iyw = g.xs, g.ys, g.ixw, g.iyw
+    ex, ey, ez, dx, dy, dz = ray
     td = _INF
     den = dx * ixw[c] - dy * iyw[r]
     if den != 0.0:
         t = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
         if t > ta and t < tb:
             td = t
-    if not has_nan:
+    if not g.has_nan:
         tm = 0.5 * (ta + tb) if td == _INF else 0.5 * (ta + td)
         u = (ex + tm * dx - xs[c]) * ixw[c]
         v = (ey + tm * dy - ys[r]) * iyw[r]
         up = v > u
         if td == _INF:
-            m = _clear(z, xs, ys, ixw, iyw, r, c, up, ex, ey, ez, dx, dy, dz, tb)
+            m = _clear(g, r, c, up, ray, tb)
             if with_ta:
-                m = min(m, _clear(z, xs, ys, ixw, iyw, r, c, up, ex, ey, ez, dx, dy, dz, ta))
+                m = min(m, _clear(g, r, c, up, ray, ta))
             return m
-        m = _clear(z, xs, ys, ixw, iyw, r, c, up, ex, ey, ez, dx, dy, dz, td)
+        m = _clear(g, r, c, up, ray, td)
         if with_ta:
-            m = min(m, _clear(z, xs, ys, ixw, iyw, r, c, up, ex, ey, ez, dx, dy, dz, ta))
+            m = min(m, _clear(g, r, c, up, ray, ta))
         # the second piece's own triangle (a track touching the diagonal only at a cell
         # corner stays in the same triangle)
         tm = 0.5 * (td + tb)
         u = (ex + tm * dx - xs[c]) * ixw[c]
         v = (ey + tm * dy - ys[r]) * iyw[r]
-        m = min(m, _clear(z, xs, ys, ixw, iyw, r, c, v > u, ex, ey, ez, dx, dy, dz, tb))
+        m = min(m, _clear(g, r, c, v > u, ray, tb))
         return m
     best = _INF
     npc = 1 if td == _INF else 2
@@ -254,33 +311,35 @@ def _cell_piece(z, xs, ys, ixw, iyw, has_nan, r, c, ex, ey, ez, dx, dy, dz, ta, 
         u = (ex + tm * dx - xs[c]) * ixw[c]
         v = (ey + tm * dy - ys[r]) * iyw[r]
         up = v > u
-        if _tri_present(z, r, c, up):
-            e = min(_clear(z, xs, ys, ixw, iyw, r, c, up, ex, ey, ez, dx, dy, dz, a),
-                    _clear(z, xs, ys, ixw, iyw, r, c, up, ex, ey, ez, dx, dy, dz, b))
+        if _tri_present(g.z, r, c, up):
+            e = min(_clear(g, r, c, up, ray, a), _clear(g, r, c, up, ray, b))
         else:
-            e = _absent_piece(z, xs, ys, ixw, iyw, r, c, up, ex, ey, ez, dx, dy, dz, a, b)
+            e = _absent_piece(g, r, c, up, ray, a, b)
         if e < best:
             best = e
     return best
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def walk_min(z, xs, ys, ixw, iyw, uniform, has_nan, ex, ey, ez, dx, dy, dz, t0, t1, stop):
-    """Exact minimum clearance of the segment E + t d over [t0, t1] (local coordinates).
+def walk_min(g, ray, t0, t1, stop):
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``.
 
-    The ground track is walked cell by cell; in each cell the clearance is evaluated at
-    the entry, the exit and the diagonal crossing (it is linear between them). On a grid
-    with nodata, triangles touching a NaN sample are absent and do not block. The walk
-    returns as soon as the minimum falls below ``stop``.
+    ``ray`` is ``(ex, ey, ez, dx, dy, dz)`` in local coordinates. The ground track is
+    walked cell by cell; in each cell the clearance is evaluated at the entry, the exit
+    and the diagonal crossing (it is linear between them). On a grid with nodata,
+    triangles touching a NaN sample are absent and do not block. The walk returns as soon
+    as the minimum falls below ``stop``.
     """
     if t1 < t0:
         return _INF
+    xs, ys = g.xs, g.ys
+    ex, ey, ez, dx, dy, dz = ray
     nr = ys.shape[0]
     nc = xs.shape[0]
     x = ex + t0 * dx
     y = ey + t0 * dy
-    c = locate(xs, ixw, uniform, x)
-    r = locate(ys, iyw, uniform, y)
+    c = locate(xs, g.ixw, g.uniform, x)
+    r = locate(ys, g.iyw, g.uniform, y)
     if dx < 0.0 and c > 0 and x <= xs[c]:
         c -= 1
     if dy < 0.0 and r > 0 and y <= ys[r]:
@@ -302,7 +361,7 @@ def walk_min(z, xs, ys, ixw, iyw, uniform, has_nan, ex, ey, ez, dx, dy, dz, t0, 
         tn = min(tx, ty, t1)
         if tn < t:
             tn = t
-        m = _cell_piece(z, xs, ys, ixw, iyw, has_nan, r, c, ex, ey, ez, dx, dy, dz, t, tn, first or has_nan)
+        m = _cell_piece(g, r, c, ray, t, tn, first or g.has_nan)
         first = False
         if m < best:
             best = m
@@ -321,27 +380,27 @@ def walk_min(z, xs, ys, ixw, iyw, uniform, has_nan, ex, ey, ez, dx, dy, dz, t0, 
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def walk_targets(z, xs, ys, ixw, iyw, uniform, has_nan, ex, ey, ez, tx, ty, tz, delta, tol, out):
+def walk_targets(g, eye, tx, ty, tz, delta, tol, out):
     """``out[i]`` = exact minimum clearance of the segment eye -> target i (canonical
     direction and length trim as in the pair engine; returns early below ``-tol``).
 
-    Serial: it only answers the few targets the sweep leaves undecided on a grid with
-    nodata (the pair engine needs a NaN-free grid)."""
+    ``eye`` is ``(ex, ey, ez)``. Serial: it only answers the few targets the sweep leaves
+    undecided on a grid with nodata (the pair engine needs a NaN-free grid)."""
     m = tx.shape[0]
     for i in range(m):
-        seg, length = _canonical((ex, ey, ez), (tx[i], ty[i], tz[i]))
+        seg, length = _canonical(eye, (tx[i], ty[i], tz[i]))
         tau = interval_start(seg, length, delta, 0.0)
         if tau < 0.0:
             out[i] = _INF
             continue
-        ax, ay, az, dx, dy, dz = seg
-        out[i] = walk_min(z, xs, ys, ixw, iyw, uniform, has_nan, ax, ay, az, dx, dy, dz, tau, 1.0 - tau, -tol)
+        out[i] = walk_min(g, seg, tau, 1.0 - tau, -tol)
 
 
 # --------------------------------------------------------------------------- bounds
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _s_at(wx, wy, ex_, ey_, a, b, lam):
+def _s_at(edge, lam):
     """(slope, distance) of the edge point w + lam e (vectors from the eye)."""
+    wx, wy, ex_, ey_, a, b = edge[0], edge[1], edge[2], edge[3], edge[4], edge[5]
     px = wx + lam * ex_
     py = wy + lam * ey_
     d = np.sqrt(px * px + py * py)
@@ -349,14 +408,18 @@ def _s_at(wx, wy, ex_, ey_, a, b, lam):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _extremes(wx, wy, ex_, ey_, a, b, alpha, beta, gamma, l0, l1, e_h):
+def _extremes(edge, l0, l1, e_h):
     """Rigorous (max, min) of the slope over the edge part [l0, l1], and its min distance.
 
-    ``s(lam) = N(lam) / d(lam)`` with N linear and d**2 quadratic has one critical point
-    ``lam*`` at most (a linear equation), so its extremes are at l0, l1 or lam*.
+    ``edge`` is ``(wx, wy, ex_, ey_, a, b, alpha, beta, gamma)``: the edge's start w and
+    direction e relative to the eye, its height above the eye ``a + lam * b``, and
+    ``alpha = |e|**2``, ``beta = w.e``, ``gamma = |w|**2``. ``s(lam) = N(lam) / d(lam)``
+    with N linear and d**2 quadratic has one critical point ``lam*`` at most (a linear
+    equation), so its extremes are at l0, l1 or lam*.
     """
-    s0, d0 = _s_at(wx, wy, ex_, ey_, a, b, l0)
-    s1, d1 = _s_at(wx, wy, ex_, ey_, a, b, l1)
+    wx, wy, ex_, ey_, a, b, alpha, beta, gamma = edge
+    s0, d0 = _s_at(edge, l0)
+    s1, d1 = _s_at(edge, l1)
     hi = max(s0 + 2.0 * e_h / d0 + _REL * abs(s0), s1 + 2.0 * e_h / d1 + _REL * abs(s1))
     lo = min(s0 - 2.0 * e_h / d0 - _REL * abs(s0), s1 - 2.0 * e_h / d1 - _REL * abs(s1))
     dmin = min(d0, d1)
@@ -364,7 +427,7 @@ def _extremes(wx, wy, ex_, ey_, a, b, alpha, beta, gamma, l0, l1, e_h):
     if den != 0.0:
         ls = (a * beta - b * gamma) / den
         if ls > l0 and ls < l1:
-            s2, d2 = _s_at(wx, wy, ex_, ey_, a, b, ls)
+            s2, d2 = _s_at(edge, ls)
             hi = max(hi, s2 + 2.0 * e_h / d2 + _REL * abs(s2))
             lo = min(lo, s2 - 2.0 * e_h / d2 - _REL * abs(s2))
     lf = -beta / alpha
@@ -376,27 +439,10 @@ def _extremes(wx, wy, ex_, ey_, a, b, alpha, beta, gamma, l0, l1, e_h):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _edge_update(ax, ay, az, bx, by, bz, ez, glo, nloc, bsz, ub, lb, r_excl, r_lb, e_h, tolm):
-    """Add one edge (coordinates relative to the eye) to the wedges ``glo .. glo+nloc-1``.
-
-    Every wedge the edge passes through gets the maximum slope of the edge's part inside
-    it (``ub``); a wedge the edge crosses from side to side gets the minimum slope of
-    that part, less the tolerance term (``lb``). Points closer than ``r_excl`` to the eye
-    lie in every target's trimmed end and are left out; ``lb`` only uses parts at least
-    ``r_lb`` away.
-    """
-    wx = ax
-    wy = ay
-    ex_ = bx - ax
-    ey_ = by - ay
-    a = az - ez
-    b = bz - az
-    alpha = ex_ * ex_ + ey_ * ey_
-    if alpha == 0.0:
-        return
-    beta = wx * ex_ + wy * ey_
-    gamma = wx * wx + wy * wy
-    # parts of [0, 1] outside the disc of radius r_excl around the eye
+def _edge_parts(edge, r_excl):
+    """The parts [l0, l1] of the edge (of :func:`_extremes`) outside the disc of radius
+    ``r_excl`` around the eye: (number of parts, l0 and l1 of each)."""
+    alpha, beta, gamma = edge[6], edge[7], edge[8]
     p0s = np.empty(2)
     p1s = np.empty(2)
     npart = 0
@@ -417,6 +463,70 @@ def _edge_update(ax, ay, az, bx, by, bz, ez, glo, nloc, bsz, ub, lb, r_excl, r_l
         p0s[0] = 0.0
         p1s[0] = 1.0
         npart = 1
+    return npart, p0s, p1s
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz):
+    """The part of the edge piece [l0, l1] (pseudo-angles pa, pb at its ends) inside global
+    wedge g (its boundaries shifted by ``shift`` turns of 4): ``(la, lb, full, ok)``, full
+    when the piece crosses the wedge from side to side, ok False when it misses it."""
+    wx, wy, ex_, ey_, alpha = edge[0], edge[1], edge[2], edge[3], edge[6]
+    lo_p = g * 4.0 / bsz - shift
+    hi_p = (g + 1) * 4.0 / bsz - shift
+    la = l0
+    lb_ = l1
+    full = False
+    if (pmax - pmin) < 1e-9:
+        return la, lb_, full, True
+    # parameters where the wedge's two boundary rays cross the edge
+    cut = True
+    lam_lo = l0 if pa <= pb else l1
+    lam_hi = l1 if pa <= pb else l0
+    if lo_p > pmin:
+        ux, uy = _direction(lo_p)
+        cr = ux * ey_ - uy * ex_
+        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
+            cut = False
+        else:
+            lam_lo = -(ux * wy - uy * wx) / cr
+    if hi_p < pmax:
+        ux, uy = _direction(hi_p)
+        cr = ux * ey_ - uy * ex_
+        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
+            cut = False
+        else:
+            lam_hi = -(ux * wy - uy * wx) / cr
+    if cut:
+        la = max(l0, min(lam_lo, lam_hi) - _LEPS)
+        lb_ = min(l1, max(lam_lo, lam_hi) + _LEPS)
+        if lb_ < la:
+            return la, lb_, full, False
+    full = lo_p >= pmin + _PEPS and hi_p <= pmax - _PEPS
+    return la, lb_, full, True
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _edge_update(pa3, pb3, ez, win, ub, lb, lim):
+    """Add one edge, from ``pa3`` to ``pb3`` ((x, y, z), x and y relative to the eye), to
+    the wedges of the window ``win`` = ``(glo, nloc, bsz)``.
+
+    Every wedge the edge passes through gets the maximum slope of the edge's part inside
+    it (``ub``); a wedge the edge crosses from side to side gets the minimum slope of
+    that part, less the tolerance term (``lb``). ``lim`` is ``(r_excl, r_lb, e_h,
+    tolm)``: points closer than ``r_excl`` to the eye lie in every target's trimmed end
+    and are left out; ``lb`` only uses parts at least ``r_lb`` away.
+    """
+    glo, nloc, bsz = win
+    r_excl, r_lb, e_h, tolm = lim
+    wx, wy, az = pa3
+    ex_ = pb3[0] - wx
+    ey_ = pb3[1] - wy
+    alpha = ex_ * ex_ + ey_ * ey_
+    if alpha == 0.0:
+        return
+    edge = (wx, wy, ex_, ey_, az - ez, pb3[2] - az, alpha, wx * ex_ + wy * ey_, wx * wx + wy * wy)
+    npart, p0s, p1s = _edge_parts(edge, r_excl)
     for k in range(npart):
         l0 = p0s[k]
         l1 = p1s[k]
@@ -431,7 +541,6 @@ def _edge_update(ax, ay, az, bx, by, bz, ez, glo, nloc, bsz, ub, lb, r_excl, r_l
             pa += 4.0
         pmin = min(pa, pb)
         pmax = max(pa, pb)
-        whole = (pmax - pmin) < 1e-9
         lo_s = glo * 4.0 / bsz
         hi_s = (glo + nloc) * 4.0 / bsz
         for sh in range(-1, 2):
@@ -445,37 +554,10 @@ def _edge_update(ax, ay, az, bx, by, bz, ez, glo, nloc, bsz, ub, lb, r_excl, r_l
             if g1 > glo + nloc - 1:
                 g1 = glo + nloc - 1
             for g in range(g0, g1 + 1):
-                lo_p = g * 4.0 / bsz - shift
-                hi_p = (g + 1) * 4.0 / bsz - shift
-                la = l0
-                lb_ = l1
-                full = False
-                if not whole:
-                    # parameters where the wedge's two boundary rays cross the edge
-                    cut = True
-                    lam_lo = l0 if pa <= pb else l1
-                    lam_hi = l1 if pa <= pb else l0
-                    if lo_p > pmin:
-                        ux, uy = _direction(lo_p)
-                        cr = ux * ey_ - uy * ex_
-                        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
-                            cut = False
-                        else:
-                            lam_lo = -(ux * wy - uy * wx) / cr
-                    if hi_p < pmax:
-                        ux, uy = _direction(hi_p)
-                        cr = ux * ey_ - uy * ex_
-                        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
-                            cut = False
-                        else:
-                            lam_hi = -(ux * wy - uy * wx) / cr
-                    if cut:
-                        la = max(l0, min(lam_lo, lam_hi) - _LEPS)
-                        lb_ = min(l1, max(lam_lo, lam_hi) + _LEPS)
-                        if lb_ < la:
-                            continue
-                    full = lo_p >= pmin + _PEPS and hi_p <= pmax - _PEPS
-                hi, lo, dmin = _extremes(wx, wy, ex_, ey_, a, b, alpha, beta, gamma, la, lb_, e_h)
+                la, lb_, full, ok = _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz)
+                if not ok:
+                    continue
+                hi, lo, dmin = _extremes(edge, la, lb_, e_h)
                 i = g - glo
                 if hi > ub[i]:
                     ub[i] = hi
@@ -486,8 +568,10 @@ def _edge_update(ax, ay, az, bx, by, bz, ez, glo, nloc, bsz, ub, lb, r_excl, r_l
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _cell_edges(z, xs, ys, r, c, ex, ey, ez, glo, nloc, bsz, ub, lb, r_excl, r_lb, e_h, tolm):
+def _cell_edges(g, eye, r, c, win, ub, lb, lim):
     """Add the edges of the present triangles of cell (r, c) with exact clipping."""
+    z, xs, ys = g.z, g.xs, g.ys
+    ex, ey, ez = eye.ex, eye.ey, eye.ez
     lower = _tri_present(z, r, c, False)
     upper = _tri_present(z, r, c, True)
     for k in range(5):
@@ -508,17 +592,37 @@ def _cell_edges(z, xs, ys, r, c, ex, ey, ez, glo, nloc, bsz, ub, lb, r_excl, r_l
             ra, ca, rb, cb = r + 1, c, r + 1, c + 1
         else:
             ra, ca, rb, cb = r, c, r + 1, c + 1
-        _edge_update(xs[ca] - ex, ys[ra] - ey, z[ra, ca], xs[cb] - ex, ys[rb] - ey, z[rb, cb], ez, glo, nloc, bsz,
-                     ub, lb, r_excl, r_lb, e_h, tolm)
+        _edge_update((xs[ca] - ex, ys[ra] - ey, z[ra, ca]), (xs[cb] - ex, ys[rb] - ey, z[rb, cb]), ez, win,
+                     ub, lb, lim)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _annulus_edges(g, eye, j, win, ub, lb, lim):
+    """Add every cell of annulus j with exact edge clipping (used near the eye)."""
+    nr = g.ys.shape[0]
+    nc = g.xs.shape[0]
+    re, ce = eye.re, eye.ce
+    r0 = max(re - j, 0)
+    r1_ = min(re + j, nr - 2)
+    c0 = max(ce - j, 0)
+    c1 = min(ce + j, nc - 2)
+    for rr in range(r0, r1_ + 1):
+        edge_row = rr == re - j or rr == re + j
+        step = 1 if edge_row else max(2 * j, 1)
+        cc = c0 if edge_row else ce - j
+        while cc <= c1:
+            if cc >= 0:
+                _cell_edges(g, eye, rr, cc, win, ub, lb, lim)
+            cc += step
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _cell_range(xs, ys, r, c, ex, ey, q):
+def _cell_range(g, eye, r, c, q):
     """(min, max) unwrapped pseudo-angle of the corners of cell (r, c)."""
-    x0 = xs[c] - ex
-    x1 = xs[c + 1] - ex
-    y0 = ys[r] - ey
-    y1 = ys[r + 1] - ey
+    x0 = g.xs[c] - eye.ex
+    x1 = g.xs[c + 1] - eye.ex
+    y0 = g.ys[r] - eye.ey
+    y1 = g.ys[r + 1] - eye.ey
     p0 = _unwrap(diamond(x0, y0), q)
     p1 = _unwrap(diamond(x1, y0), q)
     p2 = _unwrap(diamond(x0, y1), q)
@@ -527,31 +631,37 @@ def _cell_range(xs, ys, r, c, ex, ey, q):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _sample_val(z, xs, ys, r, c, ex, ey, ez, q):
+def _sample_val(g, eye, r, c, q):
     """(slope from the eye, unwrapped pseudo-angle) of sample (r, c); NaN slope on nodata."""
-    dx = xs[c] - ex
-    dy = ys[r] - ey
+    dx = g.xs[c] - eye.ex
+    dy = g.ys[r] - eye.ey
     d = np.sqrt(dx * dx + dy * dy)
-    return (z[r, c] - ez) / d, _unwrap(diamond(dx, dy), q)
+    return (g.z[r, c] - eye.ez) / d, _unwrap(diamond(dx, dy), q)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _cell_bounds(ub, lb, glo, nloc, k4, rel, hi_slack, lo_slack, use_lb,
-                 s00, s01, s10, s11, p00, p01, p10, p11):
+def _cell_bounds(ub, lb, win, ann, sv, pv):
     """Add one cell (away from the eye) to the wedges with a cheap rigorous bound.
 
-    ``sij`` and ``pij`` are the slopes and pseudo-angles of the cell's corners (NaN slope
-    on nodata). On an edge the distance d is convex and at least ``chord - g`` with
-    ``g = |e|**2 / (8 d_lo)`` (its second derivative is at most ``|e|**2 / d``), so the
-    slope N / d is bounded by Moebius functions, monotone along the edge: its maximum is
-    at most ``max(v1, v2)`` with ``v = N / (d - g)`` for N > 0 and ``N / d`` otherwise,
-    and ``N / (d - g) <= s (1 + 2 g / d)`` when ``g <= d / 2``; the minimum likewise. The
-    caller passes ``rel >= 2 g / d_lo`` (at most 1) for the whole annulus, and the slacks
-    for rounding (and the tolerance, in ``lo_slack``) divided by the annulus's smallest
-    distance. Every wedge within the cell's angular range gets the bound of the maximum
-    (``ub``); every wedge strictly inside it, whose rays all cross the cell and so meet its
-    boundary, gets the bound of the minimum (``lb``, only for a cell without nodata).
+    ``sv`` = ``(s00, s01, s10, s11)`` and ``pv`` (likewise) are the slopes and
+    pseudo-angles of the cell's corners (NaN slope on nodata); ``win`` = ``(glo, nloc,
+    k4)`` the window of wedges (k4 = wedges per unit of pseudo-angle); ``ann`` = ``(rel,
+    hi_slack, lo_slack, use_lb)`` the annulus's constants. On an edge the distance d is
+    convex and at least ``chord - g`` with ``g = |e|**2 / (8 d_lo)`` (its second
+    derivative is at most ``|e|**2 / d``), so the slope N / d is bounded by Moebius
+    functions, monotone along the edge: its maximum is at most ``max(v1, v2)`` with
+    ``v = N / (d - g)`` for N > 0 and ``N / d`` otherwise, and ``N / (d - g) <= s (1 + 2 g
+    / d)`` when ``g <= d / 2``; the minimum likewise. The caller passes ``rel >= 2 g /
+    d_lo`` (at most 1) for the whole annulus, and the slacks for rounding (and the
+    tolerance, in ``lo_slack``) divided by the annulus's smallest distance. Every wedge
+    within the cell's angular range gets the bound of the maximum (``ub``); every wedge
+    strictly inside it, whose rays all cross the cell and so meet its boundary, gets the
+    bound of the minimum (``lb``, only for a cell without nodata).
     """
+    s00, s01, s10, s11 = sv
+    p00, p01, p10, p11 = pv
+    glo, nloc, k4 = win
+    rel, hi_slack, lo_slack, use_lb = ann
     f = s00 == s00 and s11 == s11
     lower = f and s01 == s01
     upper = f and s10 == s10
@@ -591,9 +701,11 @@ def _cell_bounds(ub, lb, glo, nloc, k4, rel, hi_slack, lo_slack, use_lb,
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _ring_distance(xs, ys, re, ce, k, ex, ey):
+def _ring_distance(g, eye, k):
     """Horizontal distance from the eye to the boundary of the box of cell rings <= k
     (its sides inside the grid): every point outside the box is at least this far."""
+    xs, ys = g.xs, g.ys
+    re, ce, ex, ey = eye.re, eye.ce, eye.ex, eye.ey
     nr = ys.shape[0]
     nc = xs.shape[0]
     d = _INF
@@ -612,7 +724,7 @@ def _ring_distance(xs, ys, re, ce, k, ex, ey):
 def _cell_path(q, j, re, ce, nr, nc):
     """The cells of annulus j near quadrant q, in increasing angle, as two runs.
 
-    Returns ``(r_a, c_a, dr_a, dc_a, n_a, r_b, c_b, dr_b, dc_b, n_b)``: run k starts at
+    Returns ``((r_a, c_a, dr_a, dc_a, n_a), (r_b, c_b, dr_b, dc_b, n_b))``: run k starts at
     cell (r, c) and steps by (dr, dc) for n cells (clamped to the grid). Each run has one
     extra cell at its outer end so that cells touching the quadrant's boundary rays are
     included.
@@ -629,7 +741,7 @@ def _cell_path(q, j, re, ce, nr, nc):
         cb0 = min(ce + j - 1, ncc - 1)
         cb1 = max(ce - 1, 0)
         nb_ = cb0 - cb1 + 1 if rb <= ncr - 1 else 0
-        return ra0, ca, 1, 0, max(na, 0), rb, cb0, 0, -1, max(nb_, 0)
+        return (ra0, ca, 1, 0, max(na, 0)), (rb, cb0, 0, -1, max(nb_, 0))
     if q == 1:
         # top row r = re + j, cols ce + 1 .. ce - j; left column c = ce - j, rows re + j - 1 .. re - 1
         ra = re + j
@@ -640,7 +752,7 @@ def _cell_path(q, j, re, ce, nr, nc):
         rb0 = min(re + j - 1, ncr - 1)
         rb1 = max(re - 1, 0)
         nb_ = rb0 - rb1 + 1 if cb >= 0 else 0
-        return ra, ca0, 0, -1, max(na, 0), rb0, cb, -1, 0, max(nb_, 0)
+        return (ra, ca0, 0, -1, max(na, 0)), (rb0, cb, -1, 0, max(nb_, 0))
     if q == 2:
         # left column c = ce - j, rows re + 1 .. re - j; bottom row r = re - j, cols ce - j + 1 .. ce + 1
         ca = ce - j
@@ -651,7 +763,7 @@ def _cell_path(q, j, re, ce, nr, nc):
         cb0 = max(ce - j + 1, 0)
         cb1 = min(ce + 1, ncc - 1)
         nb_ = cb1 - cb0 + 1 if rb >= 0 else 0
-        return ra0, ca, -1, 0, max(na, 0), rb, cb0, 0, 1, max(nb_, 0)
+        return (ra0, ca, -1, 0, max(na, 0)), (rb, cb0, 0, 1, max(nb_, 0))
     # q == 3: bottom row r = re - j, cols ce - 1 .. ce + j; right column c = ce + j, rows re - j + 1 .. re + 1
     ra = re - j
     ca0 = max(ce - 1, 0)
@@ -661,12 +773,14 @@ def _cell_path(q, j, re, ce, nr, nc):
     rb0 = max(re - j + 1, 0)
     rb1 = min(re + 1, ncr - 1)
     nb_ = rb1 - rb0 + 1 if cb <= ncc - 1 else 0
-    return ra, ca0, 0, 1, max(na, 0), rb0, cb, 1, 0, max(nb_, 0)
+    return (ra, ca0, 0, 1, max(na, 0)), (rb0, cb, 1, 0, max(nb_, 0))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _box_exit(xs, ys, re, ce, k, ex, ey, dx, dy):
-    """Parameter where the ray E + t d leaves the box of cell rings <= k."""
+def _box_exit(g, eye, k, dx, dy):
+    """Parameter where the ray E + t (dx, dy) leaves the box of cell rings <= k."""
+    xs, ys = g.xs, g.ys
+    re, ce, ex, ey = eye.re, eye.ce, eye.ex, eye.ey
     nr = ys.shape[0]
     nc = xs.shape[0]
     t = _INF
@@ -702,13 +816,14 @@ def _level(j, r1):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _run_range(xs, ys, ex, ey, q, r0, c0, dr, dc, n, plo, phi):
+def _run_range(g, eye, q, run, plo, phi):
     """Cells [i0, i1] of a run (see :func:`_cell_path`) whose angular range meets [plo, phi]."""
+    r0, c0, dr, dc, n = run
     lo = 0
     hi = n
     while lo < hi:
         mid = (lo + hi) >> 1
-        pmn, pmx = _cell_range(xs, ys, r0 + mid * dr, c0 + mid * dc, ex, ey, q)
+        pmn, pmx = _cell_range(g, eye, r0 + mid * dr, c0 + mid * dc, q)
         if pmx < plo - _PEPS:
             lo = mid + 1
         else:
@@ -717,7 +832,7 @@ def _run_range(xs, ys, ex, ey, q, r0, c0, dr, dc, n, plo, phi):
     hi = n
     while lo < hi:
         mid = (lo + hi) >> 1
-        pmn, pmx = _cell_range(xs, ys, r0 + mid * dr, c0 + mid * dc, ex, ey, q)
+        pmn, pmx = _cell_range(g, eye, r0 + mid * dr, c0 + mid * dc, q)
         if pmn <= phi + _PEPS:
             lo = mid + 1
         else:
@@ -726,13 +841,15 @@ def _run_range(xs, ys, ex, ey, q, r0, c0, dr, dc, n, plo, phi):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _fill_run(z, xs, ys, ex, ey, ez, q, r0, c0, dr, dc, i0, i1, s0, p0, s1, p1):
+def _fill_run(g, eye, q, run, i0, i1, bs, bp):
     """Slopes and pseudo-angles of the corners of cells i0..i1 of a run, as two lines.
 
     Vertical run (dc == 0): line 0 is column c0 and line 1 column c0 + 1, indexed by
     row - rlo. Horizontal run: line 0 is row r0 and line 1 row r0 + 1, indexed by
-    col - clo. Returns (rlo or clo, number of samples per line).
+    col - clo. ``bs`` and ``bp`` (2, length) get the slopes and pseudo-angles of the two
+    lines. Returns (rlo or clo, number of samples per line).
     """
+    r0, c0, dr, dc = run[0], run[1], run[2], run[3]
     m = i1 - i0 + 2
     if dc == 0:
         lo = min(r0 + i0 * dr, r0 + i1 * dr)
@@ -747,13 +864,9 @@ def _fill_run(z, xs, ys, ex, ey, ez, q, r0, c0, dr, dc, i0, i1, s0, p0, s1, p1):
         else:
             rr = r0 + line
             cc = lo + k
-        sv, pv = _sample_val(z, xs, ys, rr, cc, ex, ey, ez, q)
-        if line == 0:
-            s0[k] = sv
-            p0[k] = pv
-        else:
-            s1[k] = sv
-            p1[k] = pv
+        sv, pv = _sample_val(g, eye, rr, cc, q)
+        bs[line, k] = sv
+        bp[line, k] = pv
     return lo, m
 
 
@@ -800,33 +913,35 @@ def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _decide(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, delta, tol, marg,
-            ubp, blk, hist, s, nsec, b0, r1, j, glo, bsz, p, tdx, tdy, nt, dist, st, slack):
+def _decide(g, eye, rules, w, j, win, tg):
     """Verdict of a target that the lower bound did not block, from the wedge bounds
-    (holding the rings <= j - 1) and exact walks.
+    ``w`` (holding the rings <= j - 1) and exact walks.
 
-    ``p`` is the target's unwrapped pseudo-angle, ``(tdx, tdy, nt)`` its offset from the
-    eye, ``dist`` its horizontal distance, ``st`` its slope and ``slack`` that slope's
-    rounding slack. The part beyond the box of rings <= j - 1 is walked exactly; the upper
-    bound of the wedge is the larger of ``ubp`` (completed blocks of rings) and ``blk``
-    (the current block). Returns (code, how): how 1 (decided by that walk and the upper
-    bound), 2 (by also walking the blocks of rings whose bound reaches the target's
+    ``win`` is ``(s, glo, bsz, b0, r1, nsec)``: the sector, its window of wedges and the
+    layout. ``tg`` is ``(p, tdx, tdy, nt, dist, st, slack)``: the target's unwrapped
+    pseudo-angle, its offset from the eye, its horizontal distance, its slope and that
+    slope's rounding slack. The part beyond the box of rings <= j - 1 is walked exactly;
+    the upper bound of the wedge is the larger of ``ubp`` (completed blocks of rings) and
+    ``blk`` (the current block). Returns (code, how): how 1 (decided by that walk and the
+    upper bound), 2 (by also walking the blocks of rings whose bound reaches the target's
     slope) or 3 (undecided).
     """
-    tolm = tol + marg
+    glo, bsz = win[1], win[2]
+    p, tdx, tdy, nt, dist, st, slack = tg
+    tolm = rules.tol + rules.marg
     length = np.sqrt(dist * dist + nt * nt)
-    tau = delta / length
-    tq = max(_box_exit(xs, ys, re, ce, j - 1, ex, ey, tdx, tdy), tau)
-    cl = walk_min(z, xs, ys, ixw, iyw, uniform, has_nan, ex, ey, ez, tdx, tdy, nt, tq, 1.0 - tau, -tolm)
+    tau = rules.delta / length
+    tq = max(_box_exit(g, eye, j - 1, tdx, tdy), tau)
+    ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
+    cl = walk_min(g, ray, tq, 1.0 - tau, -tolm)
     if cl < -tolm:
         return BLOCKED, 1
-    if cl < -tol + marg:
+    if cl < -rules.tol + rules.marg:
         return UNDECIDED, 3
-    ubv = max(_wedge_value(ubp, p, bsz, glo), _wedge_value(blk, p, bsz, glo))
+    ubv = max(_wedge_value(w.ubp, p, bsz, glo), _wedge_value(w.blk, p, bsz, glo))
     if st - slack >= ubv:
         return VISIBLE, 1
-    res = _block_walk(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, tol, marg, blk, hist, s, nsec,
-                      b0, r1, j, p, tdx, tdy, nt, st - slack, tau, tq)
+    res = _block_walk(g, eye, rules, w, j, win, ray, p, st - slack, tau, tq)
     how = 3
     if res != UNDECIDED:
         how = 2
@@ -834,17 +949,19 @@ def _decide(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, delta, to
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _block_walk(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, tol, marg, blk, hist, s, nsec,
-                b0, r1, j, p, tdx, tdy, nt, smin, tau, t_end):
+def _block_walk(g, eye, rules, w, j, win, ray, p, smin, tau, t_end):
     """Exact walk of the target's ray over the blocks of rings < j whose wedge maximum
-    reaches ``smin`` (the target's slope less its slack); the other blocks are clear.
+    reaches ``smin`` (the target's slope less its slack; ``p`` its unwrapped
+    pseudo-angle); the other blocks are clear.
 
-    Block b holds rings [BLOCK b, BLOCK b + BLOCK) (``hist[b]``; the current, partial
-    block is ``blk``) at the wedge resolution of its level. The walks cover t in
-    [tau, t_end] (t_end: where the exact last-rings walk began). Returns BLOCKED, VISIBLE
-    or UNDECIDED (some part within the margin of the threshold, nothing clearly blocked).
+    Block b holds rings [BLOCK b, BLOCK b + BLOCK) (``w.hist[b]``; the current, partial
+    block is ``w.blk``) at the wedge resolution of its level; ``win`` as in
+    :func:`_decide`. The walks cover t in [tau, t_end] (t_end: where the exact last-rings
+    walk began). Returns BLOCKED, VISIBLE or UNDECIDED (some part within the margin of
+    the threshold, nothing clearly blocked).
     """
-    tolm = tol + marg
+    s, b0, r1, nsec = win[0], win[3], win[4], win[5]
+    tolm = rules.tol + rules.marg
     nfull = j // BLOCK
     ambiguous = False
     for b in range(nfull + 1):
@@ -856,27 +973,27 @@ def _block_walk(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, tol, 
         nb_ = bszb // nsec
         glob = s * nb_ - 1
         if b < nfull:
-            m = _wedge_value(hist[b], p, bszb, glob)
+            m = _wedge_value(w.hist[b], p, bszb, glob)
         else:
-            m = _wedge_value(blk, p, bszb, glob)
+            m = _wedge_value(w.blk, p, bszb, glob)
         if m <= smin:
             continue
         t0 = tau
         if b > 0:
-            t0 = max(t0, _box_exit(xs, ys, re, ce, r_lo - 1, ex, ey, tdx, tdy))
-        t1 = min(_box_exit(xs, ys, re, ce, r_hi, ex, ey, tdx, tdy), t_end)
+            t0 = max(t0, _box_exit(g, eye, r_lo - 1, ray[3], ray[4]))
+        t1 = min(_box_exit(g, eye, r_hi, ray[3], ray[4]), t_end)
         if t1 <= t0:
             continue
-        cl = walk_min(z, xs, ys, ixw, iyw, uniform, has_nan, ex, ey, ez, tdx, tdy, nt, t0, t1, -tolm)
+        cl = walk_min(g, ray, t0, t1, -tolm)
         if cl < -tolm:
             return BLOCKED
-        if cl < -tol + marg:
+        if cl < -rules.tol + rules.marg:
             ambiguous = True
     return UNDECIDED if ambiguous else VISIBLE
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def bucket_targets(xs, ys, ixw, iyw, uniform, re, ce, ex, ey, tx, ty, nsec, jstop, tstart, torder):
+def bucket_targets(g, eye, tx, ty, nsec, jstop, tstart, torder):
     """Sort targets (local coordinates) by (sector, ring at which they are decided).
 
     A target in a cell of cell ring k is decided at ring j = k - 1, when the bounds hold
@@ -889,14 +1006,13 @@ def bucket_targets(xs, ys, ixw, iyw, uniform, re, ce, ex, ey, tx, ty, nsec, jsto
     nkey = nsec * (jstop + 2)
     key = np.full(m, -1, dtype=np.int64)
     counts = np.zeros(nkey + 1, dtype=np.int64)
-    sq = nsec // 4
     for i in range(m):
-        c = locate(xs, ixw, uniform, tx[i])
-        r = locate(ys, iyw, uniform, ty[i])
-        k = max(abs(r - re), abs(c - ce))
+        c = locate(g.xs, g.ixw, g.uniform, tx[i])
+        r = locate(g.ys, g.iyw, g.uniform, ty[i])
+        k = max(abs(r - eye.re), abs(c - eye.ce))
         if k < 3 or k - 1 > jstop:
             continue
-        p = diamond(tx[i] - ex, ty[i] - ey)
+        p = diamond(tx[i] - eye.ex, ty[i] - eye.ey)
         s = min(int(p * 0.25 * nsec), nsec - 1)
         # the sector owning p (the same test as the sweep's: plo <= p < phi)
         while s > 0 and p < s * 4.0 / nsec:
@@ -920,127 +1036,147 @@ def bucket_targets(xs, ys, ixw, iyw, uniform, re, ce, ex, ey, tx, ty, nsec, jsto
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def sweep(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, ht, delta, tol, marg, e_h,
-          r_excl, r_lb, diag2, nsec, b0, r1, jnear, jstop, dmax, perm, own, code, tx, ty, tz, tstart, torder, tcode,
-          stats):
+def sweep(g, eye, rules, lay, tg, perm, stats):
     """Decide the targets with rigorous horizon bounds and partial exact walks.
 
-    One task per angular sector (``nsec`` sectors, a multiple of 4, ``perm`` spreads them
-    over the threads). Each task sweeps the rings outwards keeping the bounds for its own
-    wedges plus one guard wedge on each side: at ring j it first decides the targets whose
-    bounds are complete (the samples of sample ring j whose direction falls in the sector,
-    when ``own``; otherwise the targets of bucket (sector, j) of ``tstart``/``torder``, see
-    :func:`bucket_targets`), then adds annulus j (exact edge clipping up to ring
-    ``jnear``, a cell bound beyond). ``code`` (own samples) or ``tcode`` (other targets)
-    get BLOCKED, VISIBLE or UNDECIDED (the caller answers those with the pair engine);
-    targets already NOT_TARGET are skipped. ``stats[sector, 0..3]`` counts targets decided
-    by ``lb``, by the upper bound and the last rings' walk, by walking blocks of rings, and
-    left undecided.
+    One task per angular sector (``lay.nsec`` sectors, a multiple of 4, ``perm`` spreads
+    them over the threads). Each task sweeps the rings outwards keeping the bounds for its
+    own wedges plus one guard wedge on each side: at ring j it first decides the targets
+    whose bounds are complete (the samples of sample ring j whose direction falls in the
+    sector, when ``tg.own``; otherwise the targets of bucket (sector, j) of ``tg.tstart`` /
+    ``tg.torder``, see :func:`bucket_targets`), then adds annulus j (exact edge clipping up
+    to ring ``lay.jnear``, a cell bound beyond). ``tg.code`` (own samples) or ``tg.tcode``
+    (other targets) get BLOCKED, VISIBLE or UNDECIDED (the caller answers those with the
+    pair engine); targets already NOT_TARGET are skipped. ``stats[sector, 0..3]`` counts
+    targets decided by ``lb``, by the upper bound and the last rings' walk, by walking
+    blocks of rings, and left undecided.
     """
-    for it in nb.prange(nsec):
-        s = perm[it]
-        _sector(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, ht, delta, tol, marg, e_h,
-                r_excl, r_lb, diag2, nsec, b0, r1, jnear, jstop, dmax, s, own, code, tx, ty, tz, tstart, torder,
-                tcode, stats)
+    for it in nb.prange(lay.nsec):
+        _sector(g, eye, rules, lay, tg, perm[it], stats)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _sector(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, ht, delta, tol, marg, e_h,
-            r_excl, r_lb, diag2, nsec, b0, r1, jnear, jstop, dmax, s, own, code, tx, ty, tz, tstart, torder,
-            tcode, stats):
+def _close_block(w, j, n):
+    """Close the block of rings j - BLOCK .. j - 1: keep it in the history, fold it into
+    ``ubp`` and start an empty current block."""
+    b = j // BLOCK - 1
+    for i in range(n + 2):
+        w.hist[b, i] = w.blk[i]
+        w.ubp[i] = max(w.ubp[i], w.blk[i])
+        w.blk[i] = -_INF
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _refine(w, tmp, n):
+    """Split each of the ``n`` wedges (plus guards) in two (at a block boundary, where
+    ``blk`` is empty): local index i covers global ``s * n - 1 + i``."""
+    for i in range(n + 2):
+        tmp[0, i] = w.ubp[i]
+        tmp[1, i] = w.lb[i]
+    for i in range(2 * n + 2):
+        ic = ((i - 1) >> 1) + 1
+        w.ubp[i] = tmp[0, ic]
+        w.lb[i] = tmp[1, ic]
+        w.blk[i] = -_INF
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _add_cells(w, win, ann, runs, ranges, bs, bp):
+    """Add the cells of both runs of an annulus (away from the eye) with :func:`_cell_bounds`.
+
+    ``runs`` the two runs (:func:`_cell_path`), ``ranges`` (3, 2) int64 each run's first
+    and last cell index and the first row or column of its corner buffers ``bs``, ``bp``
+    (run, line, index).
+    """
+    for run in range(2):
+        if ranges[1, run] < ranges[0, run]:
+            continue
+        r0, c0, dr, dc = runs[run][0], runs[run][1], runs[run][2], runs[run][3]
+        lo = ranges[2, run]
+        for i in range(ranges[0, run], ranges[1, run] + 1):
+            if dc == 0:
+                k = r0 + i * dr - lo
+                sv = (bs[run, 0, k], bs[run, 1, k], bs[run, 0, k + 1], bs[run, 1, k + 1])
+                pv = (bp[run, 0, k], bp[run, 1, k], bp[run, 0, k + 1], bp[run, 1, k + 1])
+            else:
+                k = c0 + i * dc - lo
+                sv = (bs[run, 0, k], bs[run, 0, k + 1], bs[run, 1, k], bs[run, 1, k + 1])
+                pv = (bp[run, 0, k], bp[run, 0, k + 1], bp[run, 1, k], bp[run, 1, k + 1])
+            _cell_bounds(w.blk, w.lb, win, ann, sv, pv)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _sector(g, eye, rules, lay, tg, s, stats):
     """The sweep of one sector (see :func:`sweep`)."""
-    ntg = tx.shape[0]
+    xs, ys, z = g.xs, g.ys, g.z
+    nsec, b0, r1, jnear, jstop = lay
+    ntg = tg.tx.shape[0]
     nr = ys.shape[0]
     nc = xs.shape[0]
-    sq = nsec // 4
     lmax = _level(jstop, r1)
     nfin = (b0 << lmax) // nsec
-    tolm = tol + marg
+    tolm = rules.tol + rules.marg
+    lim = (rules.r_excl, rules.r_lb, rules.e_h, tolm)
     blen = max(nr, nc) + 2
-    q = s // sq
-    # wedge bounds: ubp holds the completed blocks of rings, blk the current block (the
-    # cells update blk), hist[b] each completed block b; lb the whole prefix
-    ubp = np.full(nfin + 2, -_INF)
-    blk = np.full(nfin + 2, -_INF)
-    lb = np.full(nfin + 2, -_INF)
-    hist = np.empty((jstop // BLOCK + 1, nfin + 2))
-    tmp_u = np.empty(nfin + 2)
-    tmp_l = np.empty(nfin + 2)
+    q = s // (nsec // 4)
+    w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
+               np.empty((jstop // BLOCK + 1, nfin + 2)))
+    tmp = np.empty((2, nfin + 2))
     # corner buffers of the two runs: slopes and pseudo-angles of lines 0 and 1
     bs = np.empty((2, 2, blen))
     bp = np.empty((2, 2, blen))
-    i0s = np.zeros(2, dtype=np.int64)
-    i1s = np.full(2, -1, dtype=np.int64)
-    los = np.zeros(2, dtype=np.int64)
+    ranges = np.zeros((3, 2), dtype=np.int64)  # first cell, last cell, buffer start per run
+    # targets decided by the lower bound (counted apart: the hot path), then by the
+    # upper bound and the last rings' walk, by block walks, and left undecided
+    counts = np.zeros(4, dtype=np.int64)
+    n_lb = 0
     lev = 0
     bsz = b0
     n = b0 // nsec
     plo = s * 4.0 / nsec
     phi = (s + 1) * 4.0 / nsec
-    n_lb = 0
-    n_ub = 0
-    n_bw = 0
-    n_un = 0
     for j in range(0, jstop + 1):
         if j > 0 and j % BLOCK == 0:
-            # close the block of rings j - BLOCK .. j - 1
-            b = j // BLOCK - 1
-            for i in range(n + 2):
-                hist[b, i] = blk[i]
-                ubp[i] = max(ubp[i], blk[i])
-                blk[i] = -_INF
+            _close_block(w, j, n)
         target_lev = _level(j, r1)
         while lev < target_lev:
-            # refine (at a block boundary, blk is empty): each wedge splits in two (local
-            # index i covers global s*n - 1 + i)
-            for i in range(n + 2):
-                tmp_u[i] = ubp[i]
-                tmp_l[i] = lb[i]
-            for i in range(2 * n + 2):
-                ic = ((i - 1) >> 1) + 1
-                ubp[i] = tmp_u[ic]
-                lb[i] = tmp_l[ic]
-                blk[i] = -_INF
+            _refine(w, tmp, n)
             n *= 2
             bsz *= 2
             lev += 1
         glo = s * n - 1
         nloc = n + 2
-        k4 = bsz * 0.25
         if j < 2:
             # no targets yet (the caller answers rings 0 and 1 exactly); the cells next to
             # the eye are always clipped edge by edge
-            _annulus_edges(z, xs, ys, re, ce, j, ex, ey, ez, glo, nloc, bsz, blk, lb, r_excl, r_lb, e_h, tolm)
+            _annulus_edges(g, eye, j, (glo, nloc, bsz), w.blk, w.lb, lim)
             continue
+        dwin = (s, glo, bsz, b0, r1, nsec)
         plo_g = glo * 4.0 / bsz
         phi_g = (glo + nloc) * 4.0 / bsz
-        ra, ca, dra, dca, na, rb, cb, drb, dcb, nb_ = _cell_path(q, j, re, ce, nr, nc)
-        i0s[0] = 0
-        i0s[1] = 0
-        i1s[0] = -1
-        i1s[1] = -1
+        runs = _cell_path(q, j, eye.re, eye.ce, nr, nc)
         for run in range(2):
-            if run == 0:
-                r0, c0, dr, dc, nn = ra, ca, dra, dca, na
-            else:
-                r0, c0, dr, dc, nn = rb, cb, drb, dcb, nb_
+            ranges[0, run] = 0
+            ranges[1, run] = -1
+        for run in range(2):
+            rn = runs[run]
+            r0, c0, dr, dc, nn = rn
             if nn <= 0:
                 continue
-            i0, i1 = _run_range(xs, ys, ex, ey, q, r0, c0, dr, dc, nn, plo_g, phi_g)
+            i0, i1 = _run_range(g, eye, q, rn, plo_g, phi_g)
             if i1 < i0:
                 continue
-            i0s[run] = i0
-            i1s[run] = i1
-            lo, m = _fill_run(z, xs, ys, ex, ey, ez, q, r0, c0, dr, dc, i0, i1,
-                              bs[run, 0], bp[run, 0], bs[run, 1], bp[run, 1])
-            los[run] = lo
+            ranges[0, run] = i0
+            ranges[1, run] = i1
+            lo, m = _fill_run(g, eye, q, rn, i0, i1, bs[run], bp[run])
+            ranges[2, run] = lo
             # ---- decide the samples of sample ring j on the run's outer line
-            if not own:
+            if not tg.own:
                 continue
             if dc == 0:
-                outer = 1 if c0 > ce else 0
+                outer = 1 if c0 > eye.ce else 0
             else:
-                outer = 1 if r0 > re else 0
+                outer = 1 if r0 > eye.re else 0
             for k in range(m):
                 p = bp[run, outer, k]
                 if p < plo or p >= phi:
@@ -1051,109 +1187,55 @@ def _sector(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, ht, delta
                 else:
                     rr = r0 + outer
                     cc = lo + k
-                if code[rr, cc] == NOT_TARGET:
+                if tg.code[rr, cc] == NOT_TARGET:
                     continue
-                tdx = xs[cc] - ex
-                tdy = ys[rr] - ey
+                tdx = xs[cc] - eye.ex
+                tdy = ys[rr] - eye.ey
                 dist = np.sqrt(tdx * tdx + tdy * tdy)
-                if dist > dmax:
-                    code[rr, cc] = NOT_TARGET
+                if dist > rules.dmax:
+                    tg.code[rr, cc] = NOT_TARGET
                     continue
-                nt = z[rr, cc] + ht - ez
-                blocked, st, slack = _lb_blocks(lb, p, bsz, glo, nt, dist, e_h)
+                nt = z[rr, cc] + rules.ht - eye.ez
+                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h)
                 if blocked:
-                    res, how = BLOCKED, 0
-                else:
-                    res, how = _decide(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, delta, tol, marg,
-                                       ubp, blk, hist, s, nsec, b0, r1, j, glo, bsz, p, tdx, tdy, nt, dist, st, slack)
-                code[rr, cc] = res
-                if how == 0:
+                    tg.code[rr, cc] = BLOCKED
                     n_lb += 1
-                elif how == 1:
-                    n_ub += 1
-                elif how == 2:
-                    n_bw += 1
                 else:
-                    n_un += 1
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
+                    tg.code[rr, cc] = res
+                    counts[how] += 1
         # ---- decide the other targets whose box of rings <= j - 1 the bounds now cover
         if ntg > 0:
             key = s * (jstop + 2) + j
-            for kk in range(tstart[key], tstart[key + 1]):
-                t = torder[kk]
-                tdx = tx[t] - ex
-                tdy = ty[t] - ey
+            for kk in range(tg.tstart[key], tg.tstart[key + 1]):
+                t = tg.torder[kk]
+                tdx = tg.tx[t] - eye.ex
+                tdy = tg.ty[t] - eye.ey
                 dist = np.sqrt(tdx * tdx + tdy * tdy)
-                if dist > dmax:
-                    tcode[t] = NOT_TARGET
+                if dist > rules.dmax:
+                    tg.tcode[t] = NOT_TARGET
                     continue
                 p = _unwrap(diamond(tdx, tdy), q)
-                nt = tz[t] - ez
-                blocked, st, slack = _lb_blocks(lb, p, bsz, glo, nt, dist, e_h)
+                nt = tg.tz[t] - eye.ez
+                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h)
                 if blocked:
-                    res, how = BLOCKED, 0
-                else:
-                    res, how = _decide(z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, delta, tol, marg,
-                                       ubp, blk, hist, s, nsec, b0, r1, j, glo, bsz, p, tdx, tdy, nt, dist, st, slack)
-                tcode[t] = res
-                if how == 0:
+                    tg.tcode[t] = BLOCKED
                     n_lb += 1
-                elif how == 1:
-                    n_ub += 1
-                elif how == 2:
-                    n_bw += 1
                 else:
-                    n_un += 1
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
+                    tg.tcode[t] = res
+                    counts[how] += 1
         # ---- add annulus j
-        dring = _ring_distance(xs, ys, re, ce, j - 1, ex, ey)
-        rel = 0.25 * diag2 / (dring * dring) * (1.0 + 1e-12)
+        dring = _ring_distance(g, eye, j - 1)
+        rel = 0.25 * rules.diag2 / (dring * dring) * (1.0 + 1e-12)
         if j <= jnear or not (rel <= 1.0):
-            _annulus_edges(z, xs, ys, re, ce, j, ex, ey, ez, glo, nloc, bsz, blk, lb, r_excl, r_lb, e_h, tolm)
+            _annulus_edges(g, eye, j, (glo, nloc, bsz), w.blk, w.lb, lim)
             continue
-        hi_slack = 2.0 * e_h / dring
-        lo_slack = (2.0 * e_h + tolm) / dring
-        use_lb = dring >= r_lb
-        for run in range(2):
-            if i1s[run] < i0s[run]:
-                continue
-            if run == 0:
-                r0, c0, dr, dc = ra, ca, dra, dca
-            else:
-                r0, c0, dr, dc = rb, cb, drb, dcb
-            lo = los[run]
-            for i in range(i0s[run], i1s[run] + 1):
-                if dc == 0:
-                    k = r0 + i * dr - lo
-                    s00, s01, s10, s11 = bs[run, 0, k], bs[run, 1, k], bs[run, 0, k + 1], bs[run, 1, k + 1]
-                    p00, p01, p10, p11 = bp[run, 0, k], bp[run, 1, k], bp[run, 0, k + 1], bp[run, 1, k + 1]
-                else:
-                    k = c0 + i * dc - lo
-                    s00, s01, s10, s11 = bs[run, 0, k], bs[run, 0, k + 1], bs[run, 1, k], bs[run, 1, k + 1]
-                    p00, p01, p10, p11 = bp[run, 0, k], bp[run, 0, k + 1], bp[run, 1, k], bp[run, 1, k + 1]
-                _cell_bounds(blk, lb, glo, nloc, k4, rel, hi_slack, lo_slack, use_lb,
-                             s00, s01, s10, s11, p00, p01, p10, p11)
-    stats[s, 0] = n_lb
-    stats[s, 1] = n_ub
-    stats[s, 2] = n_bw
-    stats[s, 3] = n_un
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _annulus_edges(z, xs, ys, re, ce, j, ex, ey, ez, glo, nloc, bsz, ub, lb, r_excl, r_lb, e_h, tolm):
-    """Add every cell of annulus j with exact edge clipping (used near the eye)."""
-    nr = ys.shape[0]
-    nc = xs.shape[0]
-    r0 = max(re - j, 0)
-    r1_ = min(re + j, nr - 2)
-    c0 = max(ce - j, 0)
-    c1 = min(ce + j, nc - 2)
-    for rr in range(r0, r1_ + 1):
-        edge_row = rr == re - j or rr == re + j
-        step = 1 if edge_row else max(2 * j, 1)
-        cc = c0 if edge_row else ce - j
-        while cc <= c1:
-            if cc >= 0:
-                _cell_edges(z, xs, ys, rr, cc, ex, ey, ez, glo, nloc, bsz, ub, lb, r_excl, r_lb, e_h, tolm)
-            cc += step
+        ann = (rel, 2.0 * rules.e_h / dring, (2.0 * rules.e_h + tolm) / dring, dring >= rules.r_lb)
+        _add_cells(w, (glo, nloc, bsz * 0.25), ann, runs, ranges, bs, bp)
+    counts[0] += n_lb
+    for k in range(4):
+        stats[s, k] = counts[k]
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
