@@ -67,7 +67,17 @@ sight calculations", AFRIGRAPH 2009, doi:10.1145/1503454.1503465.
 """
 
 from .los import embree_tolerance, line_of_sight, min_clearance, visibility_matrix
-from .predicate import ENGINES, TOL_REL, TRIM_REL, clearance_tolerance, terrain_scale, trim_length
+from .predicate import (
+    EARTH_RADIUS,
+    ENGINES,
+    STANDARD_REFRACTION,
+    TOL_REL,
+    TRIM_REL,
+    clearance_tolerance,
+    curvature_coefficient,
+    terrain_scale,
+    trim_length,
+)
 from .profile import clearance_profile, lowest_point
 from .sweep import viewshed
 
@@ -75,6 +85,9 @@ __all__ = [
     "ENGINES",
     "TRIM_REL",
     "TOL_REL",
+    "EARTH_RADIUS",
+    "STANDARD_REFRACTION",
+    "curvature_coefficient",
     "min_clearance",
     "line_of_sight",
     "visibility_matrix",

@@ -73,7 +73,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from ._kernels import _canonical, _locate, interval_start
+from ._kernels import _canonical, _locate, curved_min, interval_start
 
 _INF = np.inf
 
@@ -102,8 +102,9 @@ Eye = namedtuple("Eye", ["re", "ce", "ex", "ey", "ez"])
 #: kept from ``-tol`` by every decision; ``e_h`` bound of the absolute rounding error of a
 #: computed height; ``r_excl`` radius around the eye inside every target's trimmed end;
 #: ``r_lb`` smallest distance of a point used by a lower bound; ``diag2`` largest squared
-#: cell diagonal; ``dmax`` maximum distance of a target (inf: none).
-Rules = namedtuple("Rules", ["ht", "delta", "tol", "marg", "e_h", "r_excl", "r_lb", "diag2", "dmax"])
+#: cell diagonal; ``dmax`` maximum distance of a target (inf: none); ``kc`` the earth
+#: curvature coefficient ``curvature / (2 R)`` (0: flat; see "Earth curvature").
+Rules = namedtuple("Rules", ["ht", "delta", "tol", "marg", "e_h", "r_excl", "r_lb", "diag2", "dmax", "kc"])
 #: The sweep's layout (ints): ``nsec`` sectors (a multiple of 4), ``b0`` wedges near the
 #: eye, ``r1`` first ring where the wedges double, ``jnear`` last ring clipped edge by
 #: edge, ``jstop`` last ring swept.
@@ -234,24 +235,27 @@ def _edge_clear(g, kind, r, c, ray, t):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _absent_piece(g, r, c, upper, ray, ta, tb):
+def _absent_piece(g, r, c, upper, ray, ta, tb, bulge):
     """Min clearance of a piece lying in an absent triangle: only where the piece runs
     along a boundary shared with a present triangle (a ray exactly on a grid line or a
-    cell diagonal); inf otherwise."""
+    cell diagonal); inf otherwise. ``bulge`` as in :func:`walk_min`."""
     z, xs, ys = g.z, g.xs, g.ys
     ex, ey, ez, dx, dy, dz = ray
     nr, nc = z.shape
     best = _INF
     if dx == 0.0:
         if ex == xs[c] and (_tri_present(z, r, c, True) or (c > 0 and _tri_present(z, r, c - 1, False))):
-            best = min(_edge_clear(g, 0, r, c, ray, ta), _edge_clear(g, 0, r, c, ray, tb))
+            best = curved_min(_edge_clear(g, 0, r, c, ray, ta), _edge_clear(g, 0, r, c, ray, tb), ta, tb, bulge)
         elif ex == xs[c + 1] and (_tri_present(z, r, c, False) or (c + 1 < nc - 1 and _tri_present(z, r, c + 1, True))):
-            best = min(_edge_clear(g, 0, r, c + 1, ray, ta), _edge_clear(g, 0, r, c + 1, ray, tb))
+            best = curved_min(_edge_clear(g, 0, r, c + 1, ray, ta), _edge_clear(g, 0, r, c + 1, ray, tb), ta, tb,
+                              bulge)
     if dy == 0.0:
         if ey == ys[r] and (_tri_present(z, r, c, False) or (r > 0 and _tri_present(z, r - 1, c, True))):
-            best = min(best, _edge_clear(g, 1, r, c, ray, ta), _edge_clear(g, 1, r, c, ray, tb))
+            best = min(best, curved_min(_edge_clear(g, 1, r, c, ray, ta), _edge_clear(g, 1, r, c, ray, tb), ta, tb,
+                                        bulge))
         elif ey == ys[r + 1] and (_tri_present(z, r, c, True) or (r + 1 < nr - 1 and _tri_present(z, r + 1, c, False))):
-            best = min(best, _edge_clear(g, 1, r + 1, c, ray, ta), _edge_clear(g, 1, r + 1, c, ray, tb))
+            best = min(best, curved_min(_edge_clear(g, 1, r + 1, c, ray, ta), _edge_clear(g, 1, r + 1, c, ray, tb),
+                                        ta, tb, bulge))
     other = not upper
     if _tri_present(z, r, c, other):
         # on the diagonal (both ends), the other triangle's plane is the surface there
@@ -260,13 +264,15 @@ def _absent_piece(g, r, c, upper, ray, ta, tb):
         ub = (ex + tb * dx - xs[c]) * g.ixw[c]
         vb = (ey + tb * dy - ys[r]) * g.iyw[r]
         if abs(ua - va) <= 1e-12 and abs(ub - vb) <= 1e-12:
-            best = min(best, _clear(g, r, c, other, ray, ta), _clear(g, r, c, other, ray, tb))
+            best = min(best, curved_min(_clear(g, r, c, other, ray, ta), _clear(g, r, c, other, ray, tb), ta, tb,
+                                        bulge))
     return best
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _cell_piece(g, r, c, ray, ta, tb, with_ta):
-    """Exact min clearance over [ta, tb] inside cell (r, c) (ends and diagonal crossing)."""
+def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
+    """Exact min clearance over [ta, tb] inside cell (r, c) (ends and diagonal crossing;
+    with ``bulge > 0`` also each side's interior minimum, see :func:`walk_min`)."""
     xs, ys, ixw, iyw = g.xs, g.ys, g.ixw, g.iyw
     ex, ey, ez, dx, dy, dz = ray
     td = _INF
@@ -275,7 +281,7 @@ def _cell_piece(g, r, c, ray, ta, tb, with_ta):
         t = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
         if t > ta and t < tb:
             td = t
-    if not g.has_nan:
+    if not g.has_nan and bulge == 0.0:
         tm = 0.5 * (ta + tb) if td == _INF else 0.5 * (ta + td)
         u = (ex + tm * dx - xs[c]) * ixw[c]
         v = (ey + tm * dy - ys[r]) * iyw[r]
@@ -311,24 +317,26 @@ def _cell_piece(g, r, c, ray, ta, tb, with_ta):
         u = (ex + tm * dx - xs[c]) * ixw[c]
         v = (ey + tm * dy - ys[r]) * iyw[r]
         up = v > u
-        if _tri_present(g.z, r, c, up):
-            e = min(_clear(g, r, c, up, ray, a), _clear(g, r, c, up, ray, b))
+        if not g.has_nan or _tri_present(g.z, r, c, up):
+            e = curved_min(_clear(g, r, c, up, ray, a), _clear(g, r, c, up, ray, b), a, b, bulge)
         else:
-            e = _absent_piece(g, r, c, up, ray, a, b)
+            e = _absent_piece(g, r, c, up, ray, a, b, bulge)
         if e < best:
             best = e
     return best
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def walk_min(g, ray, t0, t1, stop):
+def walk_min(g, ray, t0, t1, stop, bulge):
     """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``.
 
     ``ray`` is ``(ex, ey, ez, dx, dy, dz)`` in local coordinates. The ground track is
     walked cell by cell; in each cell the clearance is evaluated at the entry, the exit
-    and the diagonal crossing (it is linear between them). On a grid with nodata,
-    triangles touching a NaN sample are absent and do not block. The walk returns as soon
-    as the minimum falls below ``stop``.
+    and the diagonal crossing (it is linear between them; under earth curvature,
+    ``bulge = kc (dx**2 + dy**2) > 0``, it is lowered by ``bulge t (1 - t)`` and each
+    side's convex minimum counts too). On a grid with nodata, triangles touching a NaN
+    sample are absent and do not block. The walk returns as soon as the minimum falls
+    below ``stop``.
     """
     if t1 < t0:
         return _INF
@@ -361,7 +369,7 @@ def walk_min(g, ray, t0, t1, stop):
         tn = min(tx, ty, t1)
         if tn < t:
             tn = t
-        m = _cell_piece(g, r, c, ray, t, tn, first or g.has_nan)
+        m = _cell_piece(g, r, c, ray, t, tn, first or g.has_nan, bulge)
         first = False
         if m < best:
             best = m
@@ -380,9 +388,10 @@ def walk_min(g, ray, t0, t1, stop):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def walk_targets(g, eye, tx, ty, tz, delta, tol, out):
+def walk_targets(g, eye, tx, ty, tz, delta, tol, kc, out):
     """``out[i]`` = exact minimum clearance of the segment eye -> target i (canonical
-    direction and length trim as in the pair engine; returns early below ``-tol``).
+    direction, length trim and earth curvature ``kc`` as in the pair engine; returns early
+    below ``-tol``).
 
     ``eye`` is ``(ex, ey, ez)``. Serial: it only answers the few targets the sweep leaves
     undecided on a grid with nodata (the pair engine needs a NaN-free grid)."""
@@ -393,7 +402,7 @@ def walk_targets(g, eye, tx, ty, tz, delta, tol, out):
         if tau < 0.0:
             out[i] = _INF
             continue
-        out[i] = walk_min(g, seg, tau, 1.0 - tau, -tol)
+        out[i] = walk_min(g, seg, tau, 1.0 - tau, -tol, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
 
 
 # --------------------------------------------------------------------------- bounds
@@ -409,13 +418,15 @@ def _s_at(edge, lam):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _extremes(edge, l0, l1, e_h):
-    """Rigorous (max, min) of the slope over the edge part [l0, l1], and its min distance.
+    """Rigorous (max, min) of the slope over the edge part [l0, l1], and its min and max
+    distance.
 
     ``edge`` is ``(wx, wy, ex_, ey_, a, b, alpha, beta, gamma)``: the edge's start w and
     direction e relative to the eye, its height above the eye ``a + lam * b``, and
     ``alpha = |e|**2``, ``beta = w.e``, ``gamma = |w|**2``. ``s(lam) = N(lam) / d(lam)``
     with N linear and d**2 quadratic has one critical point ``lam*`` at most (a linear
-    equation), so its extremes are at l0, l1 or lam*.
+    equation), so its extremes are at l0, l1 or lam*. The distance is convex along the
+    edge: its maximum is at l0 or l1.
     """
     wx, wy, ex_, ey_, a, b, alpha, beta, gamma = edge
     s0, d0 = _s_at(edge, l0)
@@ -435,7 +446,7 @@ def _extremes(edge, l0, l1, e_h):
         px = wx + lf * ex_
         py = wy + lf * ey_
         dmin = min(dmin, np.sqrt(px * px + py * py))
-    return hi, lo, dmin
+    return hi, lo, dmin, max(d0, d1)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -514,11 +525,17 @@ def _edge_update(pa3, pb3, ez, win, ub, lb, lim):
     Every wedge the edge passes through gets the maximum slope of the edge's part inside
     it (``ub``); a wedge the edge crosses from side to side gets the minimum slope of
     that part, less the tolerance term (``lb``). ``lim`` is ``(r_excl, r_lb, e_h,
-    tolm)``: points closer than ``r_excl`` to the eye lie in every target's trimmed end
-    and are left out; ``lb`` only uses parts at least ``r_lb`` away.
+    tolm, kc, diag)``: points closer than ``r_excl`` to the eye lie in every target's
+    trimmed end and are left out; ``lb`` only uses parts at least ``r_lb`` away.
+
+    Under earth curvature (``kc > 0``) the slopes are lowered by ``kc d``: a part's
+    minimum by ``kc`` times its largest distance; its maximum, which must bound the
+    surface points of the triangles beside the edge inside the wedge too (the slope may
+    peak inside a triangle), by ``kc`` times its smallest distance less ``diag`` (a cell
+    diagonal: every point of those triangles is within it of the part).
     """
     glo, nloc, bsz = win
-    r_excl, r_lb, e_h, tolm = lim
+    r_excl, r_lb, e_h, tolm, kc, diag = lim
     wx, wy, az = pa3
     ex_ = pb3[0] - wx
     ey_ = pb3[1] - wy
@@ -557,7 +574,11 @@ def _edge_update(pa3, pb3, ez, win, ub, lb, lim):
                 la, lb_, full, ok = _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz)
                 if not ok:
                     continue
-                hi, lo, dmin = _extremes(edge, la, lb_, e_h)
+                hi, lo, dmin, dmax = _extremes(edge, la, lb_, e_h)
+                if kc > 0.0:
+                    if dmin > diag:
+                        hi -= kc * (dmin - diag)
+                    lo -= kc * dmax
                 i = g - glo
                 if hi > ub[i]:
                     ub[i] = hi
@@ -631,12 +652,13 @@ def _cell_range(g, eye, r, c, q):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _sample_val(g, eye, r, c, q):
-    """(slope from the eye, unwrapped pseudo-angle) of sample (r, c); NaN slope on nodata."""
+def _sample_val(g, eye, r, c, q, kc):
+    """(slope from the eye, unwrapped pseudo-angle) of sample (r, c); NaN slope on nodata.
+    Under earth curvature the slope is lowered by ``kc d`` (see "Earth curvature")."""
     dx = g.xs[c] - eye.ex
     dy = g.ys[r] - eye.ey
     d = np.sqrt(dx * dx + dy * dy)
-    return (g.z[r, c] - eye.ez) / d, _unwrap(diamond(dx, dy), q)
+    return (g.z[r, c] - eye.ez) / d - kc * d, _unwrap(diamond(dx, dy), q)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -701,6 +723,22 @@ def _cell_bounds(ub, lb, win, ann, sv, pv):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
+def curvature_pads(kc, diag2, dring, rel, far):
+    """What earth curvature adds to :func:`_cell_bounds`' slacks: ``(pad_hi, pad_lo)``.
+
+    The corners' slopes carry ``- kc d`` at the corners' distances. A point of the cell is
+    at most a diagonal farther or nearer than any corner, and along an edge the distance
+    dips at most ``g = |e|**2 / (8 d_lo) <= diag2 / (8 dring)`` below its chord (the
+    nearest point can be inside an edge); the convexity factor ``rel`` also multiplies
+    the flat slope, which exceeds the corrected one by at most ``kc far`` (``far`` the
+    annulus's farthest corner). So the upper bound needs ``kc (diag + g + rel far)`` more
+    and the lower bound ``kc diag`` less; both are 0 for a flat earth.
+    """
+    diag = np.sqrt(diag2)
+    return kc * (diag + 0.125 * diag2 / dring + rel * far), kc * diag
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _ring_distance(g, eye, k):
     """Horizontal distance from the eye to the boundary of the box of cell rings <= k
     (its sides inside the grid): every point outside the box is at least this far."""
@@ -718,6 +756,18 @@ def _ring_distance(g, eye, k):
     if re - k >= 0:
         d = min(d, ey - ys[re - k])
     return d
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _far_corner(g, eye, k):
+    """Horizontal distance from the eye to the farthest corner of the box of cell rings
+    <= k (clipped to the grid): no point of the box is farther."""
+    xs, ys = g.xs, g.ys
+    nr = ys.shape[0]
+    nc = xs.shape[0]
+    ax = max(xs[min(eye.ce + 1 + k, nc - 1)] - eye.ex, eye.ex - xs[max(eye.ce - k, 0)])
+    ay = max(ys[min(eye.re + 1 + k, nr - 1)] - eye.ey, eye.ey - ys[max(eye.re - k, 0)])
+    return np.sqrt(ax * ax + ay * ay)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -841,7 +891,7 @@ def _run_range(g, eye, q, run, plo, phi):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _fill_run(g, eye, q, run, i0, i1, bs, bp):
+def _fill_run(g, eye, q, run, i0, i1, bs, bp, kc):
     """Slopes and pseudo-angles of the corners of cells i0..i1 of a run, as two lines.
 
     Vertical run (dc == 0): line 0 is column c0 and line 1 column c0 + 1, indexed by
@@ -864,7 +914,7 @@ def _fill_run(g, eye, q, run, i0, i1, bs, bp):
         else:
             rr = r0 + line
             cc = lo + k
-        sv, pv = _sample_val(g, eye, rr, cc, q)
+        sv, pv = _sample_val(g, eye, rr, cc, q, kc)
         bs[line, k] = sv
         bp[line, k] = pv
     return lo, m
@@ -898,17 +948,18 @@ def _wedge_value(arr, p, bsz, glo):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h):
+def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h, kc):
     """Whether the lower bound of the target's wedge proves it blocked, and its slope and
-    slack: ``(blocked, s_T, slack)``."""
+    slack: ``(blocked, s_T, slack)`` (the slope lowered by ``kc * dist`` under earth
+    curvature)."""
     i_b, at_lo, at_hi = _wedge_slot(p, bsz, glo)
     lbv = lb[i_b]
     if at_lo:
         lbv = min(lbv, lb[i_b - 1])
     if at_hi:
         lbv = min(lbv, lb[i_b + 1])
-    st = nt / dist
-    slack = 2.0 * e_h / dist + _REL * abs(st)
+    st = nt / dist - kc * dist
+    slack = 2.0 * e_h / dist + _REL * (abs(st) + kc * dist)
     return lbv > st + slack, st, slack
 
 
@@ -933,7 +984,8 @@ def _decide(g, eye, rules, w, j, win, tg):
     tau = rules.delta / length
     tq = max(_box_exit(g, eye, j - 1, tdx, tdy), tau)
     ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
-    cl = walk_min(g, ray, tq, 1.0 - tau, -tolm)
+    bulge = rules.kc * (dist * dist)
+    cl = walk_min(g, ray, tq, 1.0 - tau, -tolm, bulge)
     if cl < -tolm:
         return BLOCKED, 1
     if cl < -rules.tol + rules.marg:
@@ -984,7 +1036,7 @@ def _block_walk(g, eye, rules, w, j, win, ray, p, smin, tau, t_end):
         t1 = min(_box_exit(g, eye, r_hi, ray[3], ray[4]), t_end)
         if t1 <= t0:
             continue
-        cl = walk_min(g, ray, t0, t1, -tolm)
+        cl = walk_min(g, ray, t0, t1, -tolm, rules.kc * (ray[3] * ray[3] + ray[4] * ray[4]))
         if cl < -tolm:
             return BLOCKED
         if cl < -rules.tol + rules.marg:
@@ -1116,7 +1168,9 @@ def _sector(g, eye, rules, lay, tg, s, stats):
     lmax = _level(jstop, r1)
     nfin = (b0 << lmax) // nsec
     tolm = rules.tol + rules.marg
-    lim = (rules.r_excl, rules.r_lb, rules.e_h, tolm)
+    kc = rules.kc
+    diag = np.sqrt(rules.diag2)
+    lim = (rules.r_excl, rules.r_lb, rules.e_h, tolm, kc, diag)
     blen = max(nr, nc) + 2
     q = s // (nsec // 4)
     w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
@@ -1168,7 +1222,7 @@ def _sector(g, eye, rules, lay, tg, s, stats):
                 continue
             ranges[0, run] = i0
             ranges[1, run] = i1
-            lo, m = _fill_run(g, eye, q, rn, i0, i1, bs[run], bp[run])
+            lo, m = _fill_run(g, eye, q, rn, i0, i1, bs[run], bp[run], kc)
             ranges[2, run] = lo
             # ---- decide the samples of sample ring j on the run's outer line
             if not tg.own:
@@ -1196,7 +1250,7 @@ def _sector(g, eye, rules, lay, tg, s, stats):
                     tg.code[rr, cc] = NOT_TARGET
                     continue
                 nt = z[rr, cc] + rules.ht - eye.ez
-                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h)
+                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, kc)
                 if blocked:
                     tg.code[rr, cc] = BLOCKED
                     n_lb += 1
@@ -1217,7 +1271,7 @@ def _sector(g, eye, rules, lay, tg, s, stats):
                     continue
                 p = _unwrap(diamond(tdx, tdy), q)
                 nt = tg.tz[t] - eye.ez
-                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h)
+                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, kc)
                 if blocked:
                     tg.tcode[t] = BLOCKED
                     n_lb += 1
@@ -1231,7 +1285,8 @@ def _sector(g, eye, rules, lay, tg, s, stats):
         if j <= jnear or not (rel <= 1.0):
             _annulus_edges(g, eye, j, (glo, nloc, bsz), w.blk, w.lb, lim)
             continue
-        ann = (rel, 2.0 * rules.e_h / dring, (2.0 * rules.e_h + tolm) / dring, dring >= rules.r_lb)
+        pad_hi, pad_lo = curvature_pads(kc, rules.diag2, dring, rel, _far_corner(g, eye, j))
+        ann = (rel, 2.0 * rules.e_h / dring + pad_hi, (2.0 * rules.e_h + tolm) / dring + pad_lo, dring >= rules.r_lb)
         _add_cells(w, (glo, nloc, bsz * 0.25), ann, runs, ranges, bs, bp)
     counts[0] += n_lb
     for k in range(4):

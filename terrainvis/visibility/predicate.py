@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_nonnegative_finite, as_points, describe
+from .._validate import as_nonnegative_finite, as_points, as_positive_finite, describe
 from ..errors import OutsideFootprintError
 from ..terrain import HeightGrid, as_terrain
 
-__all__ = ["ENGINES", "TRIM_REL", "TOL_REL", "terrain_scale", "trim_length", "clearance_tolerance"]
+__all__ = [
+    "ENGINES", "TRIM_REL", "TOL_REL", "EARTH_RADIUS", "STANDARD_REFRACTION", "terrain_scale", "trim_length",
+    "clearance_tolerance", "curvature_coefficient",
+]
 
 #: Valid values of the ``engine`` argument.
 ENGINES = ("auto", "grid", "embree")
@@ -21,6 +24,10 @@ ENGINES = ("auto", "grid", "embree")
 TRIM_REL = 1e-5
 #: Clearance tolerance as a fraction of :func:`terrain_scale`.
 TOL_REL = 1e-9
+#: Default earth radius (metres): WGS84's semi-major axis, as GDAL's ``gdal_viewshed`` takes it.
+EARTH_RADIUS = 6378137.0
+#: The curvature coefficient of standard refraction, ``1 - 1/7`` (GDAL's default ``-cc``).
+STANDARD_REFRACTION = 0.85714
 
 
 # ----------------------------------------------------------------- definitions
@@ -68,15 +75,46 @@ def clearance_tolerance(terrain) -> float:
     return TOL_REL * terrain_scale(terrain)
 
 
+def curvature_coefficient(curvature: float = 0.0, earth_radius: float = EARTH_RADIUS) -> float:
+    """``k = curvature / (2 earth_radius)``: the sight line between p and q must clear the
+    surface raised by ``k d1 d2`` (d1, d2 the horizontal distances to p and q).
+
+    ``curvature`` is GDAL's ``-cc`` coefficient: 0 a flat earth, 1 the geometric curvature,
+    ``1 - 1/7`` (:data:`STANDARD_REFRACTION`) curvature with standard refraction.
+    ``earth_radius`` is in the terrain's x/y units (metres on a georeferenced DEM).
+
+    Examples
+    --------
+    The earth's drop 10 km from an observer with standard refraction, ``k d**2``:
+
+    >>> round(curvature_coefficient(STANDARD_REFRACTION) * 10_000.0**2, 2)
+    6.72
+    """
+    c = as_nonnegative_finite(curvature, "curvature", "0 flat earth, 1 geometric, 0.85714 standard refraction")
+    r = as_positive_finite(earth_radius, "earth_radius")
+    return c / (2.0 * r)
+
+
 # ----------------------------------------------------------------- validation
-def _check_engine(engine, terrain) -> str:
+def _check_engine(engine, terrain, kc: float = 0.0) -> str:
+    """The engine to run: "grid", "embree", or "tin" (the exact TIN clipper, which "auto"
+    picks for a TIN under earth curvature: Embree traces straight rays against one fixed
+    mesh and cannot raise the surface by a bulge that depends on each pair)."""
     if not isinstance(engine, str) or engine not in ENGINES:
         raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
     if engine == "auto":
-        return "grid" if isinstance(terrain, HeightGrid) else "embree"
+        if isinstance(terrain, HeightGrid):
+            return "grid"
+        return "embree" if kc == 0.0 else "tin"
     if engine == "grid" and not isinstance(terrain, HeightGrid):
         raise ValueError(
             f"engine 'grid' needs a HeightGrid, got {describe(terrain)}; use engine='embree' or 'auto' for a TIN"
+        )
+    if engine == "embree" and kc != 0.0:
+        raise ValueError(
+            "engine 'embree' cannot model earth curvature (its straight rays meet one fixed mesh, and the "
+            "curvature bulge depends on each pair); use engine='auto' (exact: the grid walk on a HeightGrid, "
+            "the TIN clipper on a TIN) or curvature=0"
         )
     return engine
 
