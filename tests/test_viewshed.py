@@ -1,4 +1,4 @@
-"""Tests of exact viewsheds (terrainvis.visibility.viewshed).
+"""Tests of exact viewsheds (terrainvis.visibility.sweep).
 
 References, all independent of the viewshed sweep:
 * the pair engine, one segment per target (``line_of_sight(..., engine="grid")``): the grid
@@ -26,7 +26,7 @@ from terrainvis.visibility import (
     line_of_sight,
     min_clearance,
 )
-from terrainvis.visibility.viewshed import _surface_at, _viewshed, viewshed
+from terrainvis.visibility.sweep import _surface_at, _viewshed, viewshed
 
 
 # ----------------------------------------------------------------- references

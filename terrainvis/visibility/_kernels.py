@@ -14,7 +14,8 @@ are inlined at numba IR level (``inline="always"``) into the parallel pair loops
 separate calls they cost 1-4 % of the LOS throughput against the earlier kernels that
 took two dozen positional arrays (every call updates the reference counts of the named
 tuples' arrays); inlined, ``line_of_sight`` is 9-17 % faster than with those kernels,
-with the same bits (docs/visibility.md, "Performance").
+with the same bits (docs/visibility.md, "Performance"). The TIN clipper reads its mesh
+and bucket grid through a :data:`TinMesh`.
 
 Tested interval
 ---------------
@@ -22,6 +23,16 @@ A segment of 3-D length ``length`` and horizontal length ``lh`` is tested over
 ``[t0, 1 - t0]`` with ``t0 = max(delta / length, end_radius / lh)``
 (:func:`interval_start`); it is not tested at all (clearance ``inf``) when
 ``length <= 2 delta`` or, for ``end_radius > 0``, when ``lh <= 2 end_radius``.
+
+Earth curvature
+---------------
+With the coefficient ``kc = curvature / (2 R)`` (0 for a flat earth), the sight line
+clears the surface raised by ``kc d1 d2`` (d1, d2 the horizontal distances to its two
+ends): at parameter t of a segment of horizontal length L the clearance is the flat one
+less ``bulge t (1 - t)``, ``bulge = kc L**2``, symmetric in the two ends. On one piece
+of the walk (one triangle) that is a convex quadratic, so its minimum is at an end of the
+piece or at the quadratic's vertex inside it (:func:`curved_min`). With ``kc = 0`` every
+kernel takes the flat code path, bit for bit.
 
 Pyramid layout
 --------------
@@ -149,24 +160,73 @@ def _cell_height(z, xs, ys, ixw, iyw, r, c, x, y):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _cell_min(g, r, c, seg, t0, t1, with_t0):
+def _vertex_min(fa, fb, ta, tb, bulge):
+    """Curved clearance at the interior minimum of one piece, or inf when it has none there.
+
+    On a piece [ta, tb] where the flat clearance is linear (``fa``, ``fb`` at its ends),
+    the clearance under earth curvature is ``flat(t) - bulge * t * (1 - t)``, a convex
+    quadratic (``bulge = k L**2 > 0``, L the segment's horizontal length) whose minimum
+    is at ``t* = 1/2 - B / (2 bulge)``, B the flat slope. ``flat(t*)`` is interpolated
+    from the ends: ``|B (t* - ta)| <= |fb - fa|``, so its error is that of fa and fb.
+    """
+    if not tb > ta:
+        return _INF
+    b_ = (fb - fa) / (tb - ta)
+    ts = 0.5 - b_ / (2.0 * bulge)
+    if not (ts > ta and ts < tb):
+        return _INF
+    return fa + b_ * (ts - ta) - bulge * ts * (1.0 - ts)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def curved_min(fa, fb, ta, tb, bulge):
+    """Exact minimum over [ta, tb] of ``flat(t) - bulge t (1 - t)``, the flat clearance
+    linear with ``fa``, ``fb`` at the ends; ``min(fa, fb)`` (the same bits) for bulge 0."""
+    if bulge == 0.0:
+        return min(fa, fb)
+    m = min(fa - bulge * ta * (1.0 - ta), fb - bulge * tb * (1.0 - tb))
+    return min(m, _vertex_min(fa, fb, ta, tb, bulge))
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _tt_range(a0, a1):
+    """(min, max) of t (1 - t) over [a0, a1] (the bulge's shape, largest at t = 1/2)."""
+    f0 = a0 * (1.0 - a0)
+    f1 = a1 * (1.0 - a1)
+    hi = 0.25 if (a0 <= 0.5 and a1 >= 0.5) else max(f0, f1)
+    return min(f0, f1), hi
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
     """Exact minimum clearance of the segment ``seg`` over [t0, t1] inside cell (r, c).
 
-    The clearance is linear on each side of the cell diagonal, so its minimum is at
+    The flat clearance is linear on each side of the cell diagonal, so its minimum is at
     t0, t1 or the diagonal crossing. ``with_t0`` False skips t0 (already evaluated as
-    the end of the previous cell: the surface is continuous).
+    the end of the previous cell: the surface is continuous). With ``bulge > 0`` (earth
+    curvature, see "Earth curvature") each side's convex clearance may also have its
+    minimum inside (:func:`curved_min`), and every end is evaluated.
 
     Inlined into the walk (numba IR), like the walk itself into the pair loops (see
     "Kernel arguments").
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
     ax, ay, az, dx, dy, dz = seg
+    den = dx * ixw[c] - dy * iyw[r]
+    if bulge > 0.0:
+        f0 = az + t0 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
+        f1 = az + t1 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
+        if den != 0.0:
+            td = ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
+            if td > t0 and td < t1:
+                fd = az + td * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+                return min(curved_min(f0, fd, t0, td, bulge), curved_min(fd, f1, td, t1, bulge))
+        return curved_min(f0, f1, t0, t1, bulge)
     m = az + t1 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
     if with_t0:
         e = az + t0 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
         if e < m:
             m = e
-    den = dx * ixw[c] - dy * iyw[r]
     if den != 0.0:
         td = ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
         if td > t0 and td < t1:
@@ -224,7 +284,7 @@ def new_stack(ltop):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def segment_min(g, seg, t0, t1, los, tol, st):
+def segment_min(g, seg, t0, t1, los, tol, bulge, st):
     """Minimum clearance of the segment ``seg`` = (ax, ay, az, dx, dy, dz), i.e. a + t*d, over [t0, t1].
 
     ``g`` is a :data:`WalkGrid`, ``st`` a :data:`WalkStack` (see :func:`new_stack`).
@@ -240,6 +300,10 @@ def segment_min(g, seg, t0, t1, los, tol, st):
     segment crosses the node's two mid lines (the surface is linear along a grid line):
     in ``los`` mode a mountain between the ends is found before the walk reaches it, and
     for the exact minimum the probes lower ``best`` early so that more nodes are pruned.
+
+    ``bulge`` is ``k L**2`` (earth curvature, see "Earth curvature"; 0 for a flat earth):
+    the clearance at t is lowered by ``bulge t (1 - t)``, and a node's bounds by the
+    bulge's largest (skip test) or smallest (block test) value over its interval.
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
     pyr, off, nxl, uniform, ltop = g.pyr, g.off, g.nxl, g.uniform, g.ltop
@@ -263,7 +327,7 @@ def segment_min(g, seg, t0, t1, los, tol, st):
         a0 = sT[2 * sp]
         a1 = sT[2 * sp + 1]
         if L == 0:
-            m = _cell_min(g, R, C, seg, a0, a1, a0 != last_t)
+            m = _cell_min(g, R, C, seg, a0, a1, a0 != last_t, bulge)
             last_t = a1
             if m < best:
                 best = m
@@ -275,12 +339,21 @@ def segment_min(g, seg, t0, t1, los, tol, st):
         lo = min(za0, za1)
         k = off[L] + 2 * (R * nxl[L] + C)
         thr = -tol if los else best
-        if lo - pyr[k + 1] >= thr:
-            continue
-        if los:
-            hi = max(za0, za1)
-            if hi - pyr[k] < -tol:
-                return hi - pyr[k]
+        if bulge > 0.0:
+            b_lo, b_hi = _tt_range(a0, a1)
+            if lo - pyr[k + 1] - bulge * b_hi >= thr:
+                continue
+            if los:
+                hi = max(za0, za1)
+                if hi - pyr[k] - bulge * b_lo < -tol:
+                    return hi - pyr[k] - bulge * b_lo
+        else:
+            if lo - pyr[k + 1] >= thr:
+                continue
+            if los:
+                hi = max(za0, za1)
+                if hi - pyr[k] < -tol:
+                    return hi - pyr[k]
         half = 1 << (L - 1)
         cm = (C << L) + half
         rm = (R << L) + half
@@ -298,6 +371,8 @@ def segment_min(g, seg, t0, t1, los, tol, st):
                     r = _locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
                     v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
                     e = az + tx * dz - (z[r, cm] + v * (z[r + 1, cm] - z[r, cm]))
+                    if bulge > 0.0:
+                        e -= bulge * tx * (1.0 - tx)
                     if e < best:
                         best = e
                         if los and best < -tol:
@@ -310,6 +385,8 @@ def segment_min(g, seg, t0, t1, los, tol, st):
                     c = _locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
                     u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
                     e = az + ty * dz - (z[rm, c] + u * (z[rm, c + 1] - z[rm, c]))
+                    if bulge > 0.0:
+                        e -= bulge * ty * (1.0 - ty)
                     if e < best:
                         best = e
                         if los and best < -tol:
@@ -396,21 +473,23 @@ def interval_start(seg, length, delta, end_radius):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _pair_min(g, a, b, delta, end_radius, los, tol, st):
+def _pair_min(g, a, b, delta, end_radius, los, tol, kc, st):
     """Clearance of the segment between the points ``a``, ``b`` (3-tuples): canonical
-    direction, tested interval from the trim and the end radius."""
+    direction, tested interval from the trim and the end radius, earth curvature ``kc``
+    (see "Earth curvature")."""
     seg, length = _canonical(a, b)
     t0 = interval_start(seg, length, delta, end_radius)
     if t0 < 0.0:
         return _INF
-    return segment_min(g, seg, t0, 1.0 - t0, los, tol, st)
+    return segment_min(g, seg, t0, 1.0 - t0, los, tol, kc * (seg[3] * seg[3] + seg[4] * seg[4]), st)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_pairs(g, a, b, order, delta, end_radius, los, tol, out):
+def grid_pairs(g, a, b, order, delta, end_radius, los, tol, kc, out):
     """``out[order[k]]`` = clearance of segment a[order[k]] -> b[order[k]] (parallel).
 
-    ``g`` is a :data:`WalkGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates.
+    ``g`` is a :data:`WalkGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
+    ``kc`` the curvature coefficient over twice the earth's radius (0: flat).
     """
     m = order.shape[0]
     chunk = 512
@@ -420,12 +499,12 @@ def grid_pairs(g, a, b, order, delta, end_radius, los, tol, out):
         for k in range(ch * chunk, min(m, (ch + 1) * chunk)):
             i = order[k]
             out[i] = _pair_min(
-                g, (a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]), delta, end_radius, los, tol, st
+                g, (a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]), delta, end_radius, los, tol, kc, st
             )
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_matrix(g, p, perm, delta, end_radius, tol, out):
+def grid_matrix(g, p, perm, delta, end_radius, tol, kc, out):
     """Visibility matrix of the points ``p`` (already in walk order) on the :data:`WalkGrid` ``g``.
 
     Row k and row n-1-k are handled by the same iteration so every iteration has n-1
@@ -444,7 +523,7 @@ def grid_matrix(g, p, perm, delta, end_radius, tol, out):
             out[pi, pi] = True
             pa = (p[i, 0], p[i, 1], p[i, 2])
             for j in range(i + 1, n):
-                m = _pair_min(g, pa, (p[j, 0], p[j, 1], p[j, 2]), delta, end_radius, True, tol, st)
+                m = _pair_min(g, pa, (p[j, 0], p[j, 1], p[j, 2]), delta, end_radius, True, tol, kc, st)
                 vis = m >= -tol
                 pj = perm[j]
                 out[pi, pj] = vis
@@ -452,9 +531,23 @@ def grid_matrix(g, p, perm, delta, end_radius, tol, out):
 
 
 # --------------------------------------------------------------------------- TIN
+#: A TIN as the clip kernel reads it, in local coordinates (origin at the bucket grid's
+#: corner): ``vx``, ``vy``, ``vz`` (n,) float64 vertex coordinates; ``faces`` (f, 3)
+#: vertex indices; the uniform bucket grid of ``TIN._buckets()``: ``starts``
+#: (nbx * nby + 1,) and ``items`` the faces of each bucket (CSR), ``x0``, ``y0`` its
+#: corner, ``bw``, ``bh`` its bucket sizes, ``nbx``, ``nby`` its buckets per row and column.
+TinMesh = namedtuple("TinMesh", ["vx", "vy", "vz", "faces", "starts", "items", "x0", "y0", "bw", "bh", "nbx", "nby"])
+
+
 @nb.njit(cache=True, nogil=True)
-def _face_clip_min(vx, vy, vz, i0, i1, i2, ax, ay, az, dx, dy, dz, t0, t1, eps):
-    """Min clearance of the segment over the part of [t0, t1] whose ground track is in the face."""
+def _face_clip_min(mesh, f, seg, t0, t1, eps, bulge):
+    """Min clearance of the segment over the part of [t0, t1] whose ground track is in face f
+    (with ``bulge > 0``, the earth-curvature term: see :func:`curved_min`)."""
+    vx, vy, vz = mesh.vx, mesh.vy, mesh.vz
+    i0 = mesh.faces[f, 0]
+    i1 = mesh.faces[f, 1]
+    i2 = mesh.faces[f, 2]
+    ax, ay, az, dx, dy, dz = seg
     x0 = vx[i0]
     y0 = vy[i0]
     x1 = vx[i1]
@@ -502,6 +595,7 @@ def _face_clip_min(vx, vy, vz, i0, i1, i2, ax, ay, az, dx, dy, dz, t0, t1, eps):
         if lo > hi:
             return _INF
     best = _INF
+    f_lo = _INF
     for q in range(2):
         t = lo if q == 0 else hi
         x = ax + t * dx
@@ -510,20 +604,68 @@ def _face_clip_min(vx, vy, vz, i0, i1, i2, ax, ay, az, dx, dy, dz, t0, t1, eps):
         l2 = ((x1 - x0) * (y - y0) - (x - x0) * (y1 - y0)) / det
         zs = (1.0 - l1 - l2) * vz[i0] + l1 * vz[i1] + l2 * vz[i2]
         c = az + t * dz - zs
+        if q == 0:
+            f_lo = c
         if c < best:
             best = c
+    if bulge > 0.0:
+        return curved_min(f_lo, c, lo, hi, bulge)
+    return best
+
+
+@nb.njit(cache=True, nogil=True)
+def _tin_segment_min(mesh, seg, t0, t1, eps, bulge):
+    """Exact minimum clearance of the segment ``seg`` over [t0, t1] on the :data:`TinMesh`.
+
+    The buckets whose rows and columns the ground track passes through (plus one bucket
+    of margin) are visited; every face in them is clipped against the track and the
+    clearance is evaluated at the clip points (the minimum of a piecewise-linear function
+    is at a breakpoint; under earth curvature, ``bulge > 0``, at a breakpoint or at the
+    vertex of one face's convex clearance).
+    """
+    x0, y0, bw, bh, nbx, nby = mesh.x0, mesh.y0, mesh.bw, mesh.bh, mesh.nbx, mesh.nby
+    starts, items = mesh.starts, mesh.items
+    ax, ay, dx, dy = seg[0], seg[1], seg[3], seg[4]
+    ya = ay + t0 * dy
+    yb = ay + t1 * dy
+    ymin = min(ya, yb)
+    ymax = max(ya, yb)
+    by0 = max(int(np.floor((ymin - y0) / bh)) - 1, 0)
+    by1 = min(int(np.floor((ymax - y0) / bh)) + 1, nby - 1)
+    best = _INF
+    for rb in range(by0, by1 + 1):
+        # part of the track inside this bucket row (with a margin of one bucket row)
+        lo = t0
+        hi = t1
+        if dy != 0.0:
+            ta = (y0 + (rb - 1) * bh - ay) / dy
+            tb = (y0 + (rb + 2) * bh - ay) / dy
+            if ta > tb:
+                ta, tb = tb, ta
+            lo = max(lo, ta)
+            hi = min(hi, tb)
+            if lo > hi:
+                continue
+        xa = ax + lo * dx
+        xb = ax + hi * dx
+        bx0 = max(int(np.floor((min(xa, xb) - x0) / bw)) - 1, 0)
+        bx1 = min(int(np.floor((max(xa, xb) - x0) / bw)) + 1, nbx - 1)
+        for cb in range(bx0, bx1 + 1):
+            bk = rb * nbx + cb
+            for s in range(starts[bk], starts[bk + 1]):
+                c = _face_clip_min(mesh, items[s], seg, t0, t1, eps, bulge)
+                if c < best:
+                    best = c
     return best
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_pairs(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, a, b, delta, end_radius, eps, out):
+def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out):
     """Exact minimum clearance of each segment over a TIN (clip against every face crossed).
 
-    The segment is tested over the interval of :func:`interval_start`. The buckets whose
-    rows and columns the ground track passes through (plus one bucket of margin) are
-    visited; every face in them is clipped against the track and the clearance is
-    evaluated at the clip points (the minimum of a piecewise-linear function is at a
-    breakpoint).
+    ``mesh`` is a :data:`TinMesh`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
+    ``kc`` the curvature coefficient over twice the earth's radius (0: flat). The segment
+    is tested over the interval of :func:`interval_start` (see :func:`_tin_segment_min`).
     """
     m = a.shape[0]
     for i in nb.prange(m):
@@ -532,38 +674,4 @@ def tin_pairs(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, a, b, 
         if t0 < 0.0:
             out[i] = _INF
             continue
-        ax, ay, az, dx, dy, dz = seg
-        t1 = 1.0 - t0
-        ya = ay + t0 * dy
-        yb = ay + t1 * dy
-        ymin = min(ya, yb)
-        ymax = max(ya, yb)
-        by0 = max(int(np.floor((ymin - y0) / bh)) - 1, 0)
-        by1 = min(int(np.floor((ymax - y0) / bh)) + 1, nby - 1)
-        best = _INF
-        for rb in range(by0, by1 + 1):
-            # part of the track inside this bucket row (with a margin of one bucket row)
-            lo = t0
-            hi = t1
-            if dy != 0.0:
-                ta = (y0 + (rb - 1) * bh - ay) / dy
-                tb = (y0 + (rb + 2) * bh - ay) / dy
-                if ta > tb:
-                    ta, tb = tb, ta
-                lo = max(lo, ta)
-                hi = min(hi, tb)
-                if lo > hi:
-                    continue
-            xa = ax + lo * dx
-            xb = ax + hi * dx
-            bx0 = max(int(np.floor((min(xa, xb) - x0) / bw)) - 1, 0)
-            bx1 = min(int(np.floor((max(xa, xb) - x0) / bw)) + 1, nbx - 1)
-            for cb in range(bx0, bx1 + 1):
-                bk = rb * nbx + cb
-                for s in range(starts[bk], starts[bk + 1]):
-                    f = items[s]
-                    c = _face_clip_min(vx, vy, vz, faces[f, 0], faces[f, 1], faces[f, 2],
-                                       ax, ay, az, dx, dy, dz, t0, t1, eps)
-                    if c < best:
-                        best = c
-        out[i] = best
+        out[i] = _tin_segment_min(mesh, seg, t0, 1.0 - t0, eps, kc * (seg[3] * seg[3] + seg[4] * seg[4]))

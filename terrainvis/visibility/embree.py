@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .predicate import terrain_scale
+
 __all__ = ["EmbreeScene", "embree_scene", "embree_visible", "embree_tolerance", "embree_matrix"]
 
 #: Relative float32 degeneracy band, see :func:`embree_tolerance`.
@@ -111,8 +113,6 @@ def embree_tolerance(terrain) -> float:
     100,000 random pairs on the bundled terrains and shared DEMs, the largest
     disagreement had ``|min clearance|`` of 1.3e-8 M, 70 times inside this band.
     """
-    from . import terrain_scale
-
     return EMBREE_REL_TOL * terrain_scale(terrain)
 
 

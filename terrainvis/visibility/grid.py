@@ -148,7 +148,9 @@ def _walk_grid(grid, acc: GridAccel) -> _kernels.WalkGrid:
     return _kernels.WalkGrid(grid.z, acc.xs, acc.ys, acc.ixw, acc.iyw, acc.pyr, acc.off, acc.nxl, acc.uniform, acc.ltop)
 
 
-def grid_clearance(grid, a, b, *, delta: float, tol: float, los: bool, end_radius: float = 0.0) -> np.ndarray:
+def grid_clearance(
+    grid, a, b, *, delta: float, tol: float, los: bool, end_radius: float = 0.0, kc: float = 0.0
+) -> np.ndarray:
     """Clearance of each segment a[i] -> b[i] on a HeightGrid (validated input).
 
     The segment is tested over ``[t0, 1 - t0]`` with ``t0 = max(delta / length,
@@ -156,7 +158,7 @@ def grid_clearance(grid, a, b, *, delta: float, tol: float, los: bool, end_radiu
     over that interval. With ``los`` True: a value that is ``>= -tol`` exactly when the
     segment is visible (the walk stops early). Segments no longer than ``2 * delta``, or
     (for ``end_radius > 0``) with a horizontal length of at most ``2 * end_radius``,
-    give ``inf``.
+    give ``inf``. ``kc`` is the earth-curvature coefficient ``curvature / (2 R)`` (0: flat).
     """
     m = a.shape[0]
     out = np.empty(m, dtype=np.float64)
@@ -170,12 +172,12 @@ def grid_clearance(grid, a, b, *, delta: float, tol: float, los: bool, end_radiu
     else:
         order = np.arange(m, dtype=np.int64)
     _kernels.grid_pairs(
-        _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los), float(tol), out
+        _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los), float(tol), float(kc), out
     )
     return out
 
 
-def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0.0) -> np.ndarray:
+def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0.0, kc: float = 0.0) -> np.ndarray:
     """(n, n) visibility matrix of validated points on a HeightGrid (pairs i < j, parallel)."""
     n = points.shape[0]
     out = np.zeros((n, n), dtype=np.bool_)
@@ -184,5 +186,5 @@ def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0
     acc = grid_accel(grid)
     order = _morton_order(points[:, :2], grid.extent).astype(np.int64)
     p = np.ascontiguousarray(_local(points, acc)[order])
-    _kernels.grid_matrix(_walk_grid(grid, acc), p, order, float(delta), float(end_radius), float(tol), out)
+    _kernels.grid_matrix(_walk_grid(grid, acc), p, order, float(delta), float(end_radius), float(tol), float(kc), out)
     return out

@@ -4,8 +4,11 @@
 track (the crossings of grid lines and cell diagonals on a grid, of edges on a TIN,
 and the two ends of the tested interval), evaluates the clearance there and returns the
 lowest one with its position. Between breakpoints both the segment and the surface are
-linear, so the minimum over the breakpoints is the exact minimum. It is written with
-numpy for a handful of segments (the ``terrainvis los`` command); the numba engines in
+linear, so the minimum over the breakpoints is the exact minimum. Under earth curvature
+the clearance is lowered by ``k L**2 t (1 - t)`` (``k = curvature / (2 R)``, L the
+horizontal length), convex on each piece, so the vertex of each piece's parabola joins
+the breakpoints when it falls inside the piece. It is written with numpy for a handful
+of segments (the ``terrainvis los`` command); the numba engines in
 :mod:`terrainvis.visibility` decide millions of them.
 """
 
@@ -15,13 +18,12 @@ import numpy as np
 
 from .._validate import as_nonnegative_finite, as_points
 from ..terrain import HeightGrid, as_terrain
+from .predicate import EARTH_RADIUS, curvature_coefficient, trim_length
 
 __all__ = ["lowest_point", "clearance_profile"]
 
 
 def _interval(terrain, a, b, end_radius):
-    from . import trim_length
-
     d = b - a
     length = float(np.sqrt((d * d).sum()))
     horizontal = float(np.hypot(d[0], d[1]))
@@ -78,7 +80,20 @@ def _tin_breakpoints(tin, a, d, t0, t1):
     return np.unique(np.concatenate([[t0, t1], t[ok]]))
 
 
-def clearance_profile(terrain, a, b, *, end_radius: float = 0.0):
+def _with_vertices(t: np.ndarray, flat: np.ndarray, bulge: float) -> np.ndarray:
+    """Breakpoints ``t`` plus, on each piece between two of them, the vertex of the convex
+    clearance ``flat - bulge t (1 - t)`` (the flat clearance is linear on the piece)."""
+    dt = np.diff(t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.diff(flat) / dt
+        ts = 0.5 - slope / (2.0 * bulge)
+    inside = (dt > 0) & (ts > t[:-1]) & (ts < t[1:])
+    return np.unique(np.concatenate([t, ts[inside]]))
+
+
+def clearance_profile(
+    terrain, a, b, *, end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS
+):
     """The clearance at every breakpoint of the segment a -> b over its tested interval.
 
     Parameters
@@ -89,19 +104,23 @@ def clearance_profile(terrain, a, b, *, end_radius: float = 0.0):
     end_radius : float
         Horizontal distance around each end where the surface is not tested (see
         :func:`terrainvis.line_of_sight`).
+    curvature, earth_radius : float
+        Earth curvature and refraction as in :func:`terrainvis.line_of_sight` (0: flat).
 
     Returns
     -------
     t : (k,) float64
         Breakpoint parameters along the segment, increasing (empty when the whole
-        segment is trimmed away).
+        segment is trimmed away); under curvature also the minimum of each piece.
     clearance : (k,) float64
-        Segment height minus surface height there.
+        Segment height minus surface height there, less the curvature bulge
+        ``k L**2 t (1 - t)``.
     """
     as_terrain(terrain)
     pts = as_points(np.vstack([np.asarray(a, float).reshape(1, -1), np.asarray(b, float).reshape(1, -1)]), "a, b", 3)
     a, b = pts
     r = as_nonnegative_finite(end_radius, "end_radius")
+    kc = curvature_coefficient(curvature, earth_radius)
     span = _interval(terrain, a, b, r)
     if span is None:
         return np.empty(0), np.empty(0)
@@ -111,21 +130,30 @@ def clearance_profile(terrain, a, b, *, end_radius: float = 0.0):
         t = _grid_breakpoints(terrain, a, d, *span)
     else:
         t = _tin_breakpoints(terrain, a, d, *span)
-    xy = a[:2] + t[:, None] * d[:2]
-    surface = terrain.height_at(xy)
-    return t, a[2] + t * d[2] - surface
+    flat = a[2] + t * d[2] - terrain.height_at(a[:2] + t[:, None] * d[:2])
+    if kc == 0.0:
+        return t, flat
+    bulge = kc * float(d[0] * d[0] + d[1] * d[1])
+    t = _with_vertices(t, flat, bulge)
+    flat = a[2] + t * d[2] - terrain.height_at(a[:2] + t[:, None] * d[:2])
+    return t, flat - bulge * t * (1.0 - t)
 
 
-def lowest_point(terrain, a, b, *, end_radius: float = 0.0) -> dict:
+def lowest_point(
+    terrain, a, b, *, end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS
+) -> dict:
     """Where the segment a -> b comes closest to (or goes deepest below) the surface.
+
+    ``end_radius``, ``curvature`` and ``earth_radius`` as in :func:`clearance_profile`.
 
     Returns
     -------
     dict
-        ``clearance`` (segment height minus surface height there; ``inf`` when the
-        segment is trimmed away entirely), ``t`` (parameter along the segment), ``x``,
-        ``y`` (ground position), ``z`` (the segment's height there) and ``distance``
-        (horizontal distance from a).
+        ``clearance`` (segment height minus surface height there, less the curvature
+        bulge; ``inf`` when the segment is trimmed away entirely), ``t`` (parameter along
+        the segment), ``x``, ``y`` (ground position), ``z`` (the segment's height there),
+        ``distance`` (horizontal distance from a) and ``bulge`` (how far earth curvature
+        raises the surface under the sight line there; 0 on a flat earth).
 
     Examples
     --------
@@ -134,13 +162,15 @@ def lowest_point(terrain, a, b, *, end_radius: float = 0.0) -> dict:
     >>> low["clearance"], low["x"], low["y"]
     (-9.0, 1.0, 1.0)
     """
-    t, c = clearance_profile(terrain, a, b, end_radius=end_radius)
+    t, c = clearance_profile(terrain, a, b, end_radius=end_radius, curvature=curvature, earth_radius=earth_radius)
     a = np.asarray(a, float).ravel()
     b = np.asarray(b, float).ravel()
     if t.size == 0:
         return {"clearance": float("inf"), "t": float("nan"), "x": float("nan"), "y": float("nan"),
-                "z": float("nan"), "distance": float("nan")}
+                "z": float("nan"), "distance": float("nan"), "bulge": float("nan")}
     i = int(np.nanargmin(c))
     p = a + t[i] * (b - a)
+    horizontal = float(np.hypot(*(b - a)[:2]))
+    kc = curvature_coefficient(curvature, earth_radius)
     return {"clearance": float(c[i]), "t": float(t[i]), "x": float(p[0]), "y": float(p[1]), "z": float(p[2]),
-            "distance": float(t[i] * np.hypot(*(b - a)[:2]))}
+            "distance": float(t[i] * horizontal), "bulge": float(kc * horizontal**2 * t[i] * (1.0 - t[i]))}

@@ -14,16 +14,20 @@ import numpy as np
 
 from . import _kernels
 
-__all__ = ["tin_clearance"]
+__all__ = ["tin_clearance", "tin_matrix"]
+
+#: Pairs per call of the clip kernel in :func:`tin_matrix` (bounds the temporary arrays).
+_CHUNK = 1 << 18
 
 
-def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0) -> np.ndarray:
+def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0, kc: float = 0.0) -> np.ndarray:
     """(m,) exact minimum clearance of each validated segment a[i] -> b[i] over ``tin``.
 
     The segment is tested over ``[t0, 1 - t0]`` with ``t0 = max(delta / length,
     end_radius / horizontal length)``; segments with nothing to test give ``inf``.
     Parts of a segment whose ground track leaves the TIN's faces (possible only on a
-    TIN with holes or a non-convex footprint) do not count.
+    TIN with holes or a non-convex footprint) do not count. ``kc`` is the earth-curvature
+    coefficient ``curvature / (2 R)`` (0: flat).
     """
     m = a.shape[0]
     out = np.empty(m, dtype=np.float64)
@@ -44,8 +48,23 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0) -> np.nda
     lb[:, 0] -= x0
     la[:, 1] -= y0
     lb[:, 1] -= y0
-    _kernels.tin_pairs(
-        vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby,
-        la, lb, float(delta), float(end_radius), eps, out,
-    )
+    mesh = _kernels.TinMesh(vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby)
+    _kernels.tin_pairs(mesh, la, lb, float(delta), float(end_radius), eps, float(kc), out)
+    return out
+
+
+def tin_matrix(tin, points, *, delta: float, tol: float, end_radius: float = 0.0, kc: float = 0.0) -> np.ndarray:
+    """(n, n) exact visibility matrix of validated points on a TIN (pairs i < j, in chunks)."""
+    n = points.shape[0]
+    out = np.zeros((n, n), dtype=np.bool_)
+    np.fill_diagonal(out, True)
+    if n < 2:
+        return out
+    ii, jj = np.triu_indices(n, 1)
+    for s in range(0, ii.size, _CHUNK):
+        i = ii[s : s + _CHUNK]
+        j = jj[s : s + _CHUNK]
+        vis = tin_clearance(tin, points[i], points[j], delta=delta, end_radius=end_radius, kc=kc) >= -tol
+        out[i, j] = vis
+        out[j, i] = vis
     return out

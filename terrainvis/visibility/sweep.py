@@ -72,8 +72,8 @@ import numpy as np
 from .._validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..terrain import TIN, HeightGrid, as_terrain
-from . import _viewshed_kernels as _vk
-from . import ENGINES, _check_engine, clearance_tolerance, trim_length
+from . import _sweep_kernels as _vk
+from .predicate import EARTH_RADIUS, ENGINES, _check_engine, clearance_tolerance, curvature_coefficient, trim_length
 
 __all__ = ["viewshed", "VIEWSHED_ENGINES"]
 
@@ -100,6 +100,8 @@ def viewshed(
     max_distance=None,
     at=None,
     engine: str = "auto",
+    curvature: float = 0.0,
+    earth_radius: float = EARTH_RADIUS,
 ) -> np.ndarray:
     """Which samples of a grid are visible from an observer.
 
@@ -125,10 +127,21 @@ def viewshed(
         sample. Required for a TIN; default for a HeightGrid: its own samples.
     engine : {"auto", "grid", "embree"}
         ``"grid"`` (HeightGrid only): exact, the pair engine's verdict for every sample.
-        ``"embree"`` (any terrain; a HeightGrid goes through ``to_tin()``): float32 rays,
-        agreeing with the exact answer outside
+        ``"embree"`` (any terrain; a HeightGrid goes through ``to_tin()``; flat earth
+        only): float32 rays, agreeing with the exact answer outside
         :func:`~terrainvis.visibility.embree_tolerance`. ``"auto"``: grid for a
-        HeightGrid, embree for a TIN.
+        HeightGrid; for a TIN embree, or under earth curvature the exact TIN clipper
+        (one exact clip walk per target).
+    curvature : float, default 0.0
+        Earth curvature and refraction, GDAL's ``-cc`` coefficient: 0 a flat earth, 1
+        the geometric curvature, 0.85714 (``1 - 1/7``) standard refraction. A target is
+        then visible when the sight line clears the surface raised by
+        ``curvature * d1 * d2 / (2 * earth_radius)`` (d1, d2 the horizontal distances to
+        the eye and the target), which is GDAL's drop ``curvature * d**2 / (2 R)`` of the
+        terrain and the target seen from the eye.
+    earth_radius : float, default 6378137.0
+        Radius of the earth in the terrain's x/y units (WGS84's semi-major axis in
+        metres, as GDAL takes it).
 
     Returns
     -------
@@ -189,22 +202,23 @@ def viewshed(
     """
     out, _ = _viewshed(
         terrain, observer, observer_height=observer_height, target_height=target_height,
-        max_distance=max_distance, at=at, engine=engine,
+        max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
     )
     return out
 
 
 def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_distance=None, at=None,
-              engine="auto"):
+              engine="auto", curvature=0.0, earth_radius=EARTH_RADIUS):
     """:func:`viewshed` and a dict of counts: how the samples were decided.
 
     Keys: ``targets`` (samples that are targets), ``lb`` / ``ub`` (decided by the sweep's
     lower bound / by its upper bound and the exact last-ring walk), ``walk`` (decided by
     exact walks of the blocks of rings whose bound reached the target), ``exact``
-    (answered by the pair engine, or the nodata-aware walk, or Embree).
+    (answered by the pair engine, or the nodata-aware walk, or Embree, or the TIN clipper).
     """
     as_terrain(terrain)
-    engine = _check_engine(engine, terrain)
+    kc = curvature_coefficient(curvature, earth_radius)
+    engine = _check_engine(engine, terrain, kc)
     ox, oy, oz = _as_observer(observer)
     h_o = as_nonnegative_finite(observer_height, "observer_height", "z units")
     h_t = as_nonnegative_finite(target_height, "target_height", "z units")
@@ -233,9 +247,9 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
         # The sweep's bounds assume the eye on or above its own cell's surface (so the
         # part of every ray inside the trim cannot block). An eye below it, e.g. an
         # observer relocated by identity onto a simplification, goes to the exact walk.
-        out, info = _grid(terrain, at, eye, h_t, dmax, own, sweep=bool(eye[2] >= zs))
+        out, info = _grid(terrain, at, eye, (h_t, dmax, kc), own, sweep=bool(eye[2] >= zs))
     else:
-        out, info = _embree(terrain, at, eye, h_t, dmax, own)
+        out, info = _rays(terrain, at, eye, (h_t, dmax, kc), own, engine)
     _mark_nearest(out, terrain, at, eye)
     return out, info
 
@@ -285,8 +299,7 @@ def _surface_at(terrain, x: float, y: float) -> float:
         return math.nan
     lx = min(max(x, xs[0]), xs[-1]) - xs[0]
     ly = min(max(y, ys[0]), ys[-1]) - ys[0]
-    acc = _local_axes(terrain)
-    return float(_vk.surface_height(terrain.z, acc[0], acc[1], acc[2], acc[3], acc[4], lx, ly))
+    return float(_vk.surface_height(_sweep_grid(terrain), lx, ly))
 
 
 def _touches_present(z: np.ndarray, r: int, c: int) -> bool:
@@ -324,6 +337,12 @@ def _local_axes(grid: HeightGrid):
     return acc
 
 
+def _sweep_grid(grid: HeightGrid) -> _vk.SweepGrid:
+    """The grid as the sweep kernels read it (local coordinates; no copies of the heights)."""
+    xs, ys, ixw, iyw, uniform = _local_axes(grid)
+    return _vk.SweepGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0))
+
+
 def _max_slope(grid: HeightGrid) -> float:
     """Largest |slope| of any edge of the grid's surface (cached)."""
     g = grid._cache.get("viewshed_max_slope")
@@ -345,26 +364,39 @@ def _nanrange(grid: HeightGrid) -> tuple[float, float]:
 
 
 # ----------------------------------------------------------------- grid engine
-def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, h_t: float, dmax: float, own: bool, sweep: bool = True):
+def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, sweep: bool = True):
     """Grid engine: the sweep decides what its bounds can, the exact pair engine the rest.
 
-    With ``own`` the targets are the grid's samples (walked along the rings); otherwise
-    they are ``at``'s samples standing on the grid's surface, sorted into buckets by sector
-    and ring first. Without ``sweep`` every target goes to the exact walk.
+    ``query`` is ``(h_t, dmax, kc)``: target height, maximum distance, earth curvature
+    coefficient. With ``own`` the targets are the grid's samples (walked along the
+    rings); otherwise they are ``at``'s samples standing on the grid's surface, sorted into
+    buckets by sector and ring first. Without ``sweep`` every target goes to the exact walk.
     """
-    xs, ys, ixw, iyw, uniform = _local_axes(grid)
-    ex = eye[0] - grid.xs[0]
-    ey = eye[1] - grid.ys[0]
-    ez = float(eye[2])
+    h_t, dmax, kc = query
+    code, zt = _target_codes(grid, at, eye, dmax, own)
     delta = trim_length(grid)
     tol = clearance_tolerance(grid)
-    has_nan = grid.n_nodata > 0
-    # targets: a code per sample of ``at`` (own: the grid's samples)
-    rows, cols = at.shape
-    code = np.full((rows, cols), _vk.UNDECIDED, dtype=np.int8)
+    counts = (0, 0, 0)
+    wmin = float(min(np.diff(grid.xs).min(), np.diff(grid.ys).min()))
+    if sweep and wmin > 2.0 * delta * (1.0 + 1e-6) and grid.shape[0] >= 3 and grid.shape[1] >= 3:
+        counts = _sweep(grid, at, eye, query, code, zt, own)
+    todo = np.flatnonzero(code.ravel() == _vk.UNDECIDED)
+    if todo.size:
+        r, c = np.divmod(todo, at.shape[1])
+        vis = _exact(grid, eye, (at.xs[c], at.ys[r], zt[r, c] + h_t), delta, tol, kc)
+        code.ravel()[todo] = np.where(vis, _vk.VISIBLE, _vk.BLOCKED)
+    info = {"targets": int(code.size - np.count_nonzero(code == _vk.NOT_TARGET)), "lb": counts[0],
+            "ub": counts[1], "walk": counts[2], "exact": int(todo.size)}
+    return code == _vk.VISIBLE, info
+
+
+def _target_codes(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, dmax: float, own: bool):
+    """A code per sample of ``at`` (UNDECIDED, or NOT_TARGET: nodata, no surface under
+    it, beyond ``dmax``), and the heights of the surface under test there."""
+    code = np.full(at.shape, _vk.UNDECIDED, dtype=np.int8)
     if own:
         zt = grid.z
-        if has_nan:
+        if grid.n_nodata:
             code[~_on_surface(grid.z)] = _vk.NOT_TARGET
     else:
         zt = grid.height_on_grid(at.xs, at.ys)
@@ -373,64 +405,68 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, h_t: float, dmax: f
         code[np.isnan(at.z)] = _vk.NOT_TARGET
     if math.isfinite(dmax):
         code[(at.xs[None, :] - eye[0]) ** 2 + (at.ys[:, None] - eye[1]) ** 2 > dmax * dmax] = _vk.NOT_TARGET
-    n_lb = n_ub = n_walk = 0
+    return code, zt
+
+
+def _rules(grid: HeightGrid, ez: float, query) -> _vk.Rules:
+    """The sweep's numbers: trim, tolerance, rounding bound and margin, exclusion radii."""
+    h_t, dmax, kc = query
+    xs, ys = _local_axes(grid)[:2]
+    delta = trim_length(grid)
     zmin, zmax = _nanrange(grid)
     wmin = float(min(np.diff(xs).min(), np.diff(ys).min()))
-    if sweep and wmin > 2.0 * delta * (1.0 + 1e-6) and grid.shape[0] >= 3 and grid.shape[1] >= 3:
-        width = float(xs[-1] + ys[-1])
-        zabs = max(abs(zmin), abs(zmax)) + abs(ez) + h_t
-        # e_h bounds the absolute rounding error of any height or clearance computed by the
-        # sweep or the pair engine (local coordinates up to ``width``, slopes up to the
-        # grid's largest); decisions keep 64 e_h away from the threshold
-        e_h = 64.0 * np.finfo(np.float64).eps * (width * (1.0 + _max_slope(grid)) + zabs)
-        marg = 64.0 * e_h
-        dz = max(abs(zmax + h_t - ez), abs(zmin + h_t - ez))
-        # closer than r_excl to the eye, a point lies in every target's trimmed end
-        r_excl = 0.5 * delta * wmin / math.hypot(wmin, dz)
-        r_lb = delta * (1.0 + 1e-6)
-        ce = int(_vk.locate(xs, ixw, uniform, ex))
-        re = int(_vk.locate(ys, iyw, uniform, ey))
-        jstop = _last_ring(xs, ys, re, ce, ex, ey, dmax)
-        perm = _sector_order(_N_SECTORS)
-        stats = np.zeros((_N_SECTORS, 4), dtype=np.int64)
-        diag2 = float(np.diff(xs).max() ** 2 + np.diff(ys).max() ** 2)
-        if own:
-            tx = ty = tz = np.empty(0)
-            tstart = torder = np.zeros(1, dtype=np.int64)
-            tcode = np.empty(0, dtype=np.int8)
-            scode = code
-        else:
-            idx = np.flatnonzero(code.ravel() == _vk.UNDECIDED)
-            r, c = np.divmod(idx, cols)
-            tx = np.ascontiguousarray(at.xs[c] - grid.xs[0])
-            ty = np.ascontiguousarray(at.ys[r] - grid.ys[0])
-            tz = np.ascontiguousarray(zt.ravel()[idx] + h_t)
-            tstart = np.zeros(_N_SECTORS * (jstop + 2) + 1, dtype=np.int64)
-            torder = np.empty(idx.size, dtype=np.int64)
-            _vk.bucket_targets(xs, ys, ixw, iyw, uniform, re, ce, ex, ey, tx, ty, _N_SECTORS, jstop, tstart, torder)
-            tcode = np.full(idx.size, _vk.UNDECIDED, dtype=np.int8)
-            scode = np.zeros((1, 1), dtype=np.int8)
-        _vk.sweep(
-            grid.z, xs, ys, ixw, iyw, uniform, has_nan, re, ce, ex, ey, ez, h_t, delta, tol, marg, e_h,
-            r_excl, r_lb, diag2, _N_SECTORS, _B0, _R1, _J_NEAR, jstop, dmax, perm, own, scode,
-            tx, ty, tz, tstart, torder, tcode, stats,
-        )
-        if not own:
-            code.ravel()[idx] = tcode
-        n_lb, n_ub, n_walk = (int(v) for v in stats.sum(axis=0)[:3])
-    todo = np.flatnonzero(code.ravel() == _vk.UNDECIDED)
-    if todo.size:
-        r, c = np.divmod(todo, cols)
-        vis = _exact(grid, eye, at.xs[c], at.ys[r], zt[r, c] + h_t, delta, tol)
-        code.ravel()[todo] = np.where(vis, _vk.VISIBLE, _vk.BLOCKED)
-    info = {"targets": int(code.size - np.count_nonzero(code == _vk.NOT_TARGET)), "lb": n_lb, "ub": n_ub,
-            "walk": n_walk, "exact": int(todo.size)}
-    return code == _vk.VISIBLE, info
+    width = float(xs[-1] + ys[-1])
+    # e_h bounds the absolute rounding error of any height or clearance computed by the
+    # sweep or the pair engine (local coordinates up to ``width``, slopes up to the grid's
+    # largest, heights and the curvature drop up to ``zabs``); decisions keep 64 e_h away
+    # from the threshold
+    zabs = max(abs(zmin), abs(zmax)) + abs(ez) + h_t + kc * width * width
+    e_h = float(64.0 * np.finfo(np.float64).eps * (width * (1.0 + _max_slope(grid)) + zabs))
+    dz = max(abs(zmax + h_t - ez), abs(zmin + h_t - ez))
+    # closer than r_excl to the eye, a point lies in every target's trimmed end
+    r_excl = 0.5 * delta * wmin / math.hypot(wmin, dz)
+    diag2 = float(np.diff(xs).max() ** 2 + np.diff(ys).max() ** 2)
+    return _vk.Rules(float(h_t), delta, clearance_tolerance(grid), 64.0 * e_h, e_h, r_excl, delta * (1.0 + 1e-6),
+                     diag2, float(dmax), float(kc))
 
 
-def _exact(grid: HeightGrid, eye, tx, ty, tz, delta: float, tol: float) -> np.ndarray:
-    """Exact verdicts eye -> targets (world coordinates): the pair engine on a NaN-free grid,
-    the nodata-aware walk otherwise."""
+def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.ndarray, zt, own: bool):
+    """Run the sweep kernel: ``code`` gets its verdicts (UNDECIDED where it cannot decide);
+    returns how many targets the lower bound, the upper bound and the block walks decided."""
+    sg = _sweep_grid(grid)
+    ex = float(eye[0] - grid.xs[0])
+    ey = float(eye[1] - grid.ys[0])
+    ez = float(eye[2])
+    ce = int(_vk.locate(sg.xs, sg.ixw, sg.uniform, ex))
+    re = int(_vk.locate(sg.ys, sg.iyw, sg.uniform, ey))
+    veye = _vk.Eye(re, ce, ex, ey, ez)
+    jstop = _last_ring(sg.xs, sg.ys, re, ce, ex, ey, query[1])
+    stats = np.zeros((_N_SECTORS, 4), dtype=np.int64)
+    if own:
+        targets = _vk.Targets(True, code, np.empty(0), np.empty(0), np.empty(0), np.zeros(1, dtype=np.int64),
+                              np.zeros(1, dtype=np.int64), np.empty(0, dtype=np.int8))
+    else:
+        idx = np.flatnonzero(code.ravel() == _vk.UNDECIDED)
+        r, c = np.divmod(idx, at.shape[1])
+        tx = np.ascontiguousarray(at.xs[c] - grid.xs[0])
+        ty = np.ascontiguousarray(at.ys[r] - grid.ys[0])
+        tz = np.ascontiguousarray(zt.ravel()[idx] + query[0])
+        tstart = np.zeros(_N_SECTORS * (jstop + 2) + 1, dtype=np.int64)
+        torder = np.empty(idx.size, dtype=np.int64)
+        _vk.bucket_targets(sg, veye, tx, ty, _N_SECTORS, jstop, tstart, torder)
+        targets = _vk.Targets(False, np.zeros((1, 1), dtype=np.int8), tx, ty, tz, tstart, torder,
+                              np.full(idx.size, _vk.UNDECIDED, dtype=np.int8))
+    _vk.sweep(sg, veye, _rules(grid, ez, query), _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
+              targets, _sector_order(_N_SECTORS), stats)
+    if not own:
+        code.ravel()[idx] = targets.tcode
+    return tuple(int(v) for v in stats.sum(axis=0)[:3])
+
+
+def _exact(grid: HeightGrid, eye, targets, delta: float, tol: float, kc: float) -> np.ndarray:
+    """Exact verdicts eye -> targets ``(tx, ty, tz)`` (world coordinates): the pair engine on
+    a NaN-free grid, the nodata-aware walk otherwise."""
+    tx, ty, tz = targets
     m = tx.size
     if grid.n_nodata == 0:
         from .grid import grid_clearance
@@ -438,13 +474,12 @@ def _exact(grid: HeightGrid, eye, tx, ty, tz, delta: float, tol: float) -> np.nd
         a = np.empty((m, 3))
         a[:] = eye
         b = np.column_stack([tx, ty, tz])
-        return grid_clearance(grid, a, b, delta=delta, tol=tol, los=True) >= -tol
-    xs, ys, ixw, iyw, uniform = _local_axes(grid)
+        return grid_clearance(grid, a, b, delta=delta, tol=tol, los=True, kc=kc) >= -tol
     out = np.empty(m)
     _vk.walk_targets(
-        grid.z, xs, ys, ixw, iyw, uniform, True, eye[0] - grid.xs[0], eye[1] - grid.ys[0], float(eye[2]),
+        _sweep_grid(grid), (eye[0] - grid.xs[0], eye[1] - grid.ys[0], float(eye[2])),
         np.ascontiguousarray(tx - grid.xs[0]), np.ascontiguousarray(ty - grid.ys[0]), np.ascontiguousarray(tz),
-        float(delta), float(tol), out,
+        float(delta), float(tol), float(kc), out,
     )
     return out >= -tol
 
@@ -476,10 +511,13 @@ def _sector_order(nsec: int) -> np.ndarray:
 
 
 # ----------------------------------------------------------------- other targets
-def _embree(terrain, at: HeightGrid, eye: np.ndarray, h_t: float, dmax: float, own: bool):
-    """Viewshed at ``at``'s samples by Embree rays (float32), in chunks."""
+def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine: str):
+    """Viewshed at ``at``'s samples one segment per target, in chunks: Embree rays
+    (float32, flat earth) or the exact TIN clipper (``engine`` "tin", any curvature)."""
     from .embree import embree_visible
+    from .tin import tin_clearance
 
+    h_t, dmax, kc = query
     rows, cols = at.shape
     if own:
         zt = np.array(terrain.z, dtype=np.float64)
@@ -496,6 +534,7 @@ def _embree(terrain, at: HeightGrid, eye: np.ndarray, h_t: float, dmax: float, o
     out = np.zeros(rows * cols, dtype=bool)
     info = {"targets": int(idx.size), "lb": 0, "ub": 0, "walk": 0, "exact": int(idx.size)}
     delta = trim_length(terrain)
+    tol = clearance_tolerance(terrain)
     zflat = zt.ravel()
     for s in range(0, idx.size, _CHUNK):
         part = idx[s : s + _CHUNK]
@@ -503,7 +542,10 @@ def _embree(terrain, at: HeightGrid, eye: np.ndarray, h_t: float, dmax: float, o
         b = np.column_stack([at.xs[c], at.ys[r], zflat[part] + h_t])
         a = np.empty_like(b)
         a[:] = eye
-        out[part] = embree_visible(terrain, a, b, delta=delta)
+        if engine == "tin":
+            out[part] = tin_clearance(terrain, a, b, delta=delta, kc=kc) >= -tol
+        else:
+            out[part] = embree_visible(terrain, a, b, delta=delta)
     return out.reshape(rows, cols), info
 
 

@@ -1,0 +1,1318 @@
+"""Numba loops for exact viewsheds on a HeightGrid (see :mod:`terrainvis.visibility.sweep`).
+
+Kernels loop and never validate: :func:`terrainvis.visibility.sweep.viewshed` checks
+its input, shifts coordinates to the grid's local origin and passes plain arrays.
+
+Geometry used throughout
+------------------------
+For a point P on the surface at horizontal distance ``d`` from the eye E, its *slope*
+seen from the eye is ``s(P) = (surface(P) - z_E) / d``. On the ray from E to a target T
+(horizontal distance D, slope ``s_T``), the clearance at P is ``d * (s_T - s(P))``, so T
+is visible iff ``s_T`` is at least the *horizon*: the largest ``s(P)`` over the tested
+part of the ray. Along one ray ``s`` is monotone inside a triangle, so the horizon is
+reached on a triangle edge.
+
+*Pseudo-angles.* Directions are ordered by the diamond angle ``P`` in [0, 4) (east 0,
+north 1, west 2, south 3), monotone in the true angle and cheap (one division).
+Quadrant ``Q`` holds ``P`` in [Q, Q + 1); near quadrant ``Q`` angles are unwrapped to
+[Q - 1.5, Q + 2.5) so that no cell of that quadrant wraps around.
+
+*Rings.* The eye stands in cell ``(re, ce)``. Cell ring ``j`` (the *annulus* j) is the
+set of cells at Chebyshev index distance ``j`` from that cell; sample ring ``j`` is the
+boundary of the box of cell rings ``<= j``, so the ray from E to a sample of ring ``j``
+leaves box ``j - 1`` and crosses only annulus ``j`` before reaching it.
+
+*Bins.* The directions are cut into ``B`` wedges of equal pseudo-angle (``B`` doubles at
+rings ``R1, 2 R1, 4 R1, ...`` so that a wedge is at most about 0.7 cells wide where it is
+used). For every wedge the sweep keeps
+
+* an upper bound of ``s`` over every surface point in the wedge of the annuli swept so
+  far (no ray in the wedge has a higher horizon there), per block of ``BLOCK`` rings
+  (``hist``), for the current block (``blk``) and for all completed blocks (``ubp``), and
+* ``lb``: a value such that every ray in the wedge crosses a surface point (at a distance
+  of at least ``delta`` from the eye) whose slope exceeds it by enough to block any target
+  of slope below ``lb`` (the clearance tolerance is folded in).
+
+All bounds are rigorous: rounding is covered by ``e_h`` (an upper bound of the absolute
+error of any computed height in these kernels and in the pair engine), and the decisions
+keep a margin ``m`` from the threshold ``-tol``; targets inside that margin are left
+undecided and the caller answers them with the pair engine itself.
+
+*Deciding a target* on sample ring j (the bounds then hold the rings < j): blocked if
+``lb`` exceeds its slope; otherwise the part of its ray beyond the box of rings < j is
+walked exactly; then it is visible if its slope is at least the upper bound, and
+otherwise the blocks of rings whose bound reaches its slope are walked exactly too (so
+only the parts of the ray near its horizon are walked).
+
+Kernel arguments
+----------------
+The kernels read their state through named tuples built by
+:mod:`terrainvis.visibility.sweep` (no function takes more than about ten arguments):
+
+* :data:`SweepGrid` the surface (heights, local coordinate vectors, inverse widths,
+  ``uniform``, ``has_nan``);
+* :data:`Eye` the eye's cell ``(re, ce)`` and position ``(ex, ey, ez)``;
+* :data:`Rules` the predicate's numbers and the bounds' margins (target height, trim,
+  tolerance, rounding margin and error bound, exclusion radii, largest squared cell
+  diagonal, maximum distance);
+* :data:`Layout` the sectors and wedges (sectors, wedges near the eye, first refining
+  ring, last edge-clipped ring, last ring);
+* :data:`Targets` the targets and their output codes;
+* :data:`Wedges` one sector's wedge bounds (``ubp``, ``blk``, ``lb``, ``hist``).
+
+A ray or segment is the 6-tuple ``(ex, ey, ez, dx, dy, dz)`` of the points
+``E + t d``; a window of wedges is ``(glo, nloc, bsz)`` (first global wedge index held,
+wedges held, wedges around the full turn); the limits of an edge update are
+``(r_excl, r_lb, e_h, tolm)``.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numba as nb
+import numpy as np
+
+from ._kernels import _canonical, _locate, curved_min, interval_start
+
+_INF = np.inf
+
+#: Codes of the sweep's output (int8 per sample).
+BLOCKED = 0
+VISIBLE = 1
+UNDECIDED = 2
+NOT_TARGET = 3
+
+#: Relative slack on slopes (rounding of divisions and square roots, generously).
+_REL = 1e-13
+#: Pseudo-angle slack when a value is compared with a wedge boundary.
+_PEPS = 1e-12
+#: Slack on clipping parameters along an edge.
+_LEPS = 1e-9
+
+#: The surface, in local coordinates (origin at the grid's first sample): ``z`` (rows,
+#: cols) float64 heights (NaN = nodata); ``xs`` (cols,), ``ys`` (rows,) float64
+#: coordinates; ``ixw`` (cols - 1,), ``iyw`` (rows - 1,) inverse cell widths; ``uniform``
+#: (both spacings uniform) and ``has_nan`` (the grid holds nodata), bools.
+SweepGrid = namedtuple("SweepGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan"])
+#: The eye: its cell ``(re, ce)`` (ints) and its position ``(ex, ey, ez)`` (local coordinates).
+Eye = namedtuple("Eye", ["re", "ce", "ex", "ey", "ez"])
+#: The predicate's numbers and the bounds' margins (floats): ``ht`` target height above
+#: the surface; ``delta`` trim length; ``tol`` clearance tolerance; ``marg`` the margin
+#: kept from ``-tol`` by every decision; ``e_h`` bound of the absolute rounding error of a
+#: computed height; ``r_excl`` radius around the eye inside every target's trimmed end;
+#: ``r_lb`` smallest distance of a point used by a lower bound; ``diag2`` largest squared
+#: cell diagonal; ``dmax`` maximum distance of a target (inf: none); ``kc`` the earth
+#: curvature coefficient ``curvature / (2 R)`` (0: flat; see "Earth curvature").
+Rules = namedtuple("Rules", ["ht", "delta", "tol", "marg", "e_h", "r_excl", "r_lb", "diag2", "dmax", "kc"])
+#: The sweep's layout (ints): ``nsec`` sectors (a multiple of 4), ``b0`` wedges near the
+#: eye, ``r1`` first ring where the wedges double, ``jnear`` last ring clipped edge by
+#: edge, ``jstop`` last ring swept.
+Layout = namedtuple("Layout", ["nsec", "b0", "r1", "jnear", "jstop"])
+#: The targets: ``own`` (bool) the grid's own samples, with ``code`` (rows, cols) int8
+#: their codes; otherwise ``tx``, ``ty``, ``tz`` (m,) float64 (local coordinates, ``tz``
+#: the target's height) sorted by :func:`bucket_targets` into ``tstart`` / ``torder``, with
+#: ``tcode`` (m,) int8 their codes.
+Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "torder", "tcode"])
+#: One sector's wedge bounds, each (nfin + 2,) float64 (local wedge index i is global
+#: ``s * n - 1 + i``): ``ubp`` upper bounds over the completed blocks of rings, ``blk``
+#: over the current block, ``lb`` lower bounds of the horizon over all rings swept, and
+#: ``hist`` (blocks, nfin + 2) the upper bounds of each completed block.
+Wedges = namedtuple("Wedges", ["ubp", "blk", "lb", "hist"])
+
+
+# --------------------------------------------------------------------------- geometry
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def diamond(dx, dy):
+    """Diamond angle of the direction (dx, dy): monotone in the true angle, in [0, 4)."""
+    if dy >= 0.0:
+        if dx > 0.0:
+            return dy / (dx + dy)
+        if dy == 0.0:
+            if dx == 0.0:
+                return 0.0
+            return 2.0
+        return 1.0 - dx / (dy - dx)
+    if dx <= 0.0:
+        return 2.0 - dy / (-dx - dy)
+    return 3.0 + dx / (dx - dy)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _unwrap(p, q):
+    c = q + 0.5
+    if p - c > 2.0:
+        return p - 4.0
+    if p - c < -2.0:
+        return p + 4.0
+    return p
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _direction(p):
+    """A direction vector (not normalised) of pseudo-angle ``p`` (any real; taken mod 4)."""
+    p = p % 4.0
+    if p < 1.0:
+        return 1.0 - p, p
+    if p < 2.0:
+        return 1.0 - p, 2.0 - p
+    if p < 3.0:
+        return p - 3.0, 2.0 - p
+    return p - 3.0, p - 4.0
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def locate(v, iw, uniform, x):
+    """Index i in [0, len(v) - 2] with v[i] <= x < v[i+1] (clamped); v local, from 0."""
+    return _locate(v, iw, 0, v.shape[0] - 1, uniform, x)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _finite(v):
+    return v == v and abs(v) < _INF
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _tri_present(z, r, c, upper):
+    """Whether the lower (u >= v) or upper triangle of cell (r, c) has no nodata vertex."""
+    if not (_finite(z[r, c]) and _finite(z[r + 1, c + 1])):
+        return False
+    if upper:
+        return _finite(z[r + 1, c])
+    return _finite(z[r, c + 1])
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _tri_height(g, r, c, upper, x, y):
+    """Height of the plane of one triangle of cell (r, c) at (x, y) (the same formulas as
+    the pair engine's ``_cell_height``, without its clamping)."""
+    z = g.z
+    u = (x - g.xs[c]) * g.ixw[c]
+    v = (y - g.ys[r]) * g.iyw[r]
+    z00 = z[r, c]
+    z11 = z[r + 1, c + 1]
+    if not upper:
+        z01 = z[r, c + 1]
+        return z00 + u * (z01 - z00) + v * (z11 - z01)
+    z10 = z[r + 1, c]
+    return z00 + v * (z10 - z00) + u * (z11 - z10)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def surface_height(g, x, y):
+    """Height of the surface of the :data:`SweepGrid` ``g`` at (x, y) (local
+    coordinates), NaN on an absent triangle."""
+    c = locate(g.xs, g.ixw, g.uniform, x)
+    r = locate(g.ys, g.iyw, g.uniform, y)
+    u = (x - g.xs[c]) * g.ixw[c]
+    v = (y - g.ys[r]) * g.iyw[r]
+    upper = v > u
+    if not _tri_present(g.z, r, c, upper):
+        return np.nan
+    return _tri_height(g, r, c, upper, x, y)
+
+
+# --------------------------------------------------------------------------- exact walk
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _clear(g, r, c, upper, ray, t):
+    """Clearance of the ray at t over the plane of one triangle of cell (r, c)."""
+    ex, ey, ez, dx, dy, dz = ray
+    return ez + t * dz - _tri_height(g, r, c, upper, ex + t * dx, ey + t * dy)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _edge_clear(g, kind, r, c, ray, t):
+    """Clearance on a grid line (kind 0: x = xs[c], rows r..r+1; kind 1: y = ys[r])."""
+    z = g.z
+    ex, ey, ez, dx, dy, dz = ray
+    x = ex + t * dx
+    y = ey + t * dy
+    if kind == 0:
+        v = (y - g.ys[r]) * g.iyw[r]
+        return ez + t * dz - (z[r, c] + v * (z[r + 1, c] - z[r, c]))
+    u = (x - g.xs[c]) * g.ixw[c]
+    return ez + t * dz - (z[r, c] + u * (z[r, c + 1] - z[r, c]))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _absent_piece(g, r, c, upper, ray, ta, tb, bulge):
+    """Min clearance of a piece lying in an absent triangle: only where the piece runs
+    along a boundary shared with a present triangle (a ray exactly on a grid line or a
+    cell diagonal); inf otherwise. ``bulge`` as in :func:`walk_min`."""
+    z, xs, ys = g.z, g.xs, g.ys
+    ex, ey, ez, dx, dy, dz = ray
+    nr, nc = z.shape
+    best = _INF
+    if dx == 0.0:
+        if ex == xs[c] and (_tri_present(z, r, c, True) or (c > 0 and _tri_present(z, r, c - 1, False))):
+            best = curved_min(_edge_clear(g, 0, r, c, ray, ta), _edge_clear(g, 0, r, c, ray, tb), ta, tb, bulge)
+        elif ex == xs[c + 1] and (_tri_present(z, r, c, False) or (c + 1 < nc - 1 and _tri_present(z, r, c + 1, True))):
+            best = curved_min(_edge_clear(g, 0, r, c + 1, ray, ta), _edge_clear(g, 0, r, c + 1, ray, tb), ta, tb,
+                              bulge)
+    if dy == 0.0:
+        if ey == ys[r] and (_tri_present(z, r, c, False) or (r > 0 and _tri_present(z, r - 1, c, True))):
+            best = min(best, curved_min(_edge_clear(g, 1, r, c, ray, ta), _edge_clear(g, 1, r, c, ray, tb), ta, tb,
+                                        bulge))
+        elif ey == ys[r + 1] and (_tri_present(z, r, c, True) or (r + 1 < nr - 1 and _tri_present(z, r + 1, c, False))):
+            best = min(best, curved_min(_edge_clear(g, 1, r + 1, c, ray, ta), _edge_clear(g, 1, r + 1, c, ray, tb),
+                                        ta, tb, bulge))
+    other = not upper
+    if _tri_present(z, r, c, other):
+        # on the diagonal (both ends), the other triangle's plane is the surface there
+        ua = (ex + ta * dx - xs[c]) * g.ixw[c]
+        va = (ey + ta * dy - ys[r]) * g.iyw[r]
+        ub = (ex + tb * dx - xs[c]) * g.ixw[c]
+        vb = (ey + tb * dy - ys[r]) * g.iyw[r]
+        if abs(ua - va) <= 1e-12 and abs(ub - vb) <= 1e-12:
+            best = min(best, curved_min(_clear(g, r, c, other, ray, ta), _clear(g, r, c, other, ray, tb), ta, tb,
+                                        bulge))
+    return best
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
+    """Exact min clearance over [ta, tb] inside cell (r, c) (ends and diagonal crossing;
+    with ``bulge > 0`` also each side's interior minimum, see :func:`walk_min`)."""
+    xs, ys, ixw, iyw = g.xs, g.ys, g.ixw, g.iyw
+    ex, ey, ez, dx, dy, dz = ray
+    td = _INF
+    den = dx * ixw[c] - dy * iyw[r]
+    if den != 0.0:
+        t = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
+        if t > ta and t < tb:
+            td = t
+    if not g.has_nan and bulge == 0.0:
+        tm = 0.5 * (ta + tb) if td == _INF else 0.5 * (ta + td)
+        u = (ex + tm * dx - xs[c]) * ixw[c]
+        v = (ey + tm * dy - ys[r]) * iyw[r]
+        up = v > u
+        if td == _INF:
+            m = _clear(g, r, c, up, ray, tb)
+            if with_ta:
+                m = min(m, _clear(g, r, c, up, ray, ta))
+            return m
+        m = _clear(g, r, c, up, ray, td)
+        if with_ta:
+            m = min(m, _clear(g, r, c, up, ray, ta))
+        # the second piece's own triangle (a track touching the diagonal only at a cell
+        # corner stays in the same triangle)
+        tm = 0.5 * (td + tb)
+        u = (ex + tm * dx - xs[c]) * ixw[c]
+        v = (ey + tm * dy - ys[r]) * iyw[r]
+        m = min(m, _clear(g, r, c, v > u, ray, tb))
+        return m
+    best = _INF
+    npc = 1 if td == _INF else 2
+    for k in range(npc):
+        if npc == 1:
+            a = ta
+            b = tb
+        elif k == 0:
+            a = ta
+            b = td
+        else:
+            a = td
+            b = tb
+        tm = 0.5 * (a + b)
+        u = (ex + tm * dx - xs[c]) * ixw[c]
+        v = (ey + tm * dy - ys[r]) * iyw[r]
+        up = v > u
+        if not g.has_nan or _tri_present(g.z, r, c, up):
+            e = curved_min(_clear(g, r, c, up, ray, a), _clear(g, r, c, up, ray, b), a, b, bulge)
+        else:
+            e = _absent_piece(g, r, c, up, ray, a, b, bulge)
+        if e < best:
+            best = e
+    return best
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def walk_min(g, ray, t0, t1, stop, bulge):
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``.
+
+    ``ray`` is ``(ex, ey, ez, dx, dy, dz)`` in local coordinates. The ground track is
+    walked cell by cell; in each cell the clearance is evaluated at the entry, the exit
+    and the diagonal crossing (it is linear between them; under earth curvature,
+    ``bulge = kc (dx**2 + dy**2) > 0``, it is lowered by ``bulge t (1 - t)`` and each
+    side's convex minimum counts too). On a grid with nodata, triangles touching a NaN
+    sample are absent and do not block. The walk returns as soon as the minimum falls
+    below ``stop``.
+    """
+    if t1 < t0:
+        return _INF
+    xs, ys = g.xs, g.ys
+    ex, ey, ez, dx, dy, dz = ray
+    nr = ys.shape[0]
+    nc = xs.shape[0]
+    x = ex + t0 * dx
+    y = ey + t0 * dy
+    c = locate(xs, g.ixw, g.uniform, x)
+    r = locate(ys, g.iyw, g.uniform, y)
+    if dx < 0.0 and c > 0 and x <= xs[c]:
+        c -= 1
+    if dy < 0.0 and r > 0 and y <= ys[r]:
+        r -= 1
+    t = t0
+    best = _INF
+    first = True
+    while True:
+        tx = _INF
+        ty = _INF
+        if dx > 0.0:
+            tx = (xs[c + 1] - ex) / dx
+        elif dx < 0.0:
+            tx = (xs[c] - ex) / dx
+        if dy > 0.0:
+            ty = (ys[r + 1] - ey) / dy
+        elif dy < 0.0:
+            ty = (ys[r] - ey) / dy
+        tn = min(tx, ty, t1)
+        if tn < t:
+            tn = t
+        m = _cell_piece(g, r, c, ray, t, tn, first or g.has_nan, bulge)
+        first = False
+        if m < best:
+            best = m
+            if best < stop:
+                return best
+        if tn >= t1:
+            break
+        if tx <= tn:
+            c += 1 if dx > 0.0 else -1
+        if ty <= tn:
+            r += 1 if dy > 0.0 else -1
+        if c < 0 or c > nc - 2 or r < 0 or r > nr - 2:
+            break
+        t = tn
+    return best
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def walk_targets(g, eye, tx, ty, tz, delta, tol, kc, out):
+    """``out[i]`` = exact minimum clearance of the segment eye -> target i (canonical
+    direction, length trim and earth curvature ``kc`` as in the pair engine; returns early
+    below ``-tol``).
+
+    ``eye`` is ``(ex, ey, ez)``. Serial: it only answers the few targets the sweep leaves
+    undecided on a grid with nodata (the pair engine needs a NaN-free grid)."""
+    m = tx.shape[0]
+    for i in range(m):
+        seg, length = _canonical(eye, (tx[i], ty[i], tz[i]))
+        tau = interval_start(seg, length, delta, 0.0)
+        if tau < 0.0:
+            out[i] = _INF
+            continue
+        out[i] = walk_min(g, seg, tau, 1.0 - tau, -tol, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
+
+
+# --------------------------------------------------------------------------- bounds
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _s_at(edge, lam):
+    """(slope, distance) of the edge point w + lam e (vectors from the eye)."""
+    wx, wy, ex_, ey_, a, b = edge[0], edge[1], edge[2], edge[3], edge[4], edge[5]
+    px = wx + lam * ex_
+    py = wy + lam * ey_
+    d = np.sqrt(px * px + py * py)
+    return (a + lam * b) / d, d
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _extremes(edge, l0, l1, e_h):
+    """Rigorous (max, min) of the slope over the edge part [l0, l1], and its min and max
+    distance.
+
+    ``edge`` is ``(wx, wy, ex_, ey_, a, b, alpha, beta, gamma)``: the edge's start w and
+    direction e relative to the eye, its height above the eye ``a + lam * b``, and
+    ``alpha = |e|**2``, ``beta = w.e``, ``gamma = |w|**2``. ``s(lam) = N(lam) / d(lam)``
+    with N linear and d**2 quadratic has one critical point ``lam*`` at most (a linear
+    equation), so its extremes are at l0, l1 or lam*. The distance is convex along the
+    edge: its maximum is at l0 or l1.
+    """
+    wx, wy, ex_, ey_, a, b, alpha, beta, gamma = edge
+    s0, d0 = _s_at(edge, l0)
+    s1, d1 = _s_at(edge, l1)
+    hi = max(s0 + 2.0 * e_h / d0 + _REL * abs(s0), s1 + 2.0 * e_h / d1 + _REL * abs(s1))
+    lo = min(s0 - 2.0 * e_h / d0 - _REL * abs(s0), s1 - 2.0 * e_h / d1 - _REL * abs(s1))
+    dmin = min(d0, d1)
+    den = b * beta - a * alpha
+    if den != 0.0:
+        ls = (a * beta - b * gamma) / den
+        if ls > l0 and ls < l1:
+            s2, d2 = _s_at(edge, ls)
+            hi = max(hi, s2 + 2.0 * e_h / d2 + _REL * abs(s2))
+            lo = min(lo, s2 - 2.0 * e_h / d2 - _REL * abs(s2))
+    lf = -beta / alpha
+    if lf > l0 and lf < l1:
+        px = wx + lf * ex_
+        py = wy + lf * ey_
+        dmin = min(dmin, np.sqrt(px * px + py * py))
+    return hi, lo, dmin, max(d0, d1)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _edge_parts(edge, r_excl):
+    """The parts [l0, l1] of the edge (of :func:`_extremes`) outside the disc of radius
+    ``r_excl`` around the eye: (number of parts, l0 and l1 of each)."""
+    alpha, beta, gamma = edge[6], edge[7], edge[8]
+    p0s = np.empty(2)
+    p1s = np.empty(2)
+    npart = 0
+    disc = beta * beta - alpha * (gamma - r_excl * r_excl)
+    if disc > 0.0:
+        sq = np.sqrt(disc)
+        l1 = (-beta - sq) / alpha
+        l2 = (-beta + sq) / alpha
+        if l1 > 0.0:
+            p0s[npart] = 0.0
+            p1s[npart] = min(l1, 1.0)
+            npart += 1
+        if l2 < 1.0:
+            p0s[npart] = max(l2, 0.0)
+            p1s[npart] = 1.0
+            npart += 1
+    else:
+        p0s[0] = 0.0
+        p1s[0] = 1.0
+        npart = 1
+    return npart, p0s, p1s
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz):
+    """The part of the edge piece [l0, l1] (pseudo-angles pa, pb at its ends) inside global
+    wedge g (its boundaries shifted by ``shift`` turns of 4): ``(la, lb, full, ok)``, full
+    when the piece crosses the wedge from side to side, ok False when it misses it."""
+    wx, wy, ex_, ey_, alpha = edge[0], edge[1], edge[2], edge[3], edge[6]
+    lo_p = g * 4.0 / bsz - shift
+    hi_p = (g + 1) * 4.0 / bsz - shift
+    la = l0
+    lb_ = l1
+    full = False
+    if (pmax - pmin) < 1e-9:
+        return la, lb_, full, True
+    # parameters where the wedge's two boundary rays cross the edge
+    cut = True
+    lam_lo = l0 if pa <= pb else l1
+    lam_hi = l1 if pa <= pb else l0
+    if lo_p > pmin:
+        ux, uy = _direction(lo_p)
+        cr = ux * ey_ - uy * ex_
+        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
+            cut = False
+        else:
+            lam_lo = -(ux * wy - uy * wx) / cr
+    if hi_p < pmax:
+        ux, uy = _direction(hi_p)
+        cr = ux * ey_ - uy * ex_
+        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
+            cut = False
+        else:
+            lam_hi = -(ux * wy - uy * wx) / cr
+    if cut:
+        la = max(l0, min(lam_lo, lam_hi) - _LEPS)
+        lb_ = min(l1, max(lam_lo, lam_hi) + _LEPS)
+        if lb_ < la:
+            return la, lb_, full, False
+    full = lo_p >= pmin + _PEPS and hi_p <= pmax - _PEPS
+    return la, lb_, full, True
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _edge_update(pa3, pb3, ez, win, ub, lb, lim):
+    """Add one edge, from ``pa3`` to ``pb3`` ((x, y, z), x and y relative to the eye), to
+    the wedges of the window ``win`` = ``(glo, nloc, bsz)``.
+
+    Every wedge the edge passes through gets the maximum slope of the edge's part inside
+    it (``ub``); a wedge the edge crosses from side to side gets the minimum slope of
+    that part, less the tolerance term (``lb``). ``lim`` is ``(r_excl, r_lb, e_h,
+    tolm, kc, diag)``: points closer than ``r_excl`` to the eye lie in every target's
+    trimmed end and are left out; ``lb`` only uses parts at least ``r_lb`` away.
+
+    Under earth curvature (``kc > 0``) the slopes are lowered by ``kc d``: a part's
+    minimum by ``kc`` times its largest distance; its maximum, which must bound the
+    surface points of the triangles beside the edge inside the wedge too (the slope may
+    peak inside a triangle), by ``kc`` times its smallest distance less ``diag`` (a cell
+    diagonal: every point of those triangles is within it of the part).
+    """
+    glo, nloc, bsz = win
+    r_excl, r_lb, e_h, tolm, kc, diag = lim
+    wx, wy, az = pa3
+    ex_ = pb3[0] - wx
+    ey_ = pb3[1] - wy
+    alpha = ex_ * ex_ + ey_ * ey_
+    if alpha == 0.0:
+        return
+    edge = (wx, wy, ex_, ey_, az - ez, pb3[2] - az, alpha, wx * ex_ + wy * ey_, wx * wx + wy * wy)
+    npart, p0s, p1s = _edge_parts(edge, r_excl)
+    for k in range(npart):
+        l0 = p0s[k]
+        l1 = p1s[k]
+        if l1 <= l0:
+            continue
+        # pseudo-angles of the ends, the short way round (a piece spans less than a half turn)
+        pa = diamond(wx + l0 * ex_, wy + l0 * ey_)
+        pb = diamond(wx + l1 * ex_, wy + l1 * ey_)
+        if pa - pb > 2.0:
+            pb += 4.0
+        elif pb - pa > 2.0:
+            pa += 4.0
+        pmin = min(pa, pb)
+        pmax = max(pa, pb)
+        lo_s = glo * 4.0 / bsz
+        hi_s = (glo + nloc) * 4.0 / bsz
+        for sh in range(-1, 2):
+            shift = 4.0 * sh
+            if pmax + shift < lo_s - _PEPS or pmin + shift > hi_s + _PEPS:
+                continue
+            g0 = int(np.floor((pmin + shift - _PEPS) * bsz * 0.25))
+            g1 = int(np.floor((pmax + shift + _PEPS) * bsz * 0.25))
+            if g0 < glo:
+                g0 = glo
+            if g1 > glo + nloc - 1:
+                g1 = glo + nloc - 1
+            for g in range(g0, g1 + 1):
+                la, lb_, full, ok = _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz)
+                if not ok:
+                    continue
+                hi, lo, dmin, dmax = _extremes(edge, la, lb_, e_h)
+                if kc > 0.0:
+                    if dmin > diag:
+                        hi -= kc * (dmin - diag)
+                    lo -= kc * dmax
+                i = g - glo
+                if hi > ub[i]:
+                    ub[i] = hi
+                if full and dmin >= r_lb:
+                    v = lo - tolm / dmin
+                    if v > lb[i]:
+                        lb[i] = v
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _cell_edges(g, eye, r, c, win, ub, lb, lim):
+    """Add the edges of the present triangles of cell (r, c) with exact clipping."""
+    z, xs, ys = g.z, g.xs, g.ys
+    ex, ey, ez = eye.ex, eye.ey, eye.ez
+    lower = _tri_present(z, r, c, False)
+    upper = _tri_present(z, r, c, True)
+    for k in range(5):
+        # bottom, right (lower triangle); left, top (upper triangle); diagonal (both)
+        if k < 2 and not lower:
+            continue
+        if 2 <= k < 4 and not upper:
+            continue
+        if k == 4 and not (lower or upper):
+            continue
+        if k == 0:
+            ra, ca, rb, cb = r, c, r, c + 1
+        elif k == 1:
+            ra, ca, rb, cb = r, c + 1, r + 1, c + 1
+        elif k == 2:
+            ra, ca, rb, cb = r, c, r + 1, c
+        elif k == 3:
+            ra, ca, rb, cb = r + 1, c, r + 1, c + 1
+        else:
+            ra, ca, rb, cb = r, c, r + 1, c + 1
+        _edge_update((xs[ca] - ex, ys[ra] - ey, z[ra, ca]), (xs[cb] - ex, ys[rb] - ey, z[rb, cb]), ez, win,
+                     ub, lb, lim)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _annulus_edges(g, eye, j, win, ub, lb, lim):
+    """Add every cell of annulus j with exact edge clipping (used near the eye)."""
+    nr = g.ys.shape[0]
+    nc = g.xs.shape[0]
+    re, ce = eye.re, eye.ce
+    r0 = max(re - j, 0)
+    r1_ = min(re + j, nr - 2)
+    c0 = max(ce - j, 0)
+    c1 = min(ce + j, nc - 2)
+    for rr in range(r0, r1_ + 1):
+        edge_row = rr == re - j or rr == re + j
+        step = 1 if edge_row else max(2 * j, 1)
+        cc = c0 if edge_row else ce - j
+        while cc <= c1:
+            if cc >= 0:
+                _cell_edges(g, eye, rr, cc, win, ub, lb, lim)
+            cc += step
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cell_range(g, eye, r, c, q):
+    """(min, max) unwrapped pseudo-angle of the corners of cell (r, c)."""
+    x0 = g.xs[c] - eye.ex
+    x1 = g.xs[c + 1] - eye.ex
+    y0 = g.ys[r] - eye.ey
+    y1 = g.ys[r + 1] - eye.ey
+    p0 = _unwrap(diamond(x0, y0), q)
+    p1 = _unwrap(diamond(x1, y0), q)
+    p2 = _unwrap(diamond(x0, y1), q)
+    p3 = _unwrap(diamond(x1, y1), q)
+    return min(min(p0, p1), min(p2, p3)), max(max(p0, p1), max(p2, p3))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _sample_val(g, eye, r, c, q, kc):
+    """(slope from the eye, unwrapped pseudo-angle) of sample (r, c); NaN slope on nodata.
+    Under earth curvature the slope is lowered by ``kc d`` (see "Earth curvature")."""
+    dx = g.xs[c] - eye.ex
+    dy = g.ys[r] - eye.ey
+    d = np.sqrt(dx * dx + dy * dy)
+    return (g.z[r, c] - eye.ez) / d - kc * d, _unwrap(diamond(dx, dy), q)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cell_bounds(ub, lb, win, ann, sv, pv):
+    """Add one cell (away from the eye) to the wedges with a cheap rigorous bound.
+
+    ``sv`` = ``(s00, s01, s10, s11)`` and ``pv`` (likewise) are the slopes and
+    pseudo-angles of the cell's corners (NaN slope on nodata); ``win`` = ``(glo, nloc,
+    k4)`` the window of wedges (k4 = wedges per unit of pseudo-angle); ``ann`` = ``(rel,
+    hi_slack, lo_slack, use_lb)`` the annulus's constants. On an edge the distance d is
+    convex and at least ``chord - g`` with ``g = |e|**2 / (8 d_lo)`` (its second
+    derivative is at most ``|e|**2 / d``), so the slope N / d is bounded by Moebius
+    functions, monotone along the edge: its maximum is at most ``max(v1, v2)`` with
+    ``v = N / (d - g)`` for N > 0 and ``N / d`` otherwise, and ``N / (d - g) <= s (1 + 2 g
+    / d)`` when ``g <= d / 2``; the minimum likewise. The caller passes ``rel >= 2 g /
+    d_lo`` (at most 1) for the whole annulus, and the slacks for rounding (and the
+    tolerance, in ``lo_slack``) divided by the annulus's smallest distance. Every wedge
+    within the cell's angular range gets the bound of the maximum (``ub``); every wedge
+    strictly inside it, whose rays all cross the cell and so meet its boundary, gets the
+    bound of the minimum (``lb``, only for a cell without nodata).
+    """
+    s00, s01, s10, s11 = sv
+    p00, p01, p10, p11 = pv
+    glo, nloc, k4 = win
+    rel, hi_slack, lo_slack, use_lb = ann
+    f = s00 == s00 and s11 == s11
+    lower = f and s01 == s01
+    upper = f and s10 == s10
+    if not (lower or upper):
+        return
+    hi = max(s00, s11)
+    if lower:
+        hi = max(hi, s01)
+    if upper:
+        hi = max(hi, s10)
+    hi = hi + max(hi, 0.0) * rel
+    hi = hi + hi_slack + _REL * abs(hi)
+    pmin = min(min(p00, p01), min(p10, p11))
+    pmax = max(max(p00, p01), max(p10, p11))
+    g0 = int(np.floor((pmin - _PEPS) * k4))
+    g1 = int(np.floor((pmax + _PEPS) * k4))
+    if g0 < glo:
+        g0 = glo
+    if g1 > glo + nloc - 1:
+        g1 = glo + nloc - 1
+    for gg in range(g0, g1 + 1):
+        i = gg - glo
+        ub[i] = max(ub[i], hi)
+    if use_lb and lower and upper:
+        lo = min(min(s00, s01), min(s10, s11))
+        lo = lo + min(lo, 0.0) * rel
+        lo = lo - lo_slack - _REL * abs(lo)
+        h0 = int(np.floor((pmin + _PEPS) * k4)) + 1
+        h1 = int(np.floor((pmax - _PEPS) * k4)) - 1
+        if h0 < glo:
+            h0 = glo
+        if h1 > glo + nloc - 1:
+            h1 = glo + nloc - 1
+        for gg in range(h0, h1 + 1):
+            i = gg - glo
+            lb[i] = max(lb[i], lo)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def curvature_pads(kc, diag2, dring, rel, far):
+    """What earth curvature adds to :func:`_cell_bounds`' slacks: ``(pad_hi, pad_lo)``.
+
+    The corners' slopes carry ``- kc d`` at the corners' distances. A point of the cell is
+    at most a diagonal farther or nearer than any corner, and along an edge the distance
+    dips at most ``g = |e|**2 / (8 d_lo) <= diag2 / (8 dring)`` below its chord (the
+    nearest point can be inside an edge); the convexity factor ``rel`` also multiplies
+    the flat slope, which exceeds the corrected one by at most ``kc far`` (``far`` the
+    annulus's farthest corner). So the upper bound needs ``kc (diag + g + rel far)`` more
+    and the lower bound ``kc diag`` less; both are 0 for a flat earth.
+    """
+    diag = np.sqrt(diag2)
+    return kc * (diag + 0.125 * diag2 / dring + rel * far), kc * diag
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _ring_distance(g, eye, k):
+    """Horizontal distance from the eye to the boundary of the box of cell rings <= k
+    (its sides inside the grid): every point outside the box is at least this far."""
+    xs, ys = g.xs, g.ys
+    re, ce, ex, ey = eye.re, eye.ce, eye.ex, eye.ey
+    nr = ys.shape[0]
+    nc = xs.shape[0]
+    d = _INF
+    if ce + 1 + k <= nc - 1:
+        d = min(d, xs[ce + 1 + k] - ex)
+    if ce - k >= 0:
+        d = min(d, ex - xs[ce - k])
+    if re + 1 + k <= nr - 1:
+        d = min(d, ys[re + 1 + k] - ey)
+    if re - k >= 0:
+        d = min(d, ey - ys[re - k])
+    return d
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _far_corner(g, eye, k):
+    """Horizontal distance from the eye to the farthest corner of the box of cell rings
+    <= k (clipped to the grid): no point of the box is farther."""
+    xs, ys = g.xs, g.ys
+    nr = ys.shape[0]
+    nc = xs.shape[0]
+    ax = max(xs[min(eye.ce + 1 + k, nc - 1)] - eye.ex, eye.ex - xs[max(eye.ce - k, 0)])
+    ay = max(ys[min(eye.re + 1 + k, nr - 1)] - eye.ey, eye.ey - ys[max(eye.re - k, 0)])
+    return np.sqrt(ax * ax + ay * ay)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _cell_path(q, j, re, ce, nr, nc):
+    """The cells of annulus j near quadrant q, in increasing angle, as two runs.
+
+    Returns ``((r_a, c_a, dr_a, dc_a, n_a), (r_b, c_b, dr_b, dc_b, n_b))``: run k starts at
+    cell (r, c) and steps by (dr, dc) for n cells (clamped to the grid). Each run has one
+    extra cell at its outer end so that cells touching the quadrant's boundary rays are
+    included.
+    """
+    ncr = nr - 1  # cell rows
+    ncc = nc - 1
+    if q == 0:
+        # right column c = ce + j, rows re - 1 .. re + j; top row r = re + j, cols ce + j - 1 .. ce - 1
+        ca = ce + j
+        ra0 = max(re - 1, 0)
+        ra1 = min(re + j, ncr - 1)
+        na = ra1 - ra0 + 1 if ca <= ncc - 1 else 0
+        rb = re + j
+        cb0 = min(ce + j - 1, ncc - 1)
+        cb1 = max(ce - 1, 0)
+        nb_ = cb0 - cb1 + 1 if rb <= ncr - 1 else 0
+        return (ra0, ca, 1, 0, max(na, 0)), (rb, cb0, 0, -1, max(nb_, 0))
+    if q == 1:
+        # top row r = re + j, cols ce + 1 .. ce - j; left column c = ce - j, rows re + j - 1 .. re - 1
+        ra = re + j
+        ca0 = min(ce + 1, ncc - 1)
+        ca1 = max(ce - j, 0)
+        na = ca0 - ca1 + 1 if ra <= ncr - 1 else 0
+        cb = ce - j
+        rb0 = min(re + j - 1, ncr - 1)
+        rb1 = max(re - 1, 0)
+        nb_ = rb0 - rb1 + 1 if cb >= 0 else 0
+        return (ra, ca0, 0, -1, max(na, 0)), (rb0, cb, -1, 0, max(nb_, 0))
+    if q == 2:
+        # left column c = ce - j, rows re + 1 .. re - j; bottom row r = re - j, cols ce - j + 1 .. ce + 1
+        ca = ce - j
+        ra0 = min(re + 1, ncr - 1)
+        ra1 = max(re - j, 0)
+        na = ra0 - ra1 + 1 if ca >= 0 else 0
+        rb = re - j
+        cb0 = max(ce - j + 1, 0)
+        cb1 = min(ce + 1, ncc - 1)
+        nb_ = cb1 - cb0 + 1 if rb >= 0 else 0
+        return (ra0, ca, -1, 0, max(na, 0)), (rb, cb0, 0, 1, max(nb_, 0))
+    # q == 3: bottom row r = re - j, cols ce - 1 .. ce + j; right column c = ce + j, rows re - j + 1 .. re + 1
+    ra = re - j
+    ca0 = max(ce - 1, 0)
+    ca1 = min(ce + j, ncc - 1)
+    na = ca1 - ca0 + 1 if ra >= 0 else 0
+    cb = ce + j
+    rb0 = max(re - j + 1, 0)
+    rb1 = min(re + 1, ncr - 1)
+    nb_ = rb1 - rb0 + 1 if cb <= ncc - 1 else 0
+    return (ra, ca0, 0, 1, max(na, 0)), (rb0, cb, 1, 0, max(nb_, 0))
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _box_exit(g, eye, k, dx, dy):
+    """Parameter where the ray E + t (dx, dy) leaves the box of cell rings <= k."""
+    xs, ys = g.xs, g.ys
+    re, ce, ex, ey = eye.re, eye.ce, eye.ex, eye.ey
+    nr = ys.shape[0]
+    nc = xs.shape[0]
+    t = _INF
+    if dx > 0.0:
+        i = ce + 1 + k
+        if i <= nc - 1:
+            t = min(t, (xs[i] - ex) / dx)
+    elif dx < 0.0:
+        i = ce - k
+        if i >= 0:
+            t = min(t, (xs[i] - ex) / dx)
+    if dy > 0.0:
+        i = re + 1 + k
+        if i <= nr - 1:
+            t = min(t, (ys[i] - ey) / dy)
+    elif dy < 0.0:
+        i = re - k
+        if i >= 0:
+            t = min(t, (ys[i] - ey) / dy)
+    return t
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _level(j, r1):
+    if j < r1:
+        return 0
+    lev = 1
+    lim = 2 * r1
+    while j >= lim:
+        lim *= 2
+        lev += 1
+    return lev
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _run_range(g, eye, q, run, plo, phi):
+    """Cells [i0, i1] of a run (see :func:`_cell_path`) whose angular range meets [plo, phi]."""
+    r0, c0, dr, dc, n = run
+    lo = 0
+    hi = n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        pmn, pmx = _cell_range(g, eye, r0 + mid * dr, c0 + mid * dc, q)
+        if pmx < plo - _PEPS:
+            lo = mid + 1
+        else:
+            hi = mid
+    i0 = lo
+    hi = n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        pmn, pmx = _cell_range(g, eye, r0 + mid * dr, c0 + mid * dc, q)
+        if pmn <= phi + _PEPS:
+            lo = mid + 1
+        else:
+            hi = mid
+    return i0, lo - 1
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _fill_run(g, eye, q, run, i0, i1, bs, bp, kc):
+    """Slopes and pseudo-angles of the corners of cells i0..i1 of a run, as two lines.
+
+    Vertical run (dc == 0): line 0 is column c0 and line 1 column c0 + 1, indexed by
+    row - rlo. Horizontal run: line 0 is row r0 and line 1 row r0 + 1, indexed by
+    col - clo. ``bs`` and ``bp`` (2, length) get the slopes and pseudo-angles of the two
+    lines. Returns (rlo or clo, number of samples per line).
+    """
+    r0, c0, dr, dc = run[0], run[1], run[2], run[3]
+    m = i1 - i0 + 2
+    if dc == 0:
+        lo = min(r0 + i0 * dr, r0 + i1 * dr)
+    else:
+        lo = min(c0 + i0 * dc, c0 + i1 * dc)
+    for kk in range(2 * m):
+        k = kk >> 1
+        line = kk & 1
+        if dc == 0:
+            rr = lo + k
+            cc = c0 + line
+        else:
+            rr = r0 + line
+            cc = lo + k
+        sv, pv = _sample_val(g, eye, rr, cc, q, kc)
+        bs[line, k] = sv
+        bp[line, k] = pv
+    return lo, m
+
+
+#: Rings per block of the wedges' history (a multiple of it is where the wedges refine).
+BLOCK = 16
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _wedge_slot(p, bsz, glo):
+    """Local index of the wedge holding pseudo-angle p, and whether p lies on its lower or
+    upper boundary (within rounding), where the neighbouring wedge counts too."""
+    k4 = bsz * 0.25
+    gb = p * k4
+    g = int(np.floor(gb))
+    fr = gb - g
+    return g - glo, fr < 1e-9 * k4, fr > 1.0 - 1e-9 * k4
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _wedge_value(arr, p, bsz, glo):
+    """Value of the wedge holding pseudo-angle p (the larger of both near a boundary)."""
+    i, at_lo, at_hi = _wedge_slot(p, bsz, glo)
+    v = arr[i]
+    if at_lo:
+        v = max(v, arr[i - 1])
+    if at_hi:
+        v = max(v, arr[i + 1])
+    return v
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h, kc):
+    """Whether the lower bound of the target's wedge proves it blocked, and its slope and
+    slack: ``(blocked, s_T, slack)`` (the slope lowered by ``kc * dist`` under earth
+    curvature)."""
+    i_b, at_lo, at_hi = _wedge_slot(p, bsz, glo)
+    lbv = lb[i_b]
+    if at_lo:
+        lbv = min(lbv, lb[i_b - 1])
+    if at_hi:
+        lbv = min(lbv, lb[i_b + 1])
+    st = nt / dist - kc * dist
+    slack = 2.0 * e_h / dist + _REL * (abs(st) + kc * dist)
+    return lbv > st + slack, st, slack
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _decide(g, eye, rules, w, j, win, tg):
+    """Verdict of a target that the lower bound did not block, from the wedge bounds
+    ``w`` (holding the rings <= j - 1) and exact walks.
+
+    ``win`` is ``(s, glo, bsz, b0, r1, nsec)``: the sector, its window of wedges and the
+    layout. ``tg`` is ``(p, tdx, tdy, nt, dist, st, slack)``: the target's unwrapped
+    pseudo-angle, its offset from the eye, its horizontal distance, its slope and that
+    slope's rounding slack. The part beyond the box of rings <= j - 1 is walked exactly;
+    the upper bound of the wedge is the larger of ``ubp`` (completed blocks of rings) and
+    ``blk`` (the current block). Returns (code, how): how 1 (decided by that walk and the
+    upper bound), 2 (by also walking the blocks of rings whose bound reaches the target's
+    slope) or 3 (undecided).
+    """
+    glo, bsz = win[1], win[2]
+    p, tdx, tdy, nt, dist, st, slack = tg
+    tolm = rules.tol + rules.marg
+    length = np.sqrt(dist * dist + nt * nt)
+    tau = rules.delta / length
+    tq = max(_box_exit(g, eye, j - 1, tdx, tdy), tau)
+    ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
+    bulge = rules.kc * (dist * dist)
+    cl = walk_min(g, ray, tq, 1.0 - tau, -tolm, bulge)
+    if cl < -tolm:
+        return BLOCKED, 1
+    if cl < -rules.tol + rules.marg:
+        return UNDECIDED, 3
+    ubv = max(_wedge_value(w.ubp, p, bsz, glo), _wedge_value(w.blk, p, bsz, glo))
+    if st - slack >= ubv:
+        return VISIBLE, 1
+    res = _block_walk(g, eye, rules, w, j, win, ray, p, st - slack, tau, tq)
+    how = 3
+    if res != UNDECIDED:
+        how = 2
+    return res, how
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _block_walk(g, eye, rules, w, j, win, ray, p, smin, tau, t_end):
+    """Exact walk of the target's ray over the blocks of rings < j whose wedge maximum
+    reaches ``smin`` (the target's slope less its slack; ``p`` its unwrapped
+    pseudo-angle); the other blocks are clear.
+
+    Block b holds rings [BLOCK b, BLOCK b + BLOCK) (``w.hist[b]``; the current, partial
+    block is ``w.blk``) at the wedge resolution of its level; ``win`` as in
+    :func:`_decide`. The walks cover t in [tau, t_end] (t_end: where the exact last-rings
+    walk began). Returns BLOCKED, VISIBLE or UNDECIDED (some part within the margin of
+    the threshold, nothing clearly blocked).
+    """
+    s, b0, r1, nsec = win[0], win[3], win[4], win[5]
+    tolm = rules.tol + rules.marg
+    nfull = j // BLOCK
+    ambiguous = False
+    for b in range(nfull + 1):
+        r_lo = BLOCK * b
+        r_hi = min(r_lo + BLOCK - 1, j - 1)
+        if r_hi < r_lo:
+            continue
+        bszb = b0 << _level(r_lo, r1)
+        nb_ = bszb // nsec
+        glob = s * nb_ - 1
+        if b < nfull:
+            m = _wedge_value(w.hist[b], p, bszb, glob)
+        else:
+            m = _wedge_value(w.blk, p, bszb, glob)
+        if m <= smin:
+            continue
+        t0 = tau
+        if b > 0:
+            t0 = max(t0, _box_exit(g, eye, r_lo - 1, ray[3], ray[4]))
+        t1 = min(_box_exit(g, eye, r_hi, ray[3], ray[4]), t_end)
+        if t1 <= t0:
+            continue
+        cl = walk_min(g, ray, t0, t1, -tolm, rules.kc * (ray[3] * ray[3] + ray[4] * ray[4]))
+        if cl < -tolm:
+            return BLOCKED
+        if cl < -rules.tol + rules.marg:
+            ambiguous = True
+    return UNDECIDED if ambiguous else VISIBLE
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def bucket_targets(g, eye, tx, ty, nsec, jstop, tstart, torder):
+    """Sort targets (local coordinates) by (sector, ring at which they are decided).
+
+    A target in a cell of cell ring k is decided at ring j = k - 1, when the bounds hold
+    the rings <= k - 2 (at least one cell away from it), after an exact walk across the
+    rings k - 1 and k. Targets with k < 3 are left out (the caller answers them exactly).
+    ``tstart`` (nsec * (jstop + 2) + 1) gets each bucket's start in ``torder``; returns the
+    number of targets placed.
+    """
+    m = tx.shape[0]
+    nkey = nsec * (jstop + 2)
+    key = np.full(m, -1, dtype=np.int64)
+    counts = np.zeros(nkey + 1, dtype=np.int64)
+    for i in range(m):
+        c = locate(g.xs, g.ixw, g.uniform, tx[i])
+        r = locate(g.ys, g.iyw, g.uniform, ty[i])
+        k = max(abs(r - eye.re), abs(c - eye.ce))
+        if k < 3 or k - 1 > jstop:
+            continue
+        p = diamond(tx[i] - eye.ex, ty[i] - eye.ey)
+        s = min(int(p * 0.25 * nsec), nsec - 1)
+        # the sector owning p (the same test as the sweep's: plo <= p < phi)
+        while s > 0 and p < s * 4.0 / nsec:
+            s -= 1
+        while s < nsec - 1 and p >= (s + 1) * 4.0 / nsec:
+            s += 1
+        kk = s * (jstop + 2) + (k - 1)
+        key[i] = kk
+        counts[kk + 1] += 1
+    for kk in range(nkey):
+        counts[kk + 1] += counts[kk]
+    for kk in range(nkey + 1):
+        tstart[kk] = counts[kk]
+    placed = counts[nkey]
+    for i in range(m):
+        kk = key[i]
+        if kk >= 0:
+            torder[counts[kk]] = i
+            counts[kk] += 1
+    return placed
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
+def sweep(g, eye, rules, lay, tg, perm, stats):
+    """Decide the targets with rigorous horizon bounds and partial exact walks.
+
+    One task per angular sector (``lay.nsec`` sectors, a multiple of 4, ``perm`` spreads
+    them over the threads). Each task sweeps the rings outwards keeping the bounds for its
+    own wedges plus one guard wedge on each side: at ring j it first decides the targets
+    whose bounds are complete (the samples of sample ring j whose direction falls in the
+    sector, when ``tg.own``; otherwise the targets of bucket (sector, j) of ``tg.tstart`` /
+    ``tg.torder``, see :func:`bucket_targets`), then adds annulus j (exact edge clipping up
+    to ring ``lay.jnear``, a cell bound beyond). ``tg.code`` (own samples) or ``tg.tcode``
+    (other targets) get BLOCKED, VISIBLE or UNDECIDED (the caller answers those with the
+    pair engine); targets already NOT_TARGET are skipped. ``stats[sector, 0..3]`` counts
+    targets decided by ``lb``, by the upper bound and the last rings' walk, by walking
+    blocks of rings, and left undecided.
+    """
+    for it in nb.prange(lay.nsec):
+        _sector(g, eye, rules, lay, tg, perm[it], stats)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _close_block(w, j, n):
+    """Close the block of rings j - BLOCK .. j - 1: keep it in the history, fold it into
+    ``ubp`` and start an empty current block."""
+    b = j // BLOCK - 1
+    for i in range(n + 2):
+        w.hist[b, i] = w.blk[i]
+        w.ubp[i] = max(w.ubp[i], w.blk[i])
+        w.blk[i] = -_INF
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _refine(w, tmp, n):
+    """Split each of the ``n`` wedges (plus guards) in two (at a block boundary, where
+    ``blk`` is empty): local index i covers global ``s * n - 1 + i``."""
+    for i in range(n + 2):
+        tmp[0, i] = w.ubp[i]
+        tmp[1, i] = w.lb[i]
+    for i in range(2 * n + 2):
+        ic = ((i - 1) >> 1) + 1
+        w.ubp[i] = tmp[0, ic]
+        w.lb[i] = tmp[1, ic]
+        w.blk[i] = -_INF
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _add_cells(w, win, ann, runs, ranges, bs, bp):
+    """Add the cells of both runs of an annulus (away from the eye) with :func:`_cell_bounds`.
+
+    ``runs`` the two runs (:func:`_cell_path`), ``ranges`` (3, 2) int64 each run's first
+    and last cell index and the first row or column of its corner buffers ``bs``, ``bp``
+    (run, line, index).
+    """
+    for run in range(2):
+        if ranges[1, run] < ranges[0, run]:
+            continue
+        r0, c0, dr, dc = runs[run][0], runs[run][1], runs[run][2], runs[run][3]
+        lo = ranges[2, run]
+        for i in range(ranges[0, run], ranges[1, run] + 1):
+            if dc == 0:
+                k = r0 + i * dr - lo
+                sv = (bs[run, 0, k], bs[run, 1, k], bs[run, 0, k + 1], bs[run, 1, k + 1])
+                pv = (bp[run, 0, k], bp[run, 1, k], bp[run, 0, k + 1], bp[run, 1, k + 1])
+            else:
+                k = c0 + i * dc - lo
+                sv = (bs[run, 0, k], bs[run, 0, k + 1], bs[run, 1, k], bs[run, 1, k + 1])
+                pv = (bp[run, 0, k], bp[run, 0, k + 1], bp[run, 1, k], bp[run, 1, k + 1])
+            _cell_bounds(w.blk, w.lb, win, ann, sv, pv)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _sector(g, eye, rules, lay, tg, s, stats):
+    """The sweep of one sector (see :func:`sweep`)."""
+    xs, ys, z = g.xs, g.ys, g.z
+    nsec, b0, r1, jnear, jstop = lay
+    ntg = tg.tx.shape[0]
+    nr = ys.shape[0]
+    nc = xs.shape[0]
+    lmax = _level(jstop, r1)
+    nfin = (b0 << lmax) // nsec
+    tolm = rules.tol + rules.marg
+    kc = rules.kc
+    diag = np.sqrt(rules.diag2)
+    lim = (rules.r_excl, rules.r_lb, rules.e_h, tolm, kc, diag)
+    blen = max(nr, nc) + 2
+    q = s // (nsec // 4)
+    w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
+               np.empty((jstop // BLOCK + 1, nfin + 2)))
+    tmp = np.empty((2, nfin + 2))
+    # corner buffers of the two runs: slopes and pseudo-angles of lines 0 and 1
+    bs = np.empty((2, 2, blen))
+    bp = np.empty((2, 2, blen))
+    ranges = np.zeros((3, 2), dtype=np.int64)  # first cell, last cell, buffer start per run
+    # targets decided by the lower bound (counted apart: the hot path), then by the
+    # upper bound and the last rings' walk, by block walks, and left undecided
+    counts = np.zeros(4, dtype=np.int64)
+    n_lb = 0
+    lev = 0
+    bsz = b0
+    n = b0 // nsec
+    plo = s * 4.0 / nsec
+    phi = (s + 1) * 4.0 / nsec
+    for j in range(0, jstop + 1):
+        if j > 0 and j % BLOCK == 0:
+            _close_block(w, j, n)
+        target_lev = _level(j, r1)
+        while lev < target_lev:
+            _refine(w, tmp, n)
+            n *= 2
+            bsz *= 2
+            lev += 1
+        glo = s * n - 1
+        nloc = n + 2
+        if j < 2:
+            # no targets yet (the caller answers rings 0 and 1 exactly); the cells next to
+            # the eye are always clipped edge by edge
+            _annulus_edges(g, eye, j, (glo, nloc, bsz), w.blk, w.lb, lim)
+            continue
+        dwin = (s, glo, bsz, b0, r1, nsec)
+        plo_g = glo * 4.0 / bsz
+        phi_g = (glo + nloc) * 4.0 / bsz
+        runs = _cell_path(q, j, eye.re, eye.ce, nr, nc)
+        for run in range(2):
+            ranges[0, run] = 0
+            ranges[1, run] = -1
+        for run in range(2):
+            rn = runs[run]
+            r0, c0, dr, dc, nn = rn
+            if nn <= 0:
+                continue
+            i0, i1 = _run_range(g, eye, q, rn, plo_g, phi_g)
+            if i1 < i0:
+                continue
+            ranges[0, run] = i0
+            ranges[1, run] = i1
+            lo, m = _fill_run(g, eye, q, rn, i0, i1, bs[run], bp[run], kc)
+            ranges[2, run] = lo
+            # ---- decide the samples of sample ring j on the run's outer line
+            if not tg.own:
+                continue
+            if dc == 0:
+                outer = 1 if c0 > eye.ce else 0
+            else:
+                outer = 1 if r0 > eye.re else 0
+            for k in range(m):
+                p = bp[run, outer, k]
+                if p < plo or p >= phi:
+                    continue
+                if dc == 0:
+                    rr = lo + k
+                    cc = c0 + outer
+                else:
+                    rr = r0 + outer
+                    cc = lo + k
+                if tg.code[rr, cc] == NOT_TARGET:
+                    continue
+                tdx = xs[cc] - eye.ex
+                tdy = ys[rr] - eye.ey
+                dist = np.sqrt(tdx * tdx + tdy * tdy)
+                if dist > rules.dmax:
+                    tg.code[rr, cc] = NOT_TARGET
+                    continue
+                nt = z[rr, cc] + rules.ht - eye.ez
+                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, kc)
+                if blocked:
+                    tg.code[rr, cc] = BLOCKED
+                    n_lb += 1
+                else:
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
+                    tg.code[rr, cc] = res
+                    counts[how] += 1
+        # ---- decide the other targets whose box of rings <= j - 1 the bounds now cover
+        if ntg > 0:
+            key = s * (jstop + 2) + j
+            for kk in range(tg.tstart[key], tg.tstart[key + 1]):
+                t = tg.torder[kk]
+                tdx = tg.tx[t] - eye.ex
+                tdy = tg.ty[t] - eye.ey
+                dist = np.sqrt(tdx * tdx + tdy * tdy)
+                if dist > rules.dmax:
+                    tg.tcode[t] = NOT_TARGET
+                    continue
+                p = _unwrap(diamond(tdx, tdy), q)
+                nt = tg.tz[t] - eye.ez
+                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, kc)
+                if blocked:
+                    tg.tcode[t] = BLOCKED
+                    n_lb += 1
+                else:
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
+                    tg.tcode[t] = res
+                    counts[how] += 1
+        # ---- add annulus j
+        dring = _ring_distance(g, eye, j - 1)
+        rel = 0.25 * rules.diag2 / (dring * dring) * (1.0 + 1e-12)
+        if j <= jnear or not (rel <= 1.0):
+            _annulus_edges(g, eye, j, (glo, nloc, bsz), w.blk, w.lb, lim)
+            continue
+        pad_hi, pad_lo = curvature_pads(kc, rules.diag2, dring, rel, _far_corner(g, eye, j))
+        ann = (rel, 2.0 * rules.e_h / dring + pad_hi, (2.0 * rules.e_h + tolm) / dring + pad_lo, dring >= rules.r_lb)
+        _add_cells(w, (glo, nloc, bsz * 0.25), ann, runs, ranges, bs, bp)
+    counts[0] += n_lb
+    for k in range(4):
+        stats[s, k] = counts[k]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def max_slope(z, xs, ys, out):
+    """``out[r]`` = largest |slope| of the edges of cell row r (NaN edges ignored)."""
+    nr, nc = z.shape
+    for r in range(nr):
+        best = 0.0
+        for c in range(nc):
+            v = z[r, c]
+            if c + 1 < nc:
+                e = abs(z[r, c + 1] - v) / (xs[c + 1] - xs[c])
+                if e > best:
+                    best = e
+            if r + 1 < nr:
+                e = abs(z[r + 1, c] - v) / (ys[r + 1] - ys[r])
+                if e > best:
+                    best = e
+                if c + 1 < nc:
+                    hx = xs[c + 1] - xs[c]
+                    hy = ys[r + 1] - ys[r]
+                    e = abs(z[r + 1, c + 1] - v) / np.sqrt(hx * hx + hy * hy)
+                    if e > best:
+                        best = e
+        out[r] = best

@@ -1,0 +1,161 @@
+"""The line-of-sight predicate's definitions: trim, tolerance, scale, engines, argument checks.
+
+Every visibility entry point (:mod:`~terrainvis.visibility.los`, the viewshed sweep, the
+clearance profile) takes these from here, so the predicate is defined once; the package
+docstring of :mod:`terrainvis.visibility` states it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validate import as_nonnegative_finite, as_points, as_positive_finite, describe
+from ..errors import OutsideFootprintError
+from ..terrain import HeightGrid, as_terrain
+
+__all__ = [
+    "ENGINES", "TRIM_REL", "TOL_REL", "EARTH_RADIUS", "STANDARD_REFRACTION", "terrain_scale", "trim_length",
+    "clearance_tolerance", "curvature_coefficient",
+]
+
+#: Valid values of the ``engine`` argument.
+ENGINES = ("auto", "grid", "embree")
+#: Trim length as a fraction of the horizontal diagonal (see :func:`trim_length`).
+TRIM_REL = 1e-5
+#: Clearance tolerance as a fraction of :func:`terrain_scale`.
+TOL_REL = 1e-9
+#: Default earth radius (metres): WGS84's semi-major axis, as GDAL's ``gdal_viewshed`` takes it.
+EARTH_RADIUS = 6378137.0
+#: The curvature coefficient of standard refraction, ``1 - 1/7`` (GDAL's default ``-cc``).
+STANDARD_REFRACTION = 0.85714
+
+
+# ----------------------------------------------------------------- definitions
+def _extent_diagonal(terrain) -> float:
+    xmin, xmax, ymin, ymax = terrain.extent
+    return float(np.hypot(xmax - xmin, ymax - ymin))
+
+
+def terrain_scale(terrain) -> float:
+    """``max(horizontal diagonal of the extent, elevation range)`` of the terrain.
+
+    Parameters
+    ----------
+    terrain : HeightGrid or TIN
+
+    Returns
+    -------
+    float
+    """
+    as_terrain(terrain)
+    s = terrain._cache.get("visibility_scale")
+    if s is None:
+        z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
+        zr = float(np.nanmax(z) - np.nanmin(z)) if np.isfinite(z).any() else 0.0
+        s = max(_extent_diagonal(terrain), zr)
+        terrain._cache["visibility_scale"] = s
+    return s
+
+
+def trim_length(terrain) -> float:
+    """Length ``delta`` trimmed off both ends of every segment: ``TRIM_REL`` x diagonal.
+
+    Examples
+    --------
+    >>> from terrainvis import HeightGrid
+    >>> trim_length(HeightGrid(np.zeros((2, 2)), dx=3.0, dy=4.0))
+    5e-05
+    """
+    as_terrain(terrain)
+    return TRIM_REL * _extent_diagonal(terrain)
+
+
+def clearance_tolerance(terrain) -> float:
+    """Clearance ``tol`` down to which a segment still counts as visible: ``TOL_REL`` x scale."""
+    return TOL_REL * terrain_scale(terrain)
+
+
+def curvature_coefficient(curvature: float = 0.0, earth_radius: float = EARTH_RADIUS) -> float:
+    """``k = curvature / (2 earth_radius)``: the sight line between p and q must clear the
+    surface raised by ``k d1 d2`` (d1, d2 the horizontal distances to p and q).
+
+    ``curvature`` is GDAL's ``-cc`` coefficient: 0 a flat earth, 1 the geometric curvature,
+    ``1 - 1/7`` (:data:`STANDARD_REFRACTION`) curvature with standard refraction.
+    ``earth_radius`` is in the terrain's x/y units (metres on a georeferenced DEM).
+
+    Examples
+    --------
+    The earth's drop 10 km from an observer with standard refraction, ``k d**2``:
+
+    >>> round(curvature_coefficient(STANDARD_REFRACTION) * 10_000.0**2, 2)
+    6.72
+    """
+    c = as_nonnegative_finite(curvature, "curvature", "0 flat earth, 1 geometric, 0.85714 standard refraction")
+    r = as_positive_finite(earth_radius, "earth_radius")
+    return c / (2.0 * r)
+
+
+# ----------------------------------------------------------------- validation
+def _check_engine(engine, terrain, kc: float = 0.0) -> str:
+    """The engine to run: "grid", "embree", or "tin" (the exact TIN clipper, which "auto"
+    picks for a TIN under earth curvature: Embree traces straight rays against one fixed
+    mesh and cannot raise the surface by a bulge that depends on each pair)."""
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
+    if engine == "auto":
+        if isinstance(terrain, HeightGrid):
+            return "grid"
+        return "embree" if kc == 0.0 else "tin"
+    if engine == "grid" and not isinstance(terrain, HeightGrid):
+        raise ValueError(
+            f"engine 'grid' needs a HeightGrid, got {describe(terrain)}; use engine='embree' or 'auto' for a TIN"
+        )
+    if engine == "embree" and kc != 0.0:
+        raise ValueError(
+            "engine 'embree' cannot model earth curvature (its straight rays meet one fixed mesh, and the "
+            "curvature bulge depends on each pair); use engine='auto' (exact: the grid walk on a HeightGrid, "
+            "the TIN clipper on a TIN) or curvature=0"
+        )
+    return engine
+
+
+def _check_end_radius(end_radius) -> float:
+    if isinstance(end_radius, (str, bytes)):
+        raise TypeError(f"end_radius must be a real number, got {describe(end_radius)}")
+    return as_nonnegative_finite(end_radius, "end_radius", "a horizontal distance in the terrain's x/y units")
+
+
+def _check_inside(terrain, pts: np.ndarray, name: str) -> None:
+    if pts.shape[0] == 0:
+        return
+    if isinstance(terrain, HeightGrid):
+        xmin, xmax, ymin, ymax = terrain.extent
+        slack = 1e-9 * _extent_diagonal(terrain)
+        x = pts[:, 0]
+        y = pts[:, 1]
+        out = (x < xmin - slack) | (x > xmax + slack) | (y < ymin - slack) | (y > ymax + slack)
+    else:
+        out = np.isnan(terrain.height_at(pts[:, :2]))
+    if out.any():
+        bad = np.flatnonzero(out)
+        raise OutsideFootprintError(
+            f"{name} has {bad.size} point(s) outside the terrain's footprint {terrain.extent} "
+            f"(first at index {int(bad[0])}: {pts[bad[0], :2].tolist()})"
+        )
+
+
+def _prepare_terrain(terrain, operation: str):
+    as_terrain(terrain)
+    if isinstance(terrain, HeightGrid):
+        terrain.require_finite(operation)
+
+
+def _prepare_segments(terrain, a, b, operation: str):
+    _prepare_terrain(terrain, operation)
+    a = as_points(a, "a", 3)
+    b = as_points(b, "b", 3)
+    if a.shape != b.shape:
+        raise ValueError(f"a and b must have the same shape (m, 3), got {a.shape} and {b.shape}")
+    _check_inside(terrain, a, "a")
+    _check_inside(terrain, b, "b")
+    return np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)

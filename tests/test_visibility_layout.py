@@ -1,0 +1,83 @@
+"""The visibility package's shape: what it exports, no import cycle, no long argument lists."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+from pathlib import Path
+
+import pytest
+
+import terrainvis
+import terrainvis.visibility as vis
+
+PACKAGE = Path(vis.__file__).parent
+PUBLIC = ("min_clearance", "line_of_sight", "visibility_matrix", "viewshed", "lowest_point", "clearance_profile",
+          "trim_length", "clearance_tolerance", "terrain_scale", "embree_tolerance", "ENGINES", "TRIM_REL", "TOL_REL")
+
+
+def test_public_names_are_handed_on():
+    for name in PUBLIC:
+        assert hasattr(vis, name), name
+    for name in ("min_clearance", "line_of_sight", "visibility_matrix", "viewshed"):
+        assert getattr(terrainvis, name) is getattr(vis, name)
+    # ``viewshed`` is the function, not a module
+    assert callable(vis.viewshed) and not inspect.ismodule(vis.viewshed)
+
+
+def test_the_package_init_only_hands_names_on():
+    tree = ast.parse((PACKAGE / "__init__.py").read_text())
+    defined = [n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]
+    assert defined == []
+
+
+def _module_imports(path: Path) -> set[str]:
+    """Modules of the visibility package imported at module level by ``path``
+    (``from . import name`` of a name that is no module imports the package's ``__init__``)."""
+    out = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            if node.module:
+                out.add(node.module.split(".")[0])
+            else:
+                out.update(a.name if (PACKAGE / f"{a.name}.py").exists() else "__init__" for a in node.names)
+    return out
+
+
+def test_no_import_cycle_inside_the_package():
+    mods = {p.stem: _module_imports(p) for p in PACKAGE.glob("*.py")}
+    state = {}
+
+    def visit(m, path):
+        if state.get(m) == "done":
+            return
+        assert state.get(m) != "open", f"import cycle: {' -> '.join(path + [m])}"
+        state[m] = "open"
+        for dep in sorted(mods.get(m, ())):
+            if dep in mods:
+                visit(dep, path + [m])
+        state[m] = "done"
+
+    for m in sorted(mods):
+        visit(m, [])
+
+
+def _functions():
+    import importlib
+
+    for p in sorted(PACKAGE.glob("*.py")):
+        mod = importlib.import_module(f"terrainvis.visibility.{p.stem}") if p.stem != "__init__" else vis
+        for name, obj in vars(mod).items():
+            fn = getattr(obj, "py_func", obj)
+            if inspect.isfunction(fn) and fn.__module__ == mod.__name__:
+                yield f"{mod.__name__}.{name}", fn
+
+
+@pytest.mark.parametrize("limit", [12])
+def test_no_function_takes_more_than_a_dozen_positional_arguments(limit):
+    long = []
+    for name, fn in _functions():
+        params = [p for p in inspect.signature(fn).parameters.values() if p.kind != p.KEYWORD_ONLY]
+        if len(params) > limit:
+            long.append(f"{name} ({len(params)})")
+    assert not long, f"more than {limit} parameters (keyword-only options aside): {long}"
