@@ -26,8 +26,8 @@ from pathlib import Path
 
 __all__ = ["main"]
 
-#: ``--quick``: a run of seconds for smoke tests.
-QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "points": 20, "sets": 2}
+#: ``--quick``: a run of seconds for smoke tests (terrains, and options by name, each unless given).
+QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "n_points": 20, "n_sets": 2}
 
 
 class UsageError(ValueError):
@@ -43,13 +43,21 @@ def _add_nodata(p) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from simplifiers import METHODS
-
-    from .experiment import CASCADE_AUTO_MIN_SAMPLES, DEFAULT_TERRAINS, DEFAULTS, PREDICATES
-    from .relocation import RELOCATIONS
-
     p = argparse.ArgumentParser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _compare_parser(sub)
+    _simplify_parser(sub)
+    _los_parser(sub)
+    _viewshed_parser(sub)
+    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
+    i.add_argument("terrain", help="bundled name or DEM file")
+    return p
+
+
+def _compare_parser(sub) -> None:
+    """``terrainvis compare``: the options' flags come from :data:`terrainvis.options.OPTIONS`."""
+    from .options import add_flags
+    from .plan import DEFAULT_TERRAINS
 
     c = sub.add_parser(
         "compare", help="run the paper's experiment and print its tables",
@@ -62,47 +70,26 @@ def _parser() -> argparse.ArgumentParser:
     )
     c.add_argument("--terrain", nargs="+", default=None, metavar="T",
                    help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}) or DEM files (.npz .npy .asc .tif)")
-    c.add_argument("--levels", nargs="+", type=int, default=None,
-                   help=f"simplification levels (default: {' '.join(map(str, DEFAULTS.levels))})")
-    c.add_argument("--methods", nargs="+", default=None, metavar="M", help=f"methods (default: all of {', '.join(METHODS)})")
-    c.add_argument("--relocations", nargs="+", default=None, metavar="R",
-                   help=f"relocations (default: {' '.join(RELOCATIONS)}; add 'oracle' for the upper bound)")
-    c.add_argument("--points", type=int, default=None, help=f"points per set (default {DEFAULTS.n_points})")
-    c.add_argument("--sets", type=int, default=None, help=f"point sets per terrain (default {DEFAULTS.n_sets})")
-    c.add_argument("--seed", type=int, default=DEFAULTS.seed, help=f"seed of the point sets (default {DEFAULTS.seed})")
-    c.add_argument("--offset", type=float, default=DEFAULTS.offset,
-                   help=f"observer height above the surface (default {DEFAULTS.offset:g})")
-    c.add_argument("--max-distance", nargs="+", type=_distance, default=None, metavar="D",
-                   help="count only pairs within this horizontal distance; several give a sweep from the same "
-                        "verdicts ('all' for every pair)")
-    c.add_argument("--distance-unit", choices=["world", "cells"], default=DEFAULTS.distance_unit,
-                   help="unit of --max-distance: world units or cells of the terrain (default world)")
-    c.add_argument("--predicate", choices=PREDICATES, default=DEFAULTS.predicate,
-                   help="line-of-sight predicate on S(T): exact, or paper (ignore one cell of S(T) around each end)")
-    c.add_argument("--engine", choices=["auto", "grid", "embree"], default=DEFAULTS.engine, help="visibility engine")
-    c.add_argument("--measure", choices=["pairs", "viewshed"], default=DEFAULTS.measure,
-                   help="pairs: the paper's visibility matrices; viewshed: each observer's viewshed of every sample")
-    c.add_argument("--observers", type=int, default=DEFAULTS.n_observers,
-                   help=f"observers per terrain for --measure viewshed (default {DEFAULTS.n_observers})")
-    c.add_argument("--target-height", type=float, default=DEFAULTS.target_height,
-                   help="viewshed targets' height above the surface under test (default 0)")
-    c.add_argument("--repeats", type=int, default=DEFAULTS.repeats, help="timings per visibility matrix (the fastest is kept)")
+    add_flags(c)
     c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")
-    c.add_argument("--no-volume", action="store_true", help="skip the volume between T and S(T)")
-    cc = c.add_mutually_exclusive_group()
-    cc.add_argument("--cascade", dest="cascade", action="store_const", const=True, default=DEFAULTS.cascade,
-                    help="simplify each QEC level from the previous level's result (one decimation instead of three; "
-                         "changes QEC's results slightly, see the README). Default: only on grids of more than "
-                         f"{CASCADE_AUTO_MIN_SAMPLES:,} samples")
-    cc.add_argument("--no-cascade", dest="cascade", action="store_const", const=False,
-                    help="simplify every level from the terrain itself, as the paper does, whatever its size")
     c.add_argument("--no-plots", action="store_true", help="do not write the figures")
     c.add_argument("--quick", action="store_true",
-                   help="a run of seconds for smoke tests: terrains hills and ridges, levels 1 and 3, 2 sets of 20 points")
+                   help=f"a run of seconds for smoke tests: {_quick_flags()} (each unless given)")
     c.add_argument("--resume", action="store_true", help="keep the units already in OUT/results.csv and run only the rest")
     c.add_argument("--out", default="terrainvis-results", help="output folder (default: ./terrainvis-results)")
     _add_nodata(c)
+
+
+def _quick_flags() -> str:
+    from .options import OPTIONS
+
+    words = lambda v: " ".join(map(str, v)) if isinstance(v, list) else str(v)  # noqa: E731
+    return " ".join(f"{'--terrain' if k == 'terrains' else OPTIONS[k].flag} {words(v)}" for k, v in QUICK.items())
+
+
+def _simplify_parser(sub) -> None:
+    from simplifiers import METHODS
 
     s = sub.add_parser(
         "simplify", help="simplify a DEM and write the result",
@@ -120,6 +107,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="an option of the method, e.g. weights=derived for lls (repeatable)")
     _add_nodata(s)
 
+
+def _los_parser(sub) -> None:
     los = sub.add_parser(
         "los", help="check lines of sight on a DEM",
         description=(
@@ -136,6 +125,8 @@ def _parser() -> argparse.ArgumentParser:
     los.add_argument("--end-radius", type=float, default=0.0, help="ignore the surface within this distance of each end")
     _add_nodata(los)
 
+
+def _viewshed_parser(sub) -> None:
     v = sub.add_parser(
         "viewshed", help="which samples of a DEM an observer sees",
         description=(
@@ -152,34 +143,21 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
     _add_nodata(v)
 
-    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
-    i.add_argument("terrain", help="bundled name or DEM file")
-    return p
-
 
 # ------------------------------------------------------------------ helpers
 def _terrain(name: str, args=None):
     """One terrain from a bundled name or a DEM file, with --fill / --crop-valid applied."""
-    from .experiment import _resolve_one
+    from .plan import resolve_one
 
     if Path(name).suffix and not Path(name).exists():
         raise UsageError(f"DEM file {name!r} does not exist")
-    label, grid = _resolve_one(None, name, 0)
+    label, grid = resolve_one(None, name, 0)
     if args is not None and getattr(args, "fill", None):
         grid = grid.fill_nodata(args.fill)
     elif args is not None and getattr(args, "crop_valid", False):
         rs, cs = grid.valid_window()
         grid = grid.crop(rs, cs)
     return label, grid
-
-
-def _distance(text: str):
-    if text.lower() in ("all", "inf", "none"):
-        return None
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a distance or 'all', got {text!r}") from None
 
 
 def _option_value(text: str):
@@ -216,12 +194,15 @@ def _client(address: str):
 def _compare(args) -> int:
     from . import report
     from ._fileio import atomic_write_text, check_writable_dir
-    from .experiment import DEFAULT_TERRAINS, DEFAULTS, compare, resolve_terrains
+    from .experiment import DEFAULTS, compare, resolve_terrains
+    from .options import given
+    from .plan import DEFAULT_TERRAINS
 
     terrains = args.terrain or (QUICK["terrains"] if args.quick else list(DEFAULT_TERRAINS))
-    levels = args.levels if args.levels is not None else (QUICK["levels"] if args.quick else list(DEFAULTS.levels))
-    points = args.points if args.points is not None else (QUICK["points"] if args.quick else DEFAULTS.n_points)
-    sets = args.sets if args.sets is not None else (QUICK["sets"] if args.quick else DEFAULTS.n_sets)
+    options = given(args)
+    if args.quick:
+        options = {**{k: v for k, v in QUICK.items() if k != "terrains"}, **options}
+    settings = DEFAULTS.replace(**options)  # what the run uses (compare validates it)
     out = check_writable_dir(args.out, "--out")
     grids = {}
     for t in terrains:
@@ -232,22 +213,15 @@ def _compare(args) -> int:
     grids = resolve_terrains(grids)
     client = _client(args.scheduler) if args.scheduler else None
     t0 = time.perf_counter()
-    df = compare(
-        grids, methods=args.methods, levels=levels, relocations=args.relocations, n_points=points, n_sets=sets,
-        seed=args.seed, max_distance=DEFAULTS.max_distance if args.max_distance is None else args.max_distance,
-        distance_unit=args.distance_unit, offset=args.offset, engine=args.engine,
-        predicate=args.predicate, volume=not args.no_volume, repeats=args.repeats, cascade=args.cascade,
-        measure=args.measure, n_observers=args.observers, target_height=args.target_height,
-        workers=args.workers,
-        client=client, out_csv=out / "results.csv", resume=args.resume, save_dir=out / "simplified", progress=True,
-    )
+    df = compare(grids, **options, workers=args.workers, client=client, out_csv=out / "results.csv",
+                 resume=args.resume, save_dir=out / "simplified", progress=True)
     seconds = time.perf_counter() - t0
     extra = {}
     if (df["relocation"] == "oracle").any():
         extra["oracle"] = report.oracle_gap(df)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
-    if args.measure == "viewshed":
+    if settings.measure == "viewshed":
         if df["accuracy"].notna().any():
             extra["viewsheds"] = report.viewshed_table(df)
         text = report.to_markdown({**report.paper_tables(df), **extra})
@@ -268,7 +242,7 @@ def _compare(args) -> int:
         lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
     summary = (
         f"{df[['terrain', 'method', 'level']].drop_duplicates().shape[0]} units, {len(df)} rows, "
-        f"{len(grids)} terrains, predicate {args.predicate}, {seconds:.1f} s"
+        f"{len(grids)} terrains, predicate {settings.predicate}, {seconds:.1f} s"
     )
     atomic_write_text(out / "tables.md", f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")
     print(text)
@@ -292,8 +266,8 @@ def _write_plots(df, grids, out: Path) -> None:
 
     from . import plot
     from ._fileio import atomic_path
-    from .experiment import simplified_path
     from .io import load_terrain
+    from .units import simplified_path
 
     def save(fig, name, dpi):
         with atomic_path(out / name) as tmp:
