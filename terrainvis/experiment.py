@@ -42,7 +42,7 @@ from .options import (  # noqa: F401
 from .plan import DEFAULT_TERRAINS, JACKSBORO_WINDOW, cascades, fingerprint, resolve_terrains, run_record  # noqa: F401
 from .plan import kernels_cached as _kernels_cached
 from .plan import resolve_one as _resolve_one  # noqa: F401
-from .plan import settings_for
+from .plan import check_memory, settings_for
 from .plan import tasks as _plan_tasks
 from .plan import warm_up_parts as _warm_up_parts
 from .units import call as _call
@@ -101,7 +101,8 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
         Save every simplified terrain there (:func:`simplified_path`,
         :func:`terrainvis.load_terrain`).
     progress : bool
-        Show a progress bar (and a note when numba compiles its kernels) on stderr.
+        Show a progress bar on stderr (a widget in Jupyter with ipywidgets); on a cold
+        numba cache, first what is being compiled, with an estimate of how long.
 
     The options (between ``terrains`` and ``workers``) are declared in
     :data:`terrainvis.options.OPTIONS`; their defaults are :data:`DEFAULTS`.
@@ -118,6 +119,11 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     ------
     terrainvis.runner.Interrupted
         On Ctrl-C or SIGTERM; the units finished before are in ``out_csv``.
+    terrainvis._fileio.OutputBusyError
+        Another process is writing ``out_csv`` (a ValueError naming its pid and start time).
+    MemoryError
+        Before anything runs, when the units could not fit in the available memory
+        (:func:`terrainvis.plan.check_memory`).
 
     Examples
     --------
@@ -133,20 +139,46 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     settings = _settings(grids, **options)
     workers = check_workers(workers)
     client = check_client(client)
+    check_memory(settings, grids, _at_once(settings, grids, workers, client))
 
-    store, done = _store(out_csv, settings, grids, resume)
-    tasks = _tasks(grids, settings, done)
-    if save_dir is not None:
-        from ._fileio import check_writable_dir
+    with _lock(out_csv):
+        store, done = _store(out_csv, settings, grids, resume)
+        tasks = _tasks(grids, settings, done)
+        if save_dir is not None:
+            from ._fileio import check_writable_dir
 
-        save_dir = str(check_writable_dir(save_dir, "save_dir"))
-    new_rows = _execute(tasks, grids, settings, done, store, save_dir=save_dir, workers=workers, client=client,
-                        progress=progress)
-    rows = store.rows() if store is not None else table(new_rows)
-    df = order(rows, grids)
-    if store is not None:
-        store.finish(df)
+            save_dir = str(check_writable_dir(save_dir, "save_dir"))
+        new_rows = _execute(tasks, grids, settings, done, store, save_dir=save_dir, workers=workers, client=client,
+                            progress=progress)
+        rows = store.rows() if store is not None else table(new_rows)
+        df = order(rows, grids)
+        if store is not None:
+            store.finish(df)
     return df
+
+
+def _lock(out_csv):
+    """The run's hold on ``out_csv`` (``results.lock`` beside it): a second run writing it is refused."""
+    import contextlib
+    from pathlib import Path
+
+    if out_csv is None:
+        return contextlib.nullcontext()
+    from ._fileio import RunLock
+    from .results import lock_path
+
+    path = Path(out_csv)
+    if not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    return RunLock(lock_path(path), f"out_csv {str(path)!r}", "compare()")
+
+
+def _at_once(settings: Settings, grids: dict, workers, client) -> int:
+    """How many units may run side by side on this machine (a dask cluster's workers have their own memory)."""
+    if client is not None:
+        return 1
+    n_local = (os.cpu_count() or 1) if workers is None else workers
+    return max(1, min(n_local, len(grids) * len(settings.methods) * len(settings.levels)))
 
 
 def _store(out_csv, settings: Settings, grids: dict, resume: bool):
@@ -165,35 +197,102 @@ def _store(out_csv, settings: Settings, grids: dict, resume: bool):
 
 def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, progress) -> list[dict]:
     """Run the tasks (after the warm-up parts of a cold numba cache); every finished unit goes to ``store``."""
-    from tqdm.auto import tqdm
-
     from .runner import run_units
 
     todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
-    cold = bool(tasks) and _kernels_cached() is False
-    if progress and cold:
-        tqdm.write("terrainvis: compiling numba kernels (first run only, under a minute)...", file=sys.stderr)
-    bar = tqdm(total=todo, desc="compare", unit="unit", file=sys.stderr, disable=not (progress and tasks))
+    work = [((t, m, g), (_run_unit, grids[t], t, m, g, settings, save_dir)) for t, m, g in tasks]
+    n_local = (os.cpu_count() or 1) if workers is None else workers
+    cold = bool(tasks) and client is None and _kernels_cached() is False
+    parts = _warm_up_parts(tasks, grids) if cold and ((n_local > 1 and len(work) > 1) or progress) else []
+    work = [(("warm-up", part), (_warm_up, part, settings)) for part in parts] + work
+    bars = _Progress(progress and bool(tasks), parts, todo, min(n_local, len(work)))
     new_rows: list[dict] = []
 
     def collect(key, rows):
         if key[0] == "warm-up":
+            bars.compiled(key[1])
             return
         rows = [r for r in rows if (r["terrain"], r["method"], r["level"]) not in done]
         new_rows.extend(rows)
         if store is not None:
             store.add(rows)
-        bar.update(len({r["level"] for r in rows}))
+        bars.finished(len({r["level"] for r in rows}))
 
-    work = [((t, m, g), (_run_unit, grids[t], t, m, g, settings, save_dir)) for t, m, g in tasks]
-    n_local = (os.cpu_count() or 1) if workers is None else workers
-    if cold and client is None and n_local > 1 and len(work) > 1:
-        work = [(("warm-up", part), (_warm_up, part, settings)) for part in _warm_up_parts(tasks, grids)] + work
     try:
         run_units(work, _call, on_result=collect, workers=workers, client=client)
     finally:
-        bar.close()
+        bars.close()
     return new_rows
+
+
+class _Progress:
+    """The progress shown on stderr: the kernels being compiled (a cold cache), then the units.
+
+    The compile bar names each part as it finishes. Its first estimate comes from the
+    compile times measured on this project's machine (:func:`terrainvis.plan.compile_seconds`);
+    as parts finish, the time left is rescaled by how fast this machine compiles them.
+    """
+
+    def __init__(self, show: bool, parts: list, units: int, at_once: int):
+        import time
+
+        from .plan import compile_seconds, compile_weight
+
+        tqdm = progress_bar_class()
+        self.compile = None
+        self.weight = compile_weight
+        self.left = sum(map(compile_weight, parts))
+        self.done = 0.0
+        self.start = time.perf_counter()
+        if show and parts:
+            estimate = compile_seconds(parts, at_once)
+            tqdm.write(f"terrainvis: first run: compiling the numba kernels this run needs ({len(parts)} parts, "
+                       f"about {estimate:.0f} s on this project's shared 2-core machine; later runs load them "
+                       "from numba's cache)", file=sys.stderr)
+            self.compile = tqdm(total=len(parts), desc="compiling", unit="part", file=sys.stderr)
+        self.units = tqdm(total=units, desc="compare", unit="unit", file=sys.stderr, disable=not show)
+
+    def compiled(self, part: tuple) -> None:
+        import time
+
+        if self.compile is None:
+            return
+        w = self.weight(part)
+        self.done, self.left = self.done + w, max(0.0, self.left - w)
+        rate = (time.perf_counter() - self.start) / self.done if self.done else 0.0
+        note = f"{part[1]} done" + (f", about {self.left * rate:.0f} s left" if self.left else "")
+        self.compile.set_postfix_str(note, refresh=False)
+        self.compile.update(1)
+
+    def finished(self, n: int) -> None:
+        self.units.update(n)
+
+    def close(self) -> None:
+        for bar in (self.compile, self.units):
+            if bar is not None:
+                bar.close()
+
+
+def progress_bar_class():
+    """tqdm's notebook bar in a Jupyter kernel that has ipywidgets, else the plain one.
+
+    ``tqdm.auto`` would pick the notebook bar in any Jupyter kernel and, without
+    ipywidgets, warn "IProgress not found" and fall back; this asks first.
+    """
+    from tqdm.std import tqdm as plain
+
+    try:
+        shell = sys.modules["IPython"].get_ipython() if "IPython" in sys.modules else None
+        kernel = "ipykernel.zmqshell" in sys.modules or (shell is not None and "IPKernelApp" in shell.config)
+        if not kernel:
+            return plain
+        import ipywidgets  # noqa: F401
+
+        from tqdm import notebook
+
+        return notebook.tqdm if getattr(notebook, "IProgress", None) is not None else plain
+    except Exception:  # no ipywidgets, or an IPython without .config
+        return plain
 
 
 def _signature() -> inspect.Signature:

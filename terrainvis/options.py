@@ -171,6 +171,14 @@ def finite(value, name: str) -> float:
     return float(arr)
 
 
+def height(value, name: str) -> float:
+    """A check: a height above the surface, finite and >= 0 (a negative one would stand underground)."""
+    out = finite(value, name)
+    if out < 0:
+        raise ValueError(f"{name} must be >= 0 (a height above the surface), got {out!r}")
+    return out
+
+
 def one_of(valid: Callable[[], Sequence[str]]):
     """A check: one of the names ``valid()`` lists (read when the check runs)."""
     return lambda value, name: choice(value, name, valid())
@@ -336,7 +344,7 @@ _DECLARED = [
         cli=Flag(choices=lambda: DISTANCE_UNITS),
     ),
     Option(
-        "offset", 0.0, finite, "observer height above the original surface", "float",
+        "offset", 0.0, height, "observer height above the original surface, >= 0", "float",
         doc="See :mod:`terrainvis.relocation`.", cli=Flag(type=float),
     ),
     Option(
@@ -384,7 +392,7 @@ _DECLARED = [
     Option("n_observers", 20, integer(minimum=1), "observers per terrain", "int", measures=("viewshed",),
            cli=Flag("--observers", int)),
     Option(
-        "target_height", 0.0, finite, "the viewshed targets' height above the surface under test", "float",
+        "target_height", 0.0, height, "the viewshed targets' height above the surface under test, >= 0", "float",
         measures=("viewshed",), cli=Flag(type=float),
     ),
 ]
@@ -426,8 +434,6 @@ def _viewshed_limits(settings: Settings, grids: dict) -> None:
         raise ValueError(f"measure 'viewshed' supports predicate 'exact' only, got {settings.predicate!r}")
     if ORACLE in settings.relocations:
         raise ValueError("measure 'viewshed' does not support the 'oracle' relocation (it bounds pair verdicts)")
-    if settings.target_height < 0:
-        raise ValueError(f"target_height must be >= 0, got {settings.target_height!r}")
 
 
 #: Checks across options (and the terrains), run after every option's own check:

@@ -26,13 +26,19 @@ import pandas as pd
 
 from ._fileio import atomic_write_text
 
-__all__ = ["ResultStore", "settings_path", "read_results", "as_table"]
+__all__ = ["ResultStore", "settings_path", "lock_path", "read_results", "as_table"]
 
 
 def settings_path(csv_path) -> Path:
     """The settings file stored beside a results CSV: ``results.csv`` -> ``results.settings.json``."""
     p = Path(csv_path)
     return p.with_name(p.stem + ".settings.json")
+
+
+def lock_path(csv_path) -> Path:
+    """The lock held beside a results CSV while a run writes it: ``results.csv`` -> ``results.lock``."""
+    p = Path(csv_path)
+    return p.with_name(p.stem + ".lock")
 
 
 #: Columns read as text whatever they hold (a terrain named "2024" stays a name).

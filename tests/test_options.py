@@ -88,16 +88,21 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     argv = ["compare", "--terrain", "hills", "--out", str(tmp_path), "--methods", "lls", "qec", "--levels", "2",
             "--relocations", "full", "--points", "7", "--sets", "3", "--seed", "5", "--max-distance", "100", "all",
             "--distance-unit", "cells", "--offset", "1.5", "--engine", "embree", "--predicate", "paper",
-            "--no-volume", "--repeats", "2", "--no-cascade", "--measure", "viewshed", "--observers", "4",
-            "--target-height", "0.5"]
+            "--no-volume", "--repeats", "2", "--no-cascade"]
     with pytest.raises(Stop):
         main(argv)
     expected = dict(methods=["lls", "qec"], levels=[2], relocations=["full"], n_points=7, n_sets=3, seed=5,
                     max_distance=[100.0, None], distance_unit="cells", offset=1.5, engine="embree",
-                    predicate="paper", volume=False, repeats=2, cascade=False, measure="viewshed", n_observers=4,
-                    target_height=0.5)
-    assert set(expected) == {n for n, o in OPTIONS.items() if o.cli is not None}  # the test covers every flag
+                    predicate="paper", volume=False, repeats=2, cascade=False)
     assert {k: seen[k] for k in expected} == expected
+    seen.clear()
+    with pytest.raises(Stop):  # the viewshed measure's options (it refuses predicate 'paper')
+        main(["compare", "--terrain", "hills", "--out", str(tmp_path), "--measure", "viewshed", "--observers", "4",
+              "--target-height", "0.5"])
+    viewshed = dict(measure="viewshed", n_observers=4, target_height=0.5)
+    assert {k: v for k, v in seen.items() if k in OPTIONS} == viewshed
+    expected.update(viewshed)
+    assert set(expected) == {n for n, o in OPTIONS.items() if o.cli is not None}  # the test covers every flag
     seen.clear()
     with pytest.raises(Stop):
         main(["compare", "--terrain", "hills", "--out", str(tmp_path), "--cascade"])
