@@ -12,8 +12,13 @@
 * ``terrainvis info DEM`` describes a terrain.
 
 User mistakes end with one line on stderr and exit status 2; a run that produced no
-result exits with 1; an interrupt exits with 130 (SIGINT) or 143 (SIGTERM), after the
-finished units have been written.
+result, or a failed write (a full disk), exits with 1; an interrupt exits with 130
+(SIGINT) or 143 (SIGTERM), after the finished units have been written; a closed pipe
+(``terrainvis ... | head``) ends the command quietly with 141, as Unix tools do.
+
+Nothing is written over an input (under any spelling of its path, or through a symlink)
+or into the installed package. Heights above the surface (``--height``,
+``--target-height``, ``--offset``) must be finite and >= 0 everywhere.
 """
 
 from __future__ import annotations
@@ -26,8 +31,8 @@ from pathlib import Path
 
 __all__ = ["main"]
 
-#: ``--quick``: a run of seconds for smoke tests.
-QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "points": 20, "sets": 2}
+#: ``--quick``: a run of seconds for smoke tests (terrains, and options by name, each unless given).
+QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "n_points": 20, "n_sets": 2}
 
 
 class UsageError(ValueError):
@@ -35,6 +40,42 @@ class UsageError(ValueError):
 
 
 # ------------------------------------------------------------------ parser
+class _ParseError(ValueError):
+    """argparse's complaint, reported in one line by :func:`main` (exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (no usage block), like every other error of the command line."""
+
+    def error(self, message):
+        raise _ParseError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _height(text: str) -> float:
+    """A height above the surface: finite and >= 0 (a negative eye height would stand underground)."""
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a height >= 0 above the surface, got {text!r}")
+    return value
+
+
+def _distance_arg(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a distance >= 0, got {text!r}")
+    return value
+
+
 def _add_nodata(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--fill", choices=["nearest", "linear"], default=None,
@@ -43,13 +84,22 @@ def _add_nodata(p) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from simplifiers import METHODS
-
-    from .experiment import CASCADE_AUTO_MIN_SAMPLES, DEFAULT_TERRAINS, DEFAULTS, PREDICATES
-    from .relocation import RELOCATIONS
-
-    p = argparse.ArgumentParser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
+    p = _Parser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _compare_parser(sub)
+    _simplify_parser(sub)
+    _los_parser(sub)
+    _viewshed_parser(sub)
+    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
+    i.add_argument("terrain", help="bundled name or DEM file")
+    _add_nodata(i)
+    return p
+
+
+def _compare_parser(sub) -> None:
+    """``terrainvis compare``: the options' flags come from :data:`terrainvis.options.OPTIONS`."""
+    from .options import add_flags
+    from .plan import DEFAULT_TERRAINS
 
     c = sub.add_parser(
         "compare", help="run the paper's experiment and print its tables",
@@ -62,47 +112,31 @@ def _parser() -> argparse.ArgumentParser:
     )
     c.add_argument("--terrain", nargs="+", default=None, metavar="T",
                    help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}) or DEM files (.npz .npy .asc .tif)")
-    c.add_argument("--levels", nargs="+", type=int, default=None,
-                   help=f"simplification levels (default: {' '.join(map(str, DEFAULTS.levels))})")
-    c.add_argument("--methods", nargs="+", default=None, metavar="M", help=f"methods (default: all of {', '.join(METHODS)})")
-    c.add_argument("--relocations", nargs="+", default=None, metavar="R",
-                   help=f"relocations (default: {' '.join(RELOCATIONS)}; add 'oracle' for the upper bound)")
-    c.add_argument("--points", type=int, default=None, help=f"points per set (default {DEFAULTS.n_points})")
-    c.add_argument("--sets", type=int, default=None, help=f"point sets per terrain (default {DEFAULTS.n_sets})")
-    c.add_argument("--seed", type=int, default=DEFAULTS.seed, help=f"seed of the point sets (default {DEFAULTS.seed})")
-    c.add_argument("--offset", type=float, default=DEFAULTS.offset,
-                   help=f"observer height above the surface (default {DEFAULTS.offset:g})")
-    c.add_argument("--max-distance", nargs="+", type=_distance, default=None, metavar="D",
-                   help="count only pairs within this horizontal distance; several give a sweep from the same "
-                        "verdicts ('all' for every pair)")
-    c.add_argument("--distance-unit", choices=["world", "cells"], default=DEFAULTS.distance_unit,
-                   help="unit of --max-distance: world units or cells of the terrain (default world)")
-    c.add_argument("--predicate", choices=PREDICATES, default=DEFAULTS.predicate,
-                   help="line-of-sight predicate on S(T): exact, or paper (ignore one cell of S(T) around each end)")
-    c.add_argument("--engine", choices=["auto", "grid", "embree"], default=DEFAULTS.engine, help="visibility engine")
-    c.add_argument("--measure", choices=["pairs", "viewshed"], default=DEFAULTS.measure,
-                   help="pairs: the paper's visibility matrices; viewshed: each observer's viewshed of every sample")
-    c.add_argument("--observers", type=int, default=DEFAULTS.n_observers,
-                   help=f"observers per terrain for --measure viewshed (default {DEFAULTS.n_observers})")
-    c.add_argument("--target-height", type=float, default=DEFAULTS.target_height,
-                   help="viewshed targets' height above the surface under test (default 0)")
-    c.add_argument("--repeats", type=int, default=DEFAULTS.repeats, help="timings per visibility matrix (the fastest is kept)")
+    add_flags(c)
     c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")
-    c.add_argument("--no-volume", action="store_true", help="skip the volume between T and S(T)")
-    cc = c.add_mutually_exclusive_group()
-    cc.add_argument("--cascade", dest="cascade", action="store_const", const=True, default=DEFAULTS.cascade,
-                    help="simplify each QEC level from the previous level's result (one decimation instead of three; "
-                         "changes QEC's results slightly, see the README). Default: only on grids of more than "
-                         f"{CASCADE_AUTO_MIN_SAMPLES:,} samples")
-    cc.add_argument("--no-cascade", dest="cascade", action="store_const", const=False,
-                    help="simplify every level from the terrain itself, as the paper does, whatever its size")
     c.add_argument("--no-plots", action="store_true", help="do not write the figures")
     c.add_argument("--quick", action="store_true",
-                   help="a run of seconds for smoke tests: terrains hills and ridges, levels 1 and 3, 2 sets of 20 points")
-    c.add_argument("--resume", action="store_true", help="keep the units already in OUT/results.csv and run only the rest")
-    c.add_argument("--out", default="terrainvis-results", help="output folder (default: ./terrainvis-results)")
+                   help=f"a run of seconds for smoke tests: {_quick_flags()} (each unless given)")
+    again = c.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="keep the units already in OUT/results.csv and run only the rest (same settings)")
+    again.add_argument("--overwrite", action="store_true",
+                       help="replace an earlier run in OUT: remove the files it wrote (and only those) first")
+    c.add_argument("--out", default="terrainvis-results",
+                   help="output folder (default: ./terrainvis-results); one run at a time")
     _add_nodata(c)
+
+
+def _quick_flags() -> str:
+    from .options import OPTIONS
+
+    words = lambda v: " ".join(map(str, v)) if isinstance(v, list) else str(v)  # noqa: E731
+    return " ".join(f"{'--terrain' if k == 'terrains' else OPTIONS[k].flag} {words(v)}" for k, v in QUICK.items())
+
+
+def _simplify_parser(sub) -> None:
+    from simplifiers import METHODS
 
     s = sub.add_parser(
         "simplify", help="simplify a DEM and write the result",
@@ -120,6 +154,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="an option of the method, e.g. weights=derived for lls (repeatable)")
     _add_nodata(s)
 
+
+def _los_parser(sub) -> None:
     los = sub.add_parser(
         "los", help="check lines of sight on a DEM",
         description=(
@@ -128,14 +164,18 @@ def _parser() -> argparse.ArgumentParser:
         ),
     )
     los.add_argument("dem", help="DEM file or bundled name")
-    los.add_argument("--from", dest="start", nargs=2, type=float, metavar=("X", "Y"), help="observer position")
-    los.add_argument("--to", dest="end", nargs=2, type=float, metavar=("X", "Y"), help="target position")
+    los.add_argument("--from", dest="start", nargs=2, type=_number, metavar=("X", "Y"), help="observer position")
+    los.add_argument("--to", dest="end", nargs=2, type=_number, metavar=("X", "Y"), help="target position")
     los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2")
-    los.add_argument("--height", type=float, default=1.7, help="observer height above the surface (default 1.7)")
-    los.add_argument("--target-height", type=float, default=0.0, help="target height above the surface (default 0)")
-    los.add_argument("--end-radius", type=float, default=0.0, help="ignore the surface within this distance of each end")
+    los.add_argument("--height", type=_height, default=1.7, help="observer height above the surface, >= 0 (default 1.7)")
+    los.add_argument("--target-height", type=_height, default=0.0,
+                     help="target height above the surface, >= 0 (default 0)")
+    los.add_argument("--end-radius", type=_distance_arg, default=0.0,
+                     help="ignore the surface within this distance of each end (default 0)")
     _add_nodata(los)
 
+
+def _viewshed_parser(sub) -> None:
     v = sub.add_parser(
         "viewshed", help="which samples of a DEM an observer sees",
         description=(
@@ -145,26 +185,27 @@ def _parser() -> argparse.ArgumentParser:
         ),
     )
     v.add_argument("dem", help="DEM file or bundled name")
-    v.add_argument("--observer", nargs=2, type=float, required=True, metavar=("X", "Y"), help="observer position")
-    v.add_argument("--height", type=float, default=1.7, help="eye height above the surface (default 1.7)")
-    v.add_argument("--target-height", type=float, default=0.0, help="target height above the surface (default 0)")
-    v.add_argument("--max-distance", type=float, default=None, help="only samples within this distance")
+    v.add_argument("--observer", nargs=2, type=_number, required=True, metavar=("X", "Y"), help="observer position")
+    v.add_argument("--height", type=_height, default=1.7, help="eye height above the surface, >= 0 (default 1.7)")
+    v.add_argument("--target-height", type=_height, default=0.0,
+                   help="target height above the surface, >= 0 (default 0)")
+    v.add_argument("--max-distance", type=_number, default=None, help="only samples within this distance")
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
     _add_nodata(v)
-
-    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
-    i.add_argument("terrain", help="bundled name or DEM file")
-    return p
 
 
 # ------------------------------------------------------------------ helpers
 def _terrain(name: str, args=None):
     """One terrain from a bundled name or a DEM file, with --fill / --crop-valid applied."""
-    from .experiment import _resolve_one
+    import numpy as np
+
+    from .plan import resolve_one
 
     if Path(name).suffix and not Path(name).exists():
         raise UsageError(f"DEM file {name!r} does not exist")
-    label, grid = _resolve_one(None, name, 0)
+    label, grid = resolve_one(None, name, 0)
+    if not np.isfinite(grid.z).any():
+        raise UsageError(f"DEM {name!r} has no valid sample: all {_plural(grid.size, 'cell')} are nodata")
     if args is not None and getattr(args, "fill", None):
         grid = grid.fill_nodata(args.fill)
     elif args is not None and getattr(args, "crop_valid", False):
@@ -173,13 +214,28 @@ def _terrain(name: str, args=None):
     return label, grid
 
 
-def _distance(text: str):
-    if text.lower() in ("all", "inf", "none"):
-        return None
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a distance or 'all', got {text!r}") from None
+def _plural(n: int, word: str, plural: str | None = None) -> str:
+    """``1 terrain``, ``2 terrains``, ``12,000 vertices`` (with ``plural`` for irregular words)."""
+    return f"{n:,} {word if n == 1 else plural or word + 's'}"
+
+
+def _coord_digits(grid) -> int:
+    """Decimals that show a coordinate to a tenth of the grid's cell, or finer."""
+    import math
+
+    step = min(grid.dx, grid.dy)
+    return max(0, 1 - math.floor(math.log10(step))) if step > 0 else 6
+
+
+def _xy(value: float, grid) -> str:
+    """A coordinate with enough digits for the grid (``.6g`` would round a UTM northing to 10 m)."""
+    import math
+
+    if not math.isfinite(value):
+        return str(value)
+    decimals = _coord_digits(grid)
+    whole = math.floor(math.log10(abs(value))) + 1 if value else 1
+    return f"{value:.{max(6, whole + decimals)}g}"
 
 
 def _option_value(text: str):
@@ -214,15 +270,25 @@ def _client(address: str):
 
 
 def _compare(args) -> int:
-    from . import report
-    from ._fileio import atomic_write_text, check_writable_dir
-    from .experiment import DEFAULT_TERRAINS, DEFAULTS, compare, resolve_terrains
+    from ._fileio import RunLock, check_writable_dir, refuse_protected
+    from ._outdir import LOCK
+
+    refuse_protected(args.out, "--out")
+    out = check_writable_dir(args.out, "--out")
+    with RunLock(out / LOCK, f"--out {str(out)!r}", "terrainvis compare"):
+        return _compare_in(out, args)
+
+
+def _compare_in(out: Path, args) -> int:
+    """``terrainvis compare`` with the output folder locked: check everything, clear an earlier run, run, report."""
+    from .experiment import compare, resolve_terrains
+    from .options import given
+    from .plan import DEFAULT_TERRAINS, settings_for
 
     terrains = args.terrain or (QUICK["terrains"] if args.quick else list(DEFAULT_TERRAINS))
-    levels = args.levels if args.levels is not None else (QUICK["levels"] if args.quick else list(DEFAULTS.levels))
-    points = args.points if args.points is not None else (QUICK["points"] if args.quick else DEFAULTS.n_points)
-    sets = args.sets if args.sets is not None else (QUICK["sets"] if args.quick else DEFAULTS.n_sets)
-    out = check_writable_dir(args.out, "--out")
+    options = given(args)
+    if args.quick:
+        options = {**{k: v for k, v in QUICK.items() if k != "terrains"}, **options}
     grids = {}
     for t in terrains:
         label, grid = _terrain(t, args)
@@ -230,24 +296,47 @@ def _compare(args) -> int:
             raise UsageError(f"--terrain names must be unique, got {label!r} twice")
         grids[label] = grid
     grids = resolve_terrains(grids)
+    settings = settings_for(grids, options)  # compare checks them again; here before anything is removed
+    _earlier_run(out, args, inputs=[t for t in terrains if Path(t).is_file()])
     client = _client(args.scheduler) if args.scheduler else None
     t0 = time.perf_counter()
-    df = compare(
-        grids, methods=args.methods, levels=levels, relocations=args.relocations, n_points=points, n_sets=sets,
-        seed=args.seed, max_distance=DEFAULTS.max_distance if args.max_distance is None else args.max_distance,
-        distance_unit=args.distance_unit, offset=args.offset, engine=args.engine,
-        predicate=args.predicate, volume=not args.no_volume, repeats=args.repeats, cascade=args.cascade,
-        measure=args.measure, n_observers=args.observers, target_height=args.target_height,
-        workers=args.workers,
-        client=client, out_csv=out / "results.csv", resume=args.resume, save_dir=out / "simplified", progress=True,
-    )
-    seconds = time.perf_counter() - t0
+    df = compare(grids, **options, workers=args.workers, client=client, out_csv=out / "results.csv",
+                 resume=args.resume, save_dir=out / "simplified", progress=True)
+    return _compare_report(df, grids, settings, out, args, time.perf_counter() - t0)
+
+
+def _earlier_run(out: Path, args, inputs) -> None:
+    """An earlier run's results in ``out``: refused without --resume or --overwrite; --overwrite removes them."""
+    from ._outdir import describe, earlier_run, remove
+
+    files = earlier_run(out)
+    if not files or args.resume:
+        return
+    if not args.overwrite:
+        raise UsageError(
+            f"--out {str(out)!r} holds the results of an earlier run ({describe(files)}); add --resume to "
+            "continue it (same settings), --overwrite to replace it, or choose another --out"
+        )
+    for f in files:
+        for inp in inputs:
+            if Path(inp).resolve() == f.resolve():
+                raise UsageError(f"--overwrite would remove {str(f)!r}, which is an input (--terrain); "
+                                 "move it out of --out first")
+    remove(out, files)
+    print(f"terrainvis compare: --overwrite: removed the earlier run's {describe(files)}", file=sys.stderr)
+
+
+def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int:
+    """Print and write the tables, draw the figures; the exit status."""
+    from . import report
+    from ._fileio import atomic_write_text
+
     extra = {}
     if (df["relocation"] == "oracle").any():
         extra["oracle"] = report.oracle_gap(df)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
-    if args.measure == "viewshed":
+    if settings.measure == "viewshed":
         if df["accuracy"].notna().any():
             extra["viewsheds"] = report.viewshed_table(df)
         text = report.to_markdown({**report.paper_tables(df), **extra})
@@ -262,14 +351,13 @@ def _compare(args) -> int:
 
         lines += ["", f"Note: QEC ran on fast-simplification for {', '.join(fast)} (more than {AUTO_MAX_SAMPLES:,} "
                       "samples, where pymeshlab takes minutes per level); pymeshlab, the paper's QEC, ran elsewhere."]
+    units = df[["terrain", "method", "level"]].drop_duplicates().shape[0]
     failed = df[df["error"] != ""].drop_duplicates(["terrain", "method", "level"])
     if len(failed):
         lines += ["", "### Failed units", ""]
         lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
-    summary = (
-        f"{df[['terrain', 'method', 'level']].drop_duplicates().shape[0]} units, {len(df)} rows, "
-        f"{len(grids)} terrains, predicate {args.predicate}, {seconds:.1f} s"
-    )
+    summary = (f"{_plural(units, 'unit')}, {_plural(len(df), 'row')}, {_plural(len(grids), 'terrain')}, "
+               f"predicate {settings.predicate}, {seconds:.1f} s")
     atomic_write_text(out / "tables.md", f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")
     print(text)
     print("\n".join(lines))
@@ -278,7 +366,7 @@ def _compare(args) -> int:
     print(f"\n{summary}; wrote {out / 'results.csv'}, {out / 'tables.md'}" + ("" if args.no_plots else " and figures"))
     if df["accuracy"].notna().any():
         return 0
-    if len(failed) == df[["terrain", "method", "level"]].drop_duplicates().shape[0]:
+    if len(failed) == units:
         print("terrainvis compare: every unit failed (see 'Failed units' above)", file=sys.stderr)
     else:
         print("terrainvis compare: no pair was counted: every accuracy is undefined (with --max-distance, "
@@ -292,8 +380,8 @@ def _write_plots(df, grids, out: Path) -> None:
 
     from . import plot
     from ._fileio import atomic_path
-    from .experiment import simplified_path
     from .io import load_terrain
+    from .units import simplified_path
 
     def save(fig, name, dpi):
         with atomic_path(out / name) as tmp:
@@ -327,6 +415,7 @@ _MESH_SUFFIXES = (".ply", ".obj", ".stl", ".glb")
 def _simplify(args) -> int:
     from simplifiers import METHODS, simplify
 
+    from ._fileio import check_output_file
     from .io import save_terrain
 
     out = Path(args.output)
@@ -336,14 +425,13 @@ def _simplify(args) -> int:
     if suffix not in valid:
         kind = "a grid" if regular else "a TIN"
         raise UsageError(f"-o must end in one of {list(valid)} for {args.method} (its result is {kind}), got {out.name!r}")
-    if not out.parent.exists():
-        raise UsageError(f"-o {str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    check_output_file(out, "-o", inputs=[args.dem])
     label, grid = _terrain(args.dem, args)
     result = simplify(grid, args.method, args.level, **_options(args.option))
     save_terrain(result, out)
     a = result.attrs
-    kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {result.n_faces:,} faces"
-    print(f"{label}: {args.method} level {a['level']}: {a['n_vertices']:,} vertices ({kind}), "
+    kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {_plural(result.n_faces, 'face')}"
+    print(f"{label}: {args.method} level {a['level']}: {_plural(a['n_vertices'], 'vertex', 'vertices')} ({kind}), "
           f"{100 * a['n_vertices'] / grid.size:.2f} % of {grid.size:,}")
     print(f"  max error {a['max_error']:.4g}, RMS error {a['rms_error']:.4g} (z units), {a['seconds']:.3f} s")
     for note in a.get("notes", []):
@@ -363,17 +451,7 @@ def _los(args) -> int:
     if args.pairs:
         if args.start or args.end:
             raise UsageError("give either --pairs or --from and --to, not both")
-        import pandas as pd
-
-        try:
-            table = pd.read_csv(args.pairs)
-        except (OSError, ValueError) as exc:
-            raise UsageError(f"--pairs {args.pairs!r} could not be read as CSV: {exc}") from None
-        missing = [c for c in ("x1", "y1", "x2", "y2") if c not in table.columns]
-        if missing:
-            raise UsageError(f"--pairs needs the columns x1, y1, x2, y2; {args.pairs!r} lacks {missing}")
-        xy1 = table[["x1", "y1"]].to_numpy(float)
-        xy2 = table[["x2", "y2"]].to_numpy(float)
+        xy1, xy2 = _read_pairs(args.pairs)
     else:
         if not (args.start and args.end):
             raise UsageError("give --from X Y and --to X Y (or --pairs CSV)")
@@ -384,10 +462,11 @@ def _los(args) -> int:
     outside = np.isnan(z1) | np.isnan(z2)
     if outside.any():
         k = int(np.flatnonzero(outside)[0])
-        xmin, xmax, ymin, ymax = grid.extent
+        xmin, xmax, ymin, ymax = (_xy(v, grid) for v in grid.extent)
+        start, end = (f"({_xy(p[k, 0], grid)}, {_xy(p[k, 1], grid)})" for p in (xy1, xy2))
         raise UsageError(
-            f"point pair {k} lies outside the DEM's valid surface x [{xmin:.6g}, {xmax:.6g}], "
-            f"y [{ymin:.6g}, {ymax:.6g}] (or on nodata): from {xy1[k].tolist()} to {xy2[k].tolist()}"
+            f"point pair {k} lies outside the DEM's valid surface x [{xmin}, {xmax}], y [{ymin}, {ymax}] "
+            f"(or on nodata): from {start} to {end}"
         )
     a = np.column_stack([xy1, z1])
     b = np.column_stack([xy2, z2])
@@ -398,24 +477,50 @@ def _los(args) -> int:
         low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius)
         verdict = "visible" if visible[k] else "blocked"
         where = ("" if not np.isfinite(clear[k]) else
-                 f" at ({low['x']:.6g}, {low['y']:.6g}), {low['distance']:.6g} from the observer")
-        print(f"  ({xy1[k, 0]:.6g}, {xy1[k, 1]:.6g}) -> ({xy2[k, 0]:.6g}, {xy2[k, 1]:.6g}): {verdict}; "
-              f"lowest clearance {clear[k]:.4g}{where}")
+                 f" at ({_xy(low['x'], grid)}, {_xy(low['y'], grid)}), {low['distance']:.6g} from the observer")
+        print(f"  ({_xy(xy1[k, 0], grid)}, {_xy(xy1[k, 1], grid)}) -> ({_xy(xy2[k, 0], grid)}, "
+              f"{_xy(xy2[k, 1], grid)}): {verdict}; lowest clearance {clear[k]:.4g}{where}")
     return 0
+
+
+def _read_pairs(path: str):
+    """The x1, y1 and x2, y2 columns of a --pairs CSV; a bad cell is named by row and column."""
+    import numpy as np
+    import pandas as pd
+
+    try:
+        table = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"--pairs {path!r} could not be read as CSV: {exc}") from None
+    columns = ("x1", "y1", "x2", "y2")
+    missing = [c for c in columns if c not in table.columns]
+    if missing:
+        raise UsageError(f"--pairs needs the columns x1, y1, x2, y2; {path!r} lacks {missing}")
+    values = np.empty((len(table), 4))
+    for j, c in enumerate(columns):
+        for i, text in enumerate(table[c]):
+            try:
+                values[i, j] = float(text)
+            except ValueError:
+                values[i, j] = np.nan
+            if not np.isfinite(values[i, j]):
+                what = "is empty" if not text.strip() else f"holds {text!r}, not a finite number"
+                raise UsageError(f"--pairs {path!r}: row {i + 1} (line {i + 2}), column {c} {what}")
+    return values[:, :2], values[:, 2:]
 
 
 # ------------------------------------------------------------------ viewshed
 def _viewshed(args) -> int:
     import numpy as np
 
+    from ._fileio import check_output_file
     from .visibility import viewshed
 
     out = Path(args.output)
     suffix = out.suffix.lower()
     if suffix not in (".tif", ".tiff", ".npz", ".png"):
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
-    if not out.parent.exists():
-        raise UsageError(f"-o {str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    check_output_file(out, "-o", inputs=[args.dem])
     label, grid = _terrain(args.dem, args)
     t0 = time.perf_counter()
     vis = viewshed(grid, tuple(args.observer), observer_height=args.height, target_height=args.target_height,
@@ -424,9 +529,10 @@ def _viewshed(args) -> int:
     valid = np.isfinite(grid.z)
     n_vis = int(vis[valid].sum())
     _write_viewshed(grid, vis, out, suffix, args, label)
-    print(f"{label}: observer ({args.observer[0]:.6g}, {args.observer[1]:.6g}), eye {args.height:g} above the surface")
-    print(f"  visible {n_vis:,} of {int(valid.sum()):,} samples ({100 * n_vis / max(int(valid.sum()), 1):.2f} %), "
-          f"{seconds:.2f} s")
+    x, y = (_xy(v, grid) for v in args.observer)
+    print(f"{label}: observer ({x}, {y}), eye {args.height:g} above the surface")
+    print(f"  visible {n_vis:,} of {_plural(int(valid.sum()), 'sample')} "
+          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
 
@@ -465,25 +571,27 @@ def _info(args) -> int:
 
     from simplifiers import METHODS, max_level, vertex_budget
 
-    label, grid = _terrain(args.terrain)
+    label, grid = _terrain(args.terrain, args)
     rows, cols = grid.shape
-    xmin, xmax, ymin, ymax = grid.extent
+    xmin, xmax, ymin, ymax = (_xy(v, grid) for v in grid.extent)
     z = grid.z
-    print(f"{label}: {grid!r}")
+    kind = "uniform" if grid.is_uniform else "rectilinear"
+    nodata = f", {_plural(grid.n_nodata, 'nodata cell')}" if grid.n_nodata else ""
+    print(f"{label}: {rows}x{cols} {kind} grid, x [{xmin}, {xmax}], y [{ymin}, {ymax}], "
+          f"z [{np.nanmin(z):.6g}, {np.nanmax(z):.6g}]{nodata}")
     print(f"  samples   {rows} x {cols} = {grid.size:,}  ({grid.nbytes / 1e6:.2f} MB as a grid)")
     print(f"  spacing   dx {grid.dx:g}, dy {grid.dy:g}" + ("" if grid.is_uniform else " (mean; rectilinear)"))
-    print(f"  extent    x [{xmin:.6g}, {xmax:.6g}], y [{ymin:.6g}, {ymax:.6g}]")
+    print(f"  extent    x [{xmin}, {xmax}], y [{ymin}, {ymax}]")
     crs = grid.attrs.get("crs") or "not recorded"
     print(f"  CRS       {crs}" + (" (x, y converted to local metres)" if grid.attrs.get("geographic") else ""))
-    if np.isfinite(z).any():
-        print(f"  heights   {np.nanmin(z):.6g} to {np.nanmax(z):.6g}")
-    print(f"  nodata    {grid.n_nodata:,} cells ({100 * grid.n_nodata / grid.size:.2f} %)"
+    print(f"  heights   {np.nanmin(z):.6g} to {np.nanmax(z):.6g}")
+    print(f"  nodata    {_plural(grid.n_nodata, 'cell')} ({100 * grid.n_nodata / grid.size:.2f} %)"
           + (" (use --fill or --crop-valid)" if grid.n_nodata else ""))
     top = max_level(grid.shape)
     print("  levels    vertices per level (regular methods keep a grid; irregular ones get the same budget)")
     for level in range(1, top + 1):
         n = vertex_budget(grid.shape, level)
-        print(f"    {level}: {n:>12,} vertices ({100 * n / grid.size:.3g} %)")
+        print(f"    {level}: {n:>12,} {'vertex' if n == 1 else 'vertices'} ({100 * n / grid.size:.3g} %)")
     print(f"  methods   {', '.join(METHODS)}")
     return 0
 
@@ -505,13 +613,20 @@ def main(argv=None) -> int:
     previous = signal.signal(signal.SIGTERM, terminated) if _main_thread() else None
     name = "terrainvis"
     try:
-        args = _parser().parse_args(argv)
+        try:
+            args = _parser().parse_args(argv)
+        except _ParseError as exc:
+            print(exc, file=sys.stderr)
+            return 2
         name = f"terrainvis {args.command}"
         with _one_line_warnings(name):
             return _run(args, name)
+    except BrokenPipeError:  # the reader went away (| head): stop quietly, as Unix tools do
+        _stdout_to_devnull()
+        return 128 + signal.SIGPIPE
     except Interrupted as exc:
-        note = " finished units are in results.csv (use --resume)" if name == "terrainvis compare" else ""
-        print(f"{name}: interrupted ({exc});{note}", file=sys.stderr)
+        note = "; finished units are in results.csv (use --resume)" if name == "terrainvis compare" else ""
+        print(f"{name}: interrupted ({exc}){note}", file=sys.stderr)
         return 128 + exc.signum
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
@@ -519,6 +634,15 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _stdout_to_devnull() -> None:
+    """Point stdout at /dev/null, so the interpreter's last flush does not fail on the closed pipe again."""
+    import os
+
+    with contextlib.suppress(Exception):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
 
 
 @contextlib.contextmanager
@@ -541,16 +665,31 @@ def _main_thread() -> bool:
 
 
 def _run(args, name: str) -> int:
-    from .errors import SimplificationError
+    from ._fileio import OutputError
+    from .errors import NodataError, SimplificationError
 
     try:
         return _COMMANDS[args.command](args)
+    except BrokenPipeError:
+        raise
     except SimplificationError as exc:
         print(f"{name}: failed: {exc}", file=sys.stderr)
         return 1
+    except NodataError as exc:
+        rows, cols = exc.shape
+        print(f"{name}: error: {exc.operation} needs a DEM without nodata, but it has {exc.n_nan:,} NaN cell(s) "
+              f"out of {rows}x{cols}; add --fill nearest (or linear) to fill them, or --crop-valid to cut them "
+              "away (from Python: HeightGrid.fill_nodata(), HeightGrid.valid_window())", file=sys.stderr)
+        return 2
     except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
+    except OutputError as exc:  # a full disk, a folder turned read-only, ...: not a usage mistake
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 1
+    except MemoryError as exc:
+        print(f"{name}: error: out of memory" + (f": {exc}" if str(exc) else ""), file=sys.stderr)
+        return 1
     except OSError as exc:
         print(f"{name}: error: {exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
         return 2
