@@ -71,7 +71,8 @@ def test_an_all_nodata_dem_is_refused_clearly(tmp_path, capsys):
     for argv in (["info", str(path)], ["los", str(path), "--from", "1", "1", "--to", "5", "5"],
                  ["simplify", str(path), "-m", "lls", "-o", str(tmp_path / "s.npz")]):
         err = _err(capsys, 2, argv)
-        assert "has no valid sample: all 81 cells are nodata" in err and "All-NaN" not in err
+        # refused where the file is read, naming it and saying why
+        assert "'empty.npz' holds no height: all 9x9 samples are nodata" in err and "All-NaN" not in err
 
 
 # ---------------------------------------------------------------------- numbers and heights
