@@ -19,6 +19,13 @@ maximum is reached at a breakpoint of the ground track (a crossing of a grid lin
 cell diagonal or a TIN edge) or at an end of the interval: the thresholds below visit
 exactly the breakpoints the exact LOS engines visit.
 
+Under earth curvature (``kc = curvature / (2 R)``, :func:`terrainvis.visibility.curvature_coefficient`)
+the segment must clear the surface raised by ``kc d1 d2 = B u (1 - u)`` with
+``B = kc L**2`` (L the horizontal length), so the threshold is
+``qz + max_u [(s(u) - tol - qz) / u + B (1 - u)]``. On a piece where s is linear,
+``A / u + beta + B (1 - u)`` with ``A < 0`` is concave and can peak inside the piece,
+at ``u* = sqrt(-A / B)``: :func:`_piece_max` checks it.
+
 * :func:`grid_max_slope` walks a HeightGrid with the visibility engine's min/max
   pyramid: a node whose maximum height ``H`` gives
   ``(H - tol - qz) / u <= best`` over its parameter range cannot raise the threshold
@@ -51,27 +58,64 @@ _INF = np.inf
 
 # --------------------------------------------------------------------------- grid
 @nb.njit(cache=True, nogil=True)
-def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol):
-    """Max of (s(u) - tol - qz) / u over the breakpoints of cell (r, c) in [a0, a1]."""
+def _value(h, u, qz, tol, bulge):
+    """``(h - tol - qz) / u + bulge (1 - u)``: the height a point needs to clear the surface height h at u."""
+    return (h - tol - qz) / u + bulge * (1.0 - u)
+
+
+@nb.njit(cache=True, nogil=True)
+def _piece_max(ua, ha, ub, hb, qz, tol, bulge):
+    """Max of :func:`_value` inside (ua, ub) where the surface is linear (its ends are
+    evaluated by the caller): ``-inf`` unless the concave case peaks inside."""
+    if bulge <= 0.0 or ub <= ua:
+        return -_INF
+    beta = (hb - ha) / (ub - ua)
+    a = ha - tol - qz - beta * ua
+    if a >= 0.0:
+        return -_INF
+    us = np.sqrt(-a / bulge)
+    if us <= ua or us >= ub:
+        return -_INF
+    return beta + bulge - 2.0 * np.sqrt(-a * bulge)
+
+
+@nb.njit(cache=True, nogil=True)
+def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
+    """Max of :func:`_value` over cell (r, c)'s part [a0, a1] of the track: at its
+    breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under curvature,
+    inside its pieces."""
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    best = (_cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy) - tol - qz) / a1
-    if with_a0:
-        v = (_cell_height(z, xs, ys, ixw, iyw, r, c, qx + a0 * dx, qy + a0 * dy) - tol - qz) / a0
-        if v > best:
-            best = v
-    den = dx * ixw[c] - dy * iyw[r]
-    if den != 0.0:
-        td = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
-        if td > a0 and td < a1:
-            v = (_cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy) - tol - qz) / td
+    h1 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy)
+    best = _value(h1, a1, qz, tol, bulge)
+    if with_a0 or bulge > 0.0:
+        h0 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a0 * dx, qy + a0 * dy)
+        if with_a0:
+            v = _value(h0, a0, qz, tol, bulge)
             if v > best:
                 best = v
+    td = -1.0
+    den = dx * ixw[c] - dy * iyw[r]
+    if den != 0.0:
+        t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
+        if t > a0 and t < a1:
+            td = t
+            hd = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+            v = _value(hd, td, qz, tol, bulge)
+            if v > best:
+                best = v
+    if bulge > 0.0:
+        if td > 0.0:
+            v = max(_piece_max(a0, h0, td, hd, qz, tol, bulge), _piece_max(td, hd, a1, h1, qz, tol, bulge))
+        else:
+            v = _piece_max(a0, h0, a1, h1, qz, tol, bulge)
+        if v > best:
+            best = v
     return best
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, st):
-    """``max (s(u) - tol - qz) / u`` over the breakpoints of the track q + u d, u in [u0, u1] (u0 > 0).
+def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
+    """Max of :func:`_value` over the track q + u d, u in [u0, u1] (u0 > 0): the threshold less qz.
 
     ``g`` is the grid engine's :data:`~terrainvis.visibility._kernels.WalkGrid` (local
     coordinates), ``st`` a scratch stack (:func:`~terrainvis.visibility._kernels.new_stack`).
@@ -99,14 +143,14 @@ def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, st):
         a0 = sT[2 * sp]
         a1 = sT[2 * sp + 1]
         if L == 0:
-            v = _leaf(g, R, C, qx, qy, qz, dx, dy, a0, a1, a0 != last, tol)
+            v = _leaf(g, R, C, qx, qy, qz, dx, dy, a0, a1, a0 != last, tol, bulge)
             last = a1
             if v > best:
                 best = v
             continue
         k = off[L] + 2 * (R * nxl[L] + C)
         num = np.float64(pyr[k + 1]) - tol - qz
-        bound = num / a0 if num > 0.0 else num / a1
+        bound = (num / a0 if num > 0.0 else num / a1) + bulge * (1.0 - a0)
         if bound <= best:
             continue
         half = 1 << (L - 1)
@@ -124,7 +168,7 @@ def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, st):
                     yy = qy + tx * dy
                     r = _locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
                     v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
-                    e = (z[r, cm] + v * (z[r + 1, cm] - z[r, cm]) - tol - qz) / tx
+                    e = _value(z[r, cm] + v * (z[r + 1, cm] - z[r, cm]), tx, qz, tol, bulge)
                     if e > best:
                         best = e
         if splity and dy != 0.0:
@@ -134,7 +178,7 @@ def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, st):
                     xx = qx + ty * dx
                     c = _locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
                     u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
-                    e = (z[rm, c] + u * (z[rm, c + 1] - z[rm, c]) - tol - qz) / ty
+                    e = _value(z[rm, c] + u * (z[rm, c + 1] - z[rm, c]), ty, qz, tol, bulge)
                     if e > best:
                         best = e
                 if ty < s1:
@@ -183,7 +227,7 @@ DDA_MAX_LEVELS = 7
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_dda_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol):
+def grid_dda_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge):
     """:func:`grid_max_slope` by visiting every cell the track crosses (small grids)."""
     z, xs, ys, ixw, iyw, uniform = g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform
     ncx = xs.shape[0] - 1
@@ -212,7 +256,7 @@ def grid_dda_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol):
         b = min(ux, uy, u1)
         if b < a:
             b = a
-        v = _leaf(g, r, c, qx, qy, qz, dx, dy, a, b, first, tol)
+        v = _leaf(g, r, c, qx, qy, qz, dx, dy, a, b, first, tol, bulge)
         first = False
         if v > best:
             best = v
@@ -249,15 +293,19 @@ def interval(px, py, pz, qx, qy, qz, delta, end_radius):
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_threshold(g, st, px, py, pz, qx, qy, qz, delta, end_radius, tol):
+def grid_threshold(g, st, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
     """The threshold height of p at (px, py) for the target (qx, qy, qz); ``pz`` (a height
-    near the answer) only sets the trim. ``-inf`` when the segment is not tested."""
+    near the answer) only sets the trim; ``kc`` the curvature coefficient (0: flat).
+    ``-inf`` when the segment is not tested."""
     u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
     if u0 < 0.0:
         return -_INF
+    dx = px - qx
+    dy = py - qy
+    bulge = kc * (dx * dx + dy * dy)
     if g.ltop <= DDA_MAX_LEVELS:
-        return qz + grid_dda_max_slope(g, qx, qy, qz, px - qx, py - qy, u0, u1, tol)
-    return qz + grid_max_slope(g, qx, qy, qz, px - qx, py - qy, u0, u1, tol, st)
+        return qz + grid_dda_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge)
+    return qz + grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st)
 
 
 # --------------------------------------------------------------------------- TIN
@@ -308,17 +356,17 @@ def _lerp(lo_u, lo_s, hi_u, hi_s, at):
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol):
-    """``max (s(u) - tol - qz) / u`` over the breakpoints of the track q -> p in [u0, u1] on a TIN.
-
-    ``tin`` = (ex0, ey0, ez0, ex1, ey1, ez1, starts, items, bw, bh, nbx, nby): the edges
-    (local coordinates) and their buckets. ``qs`` and ``ps`` are the surface heights at q
-    and p (the breakpoints at u = 0 and u = 1).
-    """
+def _tin_walk(tin, qx, qy, px, py, u0, u1, qs, ps, qz, tol, bulge, buf):
+    """Visit every edge crossing of the track q -> p (u in [0, 1]) on a TIN: the max of
+    :func:`_value` over the crossings in [u0, u1], and the surface at u0 and u1 (linear
+    between the crossings around them). With ``buf`` (a (m, 2) array, or one row to
+    skip), also the crossings in [u0, u1] as rows (u, s); returns their count (which may
+    exceed the buffer's rows: the caller then calls again with a larger one)."""
     ex0, ey0, ez0, ex1, ey1, ez1, starts, items, bw, bh, nbx, nby = tin
     dx = px - qx
     dy = py - qy
     best = -_INF
+    count = 0
     a_lo_u, a_lo_s, a_hi_u, a_hi_s = 0.0, qs, 1.0, ps  # around u0
     b_lo_u, b_lo_s, b_hi_u, b_hi_s = 0.0, qs, 1.0, ps  # around u1
     # walk the buckets along the track (Amanatides-Woo), u from 0 to 1
@@ -358,9 +406,13 @@ def tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol):
                 continue
             sv = ez0[k] + w * (ez1[k] - ez0[k])
             if u >= u0 and u <= u1 and u > 0.0:
-                v = (sv - tol - qz) / u
+                v = _value(sv, u, qz, tol, bulge)
                 if v > best:
                     best = v
+                if count < buf.shape[0]:
+                    buf[count, 0] = u
+                    buf[count, 1] = sv
+                count += 1
             a_lo_u, a_lo_s, a_hi_u, a_hi_s = _bracket(u, sv, u0, a_lo_u, a_lo_s, a_hi_u, a_hi_s)
             b_lo_u, b_lo_s, b_hi_u, b_hi_s = _bracket(u, sv, u1, b_lo_u, b_lo_s, b_hi_u, b_hi_s)
         if c == cend and r == rend:
@@ -377,23 +429,49 @@ def tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol):
             tmaxr += tdr
         if c < 0 or c >= nbx or r < 0 or r >= nby:
             break
-    v = (_lerp(a_lo_u, a_lo_s, a_hi_u, a_hi_s, u0) - tol - qz) / u0
-    if v > best:
-        best = v
-    v = (_lerp(b_lo_u, b_lo_s, b_hi_u, b_hi_s, u1) - tol - qz) / u1
-    if v > best:
-        best = v
+    s0 = _lerp(a_lo_u, a_lo_s, a_hi_u, a_hi_s, u0)
+    s1 = _lerp(b_lo_u, b_lo_s, b_hi_u, b_hi_s, u1)
+    return best, s0, s1, count
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol, bulge):
+    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN.
+
+    ``tin`` = (ex0, ey0, ez0, ex1, ey1, ez1, starts, items, bw, bh, nbx, nby): the edges
+    (local coordinates) and their buckets. ``qs`` and ``ps`` are the surface heights at q
+    and p (the breakpoints at u = 0 and u = 1). Under curvature the crossings are sorted
+    to find the pieces, inside which the value can peak (:func:`_piece_max`).
+    """
+    none = np.empty((0, 2))
+    best, s0, s1, count = _tin_walk(tin, qx, qy, px, py, u0, u1, qs, ps, qz, tol, bulge, none)
+    best = max(best, _value(s0, u0, qz, tol, bulge), _value(s1, u1, qz, tol, bulge))
+    if bulge > 0.0:
+        buf = np.empty((count + 2, 2))
+        _tin_walk(tin, qx, qy, px, py, u0, u1, qs, ps, qz, tol, bulge, buf[1:count + 1])
+        buf[0, 0] = u0
+        buf[0, 1] = s0
+        buf[count + 1, 0] = u1
+        buf[count + 1, 1] = s1
+        order = np.argsort(buf[:, 0])
+        for j in range(count + 1):
+            a = order[j]
+            b = order[j + 1]
+            v = _piece_max(buf[a, 0], buf[a, 1], buf[b, 0], buf[b, 1], qz, tol, bulge)
+            if v > best:
+                best = v
     return best
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_threshold(tin, px, py, pz, ps, qx, qy, qz, qs, delta, end_radius, tol):
+def tin_threshold(tin, px, py, pz, ps, qx, qy, qz, qs, delta, end_radius, tol, kc):
     """The threshold height of p at (px, py) (surface height ``ps``) for the target
     (qx, qy, qz) standing on a surface of height ``qs``; see :func:`grid_threshold`."""
     u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
     if u0 < 0.0:
         return -_INF
-    return qz + tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol)
+    bulge = kc * ((px - qx) ** 2 + (py - qy) ** 2)
+    return qz + tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol, bulge)
 
 
 # --------------------------------------------------------------------------- best heights
@@ -453,25 +531,25 @@ def best_height(thr, vis, zref, margin):
 
 # --------------------------------------------------------------------------- loops
 @nb.njit(cache=True, nogil=True)
-def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, skip, out):
+def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
         else:
-            out[k] = grid_threshold(g, st, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol)
+            out[k] = grid_threshold(g, st, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
 
 
 @nb.njit(cache=True, nogil=True)
-def _tin_row(tin, px, py, pz, ps, q, qs, delta, end_radius, tol, skip, out):
+def _tin_row(tin, px, py, pz, ps, q, qs, delta, end_radius, tol, kc, skip, out):
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
         else:
-            out[k] = tin_threshold(tin, px, py, pz, ps, q[k, 0], q[k, 1], q[k, 2], qs[k], delta, end_radius, tol)
+            out[k] = tin_threshold(tin, px, py, pz, ps, q[k, 0], q[k, 1], q[k, 2], qs[k], delta, end_radius, tol, kc)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_heights(g, p, q, vis, delta, end_radius, tol, margin, out, score, stop):
+def grid_heights(g, p, q, vis, delta, end_radius, tol, kc, margin, out, score, stop):
     """Best height of each point p[i] = (x, y, reference height) against the partners q
     (x, y, height on the surface), whose verdicts on T are ``vis[i]`` (parallel over points)."""
     n = p.shape[0]
@@ -480,24 +558,24 @@ def grid_heights(g, p, q, vis, delta, end_radius, tol, margin, out, score, stop)
             continue
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, -1, thr)
+        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
         out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, ps, q, qs, vis, delta, end_radius, tol, margin, out, score, stop):
+def tin_heights(tin, p, ps, q, qs, vis, delta, end_radius, tol, kc, margin, out, score, stop):
     """:func:`grid_heights` on a TIN (``ps``, ``qs``: the surface under the points and partners)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
             continue
         thr = np.empty(q.shape[0])
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], ps[i], q, qs, delta, end_radius, tol, -1, thr)
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], ps[i], q, qs, delta, end_radius, tol, kc, -1, thr)
         out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin)
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_sweep(g, q, order, vis, delta, end_radius, tol, margin, stop):
+def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, stop):
     """One Gauss-Seidel sweep: each partner q[order[j]] in turn takes its best height
     (column 2 of ``q``, updated in place) against the others at their current heights.
 
@@ -509,17 +587,17 @@ def grid_sweep(g, q, order, vis, delta, end_radius, tol, margin, stop):
         if stop[0] != 0:
             return
         i = order[j]
-        _grid_row(g, st, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, i, thr)
+        _grid_row(g, st, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
         q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin)
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_sweep(tin, q, qs, order, vis, delta, end_radius, tol, margin, stop):
+def tin_sweep(tin, q, qs, order, vis, delta, end_radius, tol, kc, margin, stop):
     """:func:`grid_sweep` on a TIN (``qs``: the surface under the partners)."""
     thr = np.empty(q.shape[0])
     for j in range(order.shape[0]):
         if stop[0] != 0:
             return
         i = order[j]
-        _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], qs[i], q, qs, delta, end_radius, tol, i, thr)
+        _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], qs[i], q, qs, delta, end_radius, tol, kc, i, thr)
         q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin)

@@ -52,6 +52,7 @@ from . import _calibration_kernels as _ck
 from ._validate import as_int, describe
 from .errors import OutsideFootprintError
 from .terrain import TIN, HeightGrid
+from .visibility import EARTH_RADIUS, curvature_coefficient
 
 __all__ = ["calibrated_heights", "Partners", "partners", "N_PARTNERS", "SWEEPS"]
 
@@ -173,7 +174,7 @@ def _positions(original: HeightGrid, simplified, k: int, seed: int) -> np.ndarra
     return xy[ok]
 
 
-def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
     """(n, K) verdicts on T between the points ``a`` (n, 3) and the partners ``b`` (K, 3), in chunks."""
     from .visibility import line_of_sight
 
@@ -184,20 +185,23 @@ def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray) ->
         j = min(n, i + step)
         aa = np.repeat(a[i:j], k, axis=0)
         bb = np.tile(b, (j - i, 1))
-        out[i:j] = line_of_sight(original, aa, bb, engine="grid").reshape(j - i, k)
+        out[i:j] = line_of_sight(original, aa, bb, engine="grid", **curve).reshape(j - i, k)
     return out
 
 
 def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_partners: int = N_PARTNERS,
-             sweeps: int = SWEEPS, seed: int = 0, end_radius: float = 0.0) -> Partners:
+             sweeps: int = SWEEPS, seed: int = 0, end_radius: float = 0.0, curvature: float = 0.0,
+             earth_radius: float = EARTH_RADIUS) -> Partners:
     """The partners of a calibrated relocation onto ``simplified`` (cached on it).
 
     ``move`` True: the points setting (partners calibrated by Gauss-Seidel sweeps);
     False: the targets setting (partners fixed ``height`` above each surface). See the
-    module docstring. Inputs are validated by :func:`calibrated_heights`.
+    module docstring. Inputs are validated by :func:`calibrated_heights`; ``curvature``
+    and ``earth_radius`` as in :func:`terrainvis.line_of_sight`, on both surfaces.
     """
+    kc = curvature_coefficient(curvature, earth_radius)
     key = ("calibration", _fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
-           int(seed), float(end_radius))
+           int(seed), float(end_radius), kc)
     cached = simplified._cache.get(key)
     if cached is not None:
         return cached
@@ -211,7 +215,8 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
     if move and xy.shape[0] > 1:
         from .visibility import visibility_matrix
 
-        visible = visibility_matrix(original, np.column_stack([xy, z_t]), engine="grid")
+        visible = visibility_matrix(original, np.column_stack([xy, z_t]), engine="grid", curvature=curvature,
+                                    earth_radius=earth_radius)
         surf = _Surface(simplified)
         q = surf.local(np.column_stack([xy, z_s]))
         order_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
@@ -219,11 +224,11 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
         for _ in range(sweeps):
             order = order_rng.permutation(k).astype(np.int64)
             if surf.grid:
-                call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, surf.margin,
-                     work=k * k)
+                call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc,
+                     surf.margin, work=k * k)
             else:
                 call(_ck.tin_sweep, surf.data, q, np.ascontiguousarray(ground), order, visible, surf.delta,
-                     end_radius, surf.tol, surf.margin, work=k * k)
+                     end_radius, surf.tol, kc, surf.margin, work=k * k)
         z_s = q[:, 2].copy()
     out = Partners(xy, z_t, z_s, ground, visible)
     simplified._cache[key] = out
@@ -233,7 +238,8 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
 # ----------------------------------------------------------------------- relocation
 def calibrated_heights(points, simplified, original, *, offset: float = 0.0, target_height=None,
                        n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
-                       end_radius: float = 0.0) -> np.ndarray:
+                       end_radius: float = 0.0, curvature: float = 0.0,
+                       earth_radius: float = EARTH_RADIUS) -> np.ndarray:
     """The calibrated height on ``simplified`` of each point of ``original`` (see the module docstring).
 
     Parameters
@@ -256,6 +262,9 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     end_radius : float
         End radius of the verdicts on S(T) (:func:`terrainvis.line_of_sight`); the
         verdicts on T are exact.
+    curvature, earth_radius : float
+        Earth curvature and refraction of the verdicts on both surfaces
+        (:func:`terrainvis.line_of_sight`).
 
     Returns
     -------
@@ -266,12 +275,14 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     pts = np.asarray(points, dtype=np.float64)
     move = target_height is None
     height = float(offset if move else target_height)
+    curve = {"curvature": curvature, "earth_radius": earth_radius}
+    kc = curvature_coefficient(curvature, earth_radius)
     part = partners(original, simplified, height=height, move=move, n_partners=n_partners, sweeps=sweeps,
-                    seed=seed, end_radius=end_radius)
+                    seed=seed, end_radius=end_radius, **curve)
     n = pts.shape[0]
     if n == 0 or part.xy.shape[0] == 0:
         return simplified.height_at(pts[:, :2]) + offset
-    vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]))
+    vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]), curve)
     surf = _Surface(simplified)
     ground = simplified.height_at(pts[:, :2])
     p = surf.local(np.column_stack([pts[:, :2], ground + offset]))
@@ -280,10 +291,10 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     score = np.empty(n, dtype=np.int64)
     work = n * part.xy.shape[0]
     if surf.grid:
-        call(_ck.grid_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, surf.margin, out, score,
-             work=work)
+        call(_ck.grid_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, out,
+             score, work=work)
     else:
         call(_ck.tin_heights, surf.data, p, np.ascontiguousarray(ground), q,
-             np.ascontiguousarray(part.ground_simplified), vis, surf.delta, end_radius, surf.tol, surf.margin,
-             out, score, work=work)
+             np.ascontiguousarray(part.ground_simplified), vis, surf.delta, end_radius, surf.tol, kc,
+             surf.margin, out, score, work=work)
     return out

@@ -41,6 +41,7 @@ import numpy as np
 
 from ._validate import as_float_array, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
 from .calibration import N_PARTNERS, SWEEPS
+from .visibility import EARTH_RADIUS
 from .errors import OutsideFootprintError
 from .terrain import HeightGrid, as_terrain
 
@@ -57,8 +58,9 @@ ORACLE = "oracle"
 
 
 def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None, target_height=None,
-             end_radius: float = 0.0, n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
-             reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
+             end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
+             n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, reference=None, mask=None,
+             engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
     """Place points on a simplified terrain.
 
     Parameters
@@ -84,6 +86,9 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
     end_radius : float
         ``"calibrated"`` and ``"oracle"``: the end radius of the verdicts on S(T)
         (:func:`terrainvis.line_of_sight`).
+    curvature, earth_radius : float
+        ``"calibrated"`` and ``"oracle"``: earth curvature and refraction of the verdicts
+        they evaluate (:func:`terrainvis.line_of_sight`; 0, the default, is a flat earth).
     n_partners, sweeps, seed : int
         ``"calibrated"`` only: about how many partners, how many Gauss-Seidel sweeps
         calibrate them, and the seed of their positions
@@ -122,9 +127,12 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
         raise ValueError(f"offset must be a finite scalar, got {describe(offset)}")
     off = float(off)
     if how == ORACLE:
-        return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates)
+        curve = {"curvature": curvature, "earth_radius": earth_radius}
+        return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve)
     if how == CALIBRATED:
-        return _calibrated(pts, simplified, off, original, target_height, end_radius, n_partners, sweeps, seed)
+        options = {"end_radius": end_radius, "curvature": curvature, "earth_radius": earth_radius,
+                   "n_partners": n_partners, "sweeps": sweeps, "seed": seed}
+        return _calibrated(pts, simplified, off, original, target_height, options)
     out = pts.copy()
     if how == "identity" or pts.shape[0] == 0:
         return out
@@ -149,9 +157,9 @@ def _ground(simplified, pts):
     return ground
 
 
-def _calibrated(pts, simplified, off, original, target_height, end_radius, n_partners, sweeps, seed):
+def _calibrated(pts, simplified, off, original, target_height, options):
     from .calibration import calibrated_heights
-    from .visibility import terrain_scale
+    from .visibility import curvature_coefficient, terrain_scale
 
     if original is None:
         raise TypeError("relocate(..., 'calibrated') needs original=, the original terrain T (a HeightGrid)")
@@ -165,10 +173,10 @@ def _calibrated(pts, simplified, off, original, target_height, end_radius, n_par
     off = as_height(off, "offset", scale=scale, ground=ground)
     if target_height is not None:
         target_height = as_height(target_height, "target_height", scale=scale, ground=ground, minimum=0.0)
-    radius = as_nonnegative_finite(end_radius, "end_radius")
-    n_partners = as_int(n_partners, "n_partners", minimum=1)
-    sweeps = as_int(sweeps, "sweeps", minimum=0)
-    seed = as_int(seed, "seed", minimum=0)
+    curvature_coefficient(options["curvature"], options["earth_radius"])  # validates both
+    options = dict(options, end_radius=as_nonnegative_finite(options["end_radius"], "end_radius"),
+                   n_partners=as_int(options["n_partners"], "n_partners", minimum=1),
+                   sweeps=as_int(options["sweeps"], "sweeps", minimum=0), seed=as_int(options["seed"], "seed", minimum=0))
     out = pts.copy()
     if pts.shape[0] == 0:
         return out
@@ -180,8 +188,7 @@ def _calibrated(pts, simplified, off, original, target_height, end_radius, n_par
             f"points must lie inside the original terrain's footprint, but {int(np.isnan(on_t).sum())} of "
             f"{pts.shape[0]} do not (first at index {first})"
         )
-    out[:, 2] = calibrated_heights(pts, simplified, original, offset=off, target_height=target_height,
-                                   n_partners=n_partners, sweeps=sweeps, seed=seed, end_radius=radius)
+    out[:, 2] = calibrated_heights(pts, simplified, original, offset=off, target_height=target_height, **options)
     return out
 
 
@@ -215,7 +222,7 @@ def _candidates(pts, simplified, ground, off, original, k):
     return np.concatenate([practical, base + span], axis=1)
 
 
-def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates):
+def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve):
     from .visibility import line_of_sight, visibility_matrix
 
     n = pts.shape[0]
@@ -233,7 +240,7 @@ def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine,
     np.fill_diagonal(counted, False)
     k = as_int(n_candidates, "n_candidates", minimum=2)
     radius = as_nonnegative_finite(end_radius, "end_radius")
-    los_kw = {"engine": engine, "end_radius": radius}
+    los_kw = {"engine": engine, "end_radius": radius, **curve}
     if n < 2:
         return pts.copy()
     ground = _ground(simplified, pts)

@@ -28,7 +28,7 @@ def _random_grid(seed, rows=9, cols=11, rectilinear=False):
     return HeightGrid.from_coords(z, xs - xs[0], ys - ys[0])
 
 
-def _thresholds(surface, p, q):
+def _thresholds(surface, p, q, kc=0.0):
     """(n, m) thresholds of the points p (x, y, reference height) for the targets q, through the kernels."""
     surf = cal._Surface(surface)
     pl, ql = surf.local(p), surf.local(q)
@@ -36,12 +36,14 @@ def _thresholds(surface, p, q):
     if surf.grid:
         stack = ck.new_stack(surf.ltop)
         for i in range(p.shape[0]):
-            ck._grid_row(surf.data, stack, pl[i, 0], pl[i, 1], pl[i, 2], ql, surf.delta, 0.0, surf.tol, -1, out[i])
+            ck._grid_row(surf.data, stack, pl[i, 0], pl[i, 1], pl[i, 2], ql, surf.delta, 0.0, surf.tol, kc, -1,
+                         out[i])
     else:
         ps = surface.height_at(p[:, :2])
         qs = np.ascontiguousarray(surface.height_at(q[:, :2]))
         for i in range(p.shape[0]):
-            ck._tin_row(surf.data, pl[i, 0], pl[i, 1], pl[i, 2], ps[i], ql, qs, surf.delta, 0.0, surf.tol, -1, out[i])
+            ck._tin_row(surf.data, pl[i, 0], pl[i, 1], pl[i, 2], ps[i], ql, qs, surf.delta, 0.0, surf.tol, kc, -1,
+                        out[i])
     return out
 
 
@@ -50,14 +52,16 @@ def _inside(surface, n, rng):
     return np.column_stack([rng.uniform(xmin, xmax, n), rng.uniform(ymin, ymax, n)])
 
 
-def _check_thresholds_against_engine(surface, seed, n=12, m=25):
+def _check_thresholds_against_engine(surface, seed, n=12, m=25, curve=None):
     """Above its threshold a point sees the target on the exact engine, below it it does not."""
+    curve = curve or {}
+    kc = tv.visibility.curvature_coefficient(**curve) if curve else 0.0
     rng = np.random.default_rng(seed)
     p_xy, q_xy = _inside(surface, n, rng), _inside(surface, m, rng)
     relief = float(np.ptp(surface.z if isinstance(surface, HeightGrid) else surface.vertices[:, 2]))
     q = np.column_stack([q_xy, surface.height_at(q_xy) + rng.uniform(0.0, 0.3 * relief, m)])
     p = np.column_stack([p_xy, surface.height_at(p_xy)])
-    thr = _thresholds(surface, p, q)
+    thr = _thresholds(surface, p, q, kc)
     band = 1e-7 * tv.visibility.terrain_scale(surface)
     tol = tv.visibility.clearance_tolerance(surface)
     checked = 0
@@ -65,7 +69,7 @@ def _check_thresholds_against_engine(surface, seed, n=12, m=25):
         z = surface.height_at(p_xy[i:i + 1])[0] + rng.uniform(-relief, 2 * relief, m)
         keep = np.abs(z - thr[i]) > band
         a = np.column_stack([np.repeat(p_xy[i:i + 1], m, 0), z])[keep]
-        clearance = tv.min_clearance(surface, a, q[keep])
+        clearance = tv.min_clearance(surface, a, q[keep], **curve)
         assert np.array_equal(clearance >= -tol, (z >= thr[i])[keep])
         checked += int(keep.sum())
     assert checked > 0.9 * n * m
@@ -82,6 +86,19 @@ def test_tin_thresholds_match_the_exact_engine(seed):
     grid = _random_grid(100 + seed, 17, 15)
     tin = simplifiers.simplify(grid, "greedy-insertion", 1)
     _check_thresholds_against_engine(tin, seed)
+
+
+#: An earth whose bulge matters over the small test grids (about 15 x 8 units, relief 5):
+#: d1 d2 / (2 R) reaches 0.5 units at mid-track.
+SMALL_EARTH = {"curvature": 1.0, "earth_radius": 30.0}
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("kind", ["grid", "rectilinear", "tin"])
+def test_thresholds_under_curvature_match_the_exact_engine(seed, kind):
+    grid = _random_grid(200 + seed, 17, 15, rectilinear=kind == "rectilinear")
+    surface = simplifiers.simplify(grid, "greedy-insertion", 1) if kind == "tin" else grid
+    _check_thresholds_against_engine(surface, seed, curve=SMALL_EARTH)
 
 
 def test_a_grid_and_its_tin_give_the_same_thresholds():
@@ -111,8 +128,9 @@ def test_the_pyramid_walk_equals_the_cell_walk():
     stack = ck.new_stack(surf.ltop)
     for k in range(300):
         dx, dy = p[k, 0] - q[k, 0], p[k, 1] - q[k, 1]
-        a = ck.grid_max_slope(surf.data, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, stack)
-        b = ck.grid_dda_max_slope(surf.data, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol)
+        bulge = (k % 2) * 1e-7 * (dx * dx + dy * dy)  # every other track under a strong curvature
+        a = ck.grid_max_slope(surf.data, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge, stack)
+        b = ck.grid_dda_max_slope(surf.data, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge)
         assert a == pytest.approx(b, rel=1e-12, abs=1e-12)
 
 
@@ -163,7 +181,7 @@ def test_the_agreement_it_counts_is_the_exact_engines(hills, method):
     S = simplifiers.simplify(T, method, 3)
     part = cal.partners(T, S, height=0.0, move=True, n_partners=144, sweeps=2)
     z = cal.calibrated_heights(P, S, T, n_partners=144, sweeps=2)
-    vis = cal._verdicts_on_original(T, P, np.column_stack([part.xy, part.z_original]))
+    vis = cal._verdicts_on_original(T, P, np.column_stack([part.xy, part.z_original]), {})
     q = np.column_stack([part.xy, part.z_simplified])
     surf = cal._Surface(S)
     thr = _thresholds(S, np.column_stack([P[:, :2], S.height_at(P[:, :2])]), q)
