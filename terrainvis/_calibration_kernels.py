@@ -476,9 +476,13 @@ def tin_threshold(tin, px, py, pz, ps, qx, qy, qz, qs, delta, end_radius, tol, k
 
 # --------------------------------------------------------------------------- best heights
 @nb.njit(cache=True, nogil=True)
-def best_height(thr, vis, zref, margin):
+def best_height(thr, vis, zref, margin, min_gain):
     """The height z maximising the agreement of a point's verdicts with ``vis`` (see the
     module docstring), and that agreement.
+
+    The point stays at ``zref`` when the best agreement exceeds the agreement there by
+    less than ``min_gain`` (>= 1; 1 is the plain maximum): a few partners' verdicts are
+    not evidence enough to move it.
 
     Among the optimal intervals of z, the one nearest ``zref`` is taken, and in it the
     point nearest ``zref`` that keeps ``margin`` (> 0: an interval holds its lower end,
@@ -496,11 +500,14 @@ def best_height(thr, vis, zref, margin):
     best = -1
     best_z = zref
     best_d = _INF
+    at_ref = -1
     lo = -_INF
     j = 0
     while j <= K:
         # thresholds equal to lo were passed: z in [lo, hi) sees exactly the partners with thr <= lo
         hi = _INF if j == K else thr[order[j]]
+        if lo <= zref < hi:
+            at_ref = score
         if hi > lo and score >= best:
             if score > best:
                 best = score
@@ -526,6 +533,8 @@ def best_height(thr, vis, zref, margin):
                 score += 1 if vis[k] else -1
             j += 1
         lo = hi
+    if best - at_ref < min_gain:
+        return zref, at_ref
     return best_z, best
 
 
@@ -549,7 +558,7 @@ def _tin_row(tin, px, py, pz, ps, q, qs, delta, end_radius, tol, kc, skip, out):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_heights(g, p, q, vis, delta, end_radius, tol, kc, margin, out, score, stop):
+def grid_heights(g, p, q, vis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
     """Best height of each point p[i] = (x, y, reference height) against the partners q
     (x, y, height on the surface), whose verdicts on T are ``vis[i]`` (parallel over points)."""
     n = p.shape[0]
@@ -559,11 +568,11 @@ def grid_heights(g, p, q, vis, delta, end_radius, tol, kc, margin, out, score, s
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
         _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
-        out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin)
+        out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, ps, q, qs, vis, delta, end_radius, tol, kc, margin, out, score, stop):
+def tin_heights(tin, p, ps, q, qs, vis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
     """:func:`grid_heights` on a TIN (``ps``, ``qs``: the surface under the points and partners)."""
     n = p.shape[0]
     for i in nb.prange(n):
@@ -571,11 +580,11 @@ def tin_heights(tin, p, ps, q, qs, vis, delta, end_radius, tol, kc, margin, out,
             continue
         thr = np.empty(q.shape[0])
         _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], ps[i], q, qs, delta, end_radius, tol, kc, -1, thr)
-        out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin)
+        out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, stop):
+def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
     """One Gauss-Seidel sweep: each partner q[order[j]] in turn takes its best height
     (column 2 of ``q``, updated in place) against the others at their current heights.
 
@@ -588,11 +597,11 @@ def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, stop):
             return
         i = order[j]
         _grid_row(g, st, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_sweep(tin, q, qs, order, vis, delta, end_radius, tol, kc, margin, stop):
+def tin_sweep(tin, q, qs, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
     """:func:`grid_sweep` on a TIN (``qs``: the surface under the partners)."""
     thr = np.empty(q.shape[0])
     for j in range(order.shape[0]):
@@ -600,4 +609,4 @@ def tin_sweep(tin, q, qs, order, vis, delta, end_radius, tol, kc, margin, stop):
             return
         i = order[j]
         _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], qs[i], q, qs, delta, end_radius, tol, kc, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)

@@ -54,13 +54,15 @@ from .errors import OutsideFootprintError
 from .terrain import TIN, HeightGrid
 from .visibility import EARTH_RADIUS, curvature_coefficient
 
-__all__ = ["calibrated_heights", "Partners", "partners", "N_PARTNERS", "SWEEPS"]
+__all__ = ["calibrated_heights", "Partners", "partners", "N_PARTNERS", "SWEEPS", "MIN_GAIN"]
 
 #: Default number of partners (K): about where the accuracy saturates on the paper's
 #: terrains (docs/relocation.md gives the figures for 256 to 1024).
 N_PARTNERS = 512
 #: Default Gauss-Seidel sweeps over the partners of the points setting (the first does most).
 SWEEPS = 2
+#: Default least gain (partners' verdicts) that moves a point off the full projection.
+MIN_GAIN = 1
 #: Points per chunk of the T-side verdicts (bounds the temporary (chunk x K) segment arrays).
 _CHUNK_PAIRS = 1 << 20
 #: Height margin kept from thresholds, as a fraction of the terrain's scale (about 5 mm on a 5 km grid).
@@ -191,7 +193,7 @@ def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, cu
 
 def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_partners: int = N_PARTNERS,
              sweeps: int = SWEEPS, seed: int = 0, end_radius: float = 0.0, curvature: float = 0.0,
-             earth_radius: float = EARTH_RADIUS) -> Partners:
+             earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN) -> Partners:
     """The partners of a calibrated relocation onto ``simplified`` (cached on it).
 
     ``move`` True: the points setting (partners calibrated by Gauss-Seidel sweeps);
@@ -201,7 +203,7 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
     """
     kc = curvature_coefficient(curvature, earth_radius)
     key = ("calibration", _fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
-           int(seed), float(end_radius), kc)
+           int(seed), float(end_radius), kc, int(min_gain))
     cached = simplified._cache.get(key)
     if cached is not None:
         return cached
@@ -225,10 +227,10 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
             order = order_rng.permutation(k).astype(np.int64)
             if surf.grid:
                 call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc,
-                     surf.margin, work=k * k)
+                     surf.margin, min_gain, work=k * k)
             else:
                 call(_ck.tin_sweep, surf.data, q, np.ascontiguousarray(ground), order, visible, surf.delta,
-                     end_radius, surf.tol, kc, surf.margin, work=k * k)
+                     end_radius, surf.tol, kc, surf.margin, min_gain, work=k * k)
         z_s = q[:, 2].copy()
     out = Partners(xy, z_t, z_s, ground, visible)
     simplified._cache[key] = out
@@ -239,7 +241,7 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
 def calibrated_heights(points, simplified, original, *, offset: float = 0.0, target_height=None,
                        n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
                        end_radius: float = 0.0, curvature: float = 0.0,
-                       earth_radius: float = EARTH_RADIUS) -> np.ndarray:
+                       earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN) -> np.ndarray:
     """The calibrated height on ``simplified`` of each point of ``original`` (see the module docstring).
 
     Parameters
@@ -259,6 +261,9 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     n_partners, sweeps, seed : int
         The partners (about ``n_partners`` of them), the Gauss-Seidel sweeps of the
         points setting and the seed of their positions and sweep order.
+    min_gain : int
+        A point (and a partner in a sweep) leaves its reference height only for a
+        height that agrees with at least this many more partners (1: any gain).
     end_radius : float
         End radius of the verdicts on S(T) (:func:`terrainvis.line_of_sight`); the
         verdicts on T are exact.
@@ -278,7 +283,7 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     curve = {"curvature": curvature, "earth_radius": earth_radius}
     kc = curvature_coefficient(curvature, earth_radius)
     part = partners(original, simplified, height=height, move=move, n_partners=n_partners, sweeps=sweeps,
-                    seed=seed, end_radius=end_radius, **curve)
+                    seed=seed, end_radius=end_radius, min_gain=min_gain, **curve)
     n = pts.shape[0]
     if n == 0 or part.xy.shape[0] == 0:
         return simplified.height_at(pts[:, :2]) + offset
@@ -291,10 +296,10 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     score = np.empty(n, dtype=np.int64)
     work = n * part.xy.shape[0]
     if surf.grid:
-        call(_ck.grid_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, out,
-             score, work=work)
+        call(_ck.grid_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
+             out, score, work=work)
     else:
         call(_ck.tin_heights, surf.data, p, np.ascontiguousarray(ground), q,
              np.ascontiguousarray(part.ground_simplified), vis, surf.delta, end_radius, surf.tol, kc,
-             surf.margin, out, score, work=work)
+             surf.margin, min_gain, out, score, work=work)
     return out

@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._validate import as_float_array, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
-from .calibration import N_PARTNERS, SWEEPS
+from .calibration import MIN_GAIN, N_PARTNERS, SWEEPS
 from .visibility import EARTH_RADIUS
 from .errors import OutsideFootprintError
 from .terrain import HeightGrid, as_terrain
@@ -59,8 +59,8 @@ ORACLE = "oracle"
 
 def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None, target_height=None,
              end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
-             n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, reference=None, mask=None,
-             engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
+             n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, min_gain: int = MIN_GAIN,
+             reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
     """Place points on a simplified terrain.
 
     Parameters
@@ -89,11 +89,11 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
     curvature, earth_radius : float
         ``"calibrated"`` and ``"oracle"``: earth curvature and refraction of the verdicts
         they evaluate (:func:`terrainvis.line_of_sight`; 0, the default, is a flat earth).
-    n_partners, sweeps, seed : int
+    n_partners, sweeps, seed, min_gain : int
         ``"calibrated"`` only: about how many partners, how many Gauss-Seidel sweeps
-        calibrate them, and the seed of their positions
-        (:func:`terrainvis.calibration.partners`). A point's height depends on these,
-        T, S(T) and the point, never on the other points.
+        calibrate them, the seed of their positions, and the least gain that moves a
+        point (:func:`terrainvis.calibration.calibrated_heights`). A point's height
+        depends on these, T, S(T) and the point, never on the other points.
     reference : (n, n) bool, optional
         ``"oracle"`` only (required): the verdicts on the original terrain T.
     mask : (n, n) bool, optional
@@ -131,7 +131,7 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
         return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve)
     if how == CALIBRATED:
         options = {"end_radius": end_radius, "curvature": curvature, "earth_radius": earth_radius,
-                   "n_partners": n_partners, "sweeps": sweeps, "seed": seed}
+                   "n_partners": n_partners, "sweeps": sweeps, "seed": seed, "min_gain": min_gain}
         return _calibrated(pts, simplified, off, original, target_height, options)
     out = pts.copy()
     if how == "identity" or pts.shape[0] == 0:
@@ -176,7 +176,8 @@ def _calibrated(pts, simplified, off, original, target_height, options):
     curvature_coefficient(options["curvature"], options["earth_radius"])  # validates both
     options = dict(options, end_radius=as_nonnegative_finite(options["end_radius"], "end_radius"),
                    n_partners=as_int(options["n_partners"], "n_partners", minimum=1),
-                   sweeps=as_int(options["sweeps"], "sweeps", minimum=0), seed=as_int(options["seed"], "seed", minimum=0))
+                   sweeps=as_int(options["sweeps"], "sweeps", minimum=0), seed=as_int(options["seed"], "seed", minimum=0),
+                   min_gain=as_int(options["min_gain"], "min_gain", minimum=1))
     out = pts.copy()
     if pts.shape[0] == 0:
         return out
