@@ -44,6 +44,7 @@ Per point, K LOS queries on T and K threshold walks on S(T) (K = ``n_partners``)
 from __future__ import annotations
 
 import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -176,8 +177,38 @@ def _positions(original: HeightGrid, simplified, k: int, seed: int) -> np.ndarra
     return xy[ok]
 
 
+#: Verdicts on T, kept across calls by content (T's fingerprint and the points' bytes): the
+#: units of a comparison simplify one terrain many ways and relocate the same point sets
+#: onto each, in processes that receive T anew each time, so a cache on T would not last.
+_ON_ORIGINAL: OrderedDict = OrderedDict()
+_ON_ORIGINAL_SIZE = 64
+
+
+def _cached(key, compute):
+    out = _ON_ORIGINAL.get(key)
+    if out is None:
+        out = compute()
+        _ON_ORIGINAL[key] = out
+        while len(_ON_ORIGINAL) > _ON_ORIGINAL_SIZE:
+            _ON_ORIGINAL.popitem(last=False)
+    else:
+        _ON_ORIGINAL.move_to_end(key)
+    return out
+
+
+def _key(original, curve, *arrays):
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return (_fingerprint(original), curvature_coefficient(**curve), h.hexdigest())
+
+
 def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
-    """(n, K) verdicts on T between the points ``a`` (n, 3) and the partners ``b`` (K, 3), in chunks."""
+    """(n, K) verdicts on T between the points ``a`` (n, 3) and the partners ``b`` (K, 3), in chunks (cached)."""
+    return _cached(("pairs",) + _key(original, curve, a, b), lambda: _line_of_sight_rows(original, a, b, curve))
+
+
+def _line_of_sight_rows(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
     from .visibility import line_of_sight
 
     n, k = a.shape[0], b.shape[0]
@@ -217,8 +248,10 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
     if move and xy.shape[0] > 1:
         from .visibility import visibility_matrix
 
-        visible = visibility_matrix(original, np.column_stack([xy, z_t]), engine="grid", curvature=curvature,
-                                    earth_radius=earth_radius)
+        curve = {"curvature": curvature, "earth_radius": earth_radius}
+        at = np.column_stack([xy, z_t])
+        visible = _cached(("matrix",) + _key(original, curve, at),
+                          lambda: visibility_matrix(original, at, engine="grid", **curve))
         surf = _Surface(simplified)
         q = surf.local(np.column_stack([xy, z_s]))
         order_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
