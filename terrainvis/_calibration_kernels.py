@@ -30,10 +30,8 @@ at ``u* = sqrt(-A / B)``: :func:`_piece_max` checks it.
   pyramid: a node whose maximum height ``H`` gives
   ``(H - tol - qz) / u <= best`` over its parameter range cannot raise the threshold
   and is skipped.
-* :func:`tin_max_slope` visits the TIN's edges through a uniform bucket grid of edges
-  (each edge in every bucket its bounding box touches), walked along the ground track;
-  the surface at the interval's ends is interpolated between the breakpoints around
-  them, so no face has to be located.
+* :func:`tin_max_slope` walks the TIN from face to face across the edges the track
+  crosses (the faces' neighbours), from the face under the interval's start.
 
 Best heights
 ------------
@@ -48,6 +46,8 @@ engine will give there.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba as nb
 import numpy as np
 
@@ -57,13 +57,13 @@ _INF = np.inf
 
 
 # --------------------------------------------------------------------------- grid
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _value(h, u, qz, tol, bulge):
     """``(h - tol - qz) / u + bulge (1 - u)``: the height a point needs to clear the surface height h at u."""
     return (h - tol - qz) / u + bulge * (1.0 - u)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _piece_max(ua, ha, ub, hb, qz, tol, bulge):
     """Max of :func:`_value` inside (ua, ub) where the surface is linear (its ends are
     evaluated by the caller): ``-inf`` unless the concave case peaks inside."""
@@ -79,7 +79,7 @@ def _piece_max(ua, ha, ub, hb, qz, tol, bulge):
     return beta + bulge - 2.0 * np.sqrt(-a * bulge)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
     """Max of :func:`_value` over cell (r, c)'s part [a0, a1] of the track: at its
     breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under curvature,
@@ -309,169 +309,150 @@ def grid_threshold(g, st, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
 
 
 # --------------------------------------------------------------------------- TIN
-@nb.njit(cache=True, nogil=True)
-def build_edge_buckets(ex0, ey0, ex1, ey1, bw, bh, nbx, nby, pad):
-    """CSR lists ``(starts, items)`` of the edges whose bounding box (grown by ``pad``)
-    touches each bucket (row-major, ``nbx`` x ``nby`` buckets of ``bw`` x ``bh``)."""
-    m = ex0.shape[0]
-    counts = np.zeros(nbx * nby + 1, dtype=np.int64)
-    for e in range(2):
-        if e == 1:
-            for b in range(nbx * nby):
-                counts[b + 1] += counts[b]
-            items = np.empty(counts[nbx * nby], dtype=np.int64)
-            fill = counts[:-1].copy()
-        for k in range(m):
-            c0 = max(int(np.floor((min(ex0[k], ex1[k]) - pad) / bw)), 0)
-            c1 = min(int(np.floor((max(ex0[k], ex1[k]) + pad) / bw)), nbx - 1)
-            r0 = max(int(np.floor((min(ey0[k], ey1[k]) - pad) / bh)), 0)
-            r1 = min(int(np.floor((max(ey0[k], ey1[k]) + pad) / bh)), nby - 1)
-            for r in range(r0, r1 + 1):
-                for c in range(c0, c1 + 1):
-                    if e == 0:
-                        counts[r * nbx + c + 1] += 1
-                    else:
-                        items[fill[r * nbx + c]] = k
-                        fill[r * nbx + c] += 1
-    return counts, items
+#: A TIN as the threshold walk reads it, in local coordinates: vertices ``vx``, ``vy``,
+#: ``vz`` (n,) float64; ``faces`` (m, 3) int64, counter-clockwise; ``nbr`` (m, 3) int64, the
+#: face across edge (faces[f, e], faces[f, (e + 1) % 3]) or -1 on the boundary; the face
+#: buckets ``starts``, ``items`` (``TIN._buckets``) of ``nbx`` x ``nby`` buckets of ``bw`` x ``bh``.
+TinWalk = namedtuple("TinWalk", ["vx", "vy", "vz", "faces", "nbr", "starts", "items", "bw", "bh", "nbx", "nby"])
 
 
 @nb.njit(cache=True, nogil=True)
-def _bracket(u, s, at, lo_u, lo_s, hi_u, hi_s):
-    """Keep the breakpoints nearest below and above ``at``."""
-    if u <= at and u > lo_u:
-        lo_u = u
-        lo_s = s
-    if u >= at and u < hi_u:
-        hi_u = u
-        hi_s = s
-    return lo_u, lo_s, hi_u, hi_s
+def _face_at(w, x, y):
+    """A face of the TIN containing (x, y) (with a tiny tolerance), or -1."""
+    c = min(max(int(np.floor(x / w.bw)), 0), w.nbx - 1)
+    r = min(max(int(np.floor(y / w.bh)), 0), w.nby - 1)
+    b = r * w.nbx + c
+    best = -1
+    best_l = -_INF
+    for k in range(w.starts[b], w.starts[b + 1]):
+        f = w.items[k]
+        i0 = w.faces[f, 0]
+        i1 = w.faces[f, 1]
+        i2 = w.faces[f, 2]
+        x0 = w.vx[i0]
+        y0 = w.vy[i0]
+        det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
+        if det == 0.0:
+            continue
+        l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
+        l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
+        low = min(1.0 - l1 - l2, l1, l2)
+        if low > best_l:  # the face the point is deepest inside (robust on shared edges)
+            best_l = low
+            best = f
+    if best_l < -1e-9:
+        return -1
+    return best
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _plane(w, f, x, y):
+    """The height of face f's plane at (x, y)."""
+    i0 = w.faces[f, 0]
+    i1 = w.faces[f, 1]
+    i2 = w.faces[f, 2]
+    x0 = w.vx[i0]
+    y0 = w.vy[i0]
+    det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
+    l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
+    l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
+    return (1.0 - l1 - l2) * w.vz[i0] + l1 * w.vz[i1] + l2 * w.vz[i2]
 
 
 @nb.njit(cache=True, nogil=True)
-def _lerp(lo_u, lo_s, hi_u, hi_s, at):
-    if hi_u <= lo_u:
-        return lo_s
-    return lo_s + (hi_s - lo_s) * (at - lo_u) / (hi_u - lo_u)
+def _exit(w, f, qx, qy, dx, dy, u):
+    """Where the track q + u' d leaves face f after ``u``: (u', edge, height there), or (inf, -1, 0)."""
+    best_u = _INF
+    best_e = -1
+    best_s = 0.0
+    for e in range(3):
+        a = w.faces[f, e]
+        b = w.faces[f, (e + 1) % 3]
+        ex = w.vx[b] - w.vx[a]
+        ey = w.vy[b] - w.vy[a]
+        den = dx * ey - dy * ex
+        if den == 0.0:
+            continue
+        rx = w.vx[a] - qx
+        ry = w.vy[a] - qy
+        ue = (rx * ey - ry * ex) / den
+        we = (rx * dy - ry * dx) / den
+        if we < -1e-9 or we > 1.0 + 1e-9 or ue <= u + 1e-12 or ue >= best_u:
+            continue
+        we = min(max(we, 0.0), 1.0)
+        best_u = ue
+        best_e = e
+        best_s = w.vz[a] + we * (w.vz[b] - w.vz[a])
+    return best_u, best_e, best_s
 
 
 @nb.njit(cache=True, nogil=True)
-def _tin_walk(tin, qx, qy, px, py, u0, u1, qs, ps, qz, tol, bulge, buf):
-    """Visit every edge crossing of the track q -> p (u in [0, 1]) on a TIN: the max of
-    :func:`_value` over the crossings in [u0, u1], and the surface at u0 and u1 (linear
-    between the crossings around them). With ``buf`` (a (m, 2) array, or one row to
-    skip), also the crossings in [u0, u1] as rows (u, s); returns their count (which may
-    exceed the buffer's rows: the caller then calls again with a larger one)."""
-    ex0, ey0, ez0, ex1, ey1, ez1, starts, items, bw, bh, nbx, nby = tin
+def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
+    """A face other than f that holds the track a little after u (steps growing tenfold), or -1."""
+    step = 1e-9 * (u1 - u) + 1e-12
+    while u + step < u1:
+        g = _face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
+        if g >= 0 and g != f:
+            return g
+        step *= 10.0
+    return -1
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
+    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN (:data:`TinWalk`).
+
+    Walks from face to face across the edges the track crosses, so the breakpoints come
+    in order (the pieces between them are where the value can peak under curvature).
+    Where the walk cannot go on (through a vertex into the wrong face, across a hole), it
+    locates the next face a step further along the track.
+    """
     dx = px - qx
     dy = py - qy
-    best = -_INF
-    count = 0
-    a_lo_u, a_lo_s, a_hi_u, a_hi_s = 0.0, qs, 1.0, ps  # around u0
-    b_lo_u, b_lo_s, b_hi_u, b_hi_s = 0.0, qs, 1.0, ps  # around u1
-    # walk the buckets along the track (Amanatides-Woo), u from 0 to 1
-    c = min(max(int(np.floor(qx / bw)), 0), nbx - 1)
-    r = min(max(int(np.floor(qy / bh)), 0), nby - 1)
-    cend = min(max(int(np.floor(px / bw)), 0), nbx - 1)
-    rend = min(max(int(np.floor(py / bh)), 0), nby - 1)
-    stepc = 1 if dx > 0.0 else -1
-    stepr = 1 if dy > 0.0 else -1
-    tmaxc = _INF
-    tdc = _INF
-    if dx != 0.0:
-        edge = (c + 1) * bw if dx > 0.0 else c * bw
-        tmaxc = (edge - qx) / dx
-        tdc = bw / abs(dx)
-    tmaxr = _INF
-    tdr = _INF
-    if dy != 0.0:
-        edge = (r + 1) * bh if dy > 0.0 else r * bh
-        tmaxr = (edge - qy) / dy
-        tdr = bh / abs(dy)
-    while True:
-        b = r * nbx + c
-        for s in range(starts[b], starts[b + 1]):
-            k = items[s]
-            # q + u d = e0 + w (e1 - e0)
-            fx = ex1[k] - ex0[k]
-            fy = ey1[k] - ey0[k]
-            det = fx * dy - fy * dx
-            if det == 0.0:
-                continue
-            rx = ex0[k] - qx
-            ry = ey0[k] - qy
-            u = (fx * ry - fy * rx) / det
-            w = (dx * ry - dy * rx) / det
-            if w < 0.0 or w > 1.0 or u < 0.0 or u > 1.0:
-                continue
-            sv = ez0[k] + w * (ez1[k] - ez0[k])
-            if u >= u0 and u <= u1 and u > 0.0:
-                v = _value(sv, u, qz, tol, bulge)
-                if v > best:
-                    best = v
-                if count < buf.shape[0]:
-                    buf[count, 0] = u
-                    buf[count, 1] = sv
-                count += 1
-            a_lo_u, a_lo_s, a_hi_u, a_hi_s = _bracket(u, sv, u0, a_lo_u, a_lo_s, a_hi_u, a_hi_s)
-            b_lo_u, b_lo_s, b_hi_u, b_hi_s = _bracket(u, sv, u1, b_lo_u, b_lo_s, b_hi_u, b_hi_s)
-        if c == cend and r == rend:
-            break
-        if tmaxc < tmaxr:
-            if tmaxc > 1.0:
-                break
-            c += stepc
-            tmaxc += tdc
-        else:
-            if tmaxr > 1.0:
-                break
-            r += stepr
-            tmaxr += tdr
-        if c < 0 or c >= nbx or r < 0 or r >= nby:
-            break
-    s0 = _lerp(a_lo_u, a_lo_s, a_hi_u, a_hi_s, u0)
-    s1 = _lerp(b_lo_u, b_lo_s, b_hi_u, b_hi_s, u1)
-    return best, s0, s1, count
-
-
-@nb.njit(cache=True, nogil=True)
-def tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol, bulge):
-    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN.
-
-    ``tin`` = (ex0, ey0, ez0, ex1, ey1, ez1, starts, items, bw, bh, nbx, nby): the edges
-    (local coordinates) and their buckets. ``qs`` and ``ps`` are the surface heights at q
-    and p (the breakpoints at u = 0 and u = 1). Under curvature the crossings are sorted
-    to find the pieces, inside which the value can peak (:func:`_piece_max`).
-    """
-    none = np.empty((0, 2))
-    best, s0, s1, count = _tin_walk(tin, qx, qy, px, py, u0, u1, qs, ps, qz, tol, bulge, none)
-    best = max(best, _value(s0, u0, qz, tol, bulge), _value(s1, u1, qz, tol, bulge))
-    if bulge > 0.0:
-        buf = np.empty((count + 2, 2))
-        _tin_walk(tin, qx, qy, px, py, u0, u1, qs, ps, qz, tol, bulge, buf[1:count + 1])
-        buf[0, 0] = u0
-        buf[0, 1] = s0
-        buf[count + 1, 0] = u1
-        buf[count + 1, 1] = s1
-        order = np.argsort(buf[:, 0])
-        for j in range(count + 1):
-            a = order[j]
-            b = order[j + 1]
-            v = _piece_max(buf[a, 0], buf[a, 1], buf[b, 0], buf[b, 1], qz, tol, bulge)
-            if v > best:
-                best = v
+    u = u0
+    f = _face_at(w, qx + u * dx, qy + u * dy)
+    if f < 0:
+        return _INF  # the start is outside the TIN: not a valid query
+    su = _plane(w, f, qx + u * dx, qy + u * dy)
+    best = _value(su, u, qz, tol, bulge)
+    if dx == 0.0 and dy == 0.0:  # a vertical segment: one ground point
+        return max(best, _value(su, u1, qz, tol, bulge))
+    nf = w.faces.shape[0]
+    for _ in range(4 * nf + 16):
+        ue, e, se = _exit(w, f, qx, qy, dx, dy, u)
+        if e < 0:  # stuck (through a vertex into a face the track does not enter): look ahead
+            g = _face_ahead(w, f, qx, qy, dx, dy, u, u1)
+            if g < 0:
+                return best
+            f = g
+            continue
+        if ue >= u1:
+            s1 = _plane(w, f, qx + u1 * dx, qy + u1 * dy)
+            v = max(_value(s1, u1, qz, tol, bulge), _piece_max(u, su, u1, s1, qz, tol, bulge))
+            return max(best, v)
+        v = max(_value(se, ue, qz, tol, bulge), _piece_max(u, su, ue, se, qz, tol, bulge))
+        if v > best:
+            best = v
+        u = ue
+        su = se
+        g = w.nbr[f, e]
+        if g < 0:
+            g = _face_at(w, qx + (u + 1e-9) * dx, qy + (u + 1e-9) * dy)
+            if g < 0:
+                return best
+        f = g
     return best
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_threshold(tin, px, py, pz, ps, qx, qy, qz, qs, delta, end_radius, tol, kc):
-    """The threshold height of p at (px, py) (surface height ``ps``) for the target
-    (qx, qy, qz) standing on a surface of height ``qs``; see :func:`grid_threshold`."""
+def tin_threshold(w, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
+    """The threshold height of p at (px, py) for the target (qx, qy, qz) on a TIN; see
+    :func:`grid_threshold`."""
     u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
     if u0 < 0.0:
         return -_INF
     bulge = kc * ((px - qx) ** 2 + (py - qy) ** 2)
-    return qz + tin_max_slope(tin, qx, qy, qz, qs, px, py, ps, u0, u1, tol, bulge)
+    return qz + tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge)
 
 
 # --------------------------------------------------------------------------- best heights
@@ -549,12 +530,12 @@ def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
 
 
 @nb.njit(cache=True, nogil=True)
-def _tin_row(tin, px, py, pz, ps, q, qs, delta, end_radius, tol, kc, skip, out):
+def _tin_row(tin, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
         else:
-            out[k] = tin_threshold(tin, px, py, pz, ps, q[k, 0], q[k, 1], q[k, 2], qs[k], delta, end_radius, tol, kc)
+            out[k] = tin_threshold(tin, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
@@ -572,14 +553,14 @@ def grid_heights(g, p, q, vis, delta, end_radius, tol, kc, margin, min_gain, out
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, ps, q, qs, vis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
-    """:func:`grid_heights` on a TIN (``ps``, ``qs``: the surface under the points and partners)."""
+def tin_heights(tin, p, q, vis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+    """:func:`grid_heights` on a TIN (a :data:`TinWalk`)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
             continue
         thr = np.empty(q.shape[0])
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], ps[i], q, qs, delta, end_radius, tol, kc, -1, thr)
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
         out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin, min_gain)
 
 
@@ -601,12 +582,12 @@ def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, s
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_sweep(tin, q, qs, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
-    """:func:`grid_sweep` on a TIN (``qs``: the surface under the partners)."""
+def tin_sweep(tin, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
+    """:func:`grid_sweep` on a TIN (a :data:`TinWalk`)."""
     thr = np.empty(q.shape[0])
     for j in range(order.shape[0]):
         if stop[0] != 0:
             return
         i = order[j]
-        _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], qs[i], q, qs, delta, end_radius, tol, kc, i, thr)
+        _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
         q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)

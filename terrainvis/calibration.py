@@ -125,7 +125,7 @@ class _Surface:
             self.data = _walk_grid(terrain, acc)
             self.ltop = acc.ltop
         else:
-            self.x0, self.y0, self.data = _tin_edges(terrain)
+            self.x0, self.y0, self.data = _tin_walk(terrain)
             self.ltop = 0
 
     def local(self, xy: np.ndarray) -> np.ndarray:
@@ -135,32 +135,31 @@ class _Surface:
         return out
 
 
-def _tin_edges(tin: TIN):
-    """The TIN's edges in local coordinates with their bucket grid (cached on the TIN)."""
-    cached = tin._cache.get("calibration_edges")
+def _tin_walk(tin: TIN):
+    """The TIN as the threshold walk reads it (:data:`~terrainvis._calibration_kernels.TinWalk`,
+    local coordinates) and its origin (cached on the TIN)."""
+    cached = tin._cache.get("calibration_walk")
     if cached is not None:
         return cached
-    from ._mesh import undirected_edges
+    from ._mesh import edge_keys, half_edges
 
+    bk = tin._buckets()
+    faces = np.ascontiguousarray(tin.faces, dtype=np.int64)
+    he = half_edges(faces)  # (3m, 2): edge e of face f is row 3 f + e
+    key = edge_keys(he, tin.n_vertices, directed=True)
+    twin = edge_keys(he[:, ::-1], tin.n_vertices, directed=True)
+    order = np.argsort(key)
+    pos = np.searchsorted(key[order], twin)
+    pos = np.minimum(pos, key.size - 1)
+    found = key[order][pos] == twin
+    nbr = np.where(found, order[pos] // 3, -1).reshape(-1, 3).astype(np.int64)
     v = tin.vertices
-    xmin, xmax, ymin, ymax = tin.extent
-    keys, _ = undirected_edges(tin.faces, tin.n_vertices)
-    e0, e1 = keys // tin.n_vertices, keys % tin.n_vertices
-    x = v[:, 0] - xmin
-    y = v[:, 1] - ymin
-    w = max(xmax - xmin, 1e-300)
-    h = max(ymax - ymin, 1e-300)
-    side = max(1, int(np.sqrt(e0.size / 2.0)))  # about two edges per bucket
-    nbx = max(1, int(round(side * np.sqrt(w / h))))
-    nby = max(1, int(round(side * np.sqrt(h / w))))
-    bw, bh = w / nbx, h / nby
-    pad = 1e-9 * float(np.hypot(w, h))
-    ex0, ey0, ez0 = (np.ascontiguousarray(a[e0]) for a in (x, y, v[:, 2]))
-    ex1, ey1, ez1 = (np.ascontiguousarray(a[e1]) for a in (x, y, v[:, 2]))
-    starts, items = _ck.build_edge_buckets(ex0, ey0, ex1, ey1, bw, bh, nbx, nby, pad)
-    data = (ex0, ey0, ez0, ex1, ey1, ez1, starts, items, float(bw), float(bh), int(nbx), int(nby))
-    out = (float(xmin), float(ymin), data)
-    tin._cache["calibration_edges"] = out
+    walk = _ck.TinWalk(
+        np.ascontiguousarray(v[:, 0] - bk.x0), np.ascontiguousarray(v[:, 1] - bk.y0), np.ascontiguousarray(v[:, 2]),
+        faces, nbr, bk.starts, bk.items, float(bk.bw), float(bk.bh), int(bk.nbx), int(bk.nby),
+    )
+    out = (float(bk.x0), float(bk.y0), walk)
+    tin._cache["calibration_walk"] = out
     return out
 
 
@@ -262,8 +261,8 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
                 call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc,
                      surf.margin, min_gain, work=k * k)
             else:
-                call(_ck.tin_sweep, surf.data, q, np.ascontiguousarray(ground), order, visible, surf.delta,
-                     end_radius, surf.tol, kc, surf.margin, min_gain, work=k * k)
+                call(_ck.tin_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc, surf.margin,
+                     min_gain, work=k * k)
         z_s = q[:, 2].copy()
     out = Partners(xy, z_t, z_s, ground, visible)
     simplified._cache[key] = out
@@ -332,7 +331,6 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
         call(_ck.grid_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
              out, score, work=work)
     else:
-        call(_ck.tin_heights, surf.data, p, np.ascontiguousarray(ground), q,
-             np.ascontiguousarray(part.ground_simplified), vis, surf.delta, end_radius, surf.tol, kc,
-             surf.margin, min_gain, out, score, work=work)
+        call(_ck.tin_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
+             out, score, work=work)
     return out

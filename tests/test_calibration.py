@@ -39,11 +39,8 @@ def _thresholds(surface, p, q, kc=0.0):
             ck._grid_row(surf.data, stack, pl[i, 0], pl[i, 1], pl[i, 2], ql, surf.delta, 0.0, surf.tol, kc, -1,
                          out[i])
     else:
-        ps = surface.height_at(p[:, :2])
-        qs = np.ascontiguousarray(surface.height_at(q[:, :2]))
         for i in range(p.shape[0]):
-            ck._tin_row(surf.data, pl[i, 0], pl[i, 1], pl[i, 2], ps[i], ql, qs, surf.delta, 0.0, surf.tol, kc, -1,
-                        out[i])
+            ck._tin_row(surf.data, pl[i, 0], pl[i, 1], pl[i, 2], ql, surf.delta, 0.0, surf.tol, kc, -1, out[i])
     return out
 
 
@@ -110,6 +107,24 @@ def test_a_grid_and_its_tin_give_the_same_thresholds():
     q[:, 2] = grid.height_at(q[:, :2]) + 0.5
     a = _thresholds(grid, p, q)
     b = _thresholds(grid.to_tin(), p, q)
+    scale = tv.visibility.terrain_scale(grid)
+    assert np.allclose(a, b, rtol=0, atol=1e-9 * scale)
+
+
+def test_tin_walk_through_vertices_and_along_edges():
+    """Tracks between vertices of the grid's TIN run along its edges and through its vertices:
+    the face-to-face walk must still meet every breakpoint (the grid walk is the reference)."""
+    grid = _random_grid(11, 9, 9)
+    tin = grid.to_tin()
+    xs, ys = grid.xs, grid.ys
+    ends = [(xs[0], ys[0]), (xs[8], ys[8]), (xs[0], ys[4]), (xs[8], ys[4]), (xs[3], ys[0]), (xs[3], ys[8]),
+            (xs[1], ys[1]), (xs[7], ys[5]), (xs[2], ys[6]), (xs[6], ys[2])]
+    p = np.array([[x, y, 0.0] for x, y in ends])
+    p[:, 2] = grid.height_at(p[:, :2])
+    q = p.copy()
+    q[:, 2] += 0.25
+    a = _thresholds(grid, p, q)
+    b = _thresholds(tin, p, q)
     scale = tv.visibility.terrain_scale(grid)
     assert np.allclose(a, b, rtol=0, atol=1e-9 * scale)
 
