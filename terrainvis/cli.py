@@ -332,7 +332,10 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
     from ._fileio import atomic_write_text
 
     extra = {}
-    if (df["relocation"] == "oracle").any():
+    beyond = report.beyond_paper(df) if settings.measure == "pairs" else None
+    if beyond is not None and not beyond.empty:
+        extra["beyond"] = beyond
+    elif (df["relocation"] == "oracle").any():
         extra["oracle"] = report.oracle_gap(df)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
@@ -344,7 +347,7 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
     else:
         text = (report.to_markdown({**report.paper_tables(df), **extra}) + "\n"
                 + report.comparison_markdown(report.paper_comparison(df)))
-        lines = report.findings_markdown(report.findings(df))
+        lines = report.findings_markdown(report.findings(df)) + report.beyond_paper_findings(df)
     fast = sorted(set(df[(df["method"] == "qec") & (df["backend"] == "fast-simplification")]["terrain"]))
     if fast:
         from simplifiers.quadric import AUTO_MAX_SAMPLES
