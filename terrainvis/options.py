@@ -113,8 +113,9 @@ class Option:
         How ``terrainvis compare`` spells it (None: the API only).
     los : bool
         Passed, under its name, to every visibility computation of a run
-        (``visibility_matrix``, ``viewshed`` and the oracle's ``relocate``): an option such
-        as an earth-curvature coefficient is then one entry here and nothing else.
+        (``visibility_matrix``, ``viewshed`` and ``relocate``, whose calibrated and oracle
+        relocations compute visibility): an option such as the earth-curvature
+        coefficient is then one entry here and nothing else.
     default_text : str, optional
         How help texts show the default (when ``repr`` of it would not say it well).
     """
