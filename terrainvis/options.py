@@ -30,7 +30,9 @@ from typing import Any
 import numpy as np
 
 from ._validate import as_float_array, as_int, choice, describe
+from .calibration import N_PARTNERS
 from .relocation import ORACLE, RELOCATIONS
+from .visibility import EARTH_RADIUS
 
 __all__ = [
     "Option", "Flag", "Switch", "OPTIONS", "RULES", "Settings", "DEFAULTS", "validate", "los_keywords",
@@ -111,8 +113,9 @@ class Option:
         How ``terrainvis compare`` spells it (None: the API only).
     los : bool
         Passed, under its name, to every visibility computation of a run
-        (``visibility_matrix``, ``viewshed`` and the oracle's ``relocate``): an option such
-        as an earth-curvature coefficient is then one entry here and nothing else.
+        (``visibility_matrix``, ``viewshed`` and ``relocate``, whose calibrated and oracle
+        relocations compute visibility): an option such as the earth-curvature
+        coefficient is then one entry here and nothing else.
     default_text : str, optional
         How help texts show the default (when ``repr`` of it would not say it well).
     """
@@ -169,6 +172,22 @@ def finite(value, name: str) -> float:
     if arr.ndim != 0 or not np.isfinite(arr):
         raise ValueError(f"{name} must be a finite number, got {describe(value)}")
     return float(arr)
+
+
+def _nonnegative(value, name: str) -> float:
+    """A check: a finite real number >= 0."""
+    out = finite(value, name)
+    if out < 0:
+        raise ValueError(f"{name} must be >= 0, got {out!r}")
+    return out
+
+
+def _positive(value, name: str) -> float:
+    """A check: a finite real number > 0."""
+    out = finite(value, name)
+    if out <= 0:
+        raise ValueError(f"{name} must be > 0, got {out!r}")
+    return out
 
 
 def height(value, name: str) -> float:
@@ -313,10 +332,17 @@ _DECLARED = [
     Option(
         "relocations", RELOCATIONS, names(_relocation_names, _default_relocations),
         "relocations of the points onto S(T) (add 'oracle' for the upper bound)", "sequence of str",
-        doc=("Any of ``\"identity\"``, ``\"full\"``, ``\"half\"`` (:func:`terrainvis.relocate`), and "
-             "``\"oracle\"``, the upper bound that needs T's verdicts (not a practical relocation; "
-             "it costs many visibility queries per point set)."),
+        doc=("Any of the paper's ``\"identity\"``, ``\"full\"``, ``\"half\"``, the ``\"calibrated\"`` "
+             "relocation (:func:`terrainvis.relocate`; :mod:`terrainvis.calibration`), and ``\"oracle\"``, "
+             "the upper bound that needs T's verdicts (not a practical relocation; it costs many visibility "
+             "queries per point set)."),
         cli=Flag(many=True, metavar="R"),
+    ),
+    Option(
+        "n_partners", N_PARTNERS, integer(minimum=1), "partners of the calibrated relocation", "int",
+        doc=("The calibrated relocation places each point against about this many partners spread over the "
+             "terrain (:func:`terrainvis.calibration.partners`); their positions come from ``seed``."),
+        cli=Flag("--partners", int),
     ),
     Option(
         "n_points", 50, integer(minimum=2), "points per set", "int", measures=("pairs",),
@@ -350,6 +376,17 @@ _DECLARED = [
     Option(
         "engine", "auto", one_of(_engines), "visibility engine", "{'auto', 'grid', 'embree'}",
         doc="See :func:`terrainvis.visibility_matrix`.", cli=Flag(choices=_engines), los=True,
+    ),
+    Option(
+        "curvature", 0.0, _nonnegative, "earth curvature coefficient: 0 a flat earth (the paper's), 1 geometric, "
+        "0.85714 with standard refraction (GDAL's -cc)", "float",
+        doc=("Every line of sight, on T and on S(T), clears the surface raised by ``curvature * d1 * d2 / "
+             "(2 * earth_radius)`` (:func:`terrainvis.line_of_sight`)."),
+        cli=Flag(type=float), los=True,
+    ),
+    Option(
+        "earth_radius", EARTH_RADIUS, _positive, "earth radius in the terrain's x/y units (metres)", "float",
+        default_text=f"{EARTH_RADIUS:,.0f} (WGS84's semi-major axis)", cli=Flag(type=float), los=True,
     ),
     Option(
         "predicate", "exact", one_of(lambda: PREDICATES),

@@ -211,7 +211,7 @@ def _pair_rows(grid, simplified, base, settings, sets) -> list[dict]:
                     v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
                     rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
                 continue
-            moved = relocate(pts, simplified, how, offset=settings.offset)
+            moved = relocate(pts, simplified, how, **_relocation_keywords(settings, grid, radius))
             v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
             for d, mask in masks:
                 rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
@@ -237,12 +237,21 @@ def _viewshed_rows(grid, simplified, base, settings, eyes) -> list[dict]:
         v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, **kw)
         dist = np.hypot(X - eye[0, 0], Y - eye[0, 1])
         for how in settings.relocations:
-            moved = relocate(eye, simplified, how, offset=settings.offset)[0]
+            moved = relocate(eye, simplified, how, target_height=settings.target_height,
+                             **_relocation_keywords(settings, grid, 0.0))[0]
             v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, **kw)
             for d in settings.max_distance:
                 counted = dist <= _limit(d, grid, settings.distance_unit)
                 rows.append(_row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted)))
     return rows
+
+
+def _relocation_keywords(settings: Settings, grid: HeightGrid, end_radius: float) -> dict:
+    """What :func:`terrainvis.relocate` takes besides the points, S(T) and the relocation: the
+    observers' offset and, for the calibrated relocation, T, the partners (from the run's
+    seed) and the verdicts' predicate on S(T) (end radius, curvature)."""
+    return {"offset": settings.offset, "original": grid, "end_radius": end_radius, "n_partners": settings.n_partners,
+            "seed": settings.seed, **los_keywords(settings)}
 
 
 def _row(base, s, how, d, t_test, t_true, counts) -> dict:

@@ -88,12 +88,14 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     argv = ["compare", "--terrain", "hills", "--out", str(tmp_path), "--methods", "lls", "qec", "--levels", "2",
             "--relocations", "full", "--points", "7", "--sets", "3", "--seed", "5", "--max-distance", "100", "all",
             "--distance-unit", "cells", "--offset", "1.5", "--engine", "embree", "--predicate", "paper",
-            "--no-volume", "--repeats", "2", "--no-cascade"]
+            "--no-volume", "--repeats", "2", "--no-cascade", "--partners", "99", "--curvature", "0.5",
+            "--earth-radius", "6371000"]
     with pytest.raises(Stop):
         main(argv)
     expected = dict(methods=["lls", "qec"], levels=[2], relocations=["full"], n_points=7, n_sets=3, seed=5,
                     max_distance=[100.0, None], distance_unit="cells", offset=1.5, engine="embree",
-                    predicate="paper", volume=False, repeats=2, cascade=False)
+                    predicate="paper", volume=False, repeats=2, cascade=False, n_partners=99, curvature=0.5,
+                    earth_radius=6371000.0)
     assert {k: seen[k] for k in expected} == expected
     seen.clear()
     with pytest.raises(Stop):  # the viewshed measure's options (it refuses predicate 'paper')
@@ -139,15 +141,16 @@ def test_a_settings_file_without_a_newer_option_resumes_at_its_default(grid, tmp
 
 
 def test_relocations_and_methods_are_read_from_their_modules(monkeypatch, grid):
-    """A relocation added to terrainvis.relocation (as "calibrated" will be) is a valid name at once."""
+    """A relocation added to terrainvis.relocation (as "calibrated" was) is a valid name at once."""
     from terrainvis import relocation
 
-    monkeypatch.setattr(relocation, "RELOCATIONS", relocation.RELOCATIONS + ("calibrated",))
-    s = validate({"g": grid}, {"relocations": ["calibrated", "full"]})
-    assert s.relocations == ("calibrated", "full")
+    monkeypatch.setattr(relocation, "RELOCATIONS", relocation.RELOCATIONS + ("toy",))
+    s = validate({"g": grid}, {"relocations": ["toy", "full"]})
+    assert s.relocations == ("toy", "full")
     monkeypatch.undo()
-    with pytest.raises(ValueError, match=r"relocations must be drawn from \['identity', 'full', 'half', 'oracle'\]"):
-        validate({"g": grid}, {"relocations": ["calibrated"]})
+    with pytest.raises(ValueError, match=r"relocations must be drawn from "
+                                         r"\['identity', 'full', 'half', 'calibrated', 'oracle'\], got 'toy'"):
+        validate({"g": grid}, {"relocations": ["toy"]})
 
 
 # ---------------------------------------------------------------------- the toy option
@@ -195,8 +198,8 @@ def test_a_toy_option_is_on_the_command_line(toy, tmp_path, capsys):
 
 
 def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, grid):
-    """``los=True``: one entry, and the units pass it to visibility_matrix, viewshed and the oracle's relocate
-    (as an earth-curvature coefficient would be)."""
+    """``los=True``: one entry, and the units pass it to visibility_matrix, viewshed and relocate (whose
+    calibrated and oracle relocations compute visibility), as they pass the earth-curvature coefficient."""
     from terrainvis import relocation, visibility
 
     monkeypatch.setitem(OPTIONS, "toy_refraction", Option("toy_refraction", 0.0, lambda v, n: float(v),
@@ -218,14 +221,13 @@ def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, g
         monkeypatch.setattr(module, name, spy(getattr(module, name)))
     df = compare({"g": grid}, toy_refraction=0.13, relocations=["full", "oracle"], **_small())
     assert (df["error"] == "").all()
-    # every visibility computation got it; of the relocations only the oracle computes visibility
-    assert {(n, v) for n, oracle, v in seen if n != "relocate" or oracle} == {("visibility_matrix", 0.13),
-                                                                              ("relocate", 0.13)}
-    assert {v for n, oracle, v in seen if n == "relocate" and not oracle} == {"not given"}
+    # every visibility computation got it, every relocation too (the oracle's among them)
+    assert {(n, v) for n, _, v in seen} == {("visibility_matrix", 0.13), ("relocate", 0.13)}
+    assert {oracle for n, oracle, _ in seen if n == "relocate"} == {True, False}
     seen.clear()
     df = compare({"g": grid}, toy_refraction=0.25, measure="viewshed", n_observers=1, **_small())
     assert (df["error"] == "").all()
-    assert {(n, v) for n, _, v in seen if n != "relocate"} == {("viewshed", 0.25)}
+    assert {(n, v) for n, _, v in seen} == {("viewshed", 0.25), ("relocate", 0.25)}
 
 
 # ---------------------------------------------------------------------- the split

@@ -128,7 +128,7 @@ def test_two_real_runs_into_one_folder(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "terrainvis.cli", "compare", "--terrain", "hills", "ridges", "--levels", "1", "2",
            "--methods", "lls", "greedy-insertion", "--points", "30", "--sets", "3", "--workers", "1", "--no-plots",
-           "--out", str(out)]
+           "--relocations", "identity", "full", "half", "--out", str(out)]
     first = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
