@@ -282,7 +282,7 @@ def _affine_or_raise(attrs: dict):
     return affine
 
 
-def from_native(attrs: dict, xy, name: str = "xy") -> np.ndarray:
+def from_native(attrs: dict, xy, name: str = "xy", extent=None) -> np.ndarray:
     """Positions in the native CRS (:func:`position_crs`) moved to the terrain's own frame.
 
     Parameters
@@ -292,6 +292,10 @@ def from_native(attrs: dict, xy, name: str = "xy") -> np.ndarray:
     xy : array_like, shape (2,), (n, 2) or (n, k >= 2)
         x, y first along the last axis (lon, lat in degrees on a geographic terrain);
         further columns (a height z) are copied unchanged. NaN stays NaN.
+    extent : (xmin, xmax, ymin, ymax), optional
+        The terrain's footprint in its own frame. A position the conversion's rounding
+        puts just outside it (by at most ``1e-9`` of its span plus a few float64 steps)
+        is put on its edge, so that the lon/lat of an edge sample lands on that sample.
 
     Returns
     -------
@@ -309,9 +313,22 @@ def from_native(attrs: dict, xy, name: str = "xy") -> np.ndarray:
         sx, ox, sy, oy = affine
         x = (x - ox) / sx
         y = (y - oy) / sy
+    if extent is not None:
+        xmin, xmax, ymin, ymax = (float(v) for v in extent)
+        x = _onto_edges(x, xmin, xmax)
+        y = _onto_edges(y, ymin, ymax)
     out[..., 0] = x
     out[..., 1] = y
     return out
+
+
+def _onto_edges(v: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``v`` with the values within rounding outside ``[lo, hi]`` put on ``lo`` or ``hi``."""
+    tol = 1e-9 * (hi - lo) + 8.0 * np.spacing(max(abs(lo), abs(hi)))
+    v = np.array(v, dtype=np.float64, copy=True)
+    v[(v < lo) & (v >= lo - tol)] = lo
+    v[(v > hi) & (v <= hi + tol)] = hi
+    return v
 
 
 def to_native(attrs: dict, xy, name: str = "xy") -> np.ndarray:

@@ -23,7 +23,7 @@ import math
 
 import numpy as np
 
-from ._georef import from_native, position_crs, to_native, xy_to_native
+from ._georef import position_crs, xy_to_native
 from ._validate import choice
 
 __all__ = ["FRAMES", "PositionFrame"]
@@ -82,13 +82,13 @@ class PositionFrame:
         """Positions in this frame (x, y first along the last axis; z passes) in the terrain's frame."""
         if self.identity:
             return np.array(xy, dtype=np.float64)
-        return from_native(self.terrain.attrs, xy)
+        return self.terrain.from_native(xy)
 
     def from_grid(self, xy) -> np.ndarray:
         """Positions in the terrain's frame moved to this frame (the inverse of :meth:`to_grid`)."""
         if self.identity:
             return np.array(xy, dtype=np.float64)
-        return to_native(self.terrain.attrs, xy)
+        return self.terrain.to_native(xy)
 
     # ---------------------------------------------------------- text
     def _bounds(self) -> tuple[float, float, float, float]:

@@ -809,7 +809,7 @@ def _info_positions(grid) -> None:
     errors = local_frame_error(grid.attrs, grid.ys)
     if errors is not None:
         south, north = errors
-        print(f"  distances local metres with one east-west scale (the centre latitude's): east-west lengths "
+        print(f"  distances local metres with one east-west scale for every row: east-west lengths "
               f"{100 * south:+.2f} % off at the southern edge, {100 * north:+.2f} % at the northern edge "
               "(--metric resamples onto a metric grid)")
 

@@ -302,7 +302,9 @@ class HeightGrid:
         projected DEM (UTM, ...) that is its CRS already and this is a copy. On a lon/lat
         DEM the frame is local metres: this takes lon, lat in degrees, as GDAL and GRASS
         do. On a grid resampled by :func:`terrainvis.io.to_metric` it takes positions in
-        the lon/lat CRS it was resampled from. See :mod:`terrainvis._georef`.
+        the lon/lat CRS it was resampled from. See :mod:`terrainvis._georef`. A position
+        that the conversion's rounding puts just outside the grid (by at most ``1e-9`` of
+        its extent) is put on its edge: the lon/lat of an edge sample lands on it.
 
         Parameters
         ----------
@@ -330,7 +332,7 @@ class HeightGrid:
         """
         from ._georef import from_native
 
-        return from_native(self.attrs, xy)
+        return from_native(self.attrs, xy, extent=self.extent)
 
     def to_native(self, xy) -> np.ndarray:
         """Positions in this grid's own frame, moved to the native CRS: the inverse of :meth:`from_native`."""
@@ -724,7 +726,7 @@ class TIN:
         """
         from ._georef import from_native
 
-        return from_native(self.attrs, xy)
+        return from_native(self.attrs, xy, extent=self.extent)
 
     def to_native(self, xy) -> np.ndarray:
         """Positions in this TIN's own frame, moved to the native CRS: the inverse of :meth:`from_native`."""
