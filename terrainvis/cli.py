@@ -9,7 +9,14 @@
   ``.glb``; TINs also ``.npz``).
 * ``terrainvis los DEM --from X Y --to X Y`` checks lines of sight.
 * ``terrainvis viewshed DEM --observer X Y -o viewshed.tif`` writes an observer's viewshed.
+* ``terrainvis relocate DEM --points CSV ...`` places points on a simplification.
 * ``terrainvis info DEM`` describes a terrain.
+
+Positions (``--from``, ``--to``, ``--observer``, the ``--pairs`` and ``--points`` CSVs) are
+in the DEM's native CRS by default (lon/lat degrees on a lon/lat DEM), or in the terrain's
+own frame with ``--frame local``; outputs that report positions use the frame of the input
+(:mod:`terrainvis._positions`). ``--metric`` resamples a lon/lat DEM onto a metric grid
+first (:func:`terrainvis.io.to_metric`).
 
 User mistakes end with one line on stderr and exit status 2; a run that produced no
 result, or a failed write (a full disk), exits with 1; an interrupt exits with 130
@@ -83,6 +90,22 @@ def _add_nodata(p) -> None:
     g.add_argument("--crop-valid", action="store_true", help="cut the DEM to its largest window without nodata")
 
 
+def _add_positions(p, *, frame: bool = True) -> None:
+    """``--frame`` (how positions are given and printed) and ``--metric`` (resample a lon/lat DEM first)."""
+    from ._positions import FRAMES
+
+    if frame:
+        p.add_argument("--frame", choices=FRAMES, default="native",
+                       help="positions given and printed in the DEM's CRS (native, the default: lon/lat degrees on a "
+                            "lon/lat DEM, x, y of its projection otherwise) or in the terrain's own frame (local: "
+                            "metres from the south-west sample on a lon/lat DEM; see terrainvis info)")
+    p.add_argument("--metric", action="store_true",
+                   help="a lon/lat DEM: resample it first onto a metric grid (a transverse Mercator centred on it), "
+                        "so distances are right across the whole DEM, not only at its centre latitude; changes the "
+                        "samples (heights read from the DEM's surface; nodata wedges along the edges); positions "
+                        "stay lon/lat (docs/georeferencing.md)")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -94,6 +117,7 @@ def _parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
     i.add_argument("terrain", help="bundled name or DEM file")
     _add_nodata(i)
+    _add_positions(i, frame=False)
     return p
 
 
@@ -161,19 +185,24 @@ def _los_parser(sub) -> None:
         "los", help="check lines of sight on a DEM",
         description=(
             "Print whether the points see each other, and the lowest clearance of the segment (segment height "
-            "minus surface height) with where it occurs. Coordinates are the DEM's x, y (see terrainvis info)."
+            "minus surface height) with where it occurs. Positions are in the DEM's CRS (lon, lat in degrees on a "
+            "lon/lat DEM), or in the terrain's own frame with --frame local (see terrainvis info)."
         ),
     )
     los.add_argument("dem", help="DEM file or bundled name")
-    los.add_argument("--from", dest="start", nargs=2, type=_number, metavar=("X", "Y"), help="observer position")
-    los.add_argument("--to", dest="end", nargs=2, type=_number, metavar=("X", "Y"), help="target position")
-    los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2")
+    los.add_argument("--from", dest="start", nargs=2, type=_number, metavar=("X", "Y"),
+                     help="observer position (lon lat on a lon/lat DEM)")
+    los.add_argument("--to", dest="end", nargs=2, type=_number, metavar=("X", "Y"),
+                     help="target position (lon lat on a lon/lat DEM)")
+    los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2 (lon, lat on a "
+                                                   "lon/lat DEM)")
     los.add_argument("--height", type=_height, default=1.7, help="observer height above the surface, >= 0 (default 1.7)")
     los.add_argument("--target-height", type=_height, default=0.0,
                      help="target height above the surface, >= 0 (default 0)")
     los.add_argument("--end-radius", type=_distance_arg, default=0.0,
                      help="ignore the surface within this distance of each end (default 0)")
     _add_nodata(los)
+    _add_positions(los)
 
 
 def _viewshed_parser(sub) -> None:
@@ -186,13 +215,15 @@ def _viewshed_parser(sub) -> None:
         ),
     )
     v.add_argument("dem", help="DEM file or bundled name")
-    v.add_argument("--observer", nargs=2, type=_number, required=True, metavar=("X", "Y"), help="observer position")
+    v.add_argument("--observer", nargs=2, type=_number, required=True, metavar=("X", "Y"),
+                   help="observer position (lon lat on a lon/lat DEM; see --frame)")
     v.add_argument("--height", type=_height, default=1.7, help="eye height above the surface, >= 0 (default 1.7)")
     v.add_argument("--target-height", type=_height, default=0.0,
                    help="target height above the surface, >= 0 (default 0)")
     v.add_argument("--max-distance", type=_number, default=None, help="only samples within this distance")
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
     _add_nodata(v)
+    _add_positions(v)
 
 
 def _relocate_parser(sub) -> None:
@@ -212,7 +243,8 @@ def _relocate_parser(sub) -> None:
         ),
     )
     r.add_argument("dem", help="the original DEM (file or bundled name)")
-    r.add_argument("--points", required=True, metavar="CSV", help="the points: a CSV with columns x, y (and z)")
+    r.add_argument("--points", required=True, metavar="CSV",
+                   help="the points: a CSV with columns x, y (lon, lat on a lon/lat DEM; see --frame) and optionally z")
     r.add_argument("-o", "--output", required=True, metavar="OUT.csv", help="output CSV")
     r.add_argument("--simplified", metavar="FILE", help="the simplification (.npz from simplify or compare, .tif, .asc)")
     r.add_argument("-m", "--method", choices=list(METHODS), metavar="METHOD",
@@ -233,6 +265,7 @@ def _relocate_parser(sub) -> None:
                         "default; default 0)")
     r.add_argument("--earth-radius", type=_number, default=6378137.0, help="with --curvature: the earth's radius")
     _add_nodata(r)
+    _add_positions(r)
 
 
 # ------------------------------------------------------------------ helpers
@@ -247,6 +280,8 @@ def _terrain(name: str, args=None):
     label, grid = resolve_one(None, name, 0)
     if not np.isfinite(grid.z).any():
         raise UsageError(f"DEM {name!r} has no valid sample: all {_plural(grid.size, 'cell')} are nodata")
+    if args is not None and getattr(args, "metric", False):
+        grid = _metric_grid(name, grid)
     if args is not None and getattr(args, "fill", None):
         grid = grid.fill_nodata(args.fill)
     elif args is not None and getattr(args, "crop_valid", False):
@@ -255,28 +290,47 @@ def _terrain(name: str, args=None):
     return label, grid
 
 
+def _metric_grid(name: str, grid):
+    """``--metric``: a lon/lat DEM resampled onto a transverse Mercator grid (:func:`terrainvis.io.to_metric`)."""
+    from .io import to_metric
+
+    if not grid.attrs.get("geographic"):
+        crs = grid.attrs.get("crs")
+        raise UsageError(f"--metric resamples lon/lat DEMs; {name!r} is "
+                         + (f"in {crs}, whose x, y are metres already" if crs else "not georeferenced (no CRS)"))
+    return to_metric(grid)
+
+
+def _frame(grid, args):
+    """The :class:`~terrainvis._positions.PositionFrame` of a command's positions (``--frame``)."""
+    from ._positions import PositionFrame
+
+    return PositionFrame(grid, getattr(args, "frame", "native"))
+
+
+def _outside(frame, xy_user, what: str = "") -> str:
+    """``lies outside the DEM's footprint ... (or on nodata)`` in the user's frame, with a hint when the
+    position is on the DEM in the other frame (lon/lat given to --frame local, or local metres to native)."""
+    import numpy as np
+
+    from ._positions import PositionFrame
+
+    text = f"lies outside the DEM's footprint {frame.footprint()}{what} (or on nodata)"
+    other = PositionFrame(frame.terrain, "local" if frame.frame == "native" else "native")
+    if other.identity and frame.identity:
+        return text  # both frames are the same
+    try:
+        fits = np.isfinite(frame.terrain.height_at(other.to_grid(np.asarray([xy_user[:2]], float)))[0])
+    except ValueError:
+        fits = False
+    if fits:
+        text += f"; it is on the DEM as {other.describe()}: add --frame {other.frame} if you meant those"
+    return text
+
+
 def _plural(n: int, word: str, plural: str | None = None) -> str:
     """``1 terrain``, ``2 terrains``, ``12,000 vertices`` (with ``plural`` for irregular words)."""
     return f"{n:,} {word if n == 1 else plural or word + 's'}"
-
-
-def _coord_digits(grid) -> int:
-    """Decimals that show a coordinate to a tenth of the grid's cell, or finer."""
-    import math
-
-    step = min(grid.dx, grid.dy)
-    return max(0, 1 - math.floor(math.log10(step))) if step > 0 else 6
-
-
-def _xy(value: float, grid) -> str:
-    """A coordinate with enough digits for the grid (``.6g`` would round a UTM northing to 10 m)."""
-    import math
-
-    if not math.isfinite(value):
-        return str(value)
-    decimals = _coord_digits(grid)
-    whole = math.floor(math.log10(abs(value))) + 1 if value else 1
-    return f"{value:.{max(6, whole + decimals)}g}"
 
 
 def _option_value(text: str):
@@ -495,22 +549,23 @@ def _los(args) -> int:
     if args.pairs:
         if args.start or args.end:
             raise UsageError("give either --pairs or --from and --to, not both")
-        xy1, xy2 = _read_pairs(args.pairs)
+        user1, user2 = _read_pairs(args.pairs)
     else:
         if not (args.start and args.end):
             raise UsageError("give --from X Y and --to X Y (or --pairs CSV)")
-        xy1 = np.array([args.start], float)
-        xy2 = np.array([args.end], float)
+        user1 = np.array([args.start], float)
+        user2 = np.array([args.end], float)
+    frame = _frame(grid, args)
+    xy1, xy2 = frame.to_grid(user1), frame.to_grid(user2)
     z1 = grid.height_at(xy1) + args.height
     z2 = grid.height_at(xy2) + args.target_height
     outside = np.isnan(z1) | np.isnan(z2)
     if outside.any():
         k = int(np.flatnonzero(outside)[0])
-        xmin, xmax, ymin, ymax = (_xy(v, grid) for v in grid.extent)
-        start, end = (f"({_xy(p[k, 0], grid)}, {_xy(p[k, 1], grid)})" for p in (xy1, xy2))
+        bad = user1[k] if np.isnan(z1[k]) else user2[k]
         raise UsageError(
-            f"point pair {k} lies outside the DEM's valid surface x [{xmin}, {xmax}], y [{ymin}, {ymax}] "
-            f"(or on nodata): from {start} to {end}"
+            f"point pair {k} from {frame.point(user1[k])} to {frame.point(user2[k])}: {frame.point(bad)} "
+            f"{_outside(frame, bad)}"
         )
     a = np.column_stack([xy1, z1])
     b = np.column_stack([xy2, z2])
@@ -521,9 +576,9 @@ def _los(args) -> int:
         low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius)
         verdict = "visible" if visible[k] else "blocked"
         where = ("" if not np.isfinite(clear[k]) else
-                 f" at ({_xy(low['x'], grid)}, {_xy(low['y'], grid)}), {low['distance']:.6g} from the observer")
-        print(f"  ({_xy(xy1[k, 0], grid)}, {_xy(xy1[k, 1], grid)}) -> ({_xy(xy2[k, 0], grid)}, "
-              f"{_xy(xy2[k, 1], grid)}): {verdict}; lowest clearance {clear[k]:.4g}{where}")
+                 f" at {frame.point(frame.from_grid([low['x'], low['y']]))}, {low['distance']:.6g} from the observer")
+        print(f"  {frame.point(user1[k])} -> {frame.point(user2[k])}: {verdict}; lowest clearance "
+              f"{clear[k]:.4g}{where}")
     return 0
 
 
@@ -575,22 +630,26 @@ def _viewshed(args) -> int:
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
     check_output_file(out, "-o", inputs=[args.dem])
     label, grid = _terrain(args.dem, args)
+    frame = _frame(grid, args)
+    observer = tuple(float(v) for v in frame.to_grid(args.observer))
+    if np.isnan(grid.height_at([observer])[0]):
+        raise UsageError(f"--observer {frame.point(args.observer)} {_outside(frame, args.observer)}")
     t0 = time.perf_counter()
-    vis = viewshed(grid, tuple(args.observer), observer_height=args.height, target_height=args.target_height,
+    vis = viewshed(grid, observer, observer_height=args.height, target_height=args.target_height,
                    max_distance=args.max_distance)
     seconds = time.perf_counter() - t0
     valid = np.isfinite(grid.z)
     n_vis = int(vis[valid].sum())
-    _write_viewshed(grid, vis, out, suffix, args, label)
-    x, y = (_xy(v, grid) for v in args.observer)
-    print(f"{label}: observer ({x}, {y}), eye {args.height:g} above the surface")
+    _write_viewshed(grid, vis, out, suffix, args, label, observer)
+    print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
     print(f"  visible {n_vis:,} of {_plural(int(valid.sum()), 'sample')} "
           f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
 
 
-def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None:
+def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer) -> None:
+    """The viewshed by OUT's suffix; ``observer`` in the grid's own frame."""
     import numpy as np
 
     from ._fileio import atomic_path
@@ -598,7 +657,7 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None
     if suffix == ".png":
         from . import plot
 
-        fig = plot.viewshed(grid, vis, observer=tuple(args.observer), title=f"{label}: viewshed")
+        fig = plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed")
         with atomic_path(out) as tmp:
             fig.savefig(tmp, dpi=110, format="png")
         return
@@ -609,7 +668,9 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None
 
         # a grid of the same samples: 1 visible, 0 not, NaN nodata (with the DEM's georeferencing)
         z = np.where(np.isfinite(grid.z), vis.astype(np.float64), np.nan)
-        attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in args.observer],
+        # the observer in the grid's frame (that of its xs, ys) and in the DEM's native CRS
+        attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in observer],
+                 "viewshed_observer_native": [float(v) for v in _frame(grid, None).from_grid(observer)],
                  "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height)}
         save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
         return
@@ -633,17 +694,22 @@ def _relocate(args) -> int:
         raise UsageError("give the simplification as --simplified FILE or as -m METHOD [-l LEVEL], one of them")
     if args.level is not None and args.method is None:
         raise UsageError("-l goes with -m (the level to simplify the DEM to)")
+    if args.metric and args.simplified is not None:
+        raise UsageError("--metric resamples the DEM, and a --simplified file is in the DEM's frame as read: "
+                         "simplify here with -m METHOD [-l LEVEL] instead")
     check_output_file(out, "-o", inputs=[args.dem, args.points] + ([args.simplified] if args.simplified else []))
     label, grid = _terrain(args.dem, args)
     simplified, what = _simplification(grid, args)
     table = _read_columns(args.points, "--points", ("x", "y"), optional=("z",))
-    xy = table[:, :2]
+    frame = _frame(grid, args)
+    user = table[:, :2]
+    xy = frame.to_grid(user)
     ground = grid.height_at(xy)
     outside = np.isnan(ground) | np.isnan(simplified.height_at(xy))
     if outside.any():
         k = int(np.flatnonzero(outside)[0])
-        raise UsageError(f"--points {args.points!r}: row {k + 1} ({_xy(xy[k, 0], grid)}, {_xy(xy[k, 1], grid)}) lies "
-                         f"outside the DEM or its simplification (or on nodata); {int(outside.sum())} point(s) do")
+        raise UsageError(f"--points {args.points!r}: row {k + 1} {frame.point(user[k])} "
+                         f"{_outside(frame, user[k], ' or its simplification')}; {int(outside.sum())} point(s) do")
     z = np.where(np.isnan(table[:, 2]), ground + args.offset, table[:, 2])
     points = np.column_stack([xy, z])
     t0 = time.perf_counter()
@@ -652,10 +718,10 @@ def _relocate(args) -> int:
                      earth_radius=args.earth_radius)
     seconds = time.perf_counter() - t0
     surface = simplified.height_at(xy)
-    frame = pd.DataFrame({"x": xy[:, 0], "y": xy[:, 1], "z": moved[:, 2], "z_original": z,
-                          "ground_simplified": surface})
+    written = pd.DataFrame({**_csv_positions(frame, user), "z": moved[:, 2], "z_original": z,
+                            "ground_simplified": surface})
     with atomic_path(out) as tmp:
-        frame.to_csv(tmp, index=False, float_format="%.6f")
+        written.to_csv(tmp, index=False, float_format="%.6f")
     lift = moved[:, 2] - (surface + args.offset)
     print(f"{label}: {_plural(len(points), 'point')} relocated ({args.how}) onto {what}, {seconds:.2f} s")
     if args.how == "calibrated" and len(points):
@@ -664,6 +730,13 @@ def _relocate(args) -> int:
               f"{lift.min():+.4g} to {lift.max():+.4g}, median {np.median(lift):+.4g} (z units)")
     print(f"  wrote {out}")
     return 0
+
+
+def _csv_positions(frame, user) -> dict:
+    """The x, y columns of a CSV the command writes, in the frame of its input (degrees to 1e-9, 0.1 mm)."""
+    if frame.degrees:
+        return {"x": [f"{v:.9f}" for v in user[:, 0]], "y": [f"{v:.9f}" for v in user[:, 1]]}
+    return {"x": user[:, 0], "y": user[:, 1]}
 
 
 def _simplification(grid, args):
@@ -695,7 +768,8 @@ def _info(args) -> int:
 
     label, grid = _terrain(args.terrain, args)
     rows, cols = grid.shape
-    xmin, xmax, ymin, ymax = (_xy(v, grid) for v in grid.extent)
+    local = _frame(grid, argparse.Namespace(frame="local"))
+    xmin, xmax, ymin, ymax = (local.value(v) for v in grid.extent)
     z = grid.z
     kind = "uniform" if grid.is_uniform else "rectilinear"
     nodata = f", {_plural(grid.n_nodata, 'nodata cell')}" if grid.n_nodata else ""
@@ -706,6 +780,7 @@ def _info(args) -> int:
     print(f"  extent    x [{xmin}, {xmax}], y [{ymin}, {ymax}]")
     crs = grid.attrs.get("crs") or "not recorded"
     print(f"  CRS       {crs}" + (" (x, y converted to local metres)" if grid.attrs.get("geographic") else ""))
+    _info_positions(grid)
     print(f"  heights   {np.nanmin(z):.6g} to {np.nanmax(z):.6g}")
     print(f"  nodata    {_plural(grid.n_nodata, 'cell')} ({100 * grid.n_nodata / grid.size:.2f} %)"
           + (" (use --fill or --crop-valid)" if grid.n_nodata else ""))
@@ -716,6 +791,27 @@ def _info(args) -> int:
         print(f"    {level}: {n:>12,} {'vertex' if n == 1 else 'vertices'} ({100 * n / grid.size:.3g} %)")
     print(f"  methods   {', '.join(METHODS)}")
     return 0
+
+
+def _info_positions(grid) -> None:
+    """``info``'s lines on positions: the frame the commands take, and the local frame's distances."""
+    from ._georef import local_frame_error
+
+    native = _frame(grid, None)
+    if native.identity:
+        print(f"  positions {native.describe()}, in the commands (--from, --to, --observer, CSVs; --frame local is "
+              "the same here)")
+    else:
+        print(f"  positions {native.describe()}, the commands' default: {native.footprint(units=False)}; "
+              "--frame local takes the x, y above (local metres)")
+    if grid.attrs.get("metric_resampling"):
+        print(f"  metric    {grid.attrs['metric_resampling']}")
+    errors = local_frame_error(grid.attrs, grid.ys)
+    if errors is not None:
+        south, north = errors
+        print(f"  distances local metres with one east-west scale for every row: east-west lengths "
+              f"{100 * south:+.2f} % off at the southern edge, {100 * north:+.2f} % at the northern edge "
+              "(--metric resamples onto a metric grid)")
 
 
 # ------------------------------------------------------------------ main

@@ -294,6 +294,52 @@ class HeightGrid:
             attrs=self.attrs,
         )
 
+    # ------------------------------------------------------------- positions
+    def from_native(self, xy) -> np.ndarray:
+        """Positions in the DEM's native CRS, moved to this grid's own frame (that of ``xs``, ``ys``).
+
+        Every function of terrainvis takes positions in the grid's own frame. On a
+        projected DEM (UTM, ...) that is its CRS already and this is a copy. On a lon/lat
+        DEM the frame is local metres: this takes lon, lat in degrees, as GDAL and GRASS
+        do. On a grid resampled by :func:`terrainvis.io.to_metric` it takes positions in
+        the lon/lat CRS it was resampled from. See :mod:`terrainvis._georef`. A position
+        that the conversion's rounding puts just outside the grid (by at most ``1e-9`` of
+        its extent) is put on its edge: the lon/lat of an edge sample lands on it.
+
+        Parameters
+        ----------
+        xy : array_like, shape (2,), (n, 2) or (n, k >= 2)
+            x, y (lon, lat) first along the last axis; further columns (a height z) are
+            copied unchanged, so ``grid.from_native(points_xyz)`` works too. NaN stays NaN.
+
+        Returns
+        -------
+        ndarray, float64, the shape of ``xy``
+
+        Raises
+        ------
+        ValueError
+            When the attrs say the grid is geographic but hold no map back to lon/lat.
+
+        Examples
+        --------
+        >>> g = HeightGrid(np.zeros((3, 3)), dx=500.0, dy=1000.0,
+        ...                attrs={"crs": "EPSG:4326", "geographic": True, "xy_to_native": (0.001, -72.8, 0.001, 44.1)})
+        >>> g.from_native([-72.3, 45.1]).round(6).tolist()
+        [500.0, 1000.0]
+        >>> g.to_native([[500.0, 1000.0, 7.0]]).round(6).tolist()
+        [[-72.3, 45.1, 7.0]]
+        """
+        from ._georef import from_native
+
+        return from_native(self.attrs, xy, extent=self.extent)
+
+    def to_native(self, xy) -> np.ndarray:
+        """Positions in this grid's own frame, moved to the native CRS: the inverse of :meth:`from_native`."""
+        from ._georef import to_native
+
+        return to_native(self.attrs, xy)
+
     # ---------------------------------------------------------------- surface
     def height_at(self, xy) -> np.ndarray:
         """Height of the surface at each point.
@@ -671,6 +717,22 @@ class TIN:
             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10, work=pts.shape[0],
         )
         return out
+
+    def from_native(self, xy) -> np.ndarray:
+        """Positions in the native CRS of the DEM this TIN came from, moved to its own frame.
+
+        A simplified TIN carries its grid's georeferencing in ``attrs``; this is
+        :meth:`HeightGrid.from_native` on them (a copy when there is none).
+        """
+        from ._georef import from_native
+
+        return from_native(self.attrs, xy, extent=self.extent)
+
+    def to_native(self, xy) -> np.ndarray:
+        """Positions in this TIN's own frame, moved to the native CRS: the inverse of :meth:`from_native`."""
+        from ._georef import to_native
+
+        return to_native(self.attrs, xy)
 
     def to_grid(self, like: "HeightGrid") -> "HeightGrid":
         """This TIN's surface sampled at every sample of ``like``: a raster of it (NaN outside the TIN).

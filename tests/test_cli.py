@@ -146,7 +146,7 @@ def test_los_prints_the_verdict_and_where_it_is_decided(tmp_path, capsys):
     assert main(["los", "ridges", "--pairs", str(pairs)]) == 0
     assert capsys.readouterr().out.count("lowest clearance") == 2
     err = _one_line_error(capsys, 2, ["los", "ridges", "--from", "0", "0", "--to", "1e7", "0"])
-    assert "outside the DEM's valid surface" in err
+    assert "(10000000, 0) lies outside the DEM's footprint x [0, 3570], y [0, 3570] (or on nodata)" in err
     assert "give --from X Y and --to X Y" in _one_line_error(capsys, 2, ["los", "ridges", "--from", "0", "0"])
 
 
@@ -173,7 +173,7 @@ def test_viewshed_writes_rasters_aligned_with_the_dem(tmp_path, capsys):
     assert main(["viewshed", "hills", "--observer", "900", "900", "-o", str(tmp_path / "v.png")]) == 0
     assert (tmp_path / "v.png").stat().st_size > 1000
     err = _one_line_error(capsys, 2, ["viewshed", str(dem), "--observer", "0", "0", "-o", str(tmp_path / "w.tif")])
-    assert "outside the terrain's footprint" in err
+    assert "--observer (0, 0) lies outside the DEM's footprint x [664737, 685977], y [4878949, 4895779] (EPSG:26918)" in err
     assert "-o must end in .tif, .npz or .png" in _one_line_error(
         capsys, 2, ["viewshed", "hills", "--observer", "900", "900", "-o", str(tmp_path / "v.txt")])
 

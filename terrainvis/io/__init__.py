@@ -128,6 +128,7 @@ from ._asc import _read_asc, _write_asc
 from ._common import FORMAT, FORMAT_VERSION, _check_band, _check_crs_arg, _check_nodata, _check_path, _Corrupt, _UserError
 from ._geotiff import _read_tif, _write_tif, write_mask_geotiff
 from ._meshfile import _read_mesh, _write_mesh
+from ._metric import to_metric
 from ._npy import _read_npy, _write_npy
 from ._npz import _read_npz, _write_npz
 from ._raster import native_coords
@@ -144,10 +145,11 @@ from ._sample import sample_dem
 #   _geotiff   GeoTIFF through rasterio
 #   _meshfile  .ply, .obj, .stl, .glb
 #   _sample    sample_dem
+#   _metric    to_metric: a lon/lat grid resampled onto a local transverse Mercator grid
 
 __all__ = [
     "load_terrain", "write_mask_geotiff", "save_terrain", "load_dem", "save_dem", "sample_dem", "native_coords",
-    "metres_per_degree",
+    "metres_per_degree", "to_metric",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",
 ]
 

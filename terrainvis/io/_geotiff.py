@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._fileio import atomic_path
-from .._georef import parse_crs, rasterio_module
+from .._georef import GEOREF_KEYS, parse_crs, rasterio_module
 from ..terrain import HeightGrid
 from ._attrs import _attrs_from_json, _attrs_to_json
 from ._common import _check_read_memory, _Corrupt, _UserError
@@ -82,7 +82,7 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
                     crs_text = stored
             except ValueError:
                 pass
-    for key in ("crs", "geographic", "xy_to_native"):
+    for key in GEOREF_KEYS:
         attrs.pop(key, None)  # the file's own georeferencing decides
     return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy)
 
