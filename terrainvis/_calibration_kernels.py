@@ -388,14 +388,15 @@ def _exit(w, f, qx, qy, dx, dy, u):
 
 @nb.njit(cache=True, nogil=True)
 def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
-    """A face other than f that holds the track a little after u (steps growing tenfold), or -1."""
+    """A face other than f that holds the track a little after u (steps growing tenfold), and
+    that position of the track: (face, u'), or (-1, u1)."""
     step = 1e-9 * (u1 - u) + 1e-12
     while u + step < u1:
         g = _face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
         if g >= 0 and g != f:
-            return g
+            return g, u + step
         step *= 10.0
-    return -1
+    return -1, u1
 
 
 @nb.njit(cache=True, nogil=True)
@@ -420,11 +421,18 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
     nf = w.faces.shape[0]
     for _ in range(4 * nf + 16):
         ue, e, se = _exit(w, f, qx, qy, dx, dy, u)
-        if e < 0:  # stuck (through a vertex into a face the track does not enter): look ahead
-            g = _face_ahead(w, f, qx, qy, dx, dy, u, u1)
+        if e < 0:  # stuck (through a vertex into a face the track does not enter): step ahead
+            g, ug = _face_ahead(w, f, qx, qy, dx, dy, u, u1)
             if g < 0:
                 return best
+            # go on from the probe on g, so that u grows at every step (faces around a vertex
+            # could otherwise hand the walk back and forth); the piece skipped is ~1e-9 long
             f = g
+            u = ug
+            su = _plane(w, f, qx + u * dx, qy + u * dy)
+            v = _value(su, u, qz, tol, bulge)
+            if v > best:
+                best = v
             continue
         if ue >= u1:
             s1 = _plane(w, f, qx + u1 * dx, qy + u1 * dy)
