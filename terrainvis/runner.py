@@ -87,7 +87,12 @@ def run_units(tasks, fn, *, on_result, workers=None, client=None) -> None:
         with signals.installed():
             try:
                 for key, args in tasks:
-                    deliver(key, fn(*args))
+                    result = fn(*args)
+                    # a signal whose exception was swallowed on its way up (numba's compiler runs
+                    # Python callbacks from C, where an exception is printed and dropped) still
+                    # stops the run; this unit's result may be a failure it caused: not saved
+                    signals.check(dropped=True)
+                    deliver(key, result)
             except KeyboardInterrupt as exc:
                 raise _as_interrupted(exc) from None
         return
@@ -121,16 +126,22 @@ class _Signals:
     def __init__(self, defer: bool):
         self.defer = defer
         self.pending = None
+        self.dropped = None
         self.depth = 0
 
     def handler(self, signum, frame):
         if self.defer or self.depth:
             self.pending = signum
             return
+        self.dropped = signum  # kept: if the exception is swallowed on its way up, the run stops after the unit
         raise Interrupted(signum)
 
-    def check(self) -> None:
-        """Raise :class:`Interrupted` when a signal arrived (outside a save)."""
+    def check(self, dropped: bool = False) -> None:
+        """Raise :class:`Interrupted` when a signal arrived (outside a save); with ``dropped``,
+        also for a signal whose exception never reached the run (see :meth:`handler`)."""
+        if dropped and self.dropped is not None:
+            signum, self.dropped = self.dropped, None
+            raise Interrupted(signum)
         if self.pending is not None and not self.depth:
             signum, self.pending = self.pending, None
             raise Interrupted(signum)

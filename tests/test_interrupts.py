@@ -141,3 +141,26 @@ def test_ctrl_c_while_the_workers_are_still_starting(tmp_path):
     assert "interrupted by SIGINT" in err and "Traceback" not in err, err
     _, alive = psutil.wait_procs(workers, timeout=10)
     assert not alive, f"worker processes survived: {alive}"
+
+
+def test_an_interrupt_swallowed_inside_a_unit_still_stops_a_serial_run():
+    """numba's compiler runs Python callbacks from C, where the handler's exception is printed
+    and dropped (seen as "Exception ignored on calling ctypes callback function"): the run
+    must stop after that unit all the same, without saving what the unit returned."""
+    from terrainvis.runner import Interrupted, run_units
+
+    def unit(i):
+        if i == 1:
+            try:  # the signal lands where its exception goes nowhere
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(1.0)
+            except KeyboardInterrupt:
+                pass
+            return "unit 1, run while the interrupt was lost"
+        return f"unit {i}"
+
+    saved = []
+    with pytest.raises(Interrupted):
+        run_units([(i, (i,)) for i in range(3)], unit, on_result=lambda key, result: saved.append(result), workers=1)
+    assert saved == ["unit 0"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the run's handler is gone
