@@ -129,7 +129,7 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     --------
     >>> df = compare(["hills"], methods=["lls"], levels=[1], n_points=10, n_sets=1, workers=1)
     >>> len(df), list(df["relocation"])
-    (3, ['identity', 'full', 'half'])
+    (4, ['identity', 'full', 'half', 'calibrated'])
     """
     from .runner import check_client, check_workers
 
