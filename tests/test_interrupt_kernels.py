@@ -232,9 +232,20 @@ def test_compare_with_one_worker_does_not_swallow_the_interrupt(tmp_path):
     cmd = _cli("compare", "--terrain", dem, "--methods", "greedy-cuts", "--levels", "1", "--points", "5", "--sets", "1",
                "--no-plots", "--no-volume", "--workers", "1", "--out", str(out_dir))
     p, out, err, sent, _ = _run_and_signal(cmd, signal.SIGINT, after=10.0)
-    assert p.returncode == 130, (p.returncode, out, err[-2000:])
+    assert p.returncode == 130, (p.returncode, _failures(out_dir), err[-2000:])
     assert time.time() - sent < 3.0
     assert "Traceback" not in err and "SystemError" not in err, err
+
+
+def _failures(out_dir) -> list[str]:
+    """The errors compare recorded for failed units (for the message of a failed assertion)."""
+    import pandas as pd
+
+    path = out_dir / "results.csv"
+    if not path.exists():
+        return []
+    table = pd.read_csv(path)
+    return sorted(set(table["error"].dropna())) if "error" in table else []
 
 
 _IMPORT_SCRIPT = """
