@@ -527,6 +527,89 @@ def best_height(thr, vis, zref, margin, min_gain):
     return best_z, best
 
 
+@nb.njit(cache=True, nogil=True)
+def best_height_kept(thr, vis, lthr, lvis, zref, margin, min_gain):
+    """:func:`best_height` among the heights that keep the point's agreement with its
+    *neighbours* at least as high as at ``zref``.
+
+    ``lthr``, ``lvis`` are the thresholds and T's verdicts (1 seen, 0 not, -1 no
+    neighbour there) of the neighbours, probes close to the point: the partners spread
+    over the terrain say little about short sight lines, so without this a point can move
+    to gain one far partner and lose several near ones. The local agreement is a step
+    function of z too; the heights where it is at least its value at ``zref`` form
+    intervals (``zref`` among them), and the partners' agreement is maximised over those.
+    With no neighbours this is :func:`best_height`.
+    """
+    K = thr.shape[0]
+    L = lthr.shape[0]
+    keep = 0  # the neighbours' agreement at zref
+    for k in range(L):
+        if lvis[k] >= 0 and (zref >= lthr[k]) == (lvis[k] == 1):
+            keep += 1
+    t = np.empty(K + L)
+    dg = np.zeros(K + L, dtype=np.int64)  # the change of the partners' agreement on crossing t
+    dl = np.zeros(K + L, dtype=np.int64)  # ... and of the neighbours'
+    g = 0  # agreements below every threshold: only thresholds of -inf are seen
+    loc = 0
+    for k in range(K):
+        t[k] = thr[k]
+        if thr[k] == -_INF:
+            g += 1 if vis[k] else 0
+        else:
+            g += 0 if vis[k] else 1
+            dg[k] = 1 if vis[k] else -1
+    for k in range(L):
+        t[K + k] = lthr[k]
+        if lvis[k] < 0:
+            continue
+        if lthr[k] == -_INF:
+            loc += 1 if lvis[k] == 1 else 0
+        else:
+            loc += 0 if lvis[k] == 1 else 1
+            dl[K + k] = 1 if lvis[k] == 1 else -1
+    order = np.argsort(t)
+    n = K + L
+    best = -1
+    best_z = zref
+    best_d = _INF
+    at_ref = -1
+    lo = -_INF
+    j = 0
+    while j <= n:
+        # z in [lo, hi) sees exactly the partners and neighbours with a threshold <= lo
+        hi = _INF if j == n else t[order[j]]
+        if lo <= zref < hi:
+            at_ref = g
+        if hi > lo and loc >= keep and g >= best:
+            if g > best:
+                best = g
+                best_d = _INF
+            m = margin
+            if hi - lo < 2.0 * m:
+                m = 0.5 * (hi - lo)
+            zc = zref
+            if zc < lo + m:
+                zc = lo + m
+            if zc > hi - m:
+                zc = hi - m
+            d = abs(zc - zref)
+            if d < best_d:
+                best_d = d
+                best_z = zc
+        if j == n:
+            break
+        while j < n and t[order[j]] == hi:
+            k = order[j]
+            if t[k] > -_INF:
+                g += dg[k]
+                loc += dl[k]
+            j += 1
+        lo = hi
+    if best - at_ref < min_gain:
+        return zref, at_ref
+    return best_z, best
+
+
 # --------------------------------------------------------------------------- loops
 @nb.njit(cache=True, nogil=True)
 def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
@@ -547,9 +630,11 @@ def _tin_row(tin, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_heights(g, p, q, vis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+def grid_heights(g, p, q, vis, lq, lvis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
     """Best height of each point p[i] = (x, y, reference height) against the partners q
-    (x, y, height on the surface), whose verdicts on T are ``vis[i]`` (parallel over points)."""
+    (x, y, height on the surface), whose verdicts on T are ``vis[i]``, keeping its
+    agreement with its neighbours ``lq[i]`` (verdicts ``lvis[i]``, :func:`best_height_kept`;
+    parallel over points)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
@@ -557,11 +642,13 @@ def grid_heights(g, p, q, vis, delta, end_radius, tol, kc, margin, min_gain, out
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
         _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
-        out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin, min_gain)
+        lthr = np.empty(lq.shape[1])
+        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], lq[i], delta, end_radius, tol, kc, -1, lthr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr, lvis[i], p[i, 2], margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, q, vis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+def tin_heights(tin, p, q, vis, lq, lvis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
     """:func:`grid_heights` on a TIN (a :data:`TinWalk`)."""
     n = p.shape[0]
     for i in nb.prange(n):
@@ -569,7 +656,9 @@ def tin_heights(tin, p, q, vis, delta, end_radius, tol, kc, margin, min_gain, ou
             continue
         thr = np.empty(q.shape[0])
         _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
-        out[i], score[i] = best_height(thr, vis[i], p[i, 2], margin, min_gain)
+        lthr = np.empty(lq.shape[1])
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], lq[i], delta, end_radius, tol, kc, -1, lthr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr, lvis[i], p[i, 2], margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True)

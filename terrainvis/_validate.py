@@ -72,6 +72,13 @@ def as_nonnegative_finite(value, name: str, unit: str = "") -> float:
     return out
 
 
+def as_bool(value, name: str) -> bool:
+    """True or False (numpy's bool too), or a TypeError naming ``name``."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {describe(value)}")
+    return bool(value)
+
+
 def as_int(value, name: str, *, minimum: int | None = None, maximum: int | None = None) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, got {describe(value)}")

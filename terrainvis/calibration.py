@@ -35,10 +35,26 @@ radius). The agreement with T's verdicts is then a step function of the height, 
 maximum is found exactly by sorting the thresholds. Among the optimal heights the one
 nearest the full projection is taken, a small margin away from any threshold.
 
+Short sight lines
+-----------------
+Partners spread over the whole terrain stand, on average, tens of cells from a point, so
+they say little about its short sight lines: chasing one more far partner, a point can
+sink a little into S(T) and lose sight of what is around it. Over all pairs that trade
+pays; among pairs a few cells apart it can cost a few points of accuracy against full
+projection (docs/relocation.md). With ``neighbours=True`` each point also has
+*neighbours*: L = 48 probes on rings 1.5, 3, 5 and 8 cells of T around it
+(:data:`NEIGHBOUR_RINGS`), standing like the point (``offset`` or ``target_height`` above
+each surface; on S(T) where full projection puts them), with the point's verdicts to them
+on T. The best height is then sought only among the heights where the point agrees with
+at least as many neighbours as at its reference height
+(:func:`terrainvis._calibration_kernels.best_height_kept`): it never trades short sight
+lines for long ones. The neighbours depend on the point alone.
+
 Cost
 ----
-Per point, K LOS queries on T and K threshold walks on S(T) (K = ``n_partners``); per
-(T, S(T), setting), once, K² / 2 LOS queries on T and ``sweeps`` x K² walks on S(T).
+Per point, K + L LOS queries on T and K + L threshold walks on S(T) (K = ``n_partners``,
+L = 48 neighbours or none);
+per (T, S(T), setting), once, K² / 2 LOS queries on T and ``sweeps`` x K² walks on S(T).
 """
 
 from __future__ import annotations
@@ -68,6 +84,11 @@ MIN_GAIN = 1
 _CHUNK_PAIRS = 1 << 20
 #: Height margin kept from thresholds, as a fraction of the terrain's scale (about 5 mm on a 5 km grid).
 MARGIN_REL = 1e-6
+#: The neighbours of a point (see "Short sight lines" in the module docstring): rings at
+#: these distances, in cells of T, ...
+NEIGHBOUR_RINGS = (1.5, 3.0, 5.0, 8.0)
+#: ... with this many neighbours on each ring (alternate rings turned by half a step).
+NEIGHBOUR_DIRECTIONS = 12
 
 
 @dataclass(frozen=True)
@@ -273,7 +294,8 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
 def calibrated_heights(points, simplified, original, *, offset: float = 0.0, target_height=None,
                        n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
                        end_radius: float = 0.0, curvature: float = 0.0,
-                       earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN) -> np.ndarray:
+                       earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN,
+                       neighbours: bool = False) -> np.ndarray:
     """The calibrated height on ``simplified`` of each point of ``original`` (see the module docstring).
 
     Parameters
@@ -302,6 +324,9 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     curvature, earth_radius : float
         Earth curvature and refraction of the verdicts on both surfaces
         (:func:`terrainvis.line_of_sight`).
+    neighbours : bool
+        Keep each point's agreement with its neighbours (short sight lines) at least as
+        high as at its reference height (see the module docstring; False by default).
 
     Returns
     -------
@@ -324,13 +349,59 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     ground = simplified.height_at(pts[:, :2])
     p = surf.local(np.column_stack([pts[:, :2], ground + offset]))
     q = surf.local(np.column_stack([part.xy, part.z_simplified]))
+    if neighbours:
+        near, near_vis = _neighbours(original, simplified, pts, height, curve)
+    else:
+        near, near_vis = np.zeros((n, 0, 3)), np.zeros((n, 0), dtype=np.int8)
+    lq = surf.local(near.reshape(-1, 3)).reshape(near.shape)
     out = np.empty(n)
     score = np.empty(n, dtype=np.int64)
-    work = n * part.xy.shape[0]
-    if surf.grid:
-        call(_ck.grid_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
-             out, score, work=work)
-    else:
-        call(_ck.tin_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
-             out, score, work=work)
+    work = n * (part.xy.shape[0] + near.shape[1])
+    kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
+    call(kernel, surf.data, p, q, vis, lq, near_vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
+         out, score, work=work)
+    return out
+
+
+def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float, curve: dict):
+    """Each point's neighbours: positions on :data:`NEIGHBOUR_RINGS` around it, standing
+    ``height`` above S(T), (n, L, 3), and the point's verdicts to them on T (standing
+    ``height`` above T), (n, L) int8: 1 seen, 0 not, -1 no neighbour (off either surface).
+
+    They depend on the point alone, so a point's height still does not depend on the
+    other points.
+    """
+    n = pts.shape[0]
+    step = max(abs(original.dx), abs(original.dy))
+    d = NEIGHBOUR_DIRECTIONS
+    offsets = []
+    for j, r in enumerate(NEIGHBOUR_RINGS):
+        a = 2.0 * np.pi * (np.arange(d) + 0.5 * (j % 2)) / d
+        offsets.append(r * step * np.column_stack([np.cos(a), np.sin(a)]))
+    offsets = np.concatenate(offsets)
+    xy = pts[:, None, :2] + offsets[None, :, :]
+    flat = xy.reshape(-1, 2)
+    z_t = original.height_at(flat)
+    z_s = simplified.height_at(flat)
+    ok = np.isfinite(z_t) & np.isfinite(z_s)
+    vis = np.full(flat.shape[0], -1, dtype=np.int8)
+    if ok.any():
+        src = np.repeat(pts, offsets.shape[0], axis=0)[ok]
+        dst = np.column_stack([flat[ok], z_t[ok] + height])
+        key = ("neighbours",) + _key(original, curve, src, dst)
+        seen = _cached(key, lambda: _pairs_on_original(original, src, dst, curve))
+        vis[ok] = seen
+    # a missing neighbour stands on the point itself: its threshold is never tested
+    near = np.column_stack([np.where(ok[:, None], flat, np.repeat(pts[:, :2], offsets.shape[0], axis=0)),
+                            np.where(ok, z_s + height, np.repeat(pts[:, 2], offsets.shape[0]))])
+    return near.reshape(n, offsets.shape[0], 3), vis.reshape(n, offsets.shape[0])
+
+
+def _pairs_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+    from .visibility import line_of_sight
+
+    out = np.empty(a.shape[0], dtype=bool)
+    for i in range(0, a.shape[0], _CHUNK_PAIRS):
+        out[i:i + _CHUNK_PAIRS] = line_of_sight(original, a[i:i + _CHUNK_PAIRS], b[i:i + _CHUNK_PAIRS],
+                                                engine="grid", **curve)
     return out

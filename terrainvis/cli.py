@@ -257,6 +257,8 @@ def _relocate_parser(sub) -> None:
     r.add_argument("--target-height", type=_height, default=None,
                    help="calibrated: the points will look at targets this high above the surface (a viewshed's "
                         "cells); without it they will look at each other")
+    r.add_argument("--neighbours", action="store_true",
+                   help="calibrated: keep each point's short sight lines (its neighbours 1.5-8 cells around it)")
     r.add_argument("--partners", type=int, default=N_PARTNERS,
                    help=f"calibrated: partners spread over the DEM (default {N_PARTNERS})")
     r.add_argument("--seed", type=int, default=0, help="calibrated: seed of the partners' positions (default 0)")
@@ -715,7 +717,7 @@ def _relocate(args) -> int:
     t0 = time.perf_counter()
     moved = relocate(points, simplified, args.how, offset=args.offset, original=grid, target_height=args.target_height,
                      n_partners=args.partners, seed=args.seed, curvature=args.curvature,
-                     earth_radius=args.earth_radius)
+                     earth_radius=args.earth_radius, neighbours=args.neighbours)
     seconds = time.perf_counter() - t0
     surface = simplified.height_at(xy)
     written = pd.DataFrame({**_csv_positions(frame, user), "z": moved[:, 2], "z_original": z,

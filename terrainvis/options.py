@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_float_array, as_int, choice, describe
+from ._validate import as_bool, as_float_array, as_int, choice, describe
 from .calibration import N_PARTNERS
 from .relocation import ORACLE, RELOCATIONS
 from .visibility import EARTH_RADIUS
@@ -205,9 +205,7 @@ def one_of(valid: Callable[[], Sequence[str]]):
 
 def boolean(value, name: str) -> bool:
     """A check: True or False (numpy's bool too)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False, got {describe(value)}")
-    return bool(value)
+    return as_bool(value, name)
 
 
 def names(valid: Callable[[], Sequence[str]], default: Callable[[], Sequence[str]]):
@@ -343,6 +341,13 @@ _DECLARED = [
         doc=("The calibrated relocation places each point against about this many partners spread over the "
              "terrain (:func:`terrainvis.calibration.partners`); their positions come from ``seed``."),
         cli=Flag("--partners", int),
+    ),
+    Option(
+        "neighbours", False, boolean, "calibrated relocation: keep each point's short sight lines", "bool",
+        doc=("True: each point agrees with at least as many of its neighbours (probes 1.5 to 8 cells of T "
+             "around it) as at the full projection (:func:`terrainvis.relocate`); better among pairs a few "
+             "cells apart, a little worse over all pairs."),
+        cli=Switch(on="--neighbours", on_help="calibrated relocation: keep each point's short sight lines"),
     ),
     Option(
         "n_points", 50, integer(minimum=2), "points per set", "int", measures=("pairs",),

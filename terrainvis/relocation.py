@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_float_array, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
+from ._validate import as_bool, as_float_array, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
 from .calibration import MIN_GAIN, N_PARTNERS, SWEEPS
 from .visibility import EARTH_RADIUS
 from .errors import OutsideFootprintError
@@ -60,7 +60,7 @@ ORACLE = "oracle"
 def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None, target_height=None,
              end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
              n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, min_gain: int = MIN_GAIN,
-             reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
+             neighbours: bool = False, reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
     """Place points on a simplified terrain.
 
     Parameters
@@ -94,6 +94,11 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
         calibrate them, the seed of their positions, and the least gain that moves a
         point (:func:`terrainvis.calibration.calibrated_heights`). A point's height
         depends on these, T, S(T) and the point, never on the other points.
+    neighbours : bool
+        ``"calibrated"`` only: keep each point's short sight lines (False, the default).
+        True: a point agrees with at least as many of its neighbours (48 probes 1.5 to 8
+        cells of T around it) as at the full projection; better among pairs a few cells
+        apart, a little worse over all pairs (docs/relocation.md gives the figures).
     reference : (n, n) bool, optional
         ``"oracle"`` only (required): the verdicts on the original terrain T.
     mask : (n, n) bool, optional
@@ -131,7 +136,8 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
         return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve)
     if how == CALIBRATED:
         options = {"end_radius": end_radius, "curvature": curvature, "earth_radius": earth_radius,
-                   "n_partners": n_partners, "sweeps": sweeps, "seed": seed, "min_gain": min_gain}
+                   "n_partners": n_partners, "sweeps": sweeps, "seed": seed, "min_gain": min_gain,
+                   "neighbours": neighbours}
         return _calibrated(pts, simplified, off, original, target_height, options)
     out = pts.copy()
     if how == "identity" or pts.shape[0] == 0:
@@ -177,7 +183,8 @@ def _calibrated(pts, simplified, off, original, target_height, options):
     options = dict(options, end_radius=as_nonnegative_finite(options["end_radius"], "end_radius"),
                    n_partners=as_int(options["n_partners"], "n_partners", minimum=1),
                    sweeps=as_int(options["sweeps"], "sweeps", minimum=0), seed=as_int(options["seed"], "seed", minimum=0),
-                   min_gain=as_int(options["min_gain"], "min_gain", minimum=1))
+                   min_gain=as_int(options["min_gain"], "min_gain", minimum=1),
+                   neighbours=as_bool(options["neighbours"], "neighbours"))
     out = pts.copy()
     if pts.shape[0] == 0:
         return out

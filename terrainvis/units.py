@@ -251,7 +251,7 @@ def _relocation_keywords(settings: Settings, grid: HeightGrid, end_radius: float
     observers' offset and, for the calibrated relocation, T, the partners (from the run's
     seed) and the verdicts' predicate on S(T) (end radius, curvature)."""
     return {"offset": settings.offset, "original": grid, "end_radius": end_radius, "n_partners": settings.n_partners,
-            "seed": settings.seed, **los_keywords(settings)}
+            "neighbours": settings.neighbours, "seed": settings.seed, **los_keywords(settings)}
 
 
 def _row(base, s, how, d, t_test, t_true, counts) -> dict:

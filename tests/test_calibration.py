@@ -190,6 +190,85 @@ def test_best_height_needs_the_least_gain_to_move():
     assert ck.best_height(thr, vis, 1.5, 0.01, 2) == (1.5, 2)  # a gain of 1 only
 
 
+def _local_at(thr, vis, z):
+    ok = vis >= 0
+    return int(np.sum(np.where(vis[ok] == 1, z >= thr[ok], z < thr[ok])))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(-5, 5), st.booleans()), min_size=1, max_size=10),
+       st.lists(st.tuples(st.integers(-5, 5), st.integers(-1, 1)), min_size=0, max_size=8),
+       st.floats(-8, 8), st.sampled_from([1e-3, 0.01, 0.3]))
+def test_best_height_kept_is_optimal_among_the_heights_that_keep_the_neighbours(items, near, zref, margin):
+    thr = np.array([t for t, _ in items], dtype=float)
+    thr[thr == -5] = -np.inf
+    vis = np.array([v for _, v in items])
+    lthr = np.array([t for t, _ in near], dtype=float)
+    lthr[lthr == -5] = -np.inf
+    lvis = np.array([v for _, v in near], dtype=np.int8)
+    z, score = ck.best_height_kept(thr, vis, lthr, lvis, zref, margin, 1)
+    keep = _local_at(lthr, lvis, zref)
+    assert _local_at(lthr, lvis, z) >= keep  # the neighbours are kept
+    assert score == _agreement_at(thr, vis, z)
+    # brute force: the best agreement over every interval where the neighbours are kept
+    finite = np.unique(np.concatenate([thr[np.isfinite(thr)], lthr[np.isfinite(lthr)]]))
+    edges = np.concatenate([[-1e9], finite, [1e9]])
+    probes = np.concatenate([0.5 * (edges[:-1] + edges[1:]), finite, [zref]])
+    best = max(_agreement_at(thr, vis, x) for x in probes if _local_at(lthr, lvis, x) >= keep)
+    assert score == best
+    if lvis.size == 0 or np.all(lvis < 0):  # no neighbours: the plain best height
+        assert (z, score) == ck.best_height(thr, vis, zref, margin, 1)
+
+
+def test_best_height_kept_gives_up_a_partner_to_keep_two_neighbours():
+    # seeing is monotone in height: the partner asks the point to sink below 0, which would
+    # lose the two neighbours it sees at its reference height 1.0 (and sees on T)
+    thr = np.array([0.0])
+    vis = np.array([False])  # not seen on T: agreement needs z < 0
+    lthr = np.array([0.5, 0.8])
+    lvis = np.array([1, 1], dtype=np.int8)  # both seen on T and at the reference height 1.0
+    assert ck.best_height(thr, vis, 1.0, 0.01, 1) == (-0.01, 1)  # alone, the point sinks below 0
+    assert ck.best_height_kept(thr, vis, lthr, lvis, 1.0, 0.01, 1) == (1.0, 0)  # it stays: sinking loses both
+
+
+@pytest.mark.parametrize("method", ["lls", "greedy-insertion"])
+def test_neighbours_are_kept_by_the_exact_engine(method):
+    """With neighbours=True, each point sees on S(T) as many of its neighbours as T says at least as
+    often as at the full projection, by the exact engine; and partners' agreement is counted exactly."""
+    T = tv.experiment.resolve_terrains(["rough"])["rough"]
+    P = tv.experiment.point_sets(T, "rough", 30, 1, 0, 0.0)[0]
+    S = simplifiers.simplify(T, method, 2)
+    z = cal.calibrated_heights(P, S, T, n_partners=100, neighbours=True)
+    near, near_vis = cal._neighbours(T, S, P, 0.0, {})
+    tol = tv.visibility.clearance_tolerance(S)
+    ground = S.height_at(P[:, :2])
+    moved = 0
+    for i in range(P.shape[0]):
+        ok = near_vis[i] >= 0
+        q = near[i][ok]
+        want = near_vis[i][ok] == 1
+        agree = []
+        for h in (z[i], ground[i]):
+            a = np.column_stack([np.repeat(P[i:i + 1, :2], q.shape[0], 0), np.full(q.shape[0], h)])
+            agree.append(int(np.sum((tv.min_clearance(S, a, q) >= -tol) == want)))
+        assert agree[0] >= agree[1], (i, agree)
+        moved += z[i] != ground[i]
+    assert moved > 0  # the constraint did not simply pin every point
+
+
+def test_neighbours_on_t_are_the_exact_engines():
+    T = tv.experiment.resolve_terrains(["hills"])["hills"]
+    P = tv.sample_points(T, 7, seed=4)
+    S = simplifiers.simplify(T, "gls", 2)
+    near, near_vis = cal._neighbours(T, S, P, 1.5, {})
+    for i in range(P.shape[0]):
+        ok = near_vis[i] >= 0
+        q = np.column_stack([near[i][ok, :2], T.height_at(near[i][ok, :2]) + 1.5])
+        src = np.repeat(P[i:i + 1], q.shape[0], 0)
+        assert np.array_equal(tv.line_of_sight(T, src, q), near_vis[i][ok] == 1)
+        assert np.allclose(near[i][ok, 2], S.height_at(near[i][ok, :2]) + 1.5)
+
+
 # ----------------------------------------------------------------------- relocation
 @pytest.fixture(scope="module")
 def hills():
@@ -218,16 +297,18 @@ def test_the_agreement_it_counts_is_the_exact_engines(hills, method):
         assert int(np.sum(seen == vis[i])) == score
 
 
-def test_a_point_does_not_depend_on_the_other_points(hills):
+@pytest.mark.parametrize("neighbours", [False, True])
+def test_a_point_does_not_depend_on_the_other_points(hills, neighbours):
     T, P = hills
     S = simplifiers.simplify(T, "lls", 2)
-    alone = tv.relocate(P[:5], S, "calibrated", original=T, n_partners=100)
+    kw = dict(original=T, n_partners=100, neighbours=neighbours)
+    alone = tv.relocate(P[:5], S, "calibrated", **kw)
     others = tv.sample_points(T, 30, seed=9)
-    together = tv.relocate(np.vstack([others, P[:5], others[:3]]), S, "calibrated", original=T, n_partners=100)
+    together = tv.relocate(np.vstack([others, P[:5], others[:3]]), S, "calibrated", **kw)
     assert np.array_equal(alone, together[30:35])
     # and not on the cache: a fresh copy of S gives the same heights
     fresh = HeightGrid.from_coords(S.z, S.xs, S.ys)
-    assert np.array_equal(alone, tv.relocate(P[:5], fresh, "calibrated", original=T, n_partners=100))
+    assert np.array_equal(alone, tv.relocate(P[:5], fresh, "calibrated", **kw))
 
 
 def test_deterministic_for_a_seed(hills):
@@ -311,6 +392,8 @@ def test_bad_input(hills):
         tv.relocate(P, S, "calibrated", original=T, n_partners=0)
     with pytest.raises(TypeError, match="seed must be an integer"):
         tv.relocate(P, S, "calibrated", original=T, seed=1.5)
+    with pytest.raises(TypeError, match="neighbours must be True or False, got"):
+        tv.relocate(P, S, "calibrated", original=T, neighbours="yes")
     holes = T.copy_with(np.where(np.arange(T.size).reshape(T.shape) % 97 == 0, np.nan, T.z))
     with pytest.raises(ValueError, match="nodata"):
         tv.relocate(P, S, "calibrated", original=holes)
