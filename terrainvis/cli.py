@@ -166,14 +166,18 @@ def _simplify_parser(sub) -> None:
     s = sub.add_parser(
         "simplify", help="simplify a DEM and write the result",
         description=(
-            "Simplify a DEM with one method at one level and write it. OUT by extension: .tif .asc .npz for grids "
-            "(regular methods), .ply .obj .stl .glb for any result as a mesh, .npz for TINs."
+            "Simplify a DEM with one method, to a level or to a target error, and write it. OUT by extension: "
+            ".npz for grids and TINs; .tif .asc for grids, and for TINs sampled back at the DEM's samples (same "
+            "CRS and transform); .ply .obj .stl .glb for any result as a mesh."
         ),
     )
     s.add_argument("dem", help="DEM file or bundled name")
     s.add_argument("-m", "--method", required=True, choices=list(METHODS), metavar="METHOD",
                    help=f"one of {', '.join(METHODS)}")
-    s.add_argument("-l", "--level", type=int, default=1, help="level: each one halves both axes (default 1)")
+    s.add_argument("-l", "--level", type=int, default=None,
+                   help="level: each one halves both axes (default 1; with --max-error, the finest allowed)")
+    s.add_argument("--max-error", type=_distance_arg, default=None, metavar="E",
+                   help="the smallest result whose max vertical error is <= E (z units)")
     s.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
     s.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an option of the method, e.g. weights=derived for lls (repeatable)")
@@ -521,17 +525,19 @@ def _simplify(args) -> int:
     out = Path(args.output)
     suffix = out.suffix.lower()
     regular = METHODS[args.method].regular
-    valid = (_GRID_SUFFIXES + _MESH_SUFFIXES) if regular else (".npz",) + _MESH_SUFFIXES
+    valid = _GRID_SUFFIXES + _MESH_SUFFIXES
     if suffix not in valid:
-        kind = "a grid" if regular else "a TIN"
-        raise UsageError(f"-o must end in one of {list(valid)} for {args.method} (its result is {kind}), got {out.name!r}")
+        raise UsageError(f"-o must end in one of {list(valid)}, got {out.name!r}")
     check_output_file(out, "-o", inputs=[args.dem])
     label, grid = _terrain(args.dem, args)
-    result = simplify(grid, args.method, args.level, **_options(args.option))
-    save_terrain(result, out)
+    level = 1 if args.level is None and args.max_error is None else args.level
+    result = simplify(grid, args.method, level, max_error=args.max_error, **_options(args.option))
+    # a TIN to a raster is sampled at the DEM's own samples (nodata outside the TIN)
+    save_terrain(result, out, like=None if regular or suffix == ".npz" else grid)
     a = result.attrs
     kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {_plural(result.n_faces, 'face')}"
-    print(f"{label}: {args.method} level {a['level']}: {_plural(a['n_vertices'], 'vertex', 'vertices')} ({kind}), "
+    at = f"level {a['level']}" if a.get("level") is not None else f"max error <= {args.max_error:g}"
+    print(f"{label}: {args.method} {at}: {_plural(a['n_vertices'], 'vertex', 'vertices')} ({kind}), "
           f"{100 * a['n_vertices'] / grid.size:.2f} % of {grid.size:,}")
     print(f"  max error {a['max_error']:.4g}, RMS error {a['rms_error']:.4g} (z units), {a['seconds']:.3f} s")
     for note in a.get("notes", []):

@@ -119,13 +119,57 @@ def test_simplify_writes_grids_and_meshes(tmp_path, capsys):
     assert len(mesh.vertices) == 225
     assert main(["simplify", "ridges", "-m", "greedy-insertion", "-l", "3", "-o", str(tmp_path / "r_tin.npz")]) == 0
     assert load_terrain(tmp_path / "r_tin.npz").n_vertices == 225
-    err = _one_line_error(capsys, 2, ["simplify", "ridges", "-m", "qec", "-o", str(tmp_path / "q.tif")])
-    assert "-o must end in one of ['.npz', '.ply'" in err and "TIN" in err
+    err = _one_line_error(capsys, 2, ["simplify", "ridges", "-m", "qec", "-o", str(tmp_path / "q.xyz")])
+    assert "-o must end in one of ['.tif', '.tiff', '.asc', '.npz', '.npy', '.ply'" in err and "q.xyz" in err
     err = _one_line_error(capsys, 2, ["simplify", "ridges", "-m", "lls", "-o", str(tmp_path / "q.npz"), "--option", "x"])
     assert "--option must be KEY=VALUE" in err
     err = _one_line_error(capsys, 2, ["simplify", "ridges", "-m", "lls", "-o", str(tmp_path / "q.npz"),
                                       "--option", "weights=bogus"])
     assert "weights must be one of" in err
+
+
+def test_simplify_a_tin_to_a_raster_samples_it_at_the_dems_samples(tmp_path, capsys):
+    """A TIN written as .tif / .asc is the TIN's surface at the DEM's own samples, with its transform."""
+    from simplifiers import simplify
+
+    from terrainvis import load_terrain, sample_dem, save_terrain
+
+    dem = save_terrain(sample_dem("jacksboro").crop(rows=(0, 60), cols=(0, 80)), tmp_path / "dem.tif")
+    T = load_terrain(dem)
+    tin = simplify(T, "greedy-insertion", 3)
+    for suffix in (".tif", ".asc"):
+        out = tmp_path / f"gi{suffix}"
+        assert main(["simplify", str(dem), "-m", "greedy-insertion", "-l", "3", "-o", str(out)]) == 0
+        back = load_terrain(out)
+        assert back.shape == T.shape
+        np.testing.assert_allclose(back.xs, T.xs, rtol=0, atol=1e-6 * abs(T.dx))
+        np.testing.assert_allclose(back.ys, T.ys, rtol=0, atol=1e-6 * abs(T.dy))
+        X, Y = np.meshgrid(T.xs, T.ys)
+        want = tin.height_at(np.column_stack([X.ravel(), Y.ravel()])).reshape(T.shape)  # the reference: the TIN itself
+        tol = 1e-3 if suffix == ".asc" else 1e-4 * float(np.nanmax(np.abs(want)))  # .asc: text; .tif: float32
+        np.testing.assert_allclose(back.z, want, rtol=0, atol=tol)
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("method", ["lls", "greedy-insertion"])
+def test_simplify_to_a_target_error(tmp_path, capsys, method):
+    from terrainvis import bundled_terrain, load_terrain, vertical_errors
+
+    T = bundled_terrain("hills")
+    out = tmp_path / "s.npz"
+    assert main(["simplify", "hills", "-m", method, "--max-error", "2.5", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    # a regular method lands on a level; an irregular one has none, only the target
+    assert (f"{method} level " in printed) if method == "lls" else (f"{method} max error <= 2.5:" in printed), printed
+    S = load_terrain(out)
+    worst, _ = vertical_errors(T, S)  # measured again, independently of what simplify recorded
+    assert worst <= 2.5 + 1e-9
+    assert S.attrs["n_vertices"] < T.size
+    # a finer limit than needed is kept: --max-error with -l stops at that level at the finest
+    assert main(["simplify", "hills", "-m", method, "--max-error", "0", "-l", "2", "-o", str(tmp_path / "f.npz")]) == 0
+    assert load_terrain(tmp_path / "f.npz").attrs["n_vertices"] <= (T.shape[0] // 4 + 1) * (T.shape[1] // 4 + 1)
+    err = _one_line_error(capsys, 2, ["simplify", "hills", "-m", method, "--max-error", "-1", "-o", str(out)])
+    assert "--max-error" in err and "-1" in err
 
 
 def test_los_prints_the_verdict_and_where_it_is_decided(tmp_path, capsys):
