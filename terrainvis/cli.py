@@ -542,6 +542,13 @@ def _simplify(args) -> int:
     print(f"  max error {a['max_error']:.4g}, RMS error {a['rms_error']:.4g} (z units), {a['seconds']:.3f} s")
     for note in a.get("notes", []):
         print(f"  note: {note}")
+    if regular and suffix in (".tif", ".tiff", ".asc") and not result.is_uniform:
+        # the file holds the grid resampled onto uniform coordinates: its errors are not the ones above
+        from .deviation import vertical_errors
+        from .io import load_terrain
+
+        worst, rms = vertical_errors(grid, load_terrain(out))
+        print(f"  as written (resampled onto a uniform grid): max error {worst:.4g}, RMS error {rms:.4g}")
     print(f"  wrote {out}")
     return 0
 

@@ -238,5 +238,11 @@ def test_warnings_are_one_line(tmp_path, capsys):
     dem = tmp_path / "even.npz"
     save_dem(bundled_terrain("hills").crop(rows=(0, 40), cols=(0, 40)), dem)
     assert main(["simplify", str(dem), "-m", "lls", "-l", "1", "-o", str(tmp_path / "s.tif")]) == 0
-    err = capsys.readouterr().err.strip().splitlines()
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("terrainvis simplify: warning: .tif needs a uniform grid"), err
+    # the errors of what was written are printed too, measured on the file against the DEM
+    from terrainvis import load_terrain, vertical_errors
+
+    worst, rms = vertical_errors(load_terrain(dem), load_terrain(tmp_path / "s.tif"))
+    assert f"as written (resampled onto a uniform grid): max error {worst:.4g}, RMS error {rms:.4g}" in captured.out
