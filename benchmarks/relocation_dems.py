@@ -11,8 +11,8 @@ levels 1-3 and the paper's relocations beside the calibrated one, with a localiz
 * ``whole``: each whole DEM (Mount St Helens cut to its largest window without nodata),
   observers 1.7 m above the ground (``offset``), 6 sets of 50 points.
 
-With ``--neighbours`` the calibrated relocation keeps each point's short sight lines
-(``relocate(..., neighbours=True)``; results in ``OUT/<workload>-neighbours/``).
+With ``--no-neighbours`` the calibrated relocation counts its partners alone
+(``relocate(..., neighbours=False)``; results in ``OUT/<workload>-no-neighbours/``).
 
 It prints, per workload, method and level, the accuracy of full projection and of the
 calibrated relocation on every pair and within each distance, and whether calibrated
@@ -49,10 +49,10 @@ def _crop(grid: tv.HeightGrid, side: int = 120) -> tv.HeightGrid:
     return grid.crop(rows=(r0, r0 + n_r), cols=(c0, c0 + n_c))
 
 
-def run(workload: str, out: Path, workers: int, neighbours: bool = False) -> pd.DataFrame:
+def run(workload: str, out: Path, workers: int, neighbours: bool = True) -> pd.DataFrame:
     grids = {name: (_crop(_valid(name)) if workload == "crops" else _valid(name)) for name in DEMS}
     offset = 0.0 if workload == "crops" else 1.7
-    folder = out / (workload + ("-neighbours" if neighbours else ""))
+    folder = out / (workload + ("" if neighbours else "-no-neighbours"))
     folder.mkdir(parents=True, exist_ok=True)
     csv = folder / "results.csv"
     return tv.compare(grids, relocations=["identity", "full", "half", "calibrated"], offset=offset,
@@ -86,13 +86,13 @@ def main():
     ap.add_argument("--out", type=Path, default=Path("relocation-dems"))
     ap.add_argument("--workloads", nargs="+", default=["crops", "whole"], choices=["crops", "whole"])
     ap.add_argument("--workers", type=int, default=None)
-    ap.add_argument("--neighbours", action="store_true",
-                    help="the calibrated relocation keeps each point's short sight lines (relocate's neighbours=True)")
+    ap.add_argument("--no-neighbours", dest="neighbours", action="store_false",
+                    help="the calibrated relocation without neighbours (relocate's neighbours=False)")
     args = ap.parse_args()
     if not SHARED.exists():
         raise SystemExit(f"the shared DEMs are not at {SHARED}")
     for workload in args.workloads:
-        label = workload + (" (neighbours)" if args.neighbours else "")
+        label = workload + ("" if args.neighbours else " (no neighbours)")
         summary(run(workload, args.out, args.workers, args.neighbours), label)
 
 

@@ -528,20 +528,21 @@ def best_height(thr, vis, zref, margin, min_gain):
 
 
 @nb.njit(cache=True, nogil=True)
-def best_height_kept(thr, vis, lthr, lvis, zref, margin, min_gain):
-    """:func:`best_height` among the heights that keep the point's agreement with its
-    *neighbours* at least as high as at ``zref``.
+def best_height_kept(thr, vis, lthr, lvis, weight, zref, margin, min_gain):
+    """:func:`best_height` with the point's *neighbours* counted too.
 
     ``lthr``, ``lvis`` are the thresholds and T's verdicts (1 seen, 0 not, -1 no
     neighbour there) of the neighbours, probes close to the point: the partners spread
-    over the terrain say little about short sight lines, so without this a point can move
-    to gain one far partner and lose several near ones. The local agreement is a step
-    function of z too; the heights where it is at least its value at ``zref`` form
-    intervals (``zref`` among them), and the partners' agreement is maximised over those.
-    With no neighbours this is :func:`best_height`.
+    over the terrain say little about short sight lines. The height maximises the
+    partners' agreement plus ``weight`` times the neighbours' agreement (both step
+    functions of z); ``weight`` = inf keeps the neighbours' agreement at least as high as
+    at ``zref`` and maximises the partners' among those heights. The returned score is
+    the partners' agreement; ``min_gain`` applies to the combined one. With no
+    neighbours this is :func:`best_height`.
     """
     K = thr.shape[0]
     L = lthr.shape[0]
+    hard = weight == _INF
     keep = 0  # the neighbours' agreement at zref
     for k in range(L):
         if lvis[k] >= 0 and (zref >= lthr[k]) == (lvis[k] == 1):
@@ -567,22 +568,28 @@ def best_height_kept(thr, vis, lthr, lvis, zref, margin, min_gain):
         else:
             loc += 0 if lvis[k] == 1 else 1
             dl[K + k] = 1 if lvis[k] == 1 else -1
+    w = 0.0 if hard else weight
     order = np.argsort(t)
     n = K + L
-    best = -1
+    best = -_INF
+    best_g = -1
     best_z = zref
     best_d = _INF
-    at_ref = -1
+    at_ref = -_INF
+    at_ref_g = -1
     lo = -_INF
     j = 0
     while j <= n:
         # z in [lo, hi) sees exactly the partners and neighbours with a threshold <= lo
         hi = _INF if j == n else t[order[j]]
+        sc = g + w * loc
         if lo <= zref < hi:
-            at_ref = g
-        if hi > lo and loc >= keep and g >= best:
-            if g > best:
-                best = g
+            at_ref = sc
+            at_ref_g = g
+        if hi > lo and (not hard or loc >= keep) and sc >= best:
+            if sc > best:
+                best = sc
+                best_g = g
                 best_d = _INF
             m = margin
             if hi - lo < 2.0 * m:
@@ -596,6 +603,7 @@ def best_height_kept(thr, vis, lthr, lvis, zref, margin, min_gain):
             if d < best_d:
                 best_d = d
                 best_z = zc
+                best_g = g
         if j == n:
             break
         while j < n and t[order[j]] == hi:
@@ -606,8 +614,8 @@ def best_height_kept(thr, vis, lthr, lvis, zref, margin, min_gain):
             j += 1
         lo = hi
     if best - at_ref < min_gain:
-        return zref, at_ref
-    return best_z, best
+        return zref, at_ref_g
+    return best_z, best_g
 
 
 # --------------------------------------------------------------------------- loops
@@ -630,11 +638,11 @@ def _tin_row(tin, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_heights(g, p, q, vis, lq, lvis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+def grid_heights(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
     """Best height of each point p[i] = (x, y, reference height) against the partners q
     (x, y, height on the surface), whose verdicts on T are ``vis[i]``, keeping its
-    agreement with its neighbours ``lq[i]`` (verdicts ``lvis[i]``, :func:`best_height_kept`;
-    parallel over points)."""
+    agreement with its neighbours (thresholds ``lthr[i]``, verdicts ``lvis[i]``:
+    :func:`best_height_kept`; parallel over points)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
@@ -642,13 +650,11 @@ def grid_heights(g, p, q, vis, lq, lvis, delta, end_radius, tol, kc, margin, min
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
         _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
-        lthr = np.empty(lq.shape[1])
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], lq[i], delta, end_radius, tol, kc, -1, lthr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr, lvis[i], p[i, 2], margin, min_gain)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, q, vis, lq, lvis, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+def tin_heights(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
     """:func:`grid_heights` on a TIN (a :data:`TinWalk`)."""
     n = p.shape[0]
     for i in nb.prange(n):
@@ -656,9 +662,7 @@ def tin_heights(tin, p, q, vis, lq, lvis, delta, end_radius, tol, kc, margin, mi
             continue
         thr = np.empty(q.shape[0])
         _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
-        lthr = np.empty(lq.shape[1])
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], lq[i], delta, end_radius, tol, kc, -1, lthr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr, lvis[i], p[i, 2], margin, min_gain)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -38,17 +38,22 @@ nearest the full projection is taken, a small margin away from any threshold.
 Short sight lines
 -----------------
 Partners spread over the whole terrain stand, on average, tens of cells from a point, so
-they say little about its short sight lines: chasing one more far partner, a point can
-sink a little into S(T) and lose sight of what is around it. Over all pairs that trade
-pays; among pairs a few cells apart it can cost a few points of accuracy against full
-projection (docs/relocation.md). With ``neighbours=True`` each point also has
-*neighbours*: L = 48 probes on rings 1.5, 3, 5 and 8 cells of T around it
-(:data:`NEIGHBOUR_RINGS`), standing like the point (``offset`` or ``target_height`` above
-each surface; on S(T) where full projection puts them), with the point's verdicts to them
-on T. The best height is then sought only among the heights where the point agrees with
-at least as many neighbours as at its reference height
-(:func:`terrainvis._calibration_kernels.best_height_kept`): it never trades short sight
-lines for long ones. The neighbours depend on the point alone.
+they say little about its short sight lines: chasing one more far partner, a point could
+sink a little into S(T) and lose sight of what is around it (on the shared DEMs, without
+what follows, up to 4 points of accuracy among pairs less than 5 cells apart at level 1).
+So each point also has *neighbours* (``neighbours=True``, the default): L = 48 probes on
+rings 1.5, 3, 5 and 8 cells of T around it (:data:`NEIGHBOUR_RINGS`), standing like the
+point (``offset`` or ``target_height`` above T), with the point's verdicts to them on T.
+On S(T) a neighbour *moves with the point*: it stands at its full projection raised by
+as much as the point moved off its own, as the point's real neighbours, relocated the
+same way over nearly the same error of S(T), would. The whole segment then rises with
+the point, so the point sees the neighbour exactly when its height is at least its
+reference height minus the segment's least clearance there (and the tolerance): a
+threshold again (:func:`_neighbour_thresholds`, from the exact
+:func:`terrainvis.min_clearance`). The best height maximises the partners' agreement plus
+:data:`NEIGHBOUR_WEIGHT` (0.5) times the neighbours'
+(:func:`terrainvis._calibration_kernels.best_height_kept`). The neighbours depend on the
+point alone.
 
 Cost
 ----
@@ -89,6 +94,9 @@ MARGIN_REL = 1e-6
 NEIGHBOUR_RINGS = (1.5, 3.0, 5.0, 8.0)
 #: ... with this many neighbours on each ring (alternate rings turned by half a step).
 NEIGHBOUR_DIRECTIONS = 12
+#: A neighbour's weight against a partner's (inf: never lose a neighbour); chosen on the
+#: tuning terrains (docs/relocation.md).
+NEIGHBOUR_WEIGHT = 0.5
 
 
 @dataclass(frozen=True)
@@ -295,7 +303,7 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
                        n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
                        end_radius: float = 0.0, curvature: float = 0.0,
                        earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN,
-                       neighbours: bool = False) -> np.ndarray:
+                       neighbours: bool = True) -> np.ndarray:
     """The calibrated height on ``simplified`` of each point of ``original`` (see the module docstring).
 
     Parameters
@@ -325,8 +333,7 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
         Earth curvature and refraction of the verdicts on both surfaces
         (:func:`terrainvis.line_of_sight`).
     neighbours : bool
-        Keep each point's agreement with its neighbours (short sight lines) at least as
-        high as at its reference height (see the module docstring; False by default).
+        Count each point's neighbours too (short sight lines; see the module docstring).
 
     Returns
     -------
@@ -351,16 +358,39 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     q = surf.local(np.column_stack([part.xy, part.z_simplified]))
     if neighbours:
         near, near_vis = _neighbours(original, simplified, pts, height, curve)
+        lthr = _neighbour_thresholds(simplified, np.column_stack([pts[:, :2], ground + offset]), near, near_vis,
+                                     surf.tol, end_radius, curve)
     else:
-        near, near_vis = np.zeros((n, 0, 3)), np.zeros((n, 0), dtype=np.int8)
-    lq = surf.local(near.reshape(-1, 3)).reshape(near.shape)
+        lthr, near_vis = np.zeros((n, 0)), np.zeros((n, 0), dtype=np.int8)
     out = np.empty(n)
     score = np.empty(n, dtype=np.int64)
-    work = n * (part.xy.shape[0] + near.shape[1])
+    work = n * part.xy.shape[0]
     kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
-    call(kernel, surf.data, p, q, vis, lq, near_vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
+    call(kernel, surf.data, p, q, vis, lthr, near_vis, float(NEIGHBOUR_WEIGHT), surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
          out, score, work=work)
     return out
+
+
+def _neighbour_thresholds(simplified, ref, near, near_vis, tol, end_radius, curve) -> np.ndarray:
+    """(n, L) thresholds of the points at ``ref`` (n, 3: their reference heights on S(T)) for
+    neighbours that move with them: a neighbour stands at ``near`` (its reference height)
+    raised by the same amount as the point, so the segment rises as a whole and its least
+    clearance by that amount; the point at z sees it exactly when
+    ``z >= z_ref - tol - clearance at the reference heights``. ``-inf`` where the segment is
+    not tested (too short) or there is no neighbour (``near_vis`` -1)."""
+    from .visibility import min_clearance
+
+    n, L = near_vis.shape
+    lthr = np.full((n, L), -np.inf)
+    ok = near_vis >= 0
+    if ok.any():
+        rows = np.nonzero(ok)[0]
+        mc = min_clearance(simplified, ref[rows], near[ok], end_radius=end_radius, **curve)
+        tested = np.isfinite(mc)
+        vals = np.full(rows.size, -np.inf)
+        vals[tested] = ref[rows[tested], 2] - tol - mc[tested]
+        lthr[ok] = vals
+    return lthr
 
 
 def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float, curve: dict):

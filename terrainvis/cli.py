@@ -261,8 +261,8 @@ def _relocate_parser(sub) -> None:
     r.add_argument("--target-height", type=_height, default=None,
                    help="calibrated: the points will look at targets this high above the surface (a viewshed's "
                         "cells); without it they will look at each other")
-    r.add_argument("--neighbours", action="store_true",
-                   help="calibrated: keep each point's short sight lines (its neighbours 1.5-8 cells around it)")
+    r.add_argument("--no-neighbours", dest="neighbours", action="store_false",
+                   help="calibrated: the partners alone, without each point's neighbours 1.5-8 cells around it")
     r.add_argument("--partners", type=int, default=N_PARTNERS,
                    help=f"calibrated: partners spread over the DEM (default {N_PARTNERS})")
     r.add_argument("--seed", type=int, default=0, help="calibrated: seed of the partners' positions (default 0)")

@@ -343,11 +343,12 @@ _DECLARED = [
         cli=Flag("--partners", int),
     ),
     Option(
-        "neighbours", False, boolean, "calibrated relocation: keep each point's short sight lines", "bool",
-        doc=("True: each point agrees with at least as many of its neighbours (probes 1.5 to 8 cells of T "
-             "around it) as at the full projection (:func:`terrainvis.relocate`); better among pairs a few "
-             "cells apart, a little worse over all pairs."),
-        cli=Switch(on="--neighbours", on_help="calibrated relocation: keep each point's short sight lines"),
+        "neighbours", True, boolean, "calibrated relocation: count each point's neighbours (short sight lines)",
+        "bool",
+        doc=("The calibrated relocation weighs each point's agreement with 48 neighbours 1.5 to 8 cells of T "
+             "around it beside its partners (:func:`terrainvis.relocate`); False: the partners alone, a little "
+             "better over all pairs, worse among pairs a few cells apart."),
+        cli=Switch(off="--no-neighbours", off_help="calibrated relocation: the partners alone, no neighbours"),
     ),
     Option(
         "n_points", 50, integer(minimum=2), "points per set", "int", measures=("pairs",),

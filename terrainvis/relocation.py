@@ -60,7 +60,7 @@ ORACLE = "oracle"
 def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None, target_height=None,
              end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
              n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, min_gain: int = MIN_GAIN,
-             neighbours: bool = False, reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
+             neighbours: bool = True, reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
     """Place points on a simplified terrain.
 
     Parameters
@@ -95,10 +95,10 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
         point (:func:`terrainvis.calibration.calibrated_heights`). A point's height
         depends on these, T, S(T) and the point, never on the other points.
     neighbours : bool
-        ``"calibrated"`` only: keep each point's short sight lines (False, the default).
-        True: a point agrees with at least as many of its neighbours (48 probes 1.5 to 8
-        cells of T around it) as at the full projection; better among pairs a few cells
-        apart, a little worse over all pairs (docs/relocation.md gives the figures).
+        ``"calibrated"`` only: count each point's neighbours too, 48 probes 1.5 to 8 cells
+        of T around it (True, the default), so that short sight lines are not traded for
+        far partners; False: the partners alone (a little better over all pairs, worse
+        among pairs a few cells apart: docs/relocation.md gives the figures).
     reference : (n, n) bool, optional
         ``"oracle"`` only (required): the verdicts on the original terrain T.
     mask : (n, n) bool, optional

@@ -88,13 +88,13 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     argv = ["compare", "--terrain", "hills", "--out", str(tmp_path), "--methods", "lls", "qec", "--levels", "2",
             "--relocations", "full", "--points", "7", "--sets", "3", "--seed", "5", "--max-distance", "100", "all",
             "--distance-unit", "cells", "--offset", "1.5", "--engine", "embree", "--predicate", "paper",
-            "--no-volume", "--repeats", "2", "--no-cascade", "--partners", "99", "--neighbours", "--curvature", "0.5",
+            "--no-volume", "--repeats", "2", "--no-cascade", "--partners", "99", "--no-neighbours", "--curvature", "0.5",
             "--earth-radius", "6371000"]
     with pytest.raises(Stop):
         main(argv)
     expected = dict(methods=["lls", "qec"], levels=[2], relocations=["full"], n_points=7, n_sets=3, seed=5,
                     max_distance=[100.0, None], distance_unit="cells", offset=1.5, engine="embree",
-                    predicate="paper", volume=False, repeats=2, cascade=False, n_partners=99, neighbours=True,
+                    predicate="paper", volume=False, repeats=2, cascade=False, n_partners=99, neighbours=False,
                     curvature=0.5, earth_radius=6371000.0)
     assert {k: seen[k] for k in expected} == expected
     seen.clear()
