@@ -1,6 +1,6 @@
 """How far distances on a lon/lat DEM are off, in the local frame it is read into and on its metric grid.
 
-Not a timing: the measurement behind docs/georeferencing.md. A 1 x 1 degree tile of
+Not a timing: the measurement behind docs/user-guide.md (Georeferencing). A 1 x 1 degree tile of
 3-arc-second samples (1201 x 1201) at 45 N and at 60 N is written as a lon/lat GeoTIFF and
 read with ``load_dem`` (the local frame: metres with the centre latitude's east-west scale
 for every row), and resampled with ``terrainvis.io.to_metric`` (a transverse Mercator

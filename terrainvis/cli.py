@@ -102,8 +102,8 @@ def _add_positions(p, *, frame: bool = True) -> None:
     p.add_argument("--metric", action="store_true",
                    help="a lon/lat DEM: resample it first onto a metric grid (a transverse Mercator centred on it), "
                         "so distances are right across the whole DEM, not only at its centre latitude; changes the "
-                        "samples (heights read from the DEM's surface; nodata wedges along the edges); positions "
-                        "stay lon/lat (docs/georeferencing.md)")
+                        "samples (heights read from the DEM's surface, over the largest rectangle inside it); positions "
+                        "stay lon/lat (docs/user-guide.md, Georeferencing)")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -3,7 +3,7 @@
 The reference is geodesic distance on the WGS84 ellipsoid (``pyproj.Geod``: Karney's
 algorithm, independent of the code under test) between lon/lat points on 1 x 1 degree
 tiles at 45 N and 60 N. The local frame a lon/lat DEM is read into (one east-west scale,
-the centre latitude's) is off by the golden figures of docs/georeferencing.md; the
+the centre latitude's) is off by the golden figures of docs/user-guide.md (Georeferencing); the
 transverse Mercator grid of ``terrainvis.io.to_metric`` is within 1e-5 everywhere, and
 its heights are the DEM's surface at the lon/lat that PROJ gives for each sample.
 """
@@ -56,7 +56,7 @@ def _geodesic(a, b):
     return GEOD.inv(a[:, 0], a[:, 1], b[:, 0], b[:, 1])[2]
 
 
-#: Golden figures (docs/georeferencing.md): the local frame's relative error of a whole east-west
+#: Golden figures (docs/user-guide.md (Georeferencing)): the local frame's relative error of a whole east-west
 #: edge (southern, northern) of the tile, against the geodesic between its ends.
 LOCAL_EDGE_ERRORS = {44.5: (-0.008579, 0.008819), 59.5: (-0.014819, 0.015370)}
 

@@ -66,7 +66,7 @@ def to_metric(grid: HeightGrid, *, cell=None, footprint: str = "inside") -> Heig
     latitude for every row (:mod:`terrainvis._georef`): on a 1 x 1 degree tile at 45 N,
     east-west lengths along its northern and southern edges are then 0.88 % too long
     and 0.86 % too short, and sight lines follow rhumb lines instead of geodesics
-    (docs/georeferencing.md). This resamples the grid onto a transverse Mercator
+    (docs/user-guide.md, Georeferencing). This resamples the grid onto a transverse Mercator
     centred on it (scale factor chosen to halve the largest scale error): distances,
     ``max_distance``, curvature's drop and cell sizes are then right to ``2e-5`` on such
     a tile, but the samples change.
