@@ -307,3 +307,29 @@ def test_ctrl_c_stops_the_workers(tmp_path):
     assert "interrupted by SIGINT" in err and "Traceback" not in err, err
     _, alive = psutil.wait_procs(workers, timeout=10)
     assert not alive, f"worker processes survived: {alive}"
+
+
+# ----------------------------------------------------------------- the figure
+def test_plot_draws_the_counts_over_the_hillshade(hills):
+    from terrainvis import plot
+
+    obs = _observers(hills, 6)
+    counts = cumulative_viewshed(hills, obs, workers=1)
+    fig = plot.cumulative_viewshed(hills, counts, observers=obs, title="six")
+    ax = fig.axes[0]
+    assert ax.get_title() == "six"
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    seen = 100 * (counts > 0).mean()
+    assert labels == [f"seen by none ({100 - seen:.1f} %)", f"seen by any ({seen:.1f} %)", "6 observers"]
+    counts_image = ax.get_images()[-1]
+    assert counts_image.get_clim() == (1, max(int(counts.max()), 2))
+    np.testing.assert_array_equal(counts_image.get_array().mask, counts == 0)
+    assert fig.axes[1].get_ylabel() == "observers that see the sample"  # the colour bar
+    with pytest.raises(ValueError, match="counts must have the terrain's shape"):
+        plot.cumulative_viewshed(hills, counts[:3])
+    with pytest.raises(ValueError, match="counts must be integers >= 0"):
+        plot.cumulative_viewshed(hills, counts.astype(float))
+    with pytest.raises(TypeError, match="terrain must be the HeightGrid"):
+        plot.cumulative_viewshed(hills.to_tin(), counts)
+    with pytest.raises(ValueError, match=r"observers must have shape \(K, 2\)"):
+        plot.cumulative_viewshed(hills, counts, observers=[1.0, 2.0])
