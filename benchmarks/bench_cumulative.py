@@ -106,26 +106,28 @@ def _ours(grid, obs, workers: int, args):
 
 
 def _gdal(grid, obs, args, folder: Path):
-    """Seconds per gdal_viewshed command (median) and the sum of its viewsheds (rows south-up, as ours)."""
+    """Wall and CPU seconds per gdal_viewshed command (medians) and the sum of its viewsheds (rows south-up, as ours)."""
     dem = folder / "dem.tif"
     save_dem(grid, dem)
     import rasterio
 
     total = np.zeros(grid.shape, dtype=np.int64)
-    times = []
+    times, cpus = [], []
     for i, (x, y) in enumerate(obs):
         out = folder / f"v{i}.tif"
         cmd = [GDAL, "-q", "-ox", repr(float(x)), "-oy", repr(float(y)), "-oz", repr(args.observer_height),
                "-tz", repr(args.target_height), "-cc", repr(args.curvature), "-vv", "1", "-iv", "0", "-ov", "0"]
         if args.max_distance is not None:
             cmd += ["-md", repr(args.max_distance)]
+        c = _cpu()
         t = time.perf_counter()
         subprocess.run(cmd + [str(dem), str(out)], check=True)
         times.append(time.perf_counter() - t)
+        cpus.append(_cpu() - c)
         with rasterio.open(out) as src:
             total += src.read(1)[::-1] == 1  # north-up file, rows of the grid south-up
         out.unlink()
-    return statistics.median(times), total
+    return statistics.median(times), statistics.median(cpus), total
 
 
 def main() -> None:
@@ -157,10 +159,11 @@ def main() -> None:
     floor = k * single / cores
     print(f"  one viewshed, one thread       {single:8.3f} s per observer (median of {len(peer)}; CPU "
           f"{single_cpu:.3f} s); {k:,} on {cores} cores with no overhead: {floor:.1f} s")
-    ours = {}
+    ours, ours_cpu = {}, {}
     for w in args.workers:
         seconds, cpu, counts = _ours(grid, obs, w, args)
         ours[w] = seconds
+        ours_cpu[w] = cpu
         print(f"  ours, workers={w:<2}              {seconds:8.1f} s  {k / seconds:7.1f} observers/s  "
               f"({seconds / floor:.2f} x the floor; CPU {cpu:.1f} s = {cpu / k:.3f} s per observer, "
               f"{cpu / (k * single_cpu):.2f} x one thread's; {cpu / cores:.1f} s on {cores} idle cores); "
@@ -169,13 +172,15 @@ def main() -> None:
         print("  gdal_viewshed: not installed (Debian: apt-get install gdal-bin); peer skipped")
     else:
         with tempfile.TemporaryDirectory(prefix="bench_cumulative_") as tmp:
-            per, theirs = _gdal(grid, peer, args, Path(tmp))
+            per, per_cpu, theirs = _gdal(grid, peer, args, Path(tmp))
         mine = cumulative_viewshed(grid, peer, workers=1, **_options(args)).astype(np.int64)
         extrapolated = k * per
         best = min(ours.values())
-        print(f"  gdal_viewshed, one per command {per:8.3f} s per observer (median of {len(peer)}, whole command); "
-              f"{k:,} in a loop: {extrapolated:.1f} s  ({k / extrapolated:.1f} observers/s)")
-        print(f"  ratio gdal loop / ours (best)  {extrapolated / best:8.2f}")
+        print(f"  gdal_viewshed, one per command {per:8.3f} s per observer (median of {len(peer)}, whole command; CPU "
+              f"{per_cpu:.3f} s); {k:,} in a loop: {extrapolated:.1f} s  ({k / extrapolated:.1f} observers/s); "
+              f"{k * per_cpu / cores:.1f} s of CPU on {cores} idle cores if run {cores} at a time")
+        print(f"  ratio gdal loop / ours (best)  {extrapolated / best:8.2f} (wall); CPU per observer, gdal / ours: "
+              + ", ".join(f"workers={w} {per_cpu / (cpu / k):.2f}" for w, cpu in ours_cpu.items()))
         diff = mine != theirs
         print(f"  counts of those {len(peer)} observers: cells differing {100 * diff.mean():.2f} % (mean |difference| "
               f"{np.abs(mine - theirs).mean():.4f} observers; gdal_viewshed is an approximation)")

@@ -218,3 +218,18 @@ def test_los_takes_the_earth_model(capsys):
     assert header.endswith("; earth: curved, coefficient 1 (geometric), radius 2,000")
     assert f": {'visible' if curved else 'blocked'};" in line
     assert "--curvature" in _err(capsys, base + ["--curvature", "nan"])
+
+
+def test_on_a_dask_scheduler(tmp_path, capsys):
+    distributed = pytest.importorskip("distributed", reason="the dask extra is not installed (pip install terrainvis[dask])")
+    from terrainvis import load_terrain
+
+    xy = [(300.0, 400.0), (2000.0, 2500.0), (3300.0, 900.0), (1200.0, 3000.0)]
+    obs = _csv(tmp_path / "obs.csv", xy)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        code, out, err = _run(capsys, ["cumulative", "ridges", "--observers", obs, "-o", tmp_path / "c.npz",
+                                       "--scheduler", cluster.scheduler_address])
+    assert code == 0, err
+    assert "on the dask cluster" in out
+    np.testing.assert_array_equal(load_terrain(tmp_path / "c.npz").z,
+                                  cumulative_viewshed(bundled_terrain("ridges"), xy, workers=1))
