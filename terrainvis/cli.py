@@ -112,7 +112,8 @@ def _coefficient(text: str) -> float:
     """An earth curvature coefficient: finite and >= 0 (GDAL's -cc)."""
     value = _number(text)
     if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a coefficient >= 0 (0 flat, 1 geometric, 0.85714 GDAL's), got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected a coefficient >= 0 (0 flat, 1 geometric, 0.85714 GDAL's), got {text!r}")
     return value
 
 

@@ -395,7 +395,8 @@ def cumulative_viewshed(terrain: HeightGrid, counts, *, observers=None, title: s
     bar.locator = MaxNLocator(integer=True)
     bar.update_ticks()
     n_valid = max(int(valid.sum()), 1)
-    handles = [Patch(color=(0.05, 0.05, 0.15, 0.8), label=f"seen by none ({100 * (valid & ~seen).sum() / n_valid:.1f} %)"),
+    none = 100 * (valid & ~seen).sum() / n_valid
+    handles = [Patch(color=(0.05, 0.05, 0.15, 0.8), label=f"seen by none ({none:.1f} %)"),
                Patch(color=image.cmap(0.5), label=f"seen by any ({100 * seen.sum() / n_valid:.1f} %)")]
     if observers is not None:
         obs = np.asarray(observers, dtype=np.float64)

@@ -222,8 +222,9 @@ def _options(terrain, target_height, max_distance, at, engine, curvature, earth_
         )
     if at is not None:
         _check_overlap(terrain, at)
-    return {"target_height": float(target_height), "max_distance": None if max_distance is None else float(max_distance),
-            "engine": engine, "curvature": float(curvature), "earth_radius": float(earth_radius)}
+    dmax = None if max_distance is None else float(max_distance)
+    return {"target_height": float(target_height), "max_distance": dmax, "engine": engine,
+            "curvature": float(curvature), "earth_radius": float(earth_radius)}
 
 
 def _check_inside(terrain, obs: np.ndarray) -> None:
