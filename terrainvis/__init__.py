@@ -32,6 +32,7 @@ _API = {
     "line_of_sight": "terrainvis.visibility",
     "visibility_matrix": "terrainvis.visibility",
     "viewshed": "terrainvis.visibility",
+    "cumulative_viewshed": "terrainvis.visibility",
     "relocate": "terrainvis.relocation",
     "agreement": "terrainvis.metrics",
     "vertical_errors": "terrainvis.deviation",

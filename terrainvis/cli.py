@@ -9,10 +9,12 @@
   ``.glb``; TINs also ``.npz``).
 * ``terrainvis los DEM --from X Y --to X Y`` checks lines of sight.
 * ``terrainvis viewshed DEM --observer X Y -o viewshed.tif`` writes an observer's viewshed.
+* ``terrainvis cumulative DEM --observers OBS.csv -o counts.tif`` counts the observers that
+  see each sample (a cumulative viewshed).
 * ``terrainvis relocate DEM --points CSV ...`` places points on a simplification.
 * ``terrainvis info DEM`` describes a terrain.
 
-Positions (``--from``, ``--to``, ``--observer``, the ``--pairs`` and ``--points`` CSVs) are
+Positions (``--from``, ``--to``, ``--observer``, the ``--pairs``, ``--points`` and ``--observers`` CSVs) are
 in the DEM's native CRS by default (lon/lat degrees on a lon/lat DEM), or in the terrain's
 own frame with ``--frame local``; outputs that report positions use the frame of the input
 (:mod:`terrainvis._positions`). ``--metric`` resamples a lon/lat DEM onto a metric grid
@@ -106,6 +108,41 @@ def _add_positions(p, *, frame: bool = True) -> None:
                         "stay lon/lat (docs/user-guide.md, Georeferencing)")
 
 
+def _coefficient(text: str) -> float:
+    """An earth curvature coefficient: finite and >= 0 (GDAL's -cc)."""
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(
+            f"expected a coefficient >= 0 (0 flat, 1 geometric, 0.85714 GDAL's), got {text!r}")
+    return value
+
+
+def _radius(text: str) -> float:
+    value = _number(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a radius > 0, got {text!r}")
+    return value
+
+
+def _add_earth(p) -> None:
+    """``--curvature`` and ``--earth-radius`` of the visibility commands (flat by default, as the API)."""
+    p.add_argument("--curvature", type=_coefficient, default=0.0,
+                   help="earth curvature and refraction coefficient, GDAL's -cc: 0 a flat earth (the default, as the "
+                        "Python API and the paper), 1 geometric curvature, 0.85714 standard refraction (gdal_viewshed's "
+                        "default); the command prints the model it used")
+    p.add_argument("--earth-radius", type=_radius, default=6378137.0,
+                   help="with --curvature: the earth's radius in the DEM's x/y units (default 6378137, WGS84's "
+                        "semi-major axis in metres, as GDAL takes it)")
+
+
+def _earth(args) -> str:
+    """The earth model a command used, for its output (one phrase)."""
+    if args.curvature == 0:
+        return "earth: flat (curvature 0; --curvature 0.85714 for gdal_viewshed's default, standard refraction)"
+    name = {1.0: " (geometric)", 0.85714: " (standard refraction)"}.get(args.curvature, "")
+    return f"earth: curved, coefficient {args.curvature:g}{name}, radius {args.earth_radius:,.0f}"
+
+
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -113,6 +150,7 @@ def _parser() -> argparse.ArgumentParser:
     _simplify_parser(sub)
     _los_parser(sub)
     _viewshed_parser(sub)
+    _cumulative_parser(sub)
     _relocate_parser(sub)
     i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
     i.add_argument("terrain", help="bundled name or DEM file")
@@ -205,6 +243,7 @@ def _los_parser(sub) -> None:
                      help="target height above the surface, >= 0 (default 0)")
     los.add_argument("--end-radius", type=_distance_arg, default=0.0,
                      help="ignore the surface within this distance of each end (default 0)")
+    _add_earth(los)
     _add_nodata(los)
     _add_positions(los)
 
@@ -226,8 +265,52 @@ def _viewshed_parser(sub) -> None:
                    help="target height above the surface, >= 0 (default 0)")
     v.add_argument("--max-distance", type=_number, default=None, help="only samples within this distance")
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
+    _add_earth(v)
     _add_nodata(v)
     _add_positions(v)
+
+
+def _cumulative_parser(sub) -> None:
+    c = sub.add_parser(
+        "cumulative", help="how many observers see each sample of a DEM",
+        description=(
+            "Compute the cumulative viewshed of many observers on a DEM: for every sample, how many observers see it "
+            "(each observer's exact viewshed, summed; count > 0 is the area seen by any). Observers come from a CSV "
+            "with columns x, y (lon, lat on a lon/lat DEM; see --frame) and optionally height (each eye's height "
+            "above the surface, instead of --observer-height). Writes the counts as a GeoTIFF aligned with the DEM "
+            "(CRS and transform kept; unsigned integers, nodata the type's largest value) or an .npz, and with --png "
+            "a picture of them over the hillshade."
+        ),
+    )
+    c.add_argument("dem", help="DEM file or bundled name")
+    c.add_argument("--observers", required=True, metavar="CSV",
+                   help="the observers: a CSV with columns x, y (lon, lat on a lon/lat DEM) and optionally height")
+    c.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif (counts aligned with the "
+                                                                         "DEM) or .npz")
+    c.add_argument("--png", metavar="PNG", help="also draw the counts over the hillshade into this .png")
+    c.add_argument("--observer-height", "--height", dest="height", type=_height, default=1.7,
+                   help="eye height above the surface, >= 0, for observers without a height column (default 1.7)")
+    c.add_argument("--target-height", type=_height, default=0.0,
+                   help="target height above the surface, >= 0 (default 0)")
+    c.add_argument("--max-distance", type=_distance_arg, default=None,
+                   help="each observer sees only the samples within this distance")
+    c.add_argument("--workers", type=_workers_arg, default=None,
+                   help="local worker processes (default: number of CPUs; 1 runs in this process)")
+    c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler "
+                                                                        "(needs the dask extra)")
+    _add_earth(c)
+    _add_nodata(c)
+    _add_positions(c)
+
+
+def _workers_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of processes >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of processes >= 1, got {text!r}")
+    return value
 
 
 def _relocate_parser(sub) -> None:
@@ -584,11 +667,13 @@ def _los(args) -> int:
         )
     a = np.column_stack([xy1, z1])
     b = np.column_stack([xy2, z2])
-    visible = line_of_sight(grid, a, b, end_radius=args.end_radius)
-    clear = min_clearance(grid, a, b, end_radius=args.end_radius)
-    print(f"{label}: observer {args.height:g} above the surface, target {args.target_height:g} above it")
+    earth = {"curvature": args.curvature, "earth_radius": args.earth_radius}
+    visible = line_of_sight(grid, a, b, end_radius=args.end_radius, **earth)
+    clear = min_clearance(grid, a, b, end_radius=args.end_radius, **earth)
+    print(f"{label}: observer {args.height:g} above the surface, target {args.target_height:g} above it; "
+          f"{_earth(args)}")
     for k in range(a.shape[0]):
-        low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius)
+        low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius, **earth)
         verdict = "visible" if visible[k] else "blocked"
         where = ("" if not np.isfinite(clear[k]) else
                  f" at {frame.point(frame.from_grid([low['x'], low['y']]))}, {low['distance']:.6g} from the observer")
@@ -651,12 +736,13 @@ def _viewshed(args) -> int:
         raise UsageError(f"--observer {frame.point(args.observer)} {_outside(frame, args.observer)}")
     t0 = time.perf_counter()
     vis = viewshed(grid, observer, observer_height=args.height, target_height=args.target_height,
-                   max_distance=args.max_distance)
+                   max_distance=args.max_distance, curvature=args.curvature, earth_radius=args.earth_radius)
     seconds = time.perf_counter() - t0
     valid = np.isfinite(grid.z)
     n_vis = int(vis[valid].sum())
     _write_viewshed(grid, vis, out, suffix, args, label, observer)
     print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
+    print(f"  {_earth(args)}")
     print(f"  visible {n_vis:,} of {_plural(int(valid.sum()), 'sample')} "
           f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %), {seconds:.2f} s")
     print(f"  wrote {out}")
@@ -686,12 +772,131 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observe
         # the observer in the grid's frame (that of its xs, ys) and in the DEM's native CRS
         attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in observer],
                  "viewshed_observer_native": [float(v) for v in _frame(grid, None).from_grid(observer)],
-                 "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height)}
+                 "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height),
+                 "viewshed_curvature": float(args.curvature), "viewshed_earth_radius": float(args.earth_radius)}
         save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
         return
     from .io import write_mask_geotiff
 
     write_mask_geotiff(grid, vis, out, nodata_mask=~np.isfinite(grid.z))
+
+
+# ------------------------------------------------------------------ cumulative
+def _cumulative(args) -> int:
+    import numpy as np
+
+    from ._fileio import check_output_file
+    from .visibility import cumulative_viewshed
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in (".tif", ".tiff", ".npz"):
+        raise UsageError(f"-o must end in .tif or .npz, got {out.name!r}")
+    png = Path(args.png) if args.png else None
+    if png is not None and png.suffix.lower() != ".png":
+        raise UsageError(f"--png must end in .png, got {png.name!r}")
+    inputs = [args.dem, args.observers]
+    check_output_file(out, "-o", inputs=inputs)
+    if png is not None:
+        check_output_file(png, "--png", inputs=inputs + [str(out)])
+    label, grid = _terrain(args.dem, args)
+    if suffix in (".tif", ".tiff") and not grid.is_uniform:
+        raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
+    table = _read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))
+    if not len(table):
+        raise UsageError(f"--observers {args.observers!r} holds no observer (a header and no rows)")
+    frame = _frame(grid, args)
+    user = table[:, :2]
+    xy = frame.to_grid(user)
+    outside = np.isnan(grid.height_at(xy))
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        raise UsageError(f"--observers {args.observers!r}: row {k + 1} {frame.point(user[k])} {_outside(frame, user[k])}; "
+                         f"{_plural(int(outside.sum()), 'observer')} of {len(xy):,} do")
+    heights = np.where(np.isnan(table[:, 2]), args.height, table[:, 2])
+    if (heights < 0).any():
+        k = int(np.flatnonzero(heights < 0)[0])
+        raise UsageError(f"--observers {args.observers!r}: row {k + 1}, column height is {heights[k]:g}; "
+                         "heights above the surface must be >= 0")
+    client = _client(args.scheduler) if args.scheduler else None
+    try:
+        t0 = time.perf_counter()
+        counts = cumulative_viewshed(grid, xy, observer_height=heights, target_height=args.target_height,
+                                     max_distance=args.max_distance, curvature=args.curvature,
+                                     earth_radius=args.earth_radius, workers=args.workers, client=client,
+                                     progress=True)
+        seconds = time.perf_counter() - t0
+    finally:
+        if client is not None:
+            client.close()
+    _write_counts(grid, counts, out, suffix, args, len(xy))
+    if png is not None:
+        _write_counts_png(grid, counts, xy, png, label)
+    valid = np.isfinite(grid.z)
+    n_valid = max(int(valid.sum()), 1)
+    seen = counts[valid]
+    where = "the dask cluster" if client is not None else _plural(args.workers or _cpus(), "worker")
+    print(f"{label}: {_plural(len(xy), 'observer')}, eyes {_heights_text(heights)} above the surface, target "
+          f"{args.target_height:g}" + (f", within {args.max_distance:g}" if args.max_distance is not None else ""))
+    print(f"  {_earth(args)}")
+    print(f"  seen by any {int((seen > 0).sum()):,} of {_plural(n_valid, 'sample')} ({100 * (seen > 0).mean():.2f} %), "
+          f"by all {100 * (seen == len(xy)).mean():.2f} %, most observers on one sample {int(seen.max()):,}; "
+          f"{seconds:.1f} s on {where} ({len(xy) / seconds:.1f} observers/s)")
+    print(f"  wrote {out}" + (f" and {png}" if png is not None else ""))
+    return 0
+
+
+def _cpus() -> int:
+    import os
+
+    return os.cpu_count() or 1
+
+
+def _heights_text(heights) -> str:
+    lo, hi = float(heights.min()), float(heights.max())
+    return f"{lo:g}" if lo == hi else f"{lo:g} to {hi:g}"
+
+
+def _write_counts(grid, counts, out: Path, suffix: str, args, k: int) -> None:
+    """The counts as a GeoTIFF aligned with the DEM (unsigned integers, nodata the type's maximum) or an .npz."""
+    import numpy as np
+
+    nodata = ~np.isfinite(grid.z)
+    if suffix == ".npz":
+        from .io import save_terrain
+        from .terrain import HeightGrid
+
+        z = np.where(nodata, np.nan, counts.astype(np.float64))
+        attrs = {**grid.attrs, "cumulative_observers": int(k), "cumulative_target_height": float(args.target_height),
+                 "cumulative_curvature": float(args.curvature), "cumulative_earth_radius": float(args.earth_radius)}
+        save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
+        return
+    from ._fileio import atomic_path
+    from ._georef import parse_crs
+    from .io._geotiff import _north_up_transform, _write_gtiff
+    from .io._raster import _uniform_layout
+
+    dtype = np.uint16 if k < np.iinfo(np.uint16).max else np.uint32  # the largest value stays free for nodata
+    fill = np.iinfo(dtype).max
+    _, nx, ny, crs_text, _ = _uniform_layout(grid, suffix)
+    crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
+    data = counts.astype(dtype)
+    data[nodata] = fill
+    profile = dict(height=data.shape[0], width=data.shape[1], count=1, dtype=np.dtype(dtype).name,
+                   transform=_north_up_transform(nx, ny), crs=crs, nodata=fill)
+    with atomic_path(out) as tmp:
+        _write_gtiff(tmp, np.ascontiguousarray(data[::-1]), profile,
+                     {"TERRAINVIS_CUMULATIVE": f"observers={k} target_height={args.target_height:g} "
+                                               f"curvature={args.curvature:g} earth_radius={args.earth_radius:g}"})
+
+
+def _write_counts_png(grid, counts, xy, png: Path, label: str) -> None:
+    from . import plot
+    from ._fileio import atomic_path
+
+    fig = plot.cumulative_viewshed(grid, counts, observers=xy, title=f"{label}: cumulative viewshed")
+    with atomic_path(png) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
 
 
 # ------------------------------------------------------------------ relocate
@@ -830,8 +1035,8 @@ def _info_positions(grid) -> None:
 
 
 # ------------------------------------------------------------------ main
-_COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "viewshed": _viewshed, "relocate": _relocate,
-             "info": _info}
+_COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "viewshed": _viewshed,
+             "cumulative": _cumulative, "relocate": _relocate, "info": _info}
 
 
 def main(argv=None) -> int:

@@ -18,6 +18,7 @@ from .terrain import TIN, HeightGrid, as_terrain
 
 __all__ = [
     "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance", "viewshed",
+    "cumulative_viewshed",
 ]
 
 
@@ -348,3 +349,65 @@ def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None =
         ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
     ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
     return fig
+
+
+def cumulative_viewshed(terrain: HeightGrid, counts, *, observers=None, title: str | None = None,
+                        figsize=(6.5, 5)) -> Figure:
+    """A cumulative viewshed drawn over the terrain's hillshade: how many observers see each sample.
+
+    Parameters
+    ----------
+    terrain : HeightGrid
+        The grid whose samples ``counts`` refers to.
+    counts : (rows, cols) array_like of int
+        :func:`terrainvis.cumulative_viewshed`'s result (counts >= 0).
+    observers : (K, 2) array_like, optional
+        The observers' (x, y), marked with dots.
+    title : str, optional
+
+    Samples seen by at least one observer are coloured by their count (colour bar); those
+    seen by none are darkened; nodata is left white.
+    """
+    as_terrain(terrain)
+    if not isinstance(terrain, HeightGrid):
+        raise TypeError(f"terrain must be the HeightGrid of the counts' samples, got {describe(terrain)}")
+    c = np.asarray(counts)
+    if c.shape != terrain.shape:
+        raise ValueError(f"counts must have the terrain's shape {terrain.shape}, got {c.shape}")
+    if not (np.issubdtype(c.dtype, np.integer) or np.issubdtype(c.dtype, np.bool_)) or (c.size and c.min() < 0):
+        raise ValueError(f"counts must be integers >= 0 (cumulative_viewshed's result), got {describe(c)}")
+    from matplotlib.patches import Patch
+    from matplotlib.ticker import MaxNLocator
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title or "cumulative viewshed")
+    extent = terrain.extent
+    valid = np.isfinite(terrain.z)
+    seen = valid & (c > 0)
+    dark = np.zeros(terrain.shape + (4,))
+    dark[valid & ~seen] = (0.05, 0.05, 0.15, 0.65)
+    ax.imshow(dark, origin="lower", extent=extent, interpolation="nearest")
+    top = int(c[valid].max()) if valid.any() else 0
+    image = ax.imshow(np.ma.masked_where(~seen, c.astype(np.float64)), origin="lower", extent=extent,
+                      interpolation="nearest", cmap="YlOrRd", vmin=1, vmax=max(top, 2), alpha=0.8)
+    bar = fig.colorbar(image, ax=ax, shrink=0.85, label="observers that see the sample")
+    bar.locator = MaxNLocator(integer=True)
+    bar.update_ticks()
+    n_valid = max(int(valid.sum()), 1)
+    none = 100 * (valid & ~seen).sum() / n_valid
+    handles = [Patch(color=(0.05, 0.05, 0.15, 0.8), label=f"seen by none ({none:.1f} %)"),
+               Patch(color=image.cmap(0.5), label=f"seen by any ({100 * seen.sum() / n_valid:.1f} %)")]
+    if observers is not None:
+        obs = np.asarray(observers, dtype=np.float64)
+        if obs.ndim != 2 or obs.shape[1] not in (2, 3):
+            raise ValueError(f"observers must have shape (K, 2) (x, y) or (K, 3) (eyes), got shape {obs.shape}")
+        ax.plot(obs[:, 0], obs[:, 1], linestyle="none", marker="o", markersize=4, color="cyan",
+                markeredgecolor="k", markeredgewidth=0.4)
+        from matplotlib.lines import Line2D
+
+        handles.append(Line2D([], [], linestyle="none", marker="o", markersize=4, color="cyan", markeredgecolor="k",
+                              label=f"{len(obs):,} observer{'s' if len(obs) != 1 else ''}"))
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+

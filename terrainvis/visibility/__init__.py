@@ -66,6 +66,7 @@ B. Duvenhage, "Using an implicit min/max KD-tree for doing efficient terrain lin
 sight calculations", AFRIGRAPH 2009, doi:10.1145/1503454.1503465.
 """
 
+from .cumulative import cumulative_viewshed
 from .los import embree_tolerance, line_of_sight, min_clearance, visibility_matrix
 from .predicate import (
     EARTH_RADIUS,
@@ -96,6 +97,7 @@ __all__ = [
     "terrain_scale",
     "embree_tolerance",
     "viewshed",
+    "cumulative_viewshed",
     "lowest_point",
     "clearance_profile",
 ]
