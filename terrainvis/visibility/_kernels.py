@@ -236,7 +236,7 @@ def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
     return m
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _locate(v, iw, lo, hi, uniform, x):
     """Index i in [lo, hi) with v[i] <= x < v[i+1] (clamped), v local coordinates from 0."""
     if uniform:

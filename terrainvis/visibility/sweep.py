@@ -340,7 +340,20 @@ def _local_axes(grid: HeightGrid):
 def _sweep_grid(grid: HeightGrid) -> _vk.SweepGrid:
     """The grid as the sweep kernels read it (local coordinates; no copies of the heights)."""
     xs, ys, ixw, iyw, uniform = _local_axes(grid)
-    return _vk.SweepGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0))
+    cmax, rmax = _strip_max(grid)
+    return _vk.SweepGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0), cmax, rmax)
+
+
+def _strip_max(grid: HeightGrid):
+    """Cached largest heights of each column's and row's aligned segments (:func:`_vk.strip_max`)."""
+    v = grid._cache.get("viewshed_strip_max")
+    if v is None:
+        rows, cols = grid.shape
+        cmax = np.empty(((rows - 2) // _vk.SEG + 1, cols))
+        rmax = np.empty((rows, (cols - 2) // _vk.SEG + 1))
+        _vk.strip_max(grid.z, cmax, rmax)
+        v = grid._cache["viewshed_strip_max"] = (cmax, rmax)
+    return v
 
 
 def _max_slope(grid: HeightGrid) -> float:
