@@ -54,8 +54,9 @@ plot.los_pairs(T, P, V_T, V_S, title="LLS, level 2, half relocation")"""),
 
 `compare` runs the paper's experiment: every method, level and relocation, over several point
 sets. Here: the Jacksboro window, two levels, three sets of 25 points (`terrainvis compare` on
-the command line runs the full protocol)."""),
-    ("code", """df = tv.compare({"jacksboro": T}, levels=[1, 2], n_points=25, n_sets=3, workers=1)
+the command line runs the full protocol). `progress=True` shows a progress bar (a widget
+when ipywidgets is installed: `pip install "terrainvis[notebook]"`)."""),
+    ("code", """df = tv.compare({"jacksboro": T}, levels=[1, 2], n_points=25, n_sets=3, workers=1, progress=True)
 tables = tv.report.paper_tables(df)
 tables["Table 1"]"""),
     ("code", """plot.accuracy_vs_size(df)"""),

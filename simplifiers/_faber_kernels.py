@@ -432,13 +432,14 @@ def _feature_one(g, colptr, rows, vals, tdiag, toff, w2, crit, rhs, diag, off, l
 
 
 @nb.njit(cache=True, nogil=True)
-def feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1):
+def feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1, stop):
     """Feature-aware least squares for every curve of ``f`` (A, m, B) into ``out`` (A, n, B).
 
     Task ``t`` is the block of ``bs`` curves number ``t % nblk`` of ``a = t // nblk``
     (bs = ``_FEATURE_BLOCK`` when B > 1, else 1; A * ceil(B / bs) tasks). The block is
     gathered (reading whole row segments) into a contiguous buffer, solved curve by
-    curve and scattered back.
+    curve and scattered back. The stop flag ``stop`` (:mod:`terrainvis._interrupt`) is
+    read before every task; once it is set the remaining tasks are skipped.
     """
     A, m, B = f.shape
     n = out.shape[1]
@@ -446,6 +447,8 @@ def feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1):
     nblk = (B + bs - 1) // bs
     bad = 0
     for t in range(t0, t1):
+        if stop[0] != 0:
+            break
         a = t // nblk
         b0 = (t - a * nblk) * bs
         b1 = min(B, b0 + bs)
@@ -533,13 +536,13 @@ def gls_rows_parallel(f, jend, colptr, rows, vals, lsub, dinv, out, ntasks, nchu
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def feature_apply_parallel(f, colptr, rows, vals, tdiag, toff, w2, out, ntasks, nchunks):
+def feature_apply_parallel(f, colptr, rows, vals, tdiag, toff, w2, out, ntasks, nchunks, stop):
     """:func:`feature_apply` over tasks ``0 .. ntasks-1`` in ``nchunks`` chunks spread over the threads."""
     bad = 0
     for c in nb.prange(nchunks):
         t0 = c * ntasks // nchunks
         t1 = (c + 1) * ntasks // nchunks
-        bad += feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1)
+        bad += feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1, stop)
     return bad
 
 

@@ -38,7 +38,8 @@ Counters
 adding no vertex: ears and connections to the front), ``N_BITES`` (triangles adding a
 vertex, fallback insertions included), ``N_SPLITS`` (fallback insertions), ``STATUS``
 (``DONE``; ``STUCK``: an edge found no valid triangle; ``STEP_LIMIT``; ``OVER_BUDGET``:
-stopped early because the vertex count passed ``max_vertices``), ``N_EVAL_EAR``,
+stopped early because the vertex count passed ``max_vertices``; ``INTERRUPTED``: the stop
+flag was set, see :mod:`terrainvis._interrupt`), ``N_EVAL_EAR``,
 ``N_EVAL_BITE``, ``N_EVAL_SPLIT`` (triangles evaluated by each step), ``N_CANDIDATES``
 (fallback candidates gathered), ``N_VERTICES`` (vertices so far: the initial front's
 plus one per bite) and ``N_COVERED`` (samples no longer free: in a finished triangle or
@@ -89,6 +90,7 @@ DONE = 0
 STUCK = 1
 STEP_LIMIT = 2
 OVER_BUDGET = 3
+INTERRUPTED = 4
 
 _HOT = {"cache": True, "nogil": True, "_nrt": False}  # helpers that allocate nothing
 
@@ -776,7 +778,7 @@ def _n_buckets(iu, iw, cols):
 
 
 @nb.njit(cache=True, nogil=True)
-def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_vertices):
+def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_vertices, stop):
     """Triangulate the grid with the greedy-cuts advancing front for a fixed eps.
 
     Parameters
@@ -795,6 +797,9 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
         Largest window half-width (samples) searched by the fallback step.
     max_vertices : int
         Stop (``counts[STATUS] = OVER_BUDGET``) as soon as the vertex count exceeds this.
+    stop : (1,) int64
+        The stop flag (:mod:`terrainvis._interrupt`), read before every step; when it is
+        set the run ends with ``counts[STATUS] = INTERRUPTED``.
 
     Returns
     -------
@@ -854,6 +859,9 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
             break
         if counts[N_VERTICES] > max_vertices:
             counts[STATUS] = OVER_BUDGET
+            break
+        if stop[0] != 0:
+            counts[STATUS] = INTERRUPTED
             break
         na = queue[qhead, 0]
         v = queue[qhead, 1]

@@ -27,13 +27,27 @@ samples).
 
 ``counts`` holds the state that persists between calls: ``[n_vertices, n_triangles,
 heap_size, n_flips, n_edge_splits]``.
+
+The arrays travel together as one named record, :class:`State` (a named tuple, which
+numba passes to a kernel as one argument and reads by field name).
 """
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba as nb
 
 NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
+
+#: The state of a greedy-insertion run (see the module docstring for each array):
+#: vertices ``vx``, ``vy`` (int64 column, row); half-edge triangulation ``tri``, ``half``
+#: (int32); per triangle its candidate ``cand`` (int64 flat index) and error ``terr``;
+#: the indexed max-heap ``heap``, ``hval``, ``pos``; the triangles to rescan ``pend``,
+#: ``pmark``; the flip ``stack``; and ``counts``.
+State = namedtuple(
+    "State", ["vx", "vy", "tri", "half", "cand", "terr", "heap", "hval", "pos", "pend", "pmark", "stack", "counts"]
+)
 
 
 # ----------------------------------------------------------------- predicates
@@ -287,7 +301,10 @@ def _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, a_start, rat
 
 
 @nb.njit(cache=True, nogil=True)
-def _rescan(z, W, vx, vy, tri, cand, terr, heap, hval, pos, pend, pmark, npend, counts):
+def _rescan(z, W, st, npend):
+    """Rescan the ``npend`` triangles marked in ``st.pend``: their candidates and heap entries."""
+    vx, vy, tri, cand, terr = st.vx, st.vy, st.tri, st.cand, st.terr
+    heap, hval, pos, pend, pmark, counts = st.heap, st.hval, st.pos, st.pend, st.pmark, st.counts
     for k in range(npend):
         t = pend[k]
         pmark[t] = False
@@ -306,8 +323,9 @@ def _rescan(z, W, vx, vy, tri, cand, terr, heap, hval, pos, pend, pmark, npend, 
 
 
 @nb.njit(cache=True, nogil=True)
-def init_state(z, W, H, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pmark, counts):
-    """The two triangles over the four corners, split along (0, 0)-(W-1, H-1), scanned."""
+def init_state(z, W, H, st):
+    """The two triangles over the four corners, split along (0, 0)-(W-1, H-1), scanned (``st``: a :class:`State`)."""
+    vx, vy, tri, half, pend, pmark, counts = st.vx, st.vy, st.tri, st.half, st.pend, st.pmark, st.counts
     x1 = W - 1
     y1 = H - 1
     vx[0] = 0
@@ -325,19 +343,25 @@ def init_state(z, W, H, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pm
     npend = 0
     npend = _set_tri(tri, half, pend, pmark, npend, 0, 0, 1, 2, -1, -1, -1)
     npend = _set_tri(tri, half, pend, pmark, npend, 1, 0, 2, 3, 2, -1, -1)
-    _rescan(z, W, vx, vy, tri, cand, terr, heap, hval, pos, pend, pmark, npend, counts)
+    _rescan(z, W, st, npend)
 
 
 @nb.njit(cache=True, nogil=True)
-def run(z, W, ratio, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pmark, stack, counts,
-        n_target, max_error):
+def run(z, W, ratio, st, n_target, max_error, stop):
     """Insert the worst candidate until there are ``n_target`` vertices, no candidate is left,
-    or the worst error is <= ``max_error`` (ignored when negative).
+    the worst error is <= ``max_error`` (ignored when negative) or the stop flag ``stop[0]``
+    is set (:mod:`terrainvis._interrupt`; checked before every insertion).
 
-    Returns the largest vertical error of the current TIN over all grid samples.
+    ``st`` is the :class:`State`, ``z`` the (H * W,) heights and ``ratio`` the in-circle
+    aspect ``(dy / dx) ** 2``. Returns the largest vertical error of the current TIN over
+    all grid samples.
     """
+    vx, vy, tri, half, cand, heap, hval, pos = st.vx, st.vy, st.tri, st.half, st.cand, st.heap, st.hval, st.pos
+    pend, pmark, stack, counts = st.pend, st.pmark, st.stack, st.counts
     while counts[NV] < n_target and counts[NH] > 0:
         if max_error >= 0.0 and hval[0] <= max_error:
+            break
+        if stop[0] != 0:
             break
         t = heap[0]
         _heap_remove(heap, hval, pos, counts, t)
@@ -421,7 +445,7 @@ def run(z, W, ratio, vx, vy, tri, half, cand, terr, heap, hval, pos, pend, pmark
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1 + 1, ratio)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t2 + 1, ratio)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t3 + 1, ratio)
-        _rescan(z, W, vx, vy, tri, cand, terr, heap, hval, pos, pend, pmark, npend, counts)
+        _rescan(z, W, st, npend)
     if counts[NH] > 0:
         return max(hval[0], 0.0)
     return 0.0

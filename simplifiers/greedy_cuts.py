@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from terrainvis._interrupt import call
 from terrainvis._validate import as_nonnegative_finite, describe
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
@@ -126,8 +127,9 @@ class _Triangulator:
             eps_map[slice(0, k) if order is None else order[:k]] = eps
         boundary = self._boundary(eps_map)
         limit = np.iinfo(np.int64).max if max_vertices is None else int(max_vertices)
-        tris, counts = K.greedy_cuts_front(
-            self.gx, self.gy, self.space == "index", self.z, eps_map, boundary, 2 * max(self.z.shape), limit
+        tris, counts = call(
+            K.greedy_cuts_front, self.gx, self.gy, self.space == "index", self.z, eps_map, boundary,
+            2 * max(self.z.shape), limit, work=size,
         )
         status = int(counts[K.STATUS])
         if status == K.OVER_BUDGET:
@@ -221,15 +223,15 @@ def greedy_cuts(grid: HeightGrid, max_error: float) -> TIN:
 def _kappa(density: float) -> float:
     """Vertices of the triangulation per product of the row and column 1-D densities.
 
-    Measured on the bundled terrains, the shared DEMs and a 1024^2 tile at the budgets
-    of levels 1-3: about 2.85 at a quarter of the samples, rising to about 3.7 at a
-    sixteenth and below (the spread is about +-25 %; the search corrects it).
+    An empirical fit (2.85 at a quarter of the samples, 3.7 at a sixteenth and below;
+    how it was measured is in docs/simplifiers-and-files.md): a first guess only, which
+    the search corrects.
     """
     return float(np.clip(2.85 * (0.25 / density) ** 0.19, 2.0, 3.7))
 
 
 def _slope(density: float) -> float:
-    """Typical -d log(count) / d log(ε) at this vertex density (1.3 at 1/8, 1.63 at 1/32)."""
+    """Typical -d log(count) / d log(ε) at this vertex density (an empirical fit, as :func:`_kappa`)."""
     return float(np.clip(1.3 + 0.165 * math.log2(0.125 / density), 1.0, 2.0))
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from terrainvis._interrupt import call
 from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis._mesh import signed_area2
 from terrainvis.errors import SimplificationError
@@ -95,10 +96,7 @@ class GreedyInserter:
         self._counts = np.zeros(5, dtype=np.int64)
         self._vcap = 0
         self._alloc(min(grid.size, 64))
-        K.init_state(
-            self._z, cols, rows, self._vx, self._vy, self._tri, self._half, self._cand, self._terr,
-            self._heap, self._hval, self._pos, self._pend, self._pmark, self._counts,
-        )
+        K.init_state(self._z, cols, rows, self._state())
         self._max_error = float(self._hval[0]) if self._counts[K.NH] > 0 else 0.0
 
     # ---------------------------------------------------------------- storage
@@ -129,6 +127,13 @@ class GreedyInserter:
         grow("_pmark", tcap, np.bool_, False)
         self._stack = np.empty(3 * tcap + 16, dtype=np.int32)
         self._vcap = vcap
+
+    def _state(self) -> K.State:
+        """The kernel's named record over the current arrays (they are replaced when they grow)."""
+        return K.State(
+            self._vx, self._vy, self._tri, self._half, self._cand, self._terr, self._heap, self._hval, self._pos,
+            self._pend, self._pmark, self._stack, self._counts,
+        )
 
     # ---------------------------------------------------------------- running
     def run(self, n_vertices: int | None = None, max_error=None) -> "GreedyInserter":
@@ -168,11 +173,8 @@ class GreedyInserter:
         while True:
             goal = min(target, self._vcap)
             self._max_error = float(
-                K.run(
-                    self._z, self._W, self._ratio, self._vx, self._vy, self._tri, self._half, self._cand,
-                    self._terr, self._heap, self._hval, self._pos, self._pend, self._pmark, self._stack,
-                    self._counts, goal, -1.0 if eps is None else eps,
-                )
+                call(K.run, self._z, self._W, self._ratio, self._state(), goal, -1.0 if eps is None else eps,
+                     work=self._z.size)
             )
             done_error = eps is not None and self._max_error <= eps
             if self.n_vertices >= target or done_error or self._counts[K.NH] == 0:

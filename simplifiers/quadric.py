@@ -3,8 +3,8 @@
 The collapses themselves are done by a library: pymeshlab's
 ``meshing_decimation_quadric_edge_collapse`` (VCG; planar quadric, normal preservation
 and optimal placement), the paper's method, or ``fast_simplification.simplify``
-(Forstmann's threshold variant), which is about ten times faster and needs about half
-the memory. ``backend="auto"`` (the default) takes pymeshlab up to
+(Forstmann's threshold variant), faster and smaller in memory (measured figures:
+``docs/simplifiers-and-files.md``). ``backend="auto"`` (the default) takes pymeshlab up to
 :data:`AUTO_MAX_SAMPLES` grid samples and fast-simplification above; ``attrs["backend"]``
 records the library used.
 
@@ -16,14 +16,12 @@ decimated mesh is then turned into a valid height field over the grid's exact ex
 the bounding-box diagonal (``1e8 / diag**6``); an error below its ``QuadricEpsilon``
 (1e-15) is clamped and multiplied by the edge's length in mesh units. The share of clamped
 collapses grows with the number of faces, and with metres as units (edges of 30-60 m) a
-clamped collapse ranks behind collapses with up to 60 times the clamp's error. Measured on
-"mountains" at level 1, bare pymeshlab in metres: RMS vertical error 0.97 m at 256², but
-2.08 m at 1024² and also 2.08 m at 256² when one unused far vertex stretches the box
-fourfold (only the normalisation changes). The adapter therefore hands pymeshlab
-coordinates in units of the input's longest edge, so that a clamped collapse ranks before
-the others: 0.98 m at 1024² (fast-simplification: 0.92 m), and the results no longer
-depend on the unit of the grid (``tests/test_quadric.py``). With these units the
-boundary weight that keeps the border in place is 10 (it was 1000 in metres).
+clamped collapse ranks behind collapses with a much larger error, and the result depends
+on the grid's unit and on the bounding box (the figures are in the docs). The adapter
+therefore hands pymeshlab coordinates in units of the input's longest edge, so that a
+clamped collapse ranks before the others and the results no longer depend on the unit of
+the grid (``tests/test_quadric.py``). With these units the boundary weight that keeps the
+border in place is 10.
 fast-simplification compares its errors with an absolute threshold schedule in squared
 mesh units and gets metres (or larger units, when its schedule runs out).
 
@@ -31,11 +29,8 @@ mesh units and gets metres (or larger units, when its schedule runs out).
 decimated tile by tile, each tile with its border kept, to 1.2 times its share of the
 budget; the tiles are stitched along their identical borders and the global passes below
 take the stitched mesh to the budget (the block-based scheme of Hoppe 1998). The library
-then never holds more than a tile or about 1.2 times the budget. Measured on 3601²
-"mountains" at level 1 with fast-simplification: peak resident memory 3.8 GB instead of
-9.3 GB (the library keeps its buffers, sized for the largest mesh it was given, until the
-process ends), and RMS vertical error 0.72 m instead of 0.75 m; on 1024² with forced
-tiles the errors were 5-8 % lower than untiled at levels 1-3.
+then never holds more than a tile or about 1.2 times the budget (the library keeps its
+buffers, sized for the largest mesh it was given, until the process ends).
 
 **Budget.** The vertex count of the *post-processed* mesh must be within
 :func:`~simplifiers.levels.budget_tolerance` of the budget. The libraries take a face
@@ -51,17 +46,12 @@ the last valid result a little above the budget (at most ``max(16, min(budget //
 first (``attrs["collapses"]``).
 
 **Cascading levels.** ``build(grid, n, start=tin)`` decimates ``tin``, a finer result on
-the same grid, instead of the full grid. Decimating once to the finest level and each
-coarser level from the previous one took 0.40 of the time of three independent runs on
-1024² with pymeshlab (levels 2 and 3: 0.20 and 0.03 of an independent run). The later
-levels start from quadrics of the finer TIN, not of the grid; their RMS errors moved by
--8 % to +1 % on 1024² and by -28 % to +30 % on single 120² terrains (on average 5-10 %
-lower with pymeshlab, +-1 % with fast-simplification); see ``benchmarks/bench_quadric.py
---cascade``. ``simplify`` runs every level independently unless given ``start``;
-``terrainvis.compare`` cascades on grids above
-:data:`terrainvis.experiment.CASCADE_AUTO_MIN_SAMPLES` samples (``cascade="auto"``),
-where on 1024² "mountains" it moved QEC's accuracies by at most 0.1 points and
-lowered its RMS errors by 6-8 %.
+the same grid, instead of the full grid: each later level costs a decimation of the
+finer TIN, not of the grid. The later levels start from quadrics of the finer TIN, not
+of the grid, so their errors differ a little from independent runs (figures and
+``benchmarks/bench_quadric.py --cascade`` in the docs). ``simplify`` runs every level
+independently unless given ``start``; ``terrainvis.compare`` cascades on grids above
+:data:`terrainvis.experiment.CASCADE_AUTO_MIN_SAMPLES` samples (``cascade="auto"``).
 
 References
 ----------
@@ -84,6 +74,7 @@ import time
 
 import numpy as np
 
+from terrainvis._interrupt import import_library
 from terrainvis._memory import release_freed_memory
 from terrainvis._mesh import boundary_edges
 from terrainvis._validate import as_int, describe
@@ -101,19 +92,14 @@ __all__ = [
 BACKENDS = ("pymeshlab", "fast-simplification")
 
 #: ``backend="auto"`` uses pymeshlab (the paper's method) for grids of at most this many
-#: samples (1024² and 1025² included, 1095² at most) and fast-simplification above.
-#: Measured per level on 1024² "mountains" on the shared 2-core machine: pymeshlab 55 s of
-#: CPU (110-120 s of wall time under load) and 1.0 kB per sample, fast-simplification 10
-#: times faster and 0.6 kB per sample; at this threshold pymeshlab takes about a minute of
-#: CPU per level (20 s per level when levels 2 and 3 cascade from level 1), and above it,
-#: e.g. a 1201² SRTM-3 tile, it would take minutes.
+#: samples (1024² and 1025² included, 1095² at most) and fast-simplification above, where
+#: pymeshlab's time per level grows past a minute (figures in docs/simplifiers-and-files.md).
 AUTO_MAX_SAMPLES = 1_200_000
 
 #: pymeshlab filter settings used unless overridden through ``**tuning``. ``boundaryweight``
-#: 10 keeps the border within a fraction of a cell of its lines; 1000 (the setting before
-#: the units fix) kept up to twice the boundary vertices at 1.5 % budgets, 1 lost corners.
-#: ``preservenormal`` costs about 20 % of the time and changes nothing on smooth terrain,
-#: but without it cliffs (the 120² mesas at level 1: max error 3 m -> 28 m) suffer.
+#: 10 keeps the border within a fraction of a cell of its lines (larger weights keep too
+#: many boundary vertices at small budgets, 1 loses corners). ``preservenormal`` costs
+#: time and changes nothing on smooth terrain, but cliffs suffer without it.
 #: ``qualitythr`` must be > 0: VCG divides each collapse's error by
 #: ``min(quality, qualitythr)``.
 PYMESHLAB_DEFAULTS = {
@@ -321,8 +307,7 @@ def _grid_mesh(grid: HeightGrid, origin: np.ndarray, rows: slice = slice(None), 
 
     ``rows`` and ``cols`` (steps of 1) select a window; its vertices are numbered row-major
     within the window. Returns ``(vertices (n, 3) float64, faces (m, 3) int32)``, built
-    without the grid's cached TIN and its int64 temporaries (on 3601², 0.6 GB instead of
-    3 GB).
+    without the grid's cached TIN and its int64 temporaries (about a fifth of the memory).
     """
     xs, ys, z = grid.xs[cols], grid.ys[rows], grid.z[rows, cols]
     nr, nc = z.shape
@@ -358,8 +343,7 @@ def _pymeshlab_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: i
     pymeshlab sees the mesh in units of its longest edge (see the module notes). With
     ``keep_border`` no border vertex is removed or moved.
     """
-    import pymeshlab
-
+    pymeshlab = import_library("pymeshlab")  # an interrupt during its import would become an ImportError
     unit = _longest_edge(vertices, faces) or 1.0
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices / unit, face_matrix=np.asarray(faces, dtype=np.int32)))
@@ -389,8 +373,7 @@ def _fast_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int, s
     threshold (errors far above 1e5 squared units, e.g. a grid in millimetres): it is
     repeated in units ten times larger, up to :data:`_FAST_RESCALES` times.
     """
-    import fast_simplification
-
+    fast_simplification = import_library("fast_simplification")
     faces = np.ascontiguousarray(faces, dtype=np.int32)  # the library copies its input
     asked = faces.shape[0] - int(target_faces)
     unit = 1.0

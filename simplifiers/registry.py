@@ -23,12 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from terrainvis._memory import check_memory
 from terrainvis._mesh import NotADiskError, boundary_loop, signed_area2
-from terrainvis._validate import as_int, describe
+from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis.deviation import vertical_errors
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
 
+from ._target import qec_within, regular_within
 from .levels import check_budget, check_level, check_vertex_count, coarse_coords, vertex_budget
 
 __all__ = ["Method", "METHODS", "available", "method_info", "simplify", "check_height_field"]
@@ -61,6 +63,11 @@ class Method:
     cascades : bool
         The method can continue from its own result at a finer level (``start=``), so a
         comparison may simplify level k+1 from level k instead of from the grid.
+    memory : (int, int, int or None)
+        Peak bytes the method adds per grid sample (for at most the third entry's samples;
+        the rest cost :data:`_BYTES_PER_SAMPLE_BEYOND`) and per vertex of the result, the
+        errors' evaluation included: the estimate :func:`simplify` checks against the
+        memory available before it starts (:meth:`memory_need`).
     """
 
     name: str
@@ -73,6 +80,13 @@ class Method:
     cost_rank: int = 9
     style: tuple = ("k", "o")
     cascades: bool = False
+    memory: tuple = (32, 0, None)
+
+    def memory_need(self, n_samples: int, n_vertices: int) -> int:
+        """Estimated peak bytes of simplifying ``n_samples`` grid samples to ``n_vertices`` vertices."""
+        per_sample, per_vertex, cap = self.memory
+        heavy = n_samples if cap is None else min(n_samples, cap)
+        return per_sample * heavy + _BYTES_PER_SAMPLE_BEYOND * (n_samples - heavy) + per_vertex * n_vertices
 
     def load(self):
         """The method's operator (regular) or build function (irregular)."""
@@ -85,6 +99,9 @@ class Method:
 
 _RF = "simplifiers.reverse_faber"
 
+#: Bytes per grid sample past a method's ``memory`` cap (QEC's tiles): the grid's mesh and the errors.
+_BYTES_PER_SAMPLE_BEYOND = 72
+
 #: Every method, in the paper's row order (irregular first, then regular).
 METHODS: dict[str, Method] = {
     m.name: m
@@ -93,16 +110,20 @@ METHODS: dict[str, Method] = {
             "qec", "irregular", "simplifiers.quadric", "build",
             "quadric edge collapse (Garland & Heckbert 1997): pymeshlab, fast-simplification above 1.2 M samples",
             options=("backend", "start", "tile_samples"), cost_rank=1, style=("tab:red", "v"), cascades=True,
+            # pymeshlab holds about 1 kB per sample of the mesh it decimates; tiles of 2^22 samples at most
+            memory=(1000, 48, 2**22),
         ),
         Method(
             "greedy-cuts", "irregular", "simplifiers.greedy_cuts", "build",
             "greedy cuts (Silva, Mitchell & Kaufman 1995)",
-            options=("max_error",), cost_rank=0, style=("tab:purple", "X"),
+            # heights, tolerances, occupancy, errors; front nodes, buckets, queue and triangles
+            cost_rank=0, style=("tab:purple", "X"), memory=(56, 300, None),
         ),
         Method(
             "greedy-insertion", "irregular", "simplifiers.greedy_insertion", "build",
             "greedy insertion (Garland & Heckbert 1995, Algorithm III)",
-            options=("max_error",), cost_rank=3, style=("tab:orange", "P"),
+            # heights and errors; 166 bytes of state per vertex, twice while an array grows, and the TIN
+            cost_rank=3, style=("tab:orange", "P"), memory=(32, 400, None),
         ),
         Method("simple", "regular", _RF, "simple", "reverse Faber: keep the coarse samples",
                halo=2, cost_rank=6, style=("tab:gray", "o")),
@@ -134,8 +155,8 @@ def method_info(method) -> Method:
     return METHODS[method]
 
 
-def simplify(grid: HeightGrid, method: str, level: int = 1, **options):
-    """Simplify a height grid with one of the registered methods.
+def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_error=None, **options):
+    """Simplify a height grid with one of the registered methods, to a size or to an error.
 
     Parameters
     ----------
@@ -145,10 +166,18 @@ def simplify(grid: HeightGrid, method: str, level: int = 1, **options):
         One of :func:`available`: ``"simple"``, ``"gls"``, ``"lls"``, ``"feature"``
         (regular: the result is a HeightGrid) or ``"qec"``, ``"greedy-insertion"``,
         ``"greedy-cuts"`` (irregular: the result is a TIN).
-    level : int
+    level : int, optional
         Number of reverse-subdivision steps; each halves both axes (120 -> 60 -> 30 -> 15).
         For an irregular method, the vertex budget is the sample count of the regular
-        result at this level.
+        result at this level. Default 1, or no limit (0) when ``max_error`` is given.
+    max_error : float, optional
+        A target error E (z units): the result is the smallest one whose max vertical
+        error is <= E, no finer than ``level`` (or ``n_vertices``) when given. Regular
+        methods return the coarsest level within E; greedy insertion inserts until the
+        error is <= E; greedy cuts triangulates with ε = E; quadric edge collapse
+        searches the vertex count (:func:`simplifiers._target.qec_within`). When even
+        the size limit exceeds E, that result is returned with ``stopped_by ==
+        "budget"``.
     **options
         The method's options (:attr:`Method.options`). Irregular methods also accept
         ``n_vertices=N`` to set the budget directly (``level`` is then only recorded).
@@ -156,9 +185,13 @@ def simplify(grid: HeightGrid, method: str, level: int = 1, **options):
     Returns
     -------
     HeightGrid or TIN
-        ``attrs`` records ``method``, ``kind``, ``level``, ``n_vertices``, ``nbytes``,
+        ``attrs`` records ``method``, ``kind``, ``level`` (for an irregular method
+        simplified to an error without a level: None), ``n_vertices``, ``nbytes``,
         ``max_error`` and ``rms_error`` against ``grid`` (:func:`terrainvis.vertical_errors`)
-        and ``seconds`` (the simplification alone); irregular results also ``budget``.
+        and ``seconds`` (the simplification alone, a search included); irregular results
+        also ``budget``. With ``max_error``: ``max_error_target``, ``stopped_by`` and
+        ``notes`` (a line saying what was reached), and the search's record
+        (``level_errors`` of a regular method, ``probes`` of QEC).
 
     Examples
     --------
@@ -166,6 +199,9 @@ def simplify(grid: HeightGrid, method: str, level: int = 1, **options):
     >>> S = simplify(synthetic_terrain("hills", size=33), "lls", 2)
     >>> S.shape, S.attrs["method"], S.attrs["n_vertices"]
     ((9, 9), 'lls', 81)
+    >>> T = simplify(synthetic_terrain("hills", size=33), "lls", max_error=25.0)
+    >>> T.attrs["level"], T.attrs["max_error"] <= 25.0, T.attrs["stopped_by"]
+    (2, True, 'max_error')
     """
     if not isinstance(grid, HeightGrid):
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
@@ -174,15 +210,22 @@ def simplify(grid: HeightGrid, method: str, level: int = 1, **options):
     unknown = sorted(set(options) - set(info.options) - ({"n_vertices"} if not info.regular else set()))
     if unknown:
         raise TypeError(f"{method} got unexpected option(s) {unknown}; it accepts {sorted(info.options)}")
+    target = None if max_error is None else as_nonnegative_finite(max_error, "max_error", "z units")
+    if level is None and target is None and "n_vertices" not in options:
+        level = 1
     if info.regular:
-        level = check_level(grid.shape, level)
+        level = check_level(grid.shape, 0 if level is None else level)
+        check_memory(info.memory_need(grid.size, 0), f"simplify({method!r}) of a {grid.shape[0]}x{grid.shape[1]} grid")
         t0 = time.perf_counter()
-        out = _apply_regular(grid, info, level, options)
+        if target is None:
+            out, extra = _apply_regular(grid, info, level, options), {}
+        else:
+            out, extra = regular_within(grid, info.load(), level, target, options)
+            level = extra.pop("level")
         seconds = time.perf_counter() - t0
-        extra = {}
     else:
-        out, seconds, level, budget = _run_irregular(grid, info, level, options)
-        extra = {"budget": budget}
+        out, seconds, level, budget, extra = _run_irregular(grid, info, level, options, target)
+        extra["budget"] = budget
     err_max, err_rms = vertical_errors(grid, out)
     n_vertices = out.size if info.regular else out.n_vertices
     out.attrs.update(
@@ -204,30 +247,43 @@ def _apply_regular(grid: HeightGrid, info: Method, level: int, options) -> Heigh
     return HeightGrid.from_coords(z, coarse_coords(grid.xs, level), coarse_coords(grid.ys, level), attrs=grid.attrs)
 
 
-def _run_irregular(grid: HeightGrid, info: Method, level, options):
+def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
+    """``(tin, seconds, level, budget, extra attrs)`` of an irregular method (``target``: max_error or None)."""
     options = dict(options)
     n_override = options.pop("n_vertices", None)
-    if n_override is None:
-        level = check_level(grid.shape, level)
-        budget = vertex_budget(grid.shape, level)
-    else:
+    if n_override is not None:
         if level is not None:
             level = as_int(level, "level", minimum=0)
         budget = check_budget(grid.shape, n_override, "n_vertices")
+    elif level is None:  # an error target without a size limit
+        budget = grid.size
+    else:
+        level = check_level(grid.shape, level)
+        budget = vertex_budget(grid.shape, level)
+    # an error target's count is unknown: the per-sample part alone is checked then
+    need = info.memory_need(grid.size, budget if target is None else 0)
+    check_memory(need, f"simplify({info.name!r}) of a {grid.shape[0]}x{grid.shape[1]} grid to {budget:,} vertices")
     t0 = time.perf_counter()
-    if grid.shape == (2, 2) or budget == grid.size:
+    extra = {}
+    if grid.shape == (2, 2) or (budget == grid.size and target is None):
         own = grid.to_tin()
         tin = TIN(own.vertices, own.faces)  # a fresh object: its attrs must not touch the grid's cached TIN
     else:
         build = info.load()
         try:
-            tin = build(grid, budget, **options)
+            if target is None:
+                tin = build(grid, budget, **options)
+            elif info.name == "qec":
+                tin, extra = qec_within(grid, build, budget, target, options)
+            else:  # greedy insertion and greedy cuts stop at the error themselves
+                tin = build(grid, budget, max_error=target, **options)
+                extra = _error_note(tin, target, budget)
         except (SimplificationError, TypeError, ValueError, MemoryError):
             raise
         except Exception as exc:  # a library failed: name the method and the cause
             raise SimplificationError(f"{info.name} failed on a {grid.shape} grid: {type(exc).__name__}: {exc}") from exc
     seconds = time.perf_counter() - t0
-    early = tin.attrs.get("stopped_by") == "max_error"
+    early = "max_error" in (tin.attrs.get("stopped_by"), extra.get("stopped_by"))
     if early and tin.n_vertices > budget:
         raise SimplificationError(
             f"{info.name} stopped by max_error with {tin.n_vertices} vertices, over the budget of {budget}"
@@ -237,7 +293,16 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options):
     check_height_field(tin, grid, method=info.name, budget=None if early else budget)
     # the result carries the grid's attrs (name, CRS, georeferencing) as a regular one does
     tin.attrs = {**grid.attrs, **tin.attrs}
-    return tin, seconds, level, budget
+    return tin, seconds, level, budget, extra
+
+
+def _error_note(tin: TIN, target: float, budget: int) -> dict:
+    """The attrs of a greedy result simplified to an error (its own ``stopped_by`` says which limit held)."""
+    if tin.attrs.get("stopped_by") == "max_error":
+        note = f"max_error {target:g}: {tin.n_vertices:,} vertices, the first count within it"
+    else:
+        note = f"max_error {target:g} is not met within the budget of {budget:,} vertices"
+    return {"max_error_target": target, "notes": [note]}
 
 
 def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int | None = None) -> None:

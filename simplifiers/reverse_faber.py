@@ -46,6 +46,7 @@ import math
 import numba
 import numpy as np
 
+from terrainvis._interrupt import call
 from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis.terrain import HeightGrid
 
@@ -125,17 +126,23 @@ def _raise_nonfinite(f3, op: str):
     raise FloatingPointError(f"{op}: the result overflowed float64 (max |f| = {float(np.abs(f3).max()):g})")
 
 
-def _run(kernel, parallel_kernel, args, ntasks: int, work: int) -> int:
+def _run(kernel, parallel_kernel, args, ntasks: int, work: int, *, stoppable: bool = False) -> int:
     """Run a kernel's tasks serially when the input is small, else spread over the threads.
 
     Waking the thread pool costs far more than filtering a few thousand samples (and
     much more on a loaded machine), so inputs below ``_PARALLEL_MIN`` samples of work
-    run in the calling thread.
+    run in the calling thread. A ``stoppable`` kernel takes the stop flag last and runs
+    through :func:`terrainvis._interrupt.call` (the filters stream at memory speed and
+    need none; the feature-aware solve does).
     """
     threads = numba.get_num_threads()
     if work < _PARALLEL_MIN or threads == 1 or ntasks < 2:
-        return kernel(*args, 0, ntasks)
-    return parallel_kernel(*args, ntasks, min(ntasks, 8 * threads))
+        head = (kernel, *args, 0, ntasks)
+    else:
+        head = (parallel_kernel, *args, ntasks, min(ntasks, 8 * threads))
+    if stoppable:
+        return call(*head, work=work)
+    return head[0](*head[1:])
 
 
 # ------------------------------------------------------------ the matrix S
@@ -394,7 +401,7 @@ def feature(f, axis: int = -1, *, weight: float = 1.0):
     ntasks = A * -(-B // (_k._FEATURE_BLOCK if B > 1 else 1))
     args = (f3, s["colptr"], s["rows"], s["vals"], s["tdiag"], s["toff"], w * w, out)
     # the solve costs ~20x a filter per sample, so smaller inputs already pay for threads
-    bad = _run(_k.feature_apply, _k.feature_apply_parallel, args, ntasks, 20 * f3.size)
+    bad = _run(_k.feature_apply, _k.feature_apply_parallel, args, ntasks, 20 * f3.size, stoppable=True)
     if bad:
         _raise_nonfinite(f3, "feature")
     return out.reshape(out_shape)

@@ -40,7 +40,7 @@ _API = {
 }
 _MODULES = {
     "errors", "synthetic", "io", "visibility", "relocation", "deviation", "metrics", "experiment", "report", "plot",
-    "cli", "terrain", "sampling",
+    "cli", "terrain", "sampling", "options", "calibration",
 }
 
 __all__ = sorted(_API) + sorted(_MODULES)

@@ -19,6 +19,20 @@ right because they describe a map of coordinates, not a raster):
     On a lon/lat grid ``sx = 1 / m_lon`` and ``sy = 1 / m_lat`` (WGS84 metres per degree
     at the centre latitude, :func:`metres_per_degree`), and ``(ox, oy)`` is the lon/lat
     of the sample at local (0, 0).
+``source_crs`` : str, only on a grid resampled by :func:`terrainvis.io.to_metric`
+    The lon/lat CRS the grid was resampled from. Its ``crs`` is then the metric CRS of
+    its samples (a local transverse Mercator), and positions given in ``source_crs``
+    are moved to the grid's frame through that projection.
+
+Positions
+---------
+Every computation of terrainvis takes positions in the terrain's own frame, the frame of
+``grid.xs`` and ``grid.ys``. A user gives them in the *native* CRS: the CRS of the DEM
+file as read (``crs``), or the ``source_crs`` of a grid resampled onto a metric grid.
+:func:`from_native` and :func:`to_native` convert between the two (``HeightGrid.from_native``
+and ``HeightGrid.to_native`` call them); on a projected grid both are the identity, bit
+for bit. The command line's ``--frame native`` (the default) goes through them
+(:mod:`terrainvis._positions`); ``--frame local`` takes the terrain's own frame.
 """
 
 from __future__ import annotations
@@ -32,10 +46,11 @@ import numpy as np
 __all__ = [
     "GEOREF_KEYS", "IDENTITY", "metres_per_degree", "rasterio_module", "parse_crs", "crs_is_geographic",
     "xy_to_native", "native_axes", "lonlat_to_local", "looks_like_degrees", "warn_if_degrees",
+    "position_crs", "from_native", "to_native", "transform_xy", "local_frame_error",
 ]
 
 #: The ``attrs`` keys that hold a grid's georeferencing (see the module docstring).
-GEOREF_KEYS = ("crs", "geographic", "xy_to_native")
+GEOREF_KEYS = ("crs", "geographic", "xy_to_native", "source_crs")
 #: ``xy_to_native`` of a grid whose coordinates are already native.
 IDENTITY = (1.0, 0.0, 1.0, 0.0)
 
@@ -193,15 +208,171 @@ def looks_like_degrees(xs: np.ndarray, ys: np.ndarray) -> bool:
     return bool(in_range and cell <= 1.0 / 60.0 + 1e-12)
 
 
-def warn_if_degrees(xs: np.ndarray, ys: np.ndarray, source: str, stacklevel: int = 4) -> None:
-    """A UserWarning when coordinates without a CRS look like lon/lat degrees."""
-    if looks_like_degrees(xs, ys):
+def warn_if_degrees(xs: np.ndarray, ys: np.ndarray, source: str, stacklevel: int = 4, *,
+                    named: bool = False, fix: str = "load_dem") -> None:
+    """A UserWarning when coordinates without a CRS look like lon/lat degrees.
+
+    ``named`` says that the coordinates are *called* lon/lat (xarray dims ``lon``/``lat``):
+    then any coordinates within lon/lat ranges warn, whatever their cell size. ``fix``
+    names the function whose ``crs=`` converts them.
+    """
+    if xs.size < 2 or ys.size < 2:
+        return
+    in_range = xs[0] >= -180.0 and xs[-1] <= 360.0 and ys[0] >= -90.0 and ys[-1] <= 90.0
+    if looks_like_degrees(xs, ys) or (named and in_range):
         cell = max(float(np.diff(xs).max()), float(np.diff(ys).max()))
+        why = "are named lon/lat" if named else "look like lon/lat degrees"
         warnings.warn(
-            f"{source} records no CRS, but its coordinates look like lon/lat degrees (x in "
+            f"{source} records no CRS, but its coordinates {why} (x in "
             f"[{xs[0]:.6g}, {xs[-1]:.6g}], y in [{ys[0]:.6g}, {ys[-1]:.6g}], cells of {cell:.3g}); they are "
-            "read as metres, which makes slopes and line of sight wrong. Pass crs='EPSG:4326' to load_dem "
+            f"read as metres, which makes slopes and line of sight wrong. Pass crs='EPSG:4326' to {fix} "
             "to convert them to metres.",
             UserWarning,
             stacklevel=stacklevel,
         )
+
+
+# ---------------------------------------------------------------------- positions
+def position_crs(attrs: dict) -> str | None:
+    """The CRS positions are given in by default: ``source_crs`` when present, else ``crs`` (None: not recorded)."""
+    text = attrs.get("source_crs") or attrs.get("crs") or None
+    return text if isinstance(text, str) else None
+
+
+def _positions(xy, name: str) -> np.ndarray:
+    """``xy`` as a new float64 array whose last axis holds x, y (and anything after them, e.g. z)."""
+    try:
+        arr = np.array(xy, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be numeric array-like positions (x, y), got {type(xy).__name__} {xy!r:.60}") from None
+    if arr.ndim == 0 or arr.shape[-1] < 2:
+        raise ValueError(
+            f"{name} must hold positions along its last axis: shape (2,), (n, 2) or (n, 3) with x, y first, "
+            f"got shape {arr.shape}"
+        )
+    return arr
+
+
+def transform_xy(src: str, dst: str, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` from the CRS ``src`` to ``dst`` with rasterio (PROJ); non-finite values stay NaN."""
+    rasterio_module("moving positions between CRSs")
+    from rasterio.warp import transform
+
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    ox = np.full(x.shape, np.nan)
+    oy = np.full(y.shape, np.nan)
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.any():
+        a = parse_crs(src, "source CRS")
+        b = parse_crs(dst, "destination CRS")
+        try:
+            tx, ty = transform(a, b, x[ok], y[ok])
+        except Exception as exc:  # PROJ: a point outside the projection's domain (e.g. latitude 95)
+            raise ValueError(f"positions could not be moved from {src!r} to {dst!r}: {exc}") from None
+        ox[ok] = tx
+        oy[ok] = ty
+    return ox, oy
+
+
+def _affine_or_raise(attrs: dict):
+    affine = xy_to_native(attrs)
+    if affine is None:
+        raise ValueError("the terrain's attrs say it is geographic but hold no 'xy_to_native': its lon/lat are unknown")
+    return affine
+
+
+def from_native(attrs: dict, xy, name: str = "xy", extent=None) -> np.ndarray:
+    """Positions in the native CRS (:func:`position_crs`) moved to the terrain's own frame.
+
+    Parameters
+    ----------
+    attrs : dict
+        The terrain's ``attrs`` (its georeferencing; none: the identity).
+    xy : array_like, shape (2,), (n, 2) or (n, k >= 2)
+        x, y first along the last axis (lon, lat in degrees on a geographic terrain);
+        further columns (a height z) are copied unchanged. NaN stays NaN.
+    extent : (xmin, xmax, ymin, ymax), optional
+        The terrain's footprint in its own frame. A position the conversion's rounding
+        puts just outside it (by at most ``1e-9`` of its span plus a few float64 steps)
+        is put on its edge, so that the lon/lat of an edge sample lands on that sample.
+
+    Returns
+    -------
+    ndarray, float64, the shape of ``xy``
+        A new array; on a projected terrain (or one without a CRS) a copy of ``xy``.
+    """
+    arr = _positions(xy, name)
+    out = arr.copy()
+    x, y = arr[..., 0], arr[..., 1]
+    source = attrs.get("source_crs")
+    if source:
+        x, y = transform_xy(source, attrs["crs"], x, y)
+    affine = _affine_or_raise(attrs)
+    if affine != IDENTITY:
+        sx, ox, sy, oy = affine
+        x = (x - ox) / sx
+        y = (y - oy) / sy
+    if extent is not None:
+        xmin, xmax, ymin, ymax = (float(v) for v in extent)
+        x = _onto_edges(x, xmin, xmax)
+        y = _onto_edges(y, ymin, ymax)
+    out[..., 0] = x
+    out[..., 1] = y
+    return out
+
+
+def _onto_edges(v: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``v`` with the values within rounding outside ``[lo, hi]`` put on ``lo`` or ``hi``."""
+    tol = 1e-9 * (hi - lo) + 8.0 * np.spacing(max(abs(lo), abs(hi)))
+    v = np.array(v, dtype=np.float64, copy=True)
+    v[(v < lo) & (v >= lo - tol)] = lo
+    v[(v > hi) & (v <= hi + tol)] = hi
+    return v
+
+
+def to_native(attrs: dict, xy, name: str = "xy") -> np.ndarray:
+    """Positions in the terrain's own frame moved to the native CRS: the inverse of :func:`from_native`."""
+    arr = _positions(xy, name)
+    out = arr.copy()
+    x, y = arr[..., 0], arr[..., 1]
+    affine = _affine_or_raise(attrs)
+    if affine != IDENTITY:
+        sx, ox, sy, oy = affine
+        x = ox + sx * x
+        y = oy + sy * y
+    source = attrs.get("source_crs")
+    if source:
+        x, y = transform_xy(attrs["crs"], source, x, y)
+    out[..., 0] = x
+    out[..., 1] = y
+    return out
+
+
+def local_frame_error(attrs: dict, ys: np.ndarray) -> tuple[float, float] | None:
+    """How far east-west lengths of a lon/lat grid's local frame are off at its southern and northern rows.
+
+    The local frame uses one east-west scale (WGS84 metres per degree of longitude at
+    the centre latitude of the grid as read, ``1 / sx``) for every row; the true scale at
+    latitude phi is ``metres_per_degree(phi)[0]``. Returns the relative errors
+    ``scale / true - 1`` at the first and last row (negative: too short), or None when
+    the grid is not geographic (or its map to lon/lat is unknown).
+
+    Examples
+    --------
+    >>> from terrainvis._georef import lonlat_to_local
+    >>> xs, ys, affine = lonlat_to_local(np.linspace(0, 1, 11), np.linspace(44.5, 45.5, 11))
+    >>> [round(100 * e, 3) for e in local_frame_error({"geographic": True, "xy_to_native": affine}, ys)]
+    [-0.858, 0.881]
+    """
+    if not attrs.get("geographic") or attrs.get("source_crs"):
+        return None
+    affine = xy_to_native(attrs)
+    if affine is None or len(ys) == 0:
+        return None
+    sx, _, sy, oy = affine
+    errors = []
+    for y in (float(ys[0]), float(ys[-1])):
+        true = metres_per_degree(oy + sy * y)[0]
+        errors.append((1.0 / sx) / true - 1.0)
+    return errors[0], errors[1]

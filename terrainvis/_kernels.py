@@ -72,9 +72,14 @@ def build_buckets(vx, vy, faces, x0, y0, bw, bh, nbx, nby):
 
 
 @nb.njit(cache=True, nogil=True)
-def locate_heights(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, qx, qy, out, rel_eps):
-    """Height of the TIN at each query point (NaN outside the footprint)."""
+def locate_heights(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, qx, qy, out, rel_eps, stop):
+    """Height of the TIN at each query point (NaN outside the footprint).
+
+    ``stop`` is the stop flag (:mod:`terrainvis._interrupt`), read every 4096 points.
+    """
     for i in range(qx.shape[0]):
+        if i % 4096 == 0 and stop[0] != 0:
+            return
         x = qx[i]
         y = qy[i]
         out[i] = np.nan
@@ -94,15 +99,18 @@ def locate_heights(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, q
 
 
 @nb.njit(cache=True, nogil=True)
-def rasterize_tin(vx, vy, vz, faces, xs, ys, out, rel_eps):
+def rasterize_tin(vx, vy, vz, faces, xs, ys, out, rel_eps, stop):
     """Evaluate a TIN at every node (xs[c], ys[r]) of a rectilinear grid.
 
     Each face visits only the grid nodes inside its bounding box, so the cost is
     O(faces + nodes). Nodes outside every face stay NaN (``out`` is pre-filled by the caller).
+    ``stop`` is the stop flag (:mod:`terrainvis._interrupt`), read before every face.
     """
     nc = xs.shape[0]
     nr = ys.shape[0]
     for f in range(faces.shape[0]):
+        if stop[0] != 0:
+            return
         i0 = faces[f, 0]
         i1 = faces[f, 1]
         i2 = faces[f, 2]
@@ -124,10 +132,11 @@ def rasterize_tin(vx, vy, vz, faces, xs, ys, out, rel_eps):
 
 
 @nb.njit(cache=True, nogil=True)
-def largest_valid_rectangle(valid):
+def largest_valid_rectangle(valid, stop):
     """Largest all-True axis-aligned rectangle of a boolean mask (histogram-stack method).
 
-    Returns (r0, r1, c0, c1) with half-open bounds, or (0, 0, 0, 0) when nothing is valid.
+    Returns (r0, r1, c0, c1) with half-open bounds, or (0, 0, 0, 0) when nothing is valid
+    (or when the stop flag ``stop`` of :mod:`terrainvis._interrupt`, read every row, is set).
     """
     nr, nc = valid.shape
     heights = np.zeros(nc + 1, dtype=np.int64)
@@ -138,6 +147,8 @@ def largest_valid_rectangle(valid):
     bc0 = 0
     bc1 = 0
     for r in range(nr):
+        if stop[0] != 0:
+            return 0, 0, 0, 0
         for c in range(nc):
             if valid[r, c]:
                 heights[c] += 1
@@ -163,11 +174,12 @@ def largest_valid_rectangle(valid):
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_on_grid(xs, ys, z, qx, qy, out):
+def grid_on_grid(xs, ys, z, qx, qy, out, stop):
     """Evaluate the grid surface (xs, ys, z) at every node (qx[j], qy[i]) of another grid.
 
     The query nodes are separable, so each column's cell and u, and each row's cell and
     v, are found once. Nodes outside the extent stay as pre-filled by the caller (NaN).
+    ``stop`` is the stop flag (:mod:`terrainvis._interrupt`), read before every row.
     """
     nc = xs.shape[0]
     nr = ys.shape[0]
@@ -178,6 +190,8 @@ def grid_on_grid(xs, ys, z, qx, qy, out):
         cidx[j] = c
         uu[j] = (qx[j] - xs[c]) / (xs[c + 1] - xs[c])
     for i in range(qy.shape[0]):
+        if stop[0] != 0:
+            return
         y = qy[i]
         if not (y >= ys[0] and y <= ys[nr - 1]):
             continue

@@ -88,3 +88,60 @@ def choice(value, name: str, valid) -> str:
     if value not in valid:
         raise ValueError(f"{name} must be one of {valid}, got {value!r}")
     return value
+
+
+#: Relative rounding of float64: the spacing of float64 numbers near x is about ``2**-52 * |x|``.
+FLOAT64_EPS = 2.0**-52
+
+
+def height_limit(scale: float, ground: float = 0.0, tol_rel: float = 1e-9) -> float:
+    """The largest |height| (or offset) that float64 resolves against a terrain.
+
+    The line-of-sight predicate accepts clearances down to ``-tol`` with ``tol = tol_rel *
+    scale`` (``terrainvis.visibility.clearance_tolerance``: ``1e-9`` times the larger of
+    the extent's diagonal and the relief). An end of a segment at height ``H`` above the
+    datum is known to ``2**-52 * |H|`` only, so once that exceeds ``tol`` the predicate
+    decides on rounding noise. With ``|H| <= |h| + ground`` (``ground`` the largest |z|
+    of the terrain), a height ``h`` is resolved while ``|h| <= tol / 2**-52 - ground``.
+
+    Examples
+    --------
+    >>> round(height_limit(1000.0, 500.0) / 1e9, 3)  # a 1 km terrain: about 4.5e9
+    4.504
+    """
+    return tol_rel * scale / FLOAT64_EPS - ground
+
+
+def as_height(value, name: str, *, scale: float, ground: float = 0.0, tol_rel: float = 1e-9,
+              minimum: float | None = None) -> float:
+    """``value`` as a finite float within what float64 resolves against a terrain (:func:`height_limit`).
+
+    ``scale`` is the terrain's scale (``terrainvis.visibility.terrain_scale``), ``ground``
+    its largest |z|; ``minimum`` an optional lower bound of the caller's own (e.g. 0).
+
+    Examples
+    --------
+    >>> as_height(1.7, "observer_height", scale=1000.0)
+    1.7
+    >>> as_height(1e20, "observer_height", scale=1000.0)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: observer_height must be within [-4.5e+09, 4.5e+09] for this terrain (float64 resolves ...
+    """
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        raise TypeError(f"{name} must be a real number, got {describe(value)}")
+    try:
+        out = float(value)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+    if not np.isfinite(out):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    limit = height_limit(scale, ground, tol_rel)
+    low = -limit if minimum is None else max(-limit, minimum)
+    if not low <= out <= limit:
+        raise ValueError(
+            f"{name} must be within [{low:.3g}, {limit:.3g}] for this terrain (float64 resolves heights to "
+            f"2^-52 of their size, and line of sight compares them to {tol_rel:g} x the terrain's scale "
+            f"{scale:.6g}), got {value!r}"
+        )
+    return out

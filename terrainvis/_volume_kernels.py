@@ -237,7 +237,7 @@ def _load_corner(buf, slot, x, y, d, e0, e1, e2):
 
 
 @nb.njit(cache=True, nogil=True)
-def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf):
+def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop):
     """Integral of |coarse - fine| and covered area over coarse faces ``order[f0 .. f1-1]``.
 
     Parameters
@@ -256,6 +256,9 @@ def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf):
         The range of ``order`` to visit.
     buf : (2, MAX_POLY, N_PCOL) float64
         Clipping scratch.
+    stop : (1,) int64
+        The stop flag (:mod:`terrainvis._interrupt`), read before every face: when it is
+        set the sums so far are returned.
 
     Returns
     -------
@@ -287,6 +290,8 @@ def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf):
     cov = 0.0
     cov_c = 0.0
     for i_f in range(f0, f1):
+        if stop[0] != 0:
+            break
         f = order[i_f]
         for k in range(3):
             tid[k] = faces[f, k]
@@ -445,18 +450,19 @@ def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def volume_between(xs, ys, z, vx, vy, vz, faces, order, nchunks, out):
+def volume_between(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, stop):
     """:func:`volume_faces` over ``nchunks`` equal runs of ``order`` spread over the threads.
 
     ``out`` is (nchunks, N_OUT): row ch receives the compensated sums of chunk ch. The
     chunks depend only on ``nchunks``, so the result does not depend on the thread count.
+    Every chunk reads the stop flag ``stop`` before each face (:mod:`terrainvis._interrupt`).
     """
     nf = faces.shape[0]
     for ch in nb.prange(nchunks):
         buf = np.empty((2, MAX_POLY, N_PCOL))
         f0 = ch * nf // nchunks
         f1 = (ch + 1) * nf // nchunks
-        v, vc, a, ac = volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf)
+        v, vc, a, ac = volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop)
         out[ch, VOL] = v
         out[ch, VOL_C] = vc
         out[ch, AREA] = a

@@ -15,7 +15,7 @@ import numpy as np
 from ._georef import IDENTITY, crs_is_geographic, lonlat_to_local, parse_crs, warn_if_degrees
 from ._validate import describe
 
-__all__ = ["xarray_module", "find_dims", "grid_from_dataarray", "grid_to_dataarray", "raw_to_heights"]
+__all__ = ["xarray_module", "find_dims", "dataarray_parts", "grid_to_dataarray", "raw_to_heights"]
 
 _X_NAMES = ("x", "lon", "longitude", "easting")
 _Y_NAMES = ("y", "lat", "latitude", "northing")
@@ -119,10 +119,12 @@ def _crs_of(da, crs) -> str | None:
     return None
 
 
-def grid_from_dataarray(da, *, x=None, y=None, crs=None):
-    """See :meth:`terrainvis.HeightGrid.from_xarray`."""
+def dataarray_parts(da, *, x=None, y=None, crs=None):
+    """``(z, xs, ys, attrs)`` of the HeightGrid that :meth:`terrainvis.HeightGrid.from_xarray` builds.
+
+    This module knows nothing of HeightGrid (``terrain`` imports it, not the other way).
+    """
     xr = xarray_module()
-    from .terrain import HeightGrid
 
     if not isinstance(da, xr.DataArray):
         raise TypeError(f"da must be an xarray.DataArray, got {describe(da)}")
@@ -143,21 +145,22 @@ def grid_from_dataarray(da, *, x=None, y=None, crs=None):
         # Written by to_xarray: the coordinates are terrainvis coordinates already.
         if crs is not None:
             raise ValueError("crs: da.attrs already hold terrainvis georeferencing (xy_to_native); crs= cannot apply")
-        return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+        return z, xs, ys, attrs
     text = _crs_of(da, crs)
     if text is None:
-        warn_if_degrees(xs, ys, "the DataArray", stacklevel=4)
-        return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+        named = str(xdim).lower() in ("lon", "longitude") and str(ydim).lower() in ("lat", "latitude")
+        warn_if_degrees(xs, ys, "the DataArray", stacklevel=4, named=named, fix="HeightGrid.from_xarray")
+        return z, xs, ys, attrs
     geographic = crs_is_geographic(text)
     affine = IDENTITY
     if geographic:
         xs, ys, affine = lonlat_to_local(xs, ys)
     attrs.update(crs=text, geographic=geographic, xy_to_native=affine)
-    return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+    return z, xs, ys, attrs
 
 
 def grid_to_dataarray(grid, *, name: str = "z"):
-    """See :meth:`terrainvis.HeightGrid.to_xarray`."""
+    """See :meth:`terrainvis.HeightGrid.to_xarray` (``grid`` is any object with ``z``, ``xs``, ``ys``, ``attrs``)."""
     xr = xarray_module()
     da = xr.DataArray(
         np.array(grid.z), dims=("y", "x"), coords={"y": np.array(grid.ys), "x": np.array(grid.xs)},

@@ -9,11 +9,23 @@
   ``.glb``; TINs also ``.npz``).
 * ``terrainvis los DEM --from X Y --to X Y`` checks lines of sight.
 * ``terrainvis viewshed DEM --observer X Y -o viewshed.tif`` writes an observer's viewshed.
+* ``terrainvis relocate DEM --points CSV ...`` places points on a simplification.
 * ``terrainvis info DEM`` describes a terrain.
 
+Positions (``--from``, ``--to``, ``--observer``, the ``--pairs`` and ``--points`` CSVs) are
+in the DEM's native CRS by default (lon/lat degrees on a lon/lat DEM), or in the terrain's
+own frame with ``--frame local``; outputs that report positions use the frame of the input
+(:mod:`terrainvis._positions`). ``--metric`` resamples a lon/lat DEM onto a metric grid
+first (:func:`terrainvis.io.to_metric`).
+
 User mistakes end with one line on stderr and exit status 2; a run that produced no
-result exits with 1; an interrupt exits with 130 (SIGINT) or 143 (SIGTERM), after the
-finished units have been written.
+result, or a failed write (a full disk), exits with 1; an interrupt exits with 130
+(SIGINT) or 143 (SIGTERM), after the finished units have been written; a closed pipe
+(``terrainvis ... | head``) ends the command quietly with 141, as Unix tools do.
+
+Nothing is written over an input (under any spelling of its path, or through a symlink)
+or into the installed package. Heights above the surface (``--height``,
+``--target-height``, ``--offset``) must be finite and >= 0 everywhere.
 """
 
 from __future__ import annotations
@@ -26,8 +38,8 @@ from pathlib import Path
 
 __all__ = ["main"]
 
-#: ``--quick``: a run of seconds for smoke tests.
-QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "points": 20, "sets": 2}
+#: ``--quick``: a run of seconds for smoke tests (terrains, and options by name, each unless given).
+QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "n_points": 20, "n_sets": 2}
 
 
 class UsageError(ValueError):
@@ -35,6 +47,42 @@ class UsageError(ValueError):
 
 
 # ------------------------------------------------------------------ parser
+class _ParseError(ValueError):
+    """argparse's complaint, reported in one line by :func:`main` (exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (no usage block), like every other error of the command line."""
+
+    def error(self, message):
+        raise _ParseError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _height(text: str) -> float:
+    """A height above the surface: finite and >= 0 (a negative eye height would stand underground)."""
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a height >= 0 above the surface, got {text!r}")
+    return value
+
+
+def _distance_arg(text: str) -> float:
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a distance >= 0, got {text!r}")
+    return value
+
+
 def _add_nodata(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--fill", choices=["nearest", "linear"], default=None,
@@ -42,14 +90,41 @@ def _add_nodata(p) -> None:
     g.add_argument("--crop-valid", action="store_true", help="cut the DEM to its largest window without nodata")
 
 
+def _add_positions(p, *, frame: bool = True) -> None:
+    """``--frame`` (how positions are given and printed) and ``--metric`` (resample a lon/lat DEM first)."""
+    from ._positions import FRAMES
+
+    if frame:
+        p.add_argument("--frame", choices=FRAMES, default="native",
+                       help="positions given and printed in the DEM's CRS (native, the default: lon/lat degrees on a "
+                            "lon/lat DEM, x, y of its projection otherwise) or in the terrain's own frame (local: "
+                            "metres from the south-west sample on a lon/lat DEM; see terrainvis info)")
+    p.add_argument("--metric", action="store_true",
+                   help="a lon/lat DEM: resample it first onto a metric grid (a transverse Mercator centred on it), "
+                        "so distances are right across the whole DEM, not only at its centre latitude; changes the "
+                        "samples (heights read from the DEM's surface; nodata wedges along the edges); positions "
+                        "stay lon/lat (docs/georeferencing.md)")
+
+
 def _parser() -> argparse.ArgumentParser:
-    from simplifiers import METHODS
-
-    from .experiment import CASCADE_AUTO_MIN_SAMPLES, DEFAULT_TERRAINS, DEFAULTS, PREDICATES
-    from .relocation import RELOCATIONS
-
-    p = argparse.ArgumentParser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
+    p = _Parser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _compare_parser(sub)
+    _simplify_parser(sub)
+    _los_parser(sub)
+    _viewshed_parser(sub)
+    _relocate_parser(sub)
+    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
+    i.add_argument("terrain", help="bundled name or DEM file")
+    _add_nodata(i)
+    _add_positions(i, frame=False)
+    return p
+
+
+def _compare_parser(sub) -> None:
+    """``terrainvis compare``: the options' flags come from :data:`terrainvis.options.OPTIONS`."""
+    from .options import add_flags
+    from .plan import DEFAULT_TERRAINS
 
     c = sub.add_parser(
         "compare", help="run the paper's experiment and print its tables",
@@ -62,47 +137,31 @@ def _parser() -> argparse.ArgumentParser:
     )
     c.add_argument("--terrain", nargs="+", default=None, metavar="T",
                    help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}) or DEM files (.npz .npy .asc .tif)")
-    c.add_argument("--levels", nargs="+", type=int, default=None,
-                   help=f"simplification levels (default: {' '.join(map(str, DEFAULTS.levels))})")
-    c.add_argument("--methods", nargs="+", default=None, metavar="M", help=f"methods (default: all of {', '.join(METHODS)})")
-    c.add_argument("--relocations", nargs="+", default=None, metavar="R",
-                   help=f"relocations (default: {' '.join(RELOCATIONS)}; add 'oracle' for the upper bound)")
-    c.add_argument("--points", type=int, default=None, help=f"points per set (default {DEFAULTS.n_points})")
-    c.add_argument("--sets", type=int, default=None, help=f"point sets per terrain (default {DEFAULTS.n_sets})")
-    c.add_argument("--seed", type=int, default=DEFAULTS.seed, help=f"seed of the point sets (default {DEFAULTS.seed})")
-    c.add_argument("--offset", type=float, default=DEFAULTS.offset,
-                   help=f"observer height above the surface (default {DEFAULTS.offset:g})")
-    c.add_argument("--max-distance", nargs="+", type=_distance, default=None, metavar="D",
-                   help="count only pairs within this horizontal distance; several give a sweep from the same "
-                        "verdicts ('all' for every pair)")
-    c.add_argument("--distance-unit", choices=["world", "cells"], default=DEFAULTS.distance_unit,
-                   help="unit of --max-distance: world units or cells of the terrain (default world)")
-    c.add_argument("--predicate", choices=PREDICATES, default=DEFAULTS.predicate,
-                   help="line-of-sight predicate on S(T): exact, or paper (ignore one cell of S(T) around each end)")
-    c.add_argument("--engine", choices=["auto", "grid", "embree"], default=DEFAULTS.engine, help="visibility engine")
-    c.add_argument("--measure", choices=["pairs", "viewshed"], default=DEFAULTS.measure,
-                   help="pairs: the paper's visibility matrices; viewshed: each observer's viewshed of every sample")
-    c.add_argument("--observers", type=int, default=DEFAULTS.n_observers,
-                   help=f"observers per terrain for --measure viewshed (default {DEFAULTS.n_observers})")
-    c.add_argument("--target-height", type=float, default=DEFAULTS.target_height,
-                   help="viewshed targets' height above the surface under test (default 0)")
-    c.add_argument("--repeats", type=int, default=DEFAULTS.repeats, help="timings per visibility matrix (the fastest is kept)")
+    add_flags(c)
     c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")
-    c.add_argument("--no-volume", action="store_true", help="skip the volume between T and S(T)")
-    cc = c.add_mutually_exclusive_group()
-    cc.add_argument("--cascade", dest="cascade", action="store_const", const=True, default=DEFAULTS.cascade,
-                    help="simplify each QEC level from the previous level's result (one decimation instead of three; "
-                         "changes QEC's results slightly, see the README). Default: only on grids of more than "
-                         f"{CASCADE_AUTO_MIN_SAMPLES:,} samples")
-    cc.add_argument("--no-cascade", dest="cascade", action="store_const", const=False,
-                    help="simplify every level from the terrain itself, as the paper does, whatever its size")
     c.add_argument("--no-plots", action="store_true", help="do not write the figures")
     c.add_argument("--quick", action="store_true",
-                   help="a run of seconds for smoke tests: terrains hills and ridges, levels 1 and 3, 2 sets of 20 points")
-    c.add_argument("--resume", action="store_true", help="keep the units already in OUT/results.csv and run only the rest")
-    c.add_argument("--out", default="terrainvis-results", help="output folder (default: ./terrainvis-results)")
+                   help=f"a run of seconds for smoke tests: {_quick_flags()} (each unless given)")
+    again = c.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="keep the units already in OUT/results.csv and run only the rest (same settings)")
+    again.add_argument("--overwrite", action="store_true",
+                       help="replace an earlier run in OUT: remove the files it wrote (and only those) first")
+    c.add_argument("--out", default="terrainvis-results",
+                   help="output folder (default: ./terrainvis-results); one run at a time")
     _add_nodata(c)
+
+
+def _quick_flags() -> str:
+    from .options import OPTIONS
+
+    words = lambda v: " ".join(map(str, v)) if isinstance(v, list) else str(v)  # noqa: E731
+    return " ".join(f"{'--terrain' if k == 'terrains' else OPTIONS[k].flag} {words(v)}" for k, v in QUICK.items())
+
+
+def _simplify_parser(sub) -> None:
+    from simplifiers import METHODS
 
     s = sub.add_parser(
         "simplify", help="simplify a DEM and write the result",
@@ -120,22 +179,33 @@ def _parser() -> argparse.ArgumentParser:
                    help="an option of the method, e.g. weights=derived for lls (repeatable)")
     _add_nodata(s)
 
+
+def _los_parser(sub) -> None:
     los = sub.add_parser(
         "los", help="check lines of sight on a DEM",
         description=(
             "Print whether the points see each other, and the lowest clearance of the segment (segment height "
-            "minus surface height) with where it occurs. Coordinates are the DEM's x, y (see terrainvis info)."
+            "minus surface height) with where it occurs. Positions are in the DEM's CRS (lon, lat in degrees on a "
+            "lon/lat DEM), or in the terrain's own frame with --frame local (see terrainvis info)."
         ),
     )
     los.add_argument("dem", help="DEM file or bundled name")
-    los.add_argument("--from", dest="start", nargs=2, type=float, metavar=("X", "Y"), help="observer position")
-    los.add_argument("--to", dest="end", nargs=2, type=float, metavar=("X", "Y"), help="target position")
-    los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2")
-    los.add_argument("--height", type=float, default=1.7, help="observer height above the surface (default 1.7)")
-    los.add_argument("--target-height", type=float, default=0.0, help="target height above the surface (default 0)")
-    los.add_argument("--end-radius", type=float, default=0.0, help="ignore the surface within this distance of each end")
+    los.add_argument("--from", dest="start", nargs=2, type=_number, metavar=("X", "Y"),
+                     help="observer position (lon lat on a lon/lat DEM)")
+    los.add_argument("--to", dest="end", nargs=2, type=_number, metavar=("X", "Y"),
+                     help="target position (lon lat on a lon/lat DEM)")
+    los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2 (lon, lat on a "
+                                                   "lon/lat DEM)")
+    los.add_argument("--height", type=_height, default=1.7, help="observer height above the surface, >= 0 (default 1.7)")
+    los.add_argument("--target-height", type=_height, default=0.0,
+                     help="target height above the surface, >= 0 (default 0)")
+    los.add_argument("--end-radius", type=_distance_arg, default=0.0,
+                     help="ignore the surface within this distance of each end (default 0)")
     _add_nodata(los)
+    _add_positions(los)
 
+
+def _viewshed_parser(sub) -> None:
     v = sub.add_parser(
         "viewshed", help="which samples of a DEM an observer sees",
         description=(
@@ -145,26 +215,73 @@ def _parser() -> argparse.ArgumentParser:
         ),
     )
     v.add_argument("dem", help="DEM file or bundled name")
-    v.add_argument("--observer", nargs=2, type=float, required=True, metavar=("X", "Y"), help="observer position")
-    v.add_argument("--height", type=float, default=1.7, help="eye height above the surface (default 1.7)")
-    v.add_argument("--target-height", type=float, default=0.0, help="target height above the surface (default 0)")
-    v.add_argument("--max-distance", type=float, default=None, help="only samples within this distance")
+    v.add_argument("--observer", nargs=2, type=_number, required=True, metavar=("X", "Y"),
+                   help="observer position (lon lat on a lon/lat DEM; see --frame)")
+    v.add_argument("--height", type=_height, default=1.7, help="eye height above the surface, >= 0 (default 1.7)")
+    v.add_argument("--target-height", type=_height, default=0.0,
+                   help="target height above the surface, >= 0 (default 0)")
+    v.add_argument("--max-distance", type=_number, default=None, help="only samples within this distance")
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
     _add_nodata(v)
+    _add_positions(v)
 
-    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
-    i.add_argument("terrain", help="bundled name or DEM file")
-    return p
+
+def _relocate_parser(sub) -> None:
+    from simplifiers import METHODS
+
+    from .calibration import N_PARTNERS
+    from .relocation import RELOCATIONS
+
+    r = sub.add_parser(
+        "relocate", help="place points of a DEM on its simplification",
+        description=(
+            "Give each point of a CSV (columns x, y, and optionally z: its height on the DEM; else the surface plus "
+            "--offset) a height on a simplification of the DEM: a file (--simplified) or the DEM simplified here "
+            "(-m METHOD -l LEVEL). The calibrated relocation (the default) picks the height whose lines of sight "
+            "agree best with the point's on the DEM (docs/relocation.md). Writes a CSV with x, y, z (the new "
+            "height), z_original and the surface of the simplification under each point."
+        ),
+    )
+    r.add_argument("dem", help="the original DEM (file or bundled name)")
+    r.add_argument("--points", required=True, metavar="CSV",
+                   help="the points: a CSV with columns x, y (lon, lat on a lon/lat DEM; see --frame) and optionally z")
+    r.add_argument("-o", "--output", required=True, metavar="OUT.csv", help="output CSV")
+    r.add_argument("--simplified", metavar="FILE", help="the simplification (.npz from simplify or compare, .tif, .asc)")
+    r.add_argument("-m", "--method", choices=list(METHODS), metavar="METHOD",
+                   help=f"simplify the DEM here instead, with one of {', '.join(METHODS)}")
+    r.add_argument("-l", "--level", type=int, default=None, help="with -m: the level (default 1)")
+    r.add_argument("--how", choices=list(RELOCATIONS), default="calibrated",
+                   help="the relocation (default calibrated)")
+    r.add_argument("--offset", type=_height, default=0.0,
+                   help="the points' height above the DEM's surface, >= 0 (default 0: on the surface)")
+    r.add_argument("--target-height", type=_height, default=None,
+                   help="calibrated: the points will look at targets this high above the surface (a viewshed's "
+                        "cells); without it they will look at each other")
+    r.add_argument("--partners", type=int, default=N_PARTNERS,
+                   help=f"calibrated: partners spread over the DEM (default {N_PARTNERS})")
+    r.add_argument("--seed", type=int, default=0, help="calibrated: seed of the partners' positions (default 0)")
+    r.add_argument("--curvature", type=_number, default=0.0,
+                   help="calibrated: earth curvature coefficient of the lines of sight (0 flat, 0.85714 GDAL's "
+                        "default; default 0)")
+    r.add_argument("--earth-radius", type=_number, default=6378137.0, help="with --curvature: the earth's radius")
+    _add_nodata(r)
+    _add_positions(r)
 
 
 # ------------------------------------------------------------------ helpers
 def _terrain(name: str, args=None):
     """One terrain from a bundled name or a DEM file, with --fill / --crop-valid applied."""
-    from .experiment import _resolve_one
+    import numpy as np
+
+    from .plan import resolve_one
 
     if Path(name).suffix and not Path(name).exists():
         raise UsageError(f"DEM file {name!r} does not exist")
-    label, grid = _resolve_one(None, name, 0)
+    label, grid = resolve_one(None, name, 0)
+    if not np.isfinite(grid.z).any():
+        raise UsageError(f"DEM {name!r} has no valid sample: all {_plural(grid.size, 'cell')} are nodata")
+    if args is not None and getattr(args, "metric", False):
+        grid = _metric_grid(name, grid)
     if args is not None and getattr(args, "fill", None):
         grid = grid.fill_nodata(args.fill)
     elif args is not None and getattr(args, "crop_valid", False):
@@ -173,13 +290,47 @@ def _terrain(name: str, args=None):
     return label, grid
 
 
-def _distance(text: str):
-    if text.lower() in ("all", "inf", "none"):
-        return None
+def _metric_grid(name: str, grid):
+    """``--metric``: a lon/lat DEM resampled onto a transverse Mercator grid (:func:`terrainvis.io.to_metric`)."""
+    from .io import to_metric
+
+    if not grid.attrs.get("geographic"):
+        crs = grid.attrs.get("crs")
+        raise UsageError(f"--metric resamples lon/lat DEMs; {name!r} is "
+                         + (f"in {crs}, whose x, y are metres already" if crs else "not georeferenced (no CRS)"))
+    return to_metric(grid)
+
+
+def _frame(grid, args):
+    """The :class:`~terrainvis._positions.PositionFrame` of a command's positions (``--frame``)."""
+    from ._positions import PositionFrame
+
+    return PositionFrame(grid, getattr(args, "frame", "native"))
+
+
+def _outside(frame, xy_user, what: str = "") -> str:
+    """``lies outside the DEM's footprint ... (or on nodata)`` in the user's frame, with a hint when the
+    position is on the DEM in the other frame (lon/lat given to --frame local, or local metres to native)."""
+    import numpy as np
+
+    from ._positions import PositionFrame
+
+    text = f"lies outside the DEM's footprint {frame.footprint()}{what} (or on nodata)"
+    other = PositionFrame(frame.terrain, "local" if frame.frame == "native" else "native")
+    if other.identity and frame.identity:
+        return text  # both frames are the same
     try:
-        return float(text)
+        fits = np.isfinite(frame.terrain.height_at(other.to_grid(np.asarray([xy_user[:2]], float)))[0])
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a distance or 'all', got {text!r}") from None
+        fits = False
+    if fits:
+        text += f"; it is on the DEM as {other.describe()}: add --frame {other.frame} if you meant those"
+    return text
+
+
+def _plural(n: int, word: str, plural: str | None = None) -> str:
+    """``1 terrain``, ``2 terrains``, ``12,000 vertices`` (with ``plural`` for irregular words)."""
+    return f"{n:,} {word if n == 1 else plural or word + 's'}"
 
 
 def _option_value(text: str):
@@ -214,15 +365,25 @@ def _client(address: str):
 
 
 def _compare(args) -> int:
-    from . import report
-    from ._fileio import atomic_write_text, check_writable_dir
-    from .experiment import DEFAULT_TERRAINS, DEFAULTS, compare, resolve_terrains
+    from ._fileio import RunLock, check_writable_dir, refuse_protected
+    from ._outdir import LOCK
+
+    refuse_protected(args.out, "--out")
+    out = check_writable_dir(args.out, "--out")
+    with RunLock(out / LOCK, f"--out {str(out)!r}", "terrainvis compare"):
+        return _compare_in(out, args)
+
+
+def _compare_in(out: Path, args) -> int:
+    """``terrainvis compare`` with the output folder locked: check everything, clear an earlier run, run, report."""
+    from .experiment import compare, resolve_terrains
+    from .options import given
+    from .plan import DEFAULT_TERRAINS, settings_for
 
     terrains = args.terrain or (QUICK["terrains"] if args.quick else list(DEFAULT_TERRAINS))
-    levels = args.levels if args.levels is not None else (QUICK["levels"] if args.quick else list(DEFAULTS.levels))
-    points = args.points if args.points is not None else (QUICK["points"] if args.quick else DEFAULTS.n_points)
-    sets = args.sets if args.sets is not None else (QUICK["sets"] if args.quick else DEFAULTS.n_sets)
-    out = check_writable_dir(args.out, "--out")
+    options = given(args)
+    if args.quick:
+        options = {**{k: v for k, v in QUICK.items() if k != "terrains"}, **options}
     grids = {}
     for t in terrains:
         label, grid = _terrain(t, args)
@@ -230,24 +391,50 @@ def _compare(args) -> int:
             raise UsageError(f"--terrain names must be unique, got {label!r} twice")
         grids[label] = grid
     grids = resolve_terrains(grids)
+    settings = settings_for(grids, options)  # compare checks them again; here before anything is removed
+    _earlier_run(out, args, inputs=[t for t in terrains if Path(t).is_file()])
     client = _client(args.scheduler) if args.scheduler else None
     t0 = time.perf_counter()
-    df = compare(
-        grids, methods=args.methods, levels=levels, relocations=args.relocations, n_points=points, n_sets=sets,
-        seed=args.seed, max_distance=DEFAULTS.max_distance if args.max_distance is None else args.max_distance,
-        distance_unit=args.distance_unit, offset=args.offset, engine=args.engine,
-        predicate=args.predicate, volume=not args.no_volume, repeats=args.repeats, cascade=args.cascade,
-        measure=args.measure, n_observers=args.observers, target_height=args.target_height,
-        workers=args.workers,
-        client=client, out_csv=out / "results.csv", resume=args.resume, save_dir=out / "simplified", progress=True,
-    )
-    seconds = time.perf_counter() - t0
+    df = compare(grids, **options, workers=args.workers, client=client, out_csv=out / "results.csv",
+                 resume=args.resume, save_dir=out / "simplified", progress=True)
+    return _compare_report(df, grids, settings, out, args, time.perf_counter() - t0)
+
+
+def _earlier_run(out: Path, args, inputs) -> None:
+    """An earlier run's results in ``out``: refused without --resume or --overwrite; --overwrite removes them."""
+    from ._outdir import describe, earlier_run, remove
+
+    files = earlier_run(out)
+    if not files or args.resume:
+        return
+    if not args.overwrite:
+        raise UsageError(
+            f"--out {str(out)!r} holds the results of an earlier run ({describe(files)}); add --resume to "
+            "continue it (same settings), --overwrite to replace it, or choose another --out"
+        )
+    for f in files:
+        for inp in inputs:
+            if Path(inp).resolve() == f.resolve():
+                raise UsageError(f"--overwrite would remove {str(f)!r}, which is an input (--terrain); "
+                                 "move it out of --out first")
+    remove(out, files)
+    print(f"terrainvis compare: --overwrite: removed the earlier run's {describe(files)}", file=sys.stderr)
+
+
+def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int:
+    """Print and write the tables, draw the figures; the exit status."""
+    from . import report
+    from ._fileio import atomic_write_text
+
     extra = {}
-    if (df["relocation"] == "oracle").any():
+    beyond = report.beyond_paper(df) if settings.measure == "pairs" else None
+    if beyond is not None and not beyond.empty:
+        extra["beyond"] = beyond
+    elif (df["relocation"] == "oracle").any():
         extra["oracle"] = report.oracle_gap(df)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
-    if args.measure == "viewshed":
+    if settings.measure == "viewshed":
         if df["accuracy"].notna().any():
             extra["viewsheds"] = report.viewshed_table(df)
         text = report.to_markdown({**report.paper_tables(df), **extra})
@@ -255,21 +442,20 @@ def _compare(args) -> int:
     else:
         text = (report.to_markdown({**report.paper_tables(df), **extra}) + "\n"
                 + report.comparison_markdown(report.paper_comparison(df)))
-        lines = report.findings_markdown(report.findings(df))
+        lines = report.findings_markdown(report.findings(df)) + report.beyond_paper_findings(df)
     fast = sorted(set(df[(df["method"] == "qec") & (df["backend"] == "fast-simplification")]["terrain"]))
     if fast:
         from simplifiers.quadric import AUTO_MAX_SAMPLES
 
         lines += ["", f"Note: QEC ran on fast-simplification for {', '.join(fast)} (more than {AUTO_MAX_SAMPLES:,} "
                       "samples, where pymeshlab takes minutes per level); pymeshlab, the paper's QEC, ran elsewhere."]
+    units = df[["terrain", "method", "level"]].drop_duplicates().shape[0]
     failed = df[df["error"] != ""].drop_duplicates(["terrain", "method", "level"])
     if len(failed):
         lines += ["", "### Failed units", ""]
         lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
-    summary = (
-        f"{df[['terrain', 'method', 'level']].drop_duplicates().shape[0]} units, {len(df)} rows, "
-        f"{len(grids)} terrains, predicate {args.predicate}, {seconds:.1f} s"
-    )
+    summary = (f"{_plural(units, 'unit')}, {_plural(len(df), 'row')}, {_plural(len(grids), 'terrain')}, "
+               f"predicate {settings.predicate}, {seconds:.1f} s")
     atomic_write_text(out / "tables.md", f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")
     print(text)
     print("\n".join(lines))
@@ -278,7 +464,7 @@ def _compare(args) -> int:
     print(f"\n{summary}; wrote {out / 'results.csv'}, {out / 'tables.md'}" + ("" if args.no_plots else " and figures"))
     if df["accuracy"].notna().any():
         return 0
-    if len(failed) == df[["terrain", "method", "level"]].drop_duplicates().shape[0]:
+    if len(failed) == units:
         print("terrainvis compare: every unit failed (see 'Failed units' above)", file=sys.stderr)
     else:
         print("terrainvis compare: no pair was counted: every accuracy is undefined (with --max-distance, "
@@ -292,8 +478,8 @@ def _write_plots(df, grids, out: Path) -> None:
 
     from . import plot
     from ._fileio import atomic_path
-    from .experiment import simplified_path
     from .io import load_terrain
+    from .units import simplified_path
 
     def save(fig, name, dpi):
         with atomic_path(out / name) as tmp:
@@ -327,6 +513,7 @@ _MESH_SUFFIXES = (".ply", ".obj", ".stl", ".glb")
 def _simplify(args) -> int:
     from simplifiers import METHODS, simplify
 
+    from ._fileio import check_output_file
     from .io import save_terrain
 
     out = Path(args.output)
@@ -336,14 +523,13 @@ def _simplify(args) -> int:
     if suffix not in valid:
         kind = "a grid" if regular else "a TIN"
         raise UsageError(f"-o must end in one of {list(valid)} for {args.method} (its result is {kind}), got {out.name!r}")
-    if not out.parent.exists():
-        raise UsageError(f"-o {str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    check_output_file(out, "-o", inputs=[args.dem])
     label, grid = _terrain(args.dem, args)
     result = simplify(grid, args.method, args.level, **_options(args.option))
     save_terrain(result, out)
     a = result.attrs
-    kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {result.n_faces:,} faces"
-    print(f"{label}: {args.method} level {a['level']}: {a['n_vertices']:,} vertices ({kind}), "
+    kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {_plural(result.n_faces, 'face')}"
+    print(f"{label}: {args.method} level {a['level']}: {_plural(a['n_vertices'], 'vertex', 'vertices')} ({kind}), "
           f"{100 * a['n_vertices'] / grid.size:.2f} % of {grid.size:,}")
     print(f"  max error {a['max_error']:.4g}, RMS error {a['rms_error']:.4g} (z units), {a['seconds']:.3f} s")
     for note in a.get("notes", []):
@@ -363,31 +549,23 @@ def _los(args) -> int:
     if args.pairs:
         if args.start or args.end:
             raise UsageError("give either --pairs or --from and --to, not both")
-        import pandas as pd
-
-        try:
-            table = pd.read_csv(args.pairs)
-        except (OSError, ValueError) as exc:
-            raise UsageError(f"--pairs {args.pairs!r} could not be read as CSV: {exc}") from None
-        missing = [c for c in ("x1", "y1", "x2", "y2") if c not in table.columns]
-        if missing:
-            raise UsageError(f"--pairs needs the columns x1, y1, x2, y2; {args.pairs!r} lacks {missing}")
-        xy1 = table[["x1", "y1"]].to_numpy(float)
-        xy2 = table[["x2", "y2"]].to_numpy(float)
+        user1, user2 = _read_pairs(args.pairs)
     else:
         if not (args.start and args.end):
             raise UsageError("give --from X Y and --to X Y (or --pairs CSV)")
-        xy1 = np.array([args.start], float)
-        xy2 = np.array([args.end], float)
+        user1 = np.array([args.start], float)
+        user2 = np.array([args.end], float)
+    frame = _frame(grid, args)
+    xy1, xy2 = frame.to_grid(user1), frame.to_grid(user2)
     z1 = grid.height_at(xy1) + args.height
     z2 = grid.height_at(xy2) + args.target_height
     outside = np.isnan(z1) | np.isnan(z2)
     if outside.any():
         k = int(np.flatnonzero(outside)[0])
-        xmin, xmax, ymin, ymax = grid.extent
+        bad = user1[k] if np.isnan(z1[k]) else user2[k]
         raise UsageError(
-            f"point pair {k} lies outside the DEM's valid surface x [{xmin:.6g}, {xmax:.6g}], "
-            f"y [{ymin:.6g}, {ymax:.6g}] (or on nodata): from {xy1[k].tolist()} to {xy2[k].tolist()}"
+            f"point pair {k} from {frame.point(user1[k])} to {frame.point(user2[k])}: {frame.point(bad)} "
+            f"{_outside(frame, bad)}"
         )
     a = np.column_stack([xy1, z1])
     b = np.column_stack([xy2, z2])
@@ -398,40 +576,80 @@ def _los(args) -> int:
         low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius)
         verdict = "visible" if visible[k] else "blocked"
         where = ("" if not np.isfinite(clear[k]) else
-                 f" at ({low['x']:.6g}, {low['y']:.6g}), {low['distance']:.6g} from the observer")
-        print(f"  ({xy1[k, 0]:.6g}, {xy1[k, 1]:.6g}) -> ({xy2[k, 0]:.6g}, {xy2[k, 1]:.6g}): {verdict}; "
-              f"lowest clearance {clear[k]:.4g}{where}")
+                 f" at {frame.point(frame.from_grid([low['x'], low['y']]))}, {low['distance']:.6g} from the observer")
+        print(f"  {frame.point(user1[k])} -> {frame.point(user2[k])}: {verdict}; lowest clearance "
+              f"{clear[k]:.4g}{where}")
     return 0
+
+
+def _read_pairs(path: str):
+    """The x1, y1 and x2, y2 columns of a --pairs CSV; a bad cell is named by row and column."""
+    values = _read_columns(path, "--pairs", ("x1", "y1", "x2", "y2"))
+    return values[:, :2], values[:, 2:]
+
+
+def _read_columns(path: str, flag: str, columns, optional=()):
+    """The named columns of a CSV as an (n, k) float array (the ``optional`` ones NaN when absent);
+    a missing column or a bad cell is named by file, row and column."""
+    import numpy as np
+    import pandas as pd
+
+    try:
+        table = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"{flag} {path!r} could not be read as CSV: {exc}") from None
+    missing = [c for c in columns if c not in table.columns]
+    if missing:
+        raise UsageError(f"{flag} needs the columns {', '.join(columns)}; {path!r} lacks {missing}")
+    wanted = list(columns) + list(optional)
+    values = np.full((len(table), len(wanted)), np.nan)
+    for j, c in enumerate(wanted):
+        if c not in table.columns:
+            continue
+        for i, text in enumerate(table[c]):
+            try:
+                values[i, j] = float(text)
+            except ValueError:
+                values[i, j] = np.nan
+            if not np.isfinite(values[i, j]):
+                what = "is empty" if not text.strip() else f"holds {text!r}, not a finite number"
+                raise UsageError(f"{flag} {path!r}: row {i + 1} (line {i + 2}), column {c} {what}")
+    return values
 
 
 # ------------------------------------------------------------------ viewshed
 def _viewshed(args) -> int:
     import numpy as np
 
+    from ._fileio import check_output_file
     from .visibility import viewshed
 
     out = Path(args.output)
     suffix = out.suffix.lower()
     if suffix not in (".tif", ".tiff", ".npz", ".png"):
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
-    if not out.parent.exists():
-        raise UsageError(f"-o {str(out)!r}: the folder {str(out.parent)!r} does not exist")
+    check_output_file(out, "-o", inputs=[args.dem])
     label, grid = _terrain(args.dem, args)
+    frame = _frame(grid, args)
+    observer = tuple(float(v) for v in frame.to_grid(args.observer))
+    if np.isnan(grid.height_at([observer])[0]):
+        raise UsageError(f"--observer {frame.point(args.observer)} {_outside(frame, args.observer)}")
     t0 = time.perf_counter()
-    vis = viewshed(grid, tuple(args.observer), observer_height=args.height, target_height=args.target_height,
+    vis = viewshed(grid, observer, observer_height=args.height, target_height=args.target_height,
                    max_distance=args.max_distance)
     seconds = time.perf_counter() - t0
     valid = np.isfinite(grid.z)
     n_vis = int(vis[valid].sum())
-    _write_viewshed(grid, vis, out, suffix, args, label)
-    print(f"{label}: observer ({args.observer[0]:.6g}, {args.observer[1]:.6g}), eye {args.height:g} above the surface")
-    print(f"  visible {n_vis:,} of {int(valid.sum()):,} samples ({100 * n_vis / max(int(valid.sum()), 1):.2f} %), "
-          f"{seconds:.2f} s")
+    _write_viewshed(grid, vis, out, suffix, args, label, observer)
+    print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
+    print(f"  visible {n_vis:,} of {_plural(int(valid.sum()), 'sample')} "
+          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
 
 
-def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None:
+def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer) -> None:
+    """The viewshed by OUT's suffix; ``observer`` in the grid's own frame."""
     import numpy as np
 
     from ._fileio import atomic_path
@@ -439,7 +657,7 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None
     if suffix == ".png":
         from . import plot
 
-        fig = plot.viewshed(grid, vis, observer=tuple(args.observer), title=f"{label}: viewshed")
+        fig = plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed")
         with atomic_path(out) as tmp:
             fig.savefig(tmp, dpi=110, format="png")
         return
@@ -450,7 +668,9 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None
 
         # a grid of the same samples: 1 visible, 0 not, NaN nodata (with the DEM's georeferencing)
         z = np.where(np.isfinite(grid.z), vis.astype(np.float64), np.nan)
-        attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in args.observer],
+        # the observer in the grid's frame (that of its xs, ys) and in the DEM's native CRS
+        attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in observer],
+                 "viewshed_observer_native": [float(v) for v in _frame(grid, None).from_grid(observer)],
                  "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height)}
         save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
         return
@@ -459,37 +679,144 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str) -> None
     write_mask_geotiff(grid, vis, out, nodata_mask=~np.isfinite(grid.z))
 
 
+# ------------------------------------------------------------------ relocate
+def _relocate(args) -> int:
+    import numpy as np
+    import pandas as pd
+
+    from ._fileio import atomic_path, check_output_file
+    from .relocation import relocate
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".csv":
+        raise UsageError(f"-o must end in .csv, got {out.name!r}")
+    if (args.simplified is None) == (args.method is None):
+        raise UsageError("give the simplification as --simplified FILE or as -m METHOD [-l LEVEL], one of them")
+    if args.level is not None and args.method is None:
+        raise UsageError("-l goes with -m (the level to simplify the DEM to)")
+    if args.metric and args.simplified is not None:
+        raise UsageError("--metric resamples the DEM, and a --simplified file is in the DEM's frame as read: "
+                         "simplify here with -m METHOD [-l LEVEL] instead")
+    check_output_file(out, "-o", inputs=[args.dem, args.points] + ([args.simplified] if args.simplified else []))
+    label, grid = _terrain(args.dem, args)
+    simplified, what = _simplification(grid, args)
+    table = _read_columns(args.points, "--points", ("x", "y"), optional=("z",))
+    frame = _frame(grid, args)
+    user = table[:, :2]
+    xy = frame.to_grid(user)
+    ground = grid.height_at(xy)
+    outside = np.isnan(ground) | np.isnan(simplified.height_at(xy))
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        raise UsageError(f"--points {args.points!r}: row {k + 1} {frame.point(user[k])} "
+                         f"{_outside(frame, user[k], ' or its simplification')}; {int(outside.sum())} point(s) do")
+    z = np.where(np.isnan(table[:, 2]), ground + args.offset, table[:, 2])
+    points = np.column_stack([xy, z])
+    t0 = time.perf_counter()
+    moved = relocate(points, simplified, args.how, offset=args.offset, original=grid, target_height=args.target_height,
+                     n_partners=args.partners, seed=args.seed, curvature=args.curvature,
+                     earth_radius=args.earth_radius)
+    seconds = time.perf_counter() - t0
+    surface = simplified.height_at(xy)
+    written = pd.DataFrame({**_csv_positions(frame, user), "z": moved[:, 2], "z_original": z,
+                            "ground_simplified": surface})
+    with atomic_path(out) as tmp:
+        written.to_csv(tmp, index=False, float_format="%.6f")
+    lift = moved[:, 2] - (surface + args.offset)
+    print(f"{label}: {_plural(len(points), 'point')} relocated ({args.how}) onto {what}, {seconds:.2f} s")
+    if args.how == "calibrated" and len(points):
+        off = np.abs(lift) > 1e-9
+        print(f"  {int(off.sum())} off the full projection (S(T) + offset); height change from it "
+              f"{lift.min():+.4g} to {lift.max():+.4g}, median {np.median(lift):+.4g} (z units)")
+    print(f"  wrote {out}")
+    return 0
+
+
+def _csv_positions(frame, user) -> dict:
+    """The x, y columns of a CSV the command writes, in the frame of its input (degrees to 1e-9, 0.1 mm)."""
+    if frame.degrees:
+        return {"x": [f"{v:.9f}" for v in user[:, 0]], "y": [f"{v:.9f}" for v in user[:, 1]]}
+    return {"x": user[:, 0], "y": user[:, 1]}
+
+
+def _simplification(grid, args):
+    """The simplified terrain of ``relocate``: read from --simplified, or made with -m/-l; and how to name it."""
+    if args.method is not None:
+        from simplifiers import simplify
+
+        level = 1 if args.level is None else args.level
+        return simplify(grid, args.method, level), f"{args.method} level {level}"
+    from .io import load_terrain
+
+    path = Path(args.simplified)
+    if not path.exists():
+        raise UsageError(f"--simplified {args.simplified!r} does not exist")
+    if path.suffix.lower() == ".npz":
+        terrain = load_terrain(path)
+    else:
+        from .io import load_dem
+
+        terrain = load_dem(path)
+    return terrain, path.name
+
+
 # ------------------------------------------------------------------ info
 def _info(args) -> int:
     import numpy as np
 
     from simplifiers import METHODS, max_level, vertex_budget
 
-    label, grid = _terrain(args.terrain)
+    label, grid = _terrain(args.terrain, args)
     rows, cols = grid.shape
-    xmin, xmax, ymin, ymax = grid.extent
+    local = _frame(grid, argparse.Namespace(frame="local"))
+    xmin, xmax, ymin, ymax = (local.value(v) for v in grid.extent)
     z = grid.z
-    print(f"{label}: {grid!r}")
+    kind = "uniform" if grid.is_uniform else "rectilinear"
+    nodata = f", {_plural(grid.n_nodata, 'nodata cell')}" if grid.n_nodata else ""
+    print(f"{label}: {rows}x{cols} {kind} grid, x [{xmin}, {xmax}], y [{ymin}, {ymax}], "
+          f"z [{np.nanmin(z):.6g}, {np.nanmax(z):.6g}]{nodata}")
     print(f"  samples   {rows} x {cols} = {grid.size:,}  ({grid.nbytes / 1e6:.2f} MB as a grid)")
     print(f"  spacing   dx {grid.dx:g}, dy {grid.dy:g}" + ("" if grid.is_uniform else " (mean; rectilinear)"))
-    print(f"  extent    x [{xmin:.6g}, {xmax:.6g}], y [{ymin:.6g}, {ymax:.6g}]")
+    print(f"  extent    x [{xmin}, {xmax}], y [{ymin}, {ymax}]")
     crs = grid.attrs.get("crs") or "not recorded"
     print(f"  CRS       {crs}" + (" (x, y converted to local metres)" if grid.attrs.get("geographic") else ""))
-    if np.isfinite(z).any():
-        print(f"  heights   {np.nanmin(z):.6g} to {np.nanmax(z):.6g}")
-    print(f"  nodata    {grid.n_nodata:,} cells ({100 * grid.n_nodata / grid.size:.2f} %)"
+    _info_positions(grid)
+    print(f"  heights   {np.nanmin(z):.6g} to {np.nanmax(z):.6g}")
+    print(f"  nodata    {_plural(grid.n_nodata, 'cell')} ({100 * grid.n_nodata / grid.size:.2f} %)"
           + (" (use --fill or --crop-valid)" if grid.n_nodata else ""))
     top = max_level(grid.shape)
     print("  levels    vertices per level (regular methods keep a grid; irregular ones get the same budget)")
     for level in range(1, top + 1):
         n = vertex_budget(grid.shape, level)
-        print(f"    {level}: {n:>12,} vertices ({100 * n / grid.size:.3g} %)")
+        print(f"    {level}: {n:>12,} {'vertex' if n == 1 else 'vertices'} ({100 * n / grid.size:.3g} %)")
     print(f"  methods   {', '.join(METHODS)}")
     return 0
 
 
+def _info_positions(grid) -> None:
+    """``info``'s lines on positions: the frame the commands take, and the local frame's distances."""
+    from ._georef import local_frame_error
+
+    native = _frame(grid, None)
+    if native.identity:
+        print(f"  positions {native.describe()}, in the commands (--from, --to, --observer, CSVs; --frame local is "
+              "the same here)")
+    else:
+        print(f"  positions {native.describe()}, the commands' default: {native.footprint(units=False)}; "
+              "--frame local takes the x, y above (local metres)")
+    if grid.attrs.get("metric_resampling"):
+        print(f"  metric    {grid.attrs['metric_resampling']}")
+    errors = local_frame_error(grid.attrs, grid.ys)
+    if errors is not None:
+        south, north = errors
+        print(f"  distances local metres with one east-west scale for every row: east-west lengths "
+              f"{100 * south:+.2f} % off at the southern edge, {100 * north:+.2f} % at the northern edge "
+              "(--metric resamples onto a metric grid)")
+
+
 # ------------------------------------------------------------------ main
-_COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "viewshed": _viewshed, "info": _info}
+_COMMANDS = {"compare": _compare, "simplify": _simplify, "los": _los, "viewshed": _viewshed, "relocate": _relocate,
+             "info": _info}
 
 
 def main(argv=None) -> int:
@@ -505,13 +832,20 @@ def main(argv=None) -> int:
     previous = signal.signal(signal.SIGTERM, terminated) if _main_thread() else None
     name = "terrainvis"
     try:
-        args = _parser().parse_args(argv)
+        try:
+            args = _parser().parse_args(argv)
+        except _ParseError as exc:
+            print(exc, file=sys.stderr)
+            return 2
         name = f"terrainvis {args.command}"
         with _one_line_warnings(name):
             return _run(args, name)
+    except BrokenPipeError:  # the reader went away (| head): stop quietly, as Unix tools do
+        _stdout_to_devnull()
+        return 128 + signal.SIGPIPE
     except Interrupted as exc:
-        note = " finished units are in results.csv (use --resume)" if name == "terrainvis compare" else ""
-        print(f"{name}: interrupted ({exc});{note}", file=sys.stderr)
+        note = "; finished units are in results.csv (use --resume)" if name == "terrainvis compare" else ""
+        print(f"{name}: interrupted ({exc}){note}", file=sys.stderr)
         return 128 + exc.signum
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
@@ -519,6 +853,15 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _stdout_to_devnull() -> None:
+    """Point stdout at /dev/null, so the interpreter's last flush does not fail on the closed pipe again."""
+    import os
+
+    with contextlib.suppress(Exception):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
 
 
 @contextlib.contextmanager
@@ -541,16 +884,31 @@ def _main_thread() -> bool:
 
 
 def _run(args, name: str) -> int:
-    from .errors import SimplificationError
+    from ._fileio import OutputError
+    from .errors import NodataError, SimplificationError
 
     try:
         return _COMMANDS[args.command](args)
+    except BrokenPipeError:
+        raise
     except SimplificationError as exc:
         print(f"{name}: failed: {exc}", file=sys.stderr)
         return 1
+    except NodataError as exc:
+        rows, cols = exc.shape
+        print(f"{name}: error: {exc.operation} needs a DEM without nodata, but it has {exc.n_nan:,} NaN cell(s) "
+              f"out of {rows}x{cols}; add --fill nearest (or linear) to fill them, or --crop-valid to cut them "
+              "away (from Python: HeightGrid.fill_nodata(), HeightGrid.valid_window())", file=sys.stderr)
+        return 2
     except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 2
+    except OutputError as exc:  # a full disk, a folder turned read-only, ...: not a usage mistake
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 1
+    except MemoryError as exc:
+        print(f"{name}: error: out of memory" + (f": {exc}" if str(exc) else ""), file=sys.stderr)
+        return 1
     except OSError as exc:
         print(f"{name}: error: {exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
         return 2

@@ -5,7 +5,7 @@ Every exception subclasses a built-in one, so ``except ValueError`` keeps workin
 
 from __future__ import annotations
 
-__all__ = ["NodataError", "OutsideFootprintError", "SimplificationError"]
+__all__ = ["NodataError", "OutsideFootprintError", "SimplificationError", "NotEnoughMemoryError"]
 
 
 class NodataError(ValueError):
@@ -29,3 +29,13 @@ class OutsideFootprintError(ValueError):
 
 class SimplificationError(RuntimeError):
     """A simplifier could not produce a valid result; the message names the method and cause."""
+
+
+class NotEnoughMemoryError(MemoryError, ValueError):
+    """A request refused before allocating: its estimated memory exceeds what is available.
+
+    A :class:`MemoryError`, and a :class:`ValueError` too: the size of the request is the
+    problem (a file header that claims 100000 x 100000 samples, a grid too large for a
+    method), so callers that report bad input in one line report this one too. The
+    message says how much is needed and how much is available.
+    """

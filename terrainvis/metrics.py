@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 
-__all__ = ["agreement"]
+__all__ = ["agreement", "viewshed_agreement"]
 
 
 def agreement(V_true, V_test, mask=None) -> dict:
@@ -65,30 +65,78 @@ def agreement(V_true, V_test, mask=None) -> dict:
         if m.shape != t.shape:
             raise ValueError(f"mask must have the shape of V_true {t.shape}, got {m.shape}")
         sel = m[iu]
-    tv = t[iu][sel]
-    sv = s[iu][sel]
-    agree_visible = int(np.count_nonzero(tv & sv))
-    agree_blocked = int(np.count_nonzero(~tv & ~sv))
-    false_visible = int(np.count_nonzero(~tv & sv))
-    false_blocked = int(np.count_nonzero(tv & ~sv))
-    n_pairs = int(tv.size)
+    counts = _tally(t[iu][sel], s[iu][sel])
+    agreed = counts["agree_visible"] + counts["agree_blocked"]
+    if mask is None:
+        counts["accuracy_paper"] = (2 * agreed + n) / (n * n) if n else float("nan")
+    else:
+        counts["accuracy_paper"] = counts["accuracy"]  # the paper's P x P convention has no meaning for a subset
+    return counts
+
+
+def viewshed_agreement(V_true, V_test, mask=None) -> dict:
+    """How many cells of a viewshed keep their verdict: the counts of :func:`agreement` for one observer.
+
+    A cell counts as the pair (observer, cell), so the counts read as in :func:`agreement`.
+
+    Parameters
+    ----------
+    V_true, V_test : (rows, cols) bool
+        The viewshed on the original terrain and on the simplified one (targets at the
+        same samples, e.g. :func:`terrainvis.viewshed` with ``at=``).
+    mask : (rows, cols) bool, optional
+        Cells to count (e.g. those within a distance of the observer).
+
+    Returns
+    -------
+    dict
+        The keys of :func:`agreement` (``n_pairs`` is the number of cells counted;
+        ``accuracy_paper`` is NaN: the paper's convention is about point pairs), and
+        ``visible_area_ratio``, the visible area on S(T) over that on T.
+
+    Examples
+    --------
+    >>> T = np.array([[1, 1], [0, 0]], bool)
+    >>> S = np.array([[1, 0], [1, 0]], bool)
+    >>> a = viewshed_agreement(T, S)
+    >>> a["accuracy"], a["false_visible"], a["visible_area_ratio"]
+    (0.5, 1, 1.0)
+    """
+    t = _bool_array(V_true, "V_true")
+    s = _bool_array(V_test, "V_test")
+    if s.shape != t.shape:
+        raise ValueError(f"V_test must have the shape of V_true {t.shape}, got {s.shape}")
+    if mask is not None:
+        m = _bool_array(mask, "mask")
+        if m.shape != t.shape:
+            raise ValueError(f"mask must have the shape of V_true {t.shape}, got {m.shape}")
+        t, s = t[m], s[m]
+    counts = _tally(t.ravel(), s.ravel())
+    visible = counts["agree_visible"] + counts["false_blocked"]
+    counts["accuracy_paper"] = np.nan
+    counts["visible_area_ratio"] = (
+        (counts["agree_visible"] + counts["false_visible"]) / visible if visible else np.nan)
+    return counts
+
+
+def _tally(t: np.ndarray, s: np.ndarray) -> dict:
+    """The agreement counts and rates of verdicts ``t`` (true) and ``s`` (test), 1-D bool arrays."""
+    agree_visible = int(np.count_nonzero(t & s))
+    agree_blocked = int(np.count_nonzero(~t & ~s))
+    false_visible = int(np.count_nonzero(~t & s))
+    false_blocked = int(np.count_nonzero(t & ~s))
+    n = int(t.size)
     n_vis = agree_visible + false_blocked
     n_blk = agree_blocked + false_visible
-    accuracy = (agree_visible + agree_blocked) / n_pairs if n_pairs else float("nan")
-    if mask is None:
-        accuracy_paper = (2 * (agree_visible + agree_blocked) + n) / (n * n) if n else float("nan")
-    else:
-        accuracy_paper = accuracy  # the paper's P x P convention has no meaning for a subset of pairs
     return {
-        "n_pairs": n_pairs,
+        "n_pairs": n,
         "agree_visible": agree_visible,
         "agree_blocked": agree_blocked,
         "false_visible": false_visible,
         "false_blocked": false_blocked,
-        "accuracy": accuracy,
+        "accuracy": (agree_visible + agree_blocked) / n if n else float("nan"),
         "visible_kept": agree_visible / n_vis if n_vis else float("nan"),
         "blocked_kept": agree_blocked / n_blk if n_blk else float("nan"),
-        "accuracy_paper": accuracy_paper,
     }
 
 
@@ -96,6 +144,13 @@ def _square_bool(value, name: str) -> np.ndarray:
     arr = np.asarray(value)
     if arr.ndim != 2 or arr.shape[0] != arr.shape[1]:
         raise ValueError(f"{name} must be a square (n, n) matrix, got shape {arr.shape}")
+    return _bool_array(arr, name)
+
+
+def _bool_array(value, name: str) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must be a 2-D array, got shape {arr.shape}")
     if arr.dtype != bool:
         if not np.isin(arr, (0, 1)).all():
             raise ValueError(f"{name} must be boolean (or 0/1), got values other than 0 and 1 (dtype {arr.dtype})")

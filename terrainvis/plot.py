@@ -271,7 +271,7 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
 
 
 _RELOCATION_STYLE = {"identity": ("tab:red", "o"), "full": ("tab:blue", "s"), "half": ("tab:green", "^"),
-                     "oracle": ("k", "*")}
+                     "calibrated": ("tab:purple", "D"), "oracle": ("k", "*")}
 
 
 def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:

@@ -10,6 +10,11 @@ S(T). Alderson and Samavati compare three ways of placing them on S(T):
     Every point is moved vertically onto S(T).
 ``"half"``
     Only points below S(T) are moved up onto it; points above it stay where they are.
+``"calibrated"``
+    Each point takes the height on S(T) whose verdicts agree best with its verdicts on T,
+    against partners spread over the terrain that stand for the points it will be tested
+    with (never the other points themselves): :mod:`terrainvis.calibration`. It needs T
+    (``original=``).
 ``"oracle"`` (not a practical relocation: an upper bound)
     Each point takes, from a set of candidate heights spanning the local vertical error
     of S(T) (plus the three heights above), the height whose row of verdicts on S(T)
@@ -34,20 +39,28 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_float_array, as_int, as_nonnegative_finite, as_points, choice, describe
+from ._validate import as_float_array, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
+from .calibration import MIN_GAIN, N_PARTNERS, SWEEPS
+from .visibility import EARTH_RADIUS
 from .errors import OutsideFootprintError
 from .terrain import HeightGrid, as_terrain
 
-__all__ = ["relocate", "RELOCATIONS", "ORACLE"]
+__all__ = ["relocate", "RELOCATIONS", "PAPER_RELOCATIONS", "CALIBRATED", "ORACLE"]
 
-#: The relocation strategies, in the paper's order.
-RELOCATIONS = ("identity", "full", "half")
+#: The paper's relocation strategies, in the paper's order.
+PAPER_RELOCATIONS = ("identity", "full", "half")
+#: The calibrated relocation (see the module docstring and :mod:`terrainvis.calibration`).
+CALIBRATED = "calibrated"
+#: The practical relocations: the paper's three and the calibrated one.
+RELOCATIONS = PAPER_RELOCATIONS + (CALIBRATED,)
 #: The oracle bound (see the module docstring); accepted by :func:`relocate` and compare.
 ORACLE = "oracle"
 
 
-def relocate(points, simplified, how: str, *, offset: float = 0.0, reference=None, original=None,
-             mask=None, end_radius: float = 0.0, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
+def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None, target_height=None,
+             end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
+             n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, min_gain: int = MIN_GAIN,
+             reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
     """Place points on a simplified terrain.
 
     Parameters
@@ -56,21 +69,35 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, reference=Non
         Points on (or ``offset`` above) the original terrain. Never modified.
     simplified : HeightGrid or TIN
         The simplified terrain.
-    how : {"identity", "full", "half", "oracle"}
+    how : {"identity", "full", "half", "calibrated", "oracle"}
         See the module docstring.
     offset : float
         The observer height that ``points`` carry above their ground point.
+    original : HeightGrid, optional
+        T itself. ``"calibrated"``: required (the points' verdicts on T). ``"oracle"``:
+        the candidate heights of a point span the vertical error of S(T) around it (T's
+        samples within one coarse cell); without it they span ``[-max_error,
+        max_error]`` of ``simplified.attrs``.
+    target_height : float, optional
+        ``"calibrated"`` only. None (the default): the points are tested against each
+        other (pairs), so the partners are points relocated the same way. A height:
+        the points are observers of targets standing that high above each surface (a
+        viewshed's cells).
+    end_radius : float
+        ``"calibrated"`` and ``"oracle"``: the end radius of the verdicts on S(T)
+        (:func:`terrainvis.line_of_sight`).
+    curvature, earth_radius : float
+        ``"calibrated"`` and ``"oracle"``: earth curvature and refraction of the verdicts
+        they evaluate (:func:`terrainvis.line_of_sight`; 0, the default, is a flat earth).
+    n_partners, sweeps, seed, min_gain : int
+        ``"calibrated"`` only: about how many partners, how many Gauss-Seidel sweeps
+        calibrate them, the seed of their positions, and the least gain that moves a
+        point (:func:`terrainvis.calibration.calibrated_heights`). A point's height
+        depends on these, T, S(T) and the point, never on the other points.
     reference : (n, n) bool, optional
         ``"oracle"`` only (required): the verdicts on the original terrain T.
-    original : HeightGrid, optional
-        ``"oracle"`` only: T itself, so the candidate heights of a point span the
-        vertical error of S(T) around it (T's samples within one coarse cell); without
-        it they span ``[-max_error, max_error]`` of ``simplified.attrs``.
     mask : (n, n) bool, optional
         ``"oracle"`` only: the pairs that count (e.g. within a distance).
-    end_radius : float
-        ``"oracle"`` only: the end radius of the verdicts on S(T)
-        (:func:`terrainvis.line_of_sight`).
     engine : str
         ``"oracle"`` only: the visibility engine on S(T).
     n_candidates : int
@@ -100,18 +127,16 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, reference=Non
         raise ValueError(f"offset must be a finite scalar, got {describe(offset)}")
     off = float(off)
     if how == ORACLE:
-        return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates)
+        curve = {"curvature": curvature, "earth_radius": earth_radius}
+        return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve)
+    if how == CALIBRATED:
+        options = {"end_radius": end_radius, "curvature": curvature, "earth_radius": earth_radius,
+                   "n_partners": n_partners, "sweeps": sweeps, "seed": seed, "min_gain": min_gain}
+        return _calibrated(pts, simplified, off, original, target_height, options)
     out = pts.copy()
     if how == "identity" or pts.shape[0] == 0:
         return out
-    ground = simplified.height_at(pts[:, :2])
-    outside = np.isnan(ground)
-    if outside.any():
-        first = int(np.flatnonzero(outside)[0])
-        raise OutsideFootprintError(
-            f"points must lie inside the simplified terrain's footprint, but {int(outside.sum())} of "
-            f"{pts.shape[0]} do not (first at index {first})"
-        )
+    ground = _ground(simplified, pts)
     if how == "full":
         out[:, 2] = ground + off
     else:
@@ -130,6 +155,42 @@ def _ground(simplified, pts):
             f"{pts.shape[0]} do not (first at index {first})"
         )
     return ground
+
+
+def _calibrated(pts, simplified, off, original, target_height, options):
+    from .calibration import calibrated_heights
+    from .visibility import curvature_coefficient, terrain_scale
+
+    if original is None:
+        raise TypeError("relocate(..., 'calibrated') needs original=, the original terrain T (a HeightGrid)")
+    if not isinstance(original, HeightGrid):
+        raise TypeError(f"original must be a terrainvis.HeightGrid, got {describe(original)}")
+    original.require_finite("relocate(..., 'calibrated') (original)")
+    if isinstance(simplified, HeightGrid):
+        simplified.require_finite("relocate(..., 'calibrated') (simplified)")
+    scale = float(terrain_scale(original))
+    ground = float(np.nanmax(np.abs(original.z)))
+    off = as_height(off, "offset", scale=scale, ground=ground)
+    if target_height is not None:
+        target_height = as_height(target_height, "target_height", scale=scale, ground=ground, minimum=0.0)
+    curvature_coefficient(options["curvature"], options["earth_radius"])  # validates both
+    options = dict(options, end_radius=as_nonnegative_finite(options["end_radius"], "end_radius"),
+                   n_partners=as_int(options["n_partners"], "n_partners", minimum=1),
+                   sweeps=as_int(options["sweeps"], "sweeps", minimum=0), seed=as_int(options["seed"], "seed", minimum=0),
+                   min_gain=as_int(options["min_gain"], "min_gain", minimum=1))
+    out = pts.copy()
+    if pts.shape[0] == 0:
+        return out
+    _ground(simplified, pts)
+    on_t = original.height_at(pts[:, :2])
+    if np.isnan(on_t).any():
+        first = int(np.flatnonzero(np.isnan(on_t))[0])
+        raise OutsideFootprintError(
+            f"points must lie inside the original terrain's footprint, but {int(np.isnan(on_t).sum())} of "
+            f"{pts.shape[0]} do not (first at index {first})"
+        )
+    out[:, 2] = calibrated_heights(pts, simplified, original, offset=off, target_height=target_height, **options)
+    return out
 
 
 def _candidates(pts, simplified, ground, off, original, k):
@@ -162,7 +223,7 @@ def _candidates(pts, simplified, ground, off, original, k):
     return np.concatenate([practical, base + span], axis=1)
 
 
-def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates):
+def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve):
     from .visibility import line_of_sight, visibility_matrix
 
     n = pts.shape[0]
@@ -180,7 +241,7 @@ def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine,
     np.fill_diagonal(counted, False)
     k = as_int(n_candidates, "n_candidates", minimum=2)
     radius = as_nonnegative_finite(end_radius, "end_radius")
-    los_kw = {"engine": engine, "end_radius": radius}
+    los_kw = {"engine": engine, "end_radius": radius, **curve}
     if n < 2:
         return pts.copy()
     ground = _ground(simplified, pts)

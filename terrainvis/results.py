@@ -26,13 +26,19 @@ import pandas as pd
 
 from ._fileio import atomic_write_text
 
-__all__ = ["ResultStore", "settings_path", "read_results", "as_table"]
+__all__ = ["ResultStore", "settings_path", "lock_path", "read_results", "as_table"]
 
 
 def settings_path(csv_path) -> Path:
     """The settings file stored beside a results CSV: ``results.csv`` -> ``results.settings.json``."""
     p = Path(csv_path)
     return p.with_name(p.stem + ".settings.json")
+
+
+def lock_path(csv_path) -> Path:
+    """The lock held beside a results CSV while a run writes it: ``results.csv`` -> ``results.lock``."""
+    p = Path(csv_path)
+    return p.with_name(p.stem + ".lock")
 
 
 #: Columns read as text whatever they hold (a terrain named "2024" stays a name).
@@ -124,13 +130,18 @@ class ResultStore:
         ``rows_per_unit(key) -> int``: how many error-free rows a complete unit has.
     resume : bool
         Keep the complete units of an existing file (with the same settings).
+    absent : dict, optional
+        What a setting missing from a stored settings file means (a file written before
+        that setting existed): resuming such a file compares these values instead.
     """
 
-    def __init__(self, path, settings: dict, columns, unit_key, rows_per_unit, *, resume: bool):
+    def __init__(self, path, settings: dict, columns, unit_key, rows_per_unit, *, resume: bool,
+                 absent: dict | None = None):
         self.path = Path(path)
         self.columns = list(columns)
         self.unit_key = list(unit_key)
         self.settings = json.loads(json.dumps(settings))  # normalised (tuples -> lists)
+        self.absent = json.loads(json.dumps(absent or {}))
         self.done: set = set()
         self._parts: list[str] = []
         if self.path.is_dir():
@@ -154,7 +165,7 @@ class ResultStore:
             stored = json.loads(spath.read_text(encoding="utf-8"))
         except (OSError, ValueError) as exc:
             raise ValueError(f"cannot resume {str(self.path)!r}: its settings file is unreadable ({exc})") from None
-        diff = _differences(stored, self.settings)
+        diff = _differences({**self.absent, **stored}, self.settings)
         if diff:
             raise ValueError(
                 f"cannot resume {str(self.path)!r}: it was written with other settings ("

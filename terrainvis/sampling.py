@@ -18,8 +18,8 @@ def sample_points(terrain, n: int, seed=0, offset: float = 0.0) -> np.ndarray:
     terrain : HeightGrid or TIN
     n : int
         Number of points.
-    seed : int or numpy.random.Generator
-        Seed of the generator (the same seed gives the same points).
+    seed : int >= 0, None or numpy.random.Generator
+        Seed of the generator (the same seed gives the same points; None: fresh entropy).
     offset : float
         Height added to the surface height (an observer's eye height).
 
@@ -41,13 +41,27 @@ def sample_points(terrain, n: int, seed=0, offset: float = 0.0) -> np.ndarray:
     offset_arr = as_float_array(offset, "offset")
     if offset_arr.ndim != 0 or not np.isfinite(offset_arr):
         raise ValueError(f"offset must be a finite scalar, got {describe(offset)}")
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    rng = _generator(seed)
     if isinstance(terrain, TIN):
         xy = _sample_tin(terrain, n, rng)
     else:
         xy = _sample_grid(terrain, n, rng)
     z = terrain.height_at(xy) + float(offset_arr)
     return np.column_stack([xy, z])
+
+
+def _generator(seed) -> np.random.Generator:
+    """``seed`` as a numpy Generator (numpy's own message for a bad seed names nothing)."""
+    if isinstance(seed, np.random.Generator):
+        return seed
+    if isinstance(seed, (bool, np.bool_)):
+        raise TypeError(f"seed must be an integer >= 0, None or a numpy Generator, got {describe(seed)}")
+    if isinstance(seed, (int, np.integer)) and seed < 0:
+        raise ValueError(f"seed must be >= 0 (or a numpy Generator), got {int(seed)}")
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError):
+        raise TypeError(f"seed must be an integer >= 0, None or a numpy Generator, got {describe(seed)}") from None
 
 
 def _sample_grid(grid: HeightGrid, n: int, rng) -> np.ndarray:

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels
+from ._interrupt import call
 from ._mesh import signed_area2
 from ._validate import as_float_array, as_int, as_points, as_positive_finite, describe
 from .errors import NodataError
@@ -189,9 +190,10 @@ class HeightGrid:
         >>> HeightGrid.from_xarray(da).z.tolist()  # y ascending now: row 0 is y = 0
         [[1.0, 2.0], [3.0, 4.0]]
         """
-        from ._xarray import grid_from_dataarray
+        from ._xarray import dataarray_parts
 
-        return grid_from_dataarray(da, x=x, y=y, crs=crs)
+        z, xs, ys, attrs = dataarray_parts(da, x=x, y=y, crs=crs)
+        return cls.from_coords(z, xs, ys, attrs=attrs)
 
     def to_xarray(self, *, name: str = "z"):
         """This grid as an :class:`xarray.DataArray` with dims ``("y", "x")`` (needs xarray).
@@ -292,6 +294,52 @@ class HeightGrid:
             attrs=self.attrs,
         )
 
+    # ------------------------------------------------------------- positions
+    def from_native(self, xy) -> np.ndarray:
+        """Positions in the DEM's native CRS, moved to this grid's own frame (that of ``xs``, ``ys``).
+
+        Every function of terrainvis takes positions in the grid's own frame. On a
+        projected DEM (UTM, ...) that is its CRS already and this is a copy. On a lon/lat
+        DEM the frame is local metres: this takes lon, lat in degrees, as GDAL and GRASS
+        do. On a grid resampled by :func:`terrainvis.io.to_metric` it takes positions in
+        the lon/lat CRS it was resampled from. See :mod:`terrainvis._georef`. A position
+        that the conversion's rounding puts just outside the grid (by at most ``1e-9`` of
+        its extent) is put on its edge: the lon/lat of an edge sample lands on it.
+
+        Parameters
+        ----------
+        xy : array_like, shape (2,), (n, 2) or (n, k >= 2)
+            x, y (lon, lat) first along the last axis; further columns (a height z) are
+            copied unchanged, so ``grid.from_native(points_xyz)`` works too. NaN stays NaN.
+
+        Returns
+        -------
+        ndarray, float64, the shape of ``xy``
+
+        Raises
+        ------
+        ValueError
+            When the attrs say the grid is geographic but hold no map back to lon/lat.
+
+        Examples
+        --------
+        >>> g = HeightGrid(np.zeros((3, 3)), dx=500.0, dy=1000.0,
+        ...                attrs={"crs": "EPSG:4326", "geographic": True, "xy_to_native": (0.001, -72.8, 0.001, 44.1)})
+        >>> g.from_native([-72.3, 45.1]).round(6).tolist()
+        [500.0, 1000.0]
+        >>> g.to_native([[500.0, 1000.0, 7.0]]).round(6).tolist()
+        [[-72.3, 45.1, 7.0]]
+        """
+        from ._georef import from_native
+
+        return from_native(self.attrs, xy, extent=self.extent)
+
+    def to_native(self, xy) -> np.ndarray:
+        """Positions in this grid's own frame, moved to the native CRS: the inverse of :meth:`from_native`."""
+        from ._georef import to_native
+
+        return to_native(self.attrs, xy)
+
     # ---------------------------------------------------------------- surface
     def height_at(self, xy) -> np.ndarray:
         """Height of the surface at each point.
@@ -343,7 +391,7 @@ class HeightGrid:
         qx = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
         qy = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((qy.size, qx.size), np.nan)
-        _kernels.grid_on_grid(self.xs, self.ys, self.z, qx, qy, out)
+        call(_kernels.grid_on_grid, self.xs, self.ys, self.z, qx, qy, out, work=out.size)
         return out
 
     def sample_xy(self) -> np.ndarray:
@@ -391,7 +439,7 @@ class HeightGrid:
         """``(rows, cols)`` slices of the largest axis-aligned window without nodata."""
         if not self.n_nodata:
             return slice(0, self.shape[0]), slice(0, self.shape[1])
-        r0, r1, c0, c1 = _kernels.largest_valid_rectangle(np.isfinite(self.z))
+        r0, r1, c0, c1 = call(_kernels.largest_valid_rectangle, np.isfinite(self.z), work=self.size)
         if r1 - r0 < 2 or c1 - c0 < 2:
             raise ValueError(f"z has no NaN-free window of at least 2x2 samples ({self.n_nodata} NaN cells)")
         return slice(int(r0), int(r1)), slice(int(c0), int(c1))
@@ -662,12 +710,61 @@ class TIN:
             return out
         bk = self._buckets()
         v = self.vertices
-        _kernels.locate_heights(
+        call(
+            _kernels.locate_heights,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
             self.faces, bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10,
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10, work=pts.shape[0],
         )
         return out
+
+    def from_native(self, xy) -> np.ndarray:
+        """Positions in the native CRS of the DEM this TIN came from, moved to its own frame.
+
+        A simplified TIN carries its grid's georeferencing in ``attrs``; this is
+        :meth:`HeightGrid.from_native` on them (a copy when there is none).
+        """
+        from ._georef import from_native
+
+        return from_native(self.attrs, xy, extent=self.extent)
+
+    def to_native(self, xy) -> np.ndarray:
+        """Positions in this TIN's own frame, moved to the native CRS: the inverse of :meth:`from_native`."""
+        from ._georef import to_native
+
+        return to_native(self.attrs, xy)
+
+    def to_grid(self, like: "HeightGrid") -> "HeightGrid":
+        """This TIN's surface sampled at every sample of ``like``: a raster of it (NaN outside the TIN).
+
+        Parameters
+        ----------
+        like : HeightGrid
+            The grid whose coordinates (and georeferencing: ``crs``, ``geographic``,
+            ``xy_to_native``) the raster takes, usually the DEM the TIN was simplified
+            from. Samples outside the TIN's faces are nodata (NaN).
+
+        Returns
+        -------
+        HeightGrid
+            ``attrs`` are this TIN's, with ``like``'s georeferencing and
+            ``sampled_from_tin`` (the TIN's vertex count).
+
+        Examples
+        --------
+        >>> g = HeightGrid([[0.0, 1.0, 2.0], [1.0, 2.0, 3.0], [2.0, 3.0, 4.0]])
+        >>> coarse = TIN([[0, 0, 0], [2, 0, 2], [2, 2, 4], [0, 2, 2]], [[0, 1, 2], [0, 2, 3]])
+        >>> coarse.to_grid(g).z.tolist() == g.z.tolist()  # a plane is sampled exactly
+        True
+        """
+        if not isinstance(like, HeightGrid):
+            raise TypeError(f"like must be a terrainvis.HeightGrid (the grid to sample on), got {describe(like)}")
+        from ._georef import GEOREF_KEYS
+
+        z = self.height_on_grid(like.xs, like.ys)
+        attrs = {k: v for k, v in self.attrs.items() if k not in GEOREF_KEYS}
+        attrs.update({k: like.attrs[k] for k in GEOREF_KEYS if k in like.attrs}, sampled_from_tin=self.n_vertices)
+        return HeightGrid.from_coords(z, like.xs, like.ys, attrs=attrs)
 
     def height_on_grid(self, xs, ys) -> np.ndarray:
         """Heights at every node of a rectilinear grid, shape (len(ys), len(xs)); NaN outside."""
@@ -675,9 +772,10 @@ class TIN:
         ys = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((ys.size, xs.size), np.nan)
         v = self.vertices
-        _kernels.rasterize_tin(
+        call(
+            _kernels.rasterize_tin,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
-            self.faces, xs, ys, out, 1e-10,
+            self.faces, xs, ys, out, 1e-10, work=out.size + self.n_faces,
         )
         return out
 

@@ -15,7 +15,7 @@ from terrainvis.cli import main
 from conftest import shared_dem_path
 
 SMALL = ["--terrain", "hills", "--levels", "1", "--methods", "simple", "lls", "--points", "10", "--sets", "2",
-         "--workers", "1", "--repeats", "1"]
+         "--workers", "1", "--repeats", "1", "--relocations", "identity", "full", "half"]
 
 
 def _one_line_error(capsys, code_expected, argv):
@@ -54,7 +54,7 @@ def test_compare_errors_are_one_line(tmp_path, capsys):
     err = _one_line_error(capsys, 2, ["compare", "--terrain", "hills", "--methods", "nope", "--out", str(tmp_path)])
     assert "methods must be drawn from ['qec', 'greedy-cuts'" in err
     err = _one_line_error(capsys, 2, ["compare", "--terrain", "hills", "--relocations", "lift", "--out", str(tmp_path)])
-    assert "relocations must be drawn from ['identity', 'full', 'half', 'oracle']" in err
+    assert "relocations must be drawn from ['identity', 'full', 'half', 'calibrated', 'oracle']" in err
     # zero is not silently replaced by the default
     assert "n_points must be >= 2, got 0" in _one_line_error(capsys, 2, ["compare", "--points", "0", "--out", str(tmp_path)])
     assert "n_sets must be >= 1, got 0" in _one_line_error(capsys, 2, ["compare", "--sets", "0", "--out", str(tmp_path)])
@@ -146,7 +146,7 @@ def test_los_prints_the_verdict_and_where_it_is_decided(tmp_path, capsys):
     assert main(["los", "ridges", "--pairs", str(pairs)]) == 0
     assert capsys.readouterr().out.count("lowest clearance") == 2
     err = _one_line_error(capsys, 2, ["los", "ridges", "--from", "0", "0", "--to", "1e7", "0"])
-    assert "outside the DEM's valid surface" in err
+    assert "(10000000, 0) lies outside the DEM's footprint x [0, 3570], y [0, 3570] (or on nodata)" in err
     assert "give --from X Y and --to X Y" in _one_line_error(capsys, 2, ["los", "ridges", "--from", "0", "0"])
 
 
@@ -173,7 +173,7 @@ def test_viewshed_writes_rasters_aligned_with_the_dem(tmp_path, capsys):
     assert main(["viewshed", "hills", "--observer", "900", "900", "-o", str(tmp_path / "v.png")]) == 0
     assert (tmp_path / "v.png").stat().st_size > 1000
     err = _one_line_error(capsys, 2, ["viewshed", str(dem), "--observer", "0", "0", "-o", str(tmp_path / "w.tif")])
-    assert "outside the terrain's footprint" in err
+    assert "--observer (0, 0) lies outside the DEM's footprint x [664737, 685977], y [4878949, 4895779] (EPSG:26918)" in err
     assert "-o must end in .tif, .npz or .png" in _one_line_error(
         capsys, 2, ["viewshed", "hills", "--observer", "900", "900", "-o", str(tmp_path / "v.txt")])
 
@@ -184,7 +184,7 @@ def test_compare_viewsheds(tmp_path, capsys):
                  "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "Viewsheds: cells whose verdict survives" in out and "The paper side by side" not in out
-    assert len(pd.read_csv(tmp_path / "results.csv")) == 2 * 3
+    assert len(pd.read_csv(tmp_path / "results.csv")) == 2 * 4  # 2 observers x the 4 default relocations
 
 
 def test_warnings_are_one_line(tmp_path, capsys):

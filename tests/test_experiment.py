@@ -11,6 +11,7 @@ import pytest
 from terrainvis import HeightGrid, compare, synthetic_terrain
 from terrainvis.experiment import COLUMNS, DEFAULT_TERRAINS, JACKSBORO_WINDOW, TIMING_COLUMNS, resolve_terrains
 from terrainvis.results import settings_path
+from terrainvis.relocation import PAPER_RELOCATIONS
 
 MEASURED = ["accuracy", "visible_kept", "blocked_kept", "agree_visible", "agree_blocked", "false_visible",
             "false_blocked", "n_vertices", "nbytes", "max_error", "rms_error", "volume_error"]
@@ -24,7 +25,10 @@ def small():
 
 
 def _kw(**extra):
-    kw = dict(methods=["simple", "lls", "greedy-insertion"], levels=[1, 2], n_points=12, n_sets=2, seed=3, repeats=1)
+    # the runner's tests use the paper's three relocations; the calibrated one is tested in
+    # test_calibration.py and, through compare, in test_calibrated_in_a_comparison
+    kw = dict(methods=["simple", "lls", "greedy-insertion"], levels=[1, 2], n_points=12, n_sets=2, seed=3, repeats=1,
+              relocations=list(PAPER_RELOCATIONS))
     kw.update(extra)
     return kw
 
@@ -121,7 +125,7 @@ def test_everything_is_validated_before_any_unit_runs(small):
         (dict(methods=["lls", "lls"]), ValueError, "methods must not repeat a name, got 'lls' twice"),
         (dict(methods=["decimate"]), ValueError, r"methods must be drawn from \['qec', 'greedy-cuts'"),
         (dict(relocations=["full", "full"]), ValueError, "relocations must not repeat a name"),
-        (dict(relocations=["lift"]), ValueError, r"relocations must be drawn from \['identity', 'full', 'half', 'oracle'\], got 'lift'"),
+        (dict(relocations=["lift"]), ValueError, r"relocations must be drawn from \['identity', 'full', 'half', 'calibrated', 'oracle'\], got 'lift'"),
         (dict(engine="gird"), ValueError, r"engine must be one of \['auto', 'grid', 'embree'\], got 'gird'"),
         (dict(engine="grid", methods=["lls", "qec"]), ValueError, r"engine 'grid' works on grids only.*\['qec'\]"),
         (dict(predicate="loose"), ValueError, r"predicate must be one of \['exact', 'paper'\]"),
@@ -317,8 +321,8 @@ def test_a_distance_sweep_equals_separate_runs(small):
 
 
 def test_oracle_rows_bound_the_practical_ones(small):
-    df = compare({"a": small["a"]}, workers=1, relocations=["identity", "full", "half", "oracle"],
-                 **_kw(methods=["lls"], levels=[3], n_sets=1))
+    df = compare({"a": small["a"]}, workers=1,
+                 **_kw(methods=["lls"], levels=[3], n_sets=1, relocations=["identity", "full", "half", "oracle"]))
     acc = df.set_index("relocation")["accuracy"]
     assert acc["oracle"] >= acc[["identity", "full", "half"]].max()
 
@@ -363,6 +367,27 @@ def test_cascade_continues_each_qec_level_from_the_previous(small, tmp_path, mon
     pd.testing.assert_frame_equal(again[STABLE], full[STABLE], check_dtype=False)
 
 
+def test_calibrated_in_a_comparison(small):
+    """compare relocates with the calibrated relocation as relocate does (T, the run's seed, the
+    predicate's end radius), and it keeps at least as many verdicts as full projection here."""
+    from simplifiers import simplify
+
+    from terrainvis import agreement, relocate, visibility_matrix
+    from terrainvis.experiment import point_sets
+
+    T = small["a"]
+    df = compare({"a": T}, workers=1, methods=["lls"], levels=[2], n_points=20, n_sets=1, seed=3, repeats=1,
+                 relocations=["full", "calibrated"], predicate="paper")
+    S = simplify(T, "lls", 2)
+    P = point_sets(T, "a", 20, 1, 3, 0.0)[0]
+    radius = float(df["end_radius"].iloc[0])
+    moved = relocate(P, S, "calibrated", original=T, seed=3, end_radius=radius)
+    expected = agreement(visibility_matrix(T, P), visibility_matrix(S, moved, end_radius=radius))["accuracy"]
+    acc = df.set_index("relocation")["accuracy"]
+    assert acc["calibrated"] == expected
+    assert acc["calibrated"] >= acc["full"]
+
+
 def test_viewshed_measure(small):
     from simplifiers import simplify
 
@@ -373,7 +398,8 @@ def test_viewshed_measure(small):
     kw = dict(methods=["lls", "greedy-insertion"], levels=[2], seed=3, repeats=1, measure="viewshed", n_observers=3,
               offset=1.7)
     df = compare(g, workers=1, **kw)
-    assert len(df) == 2 * 3 * 3 and (df["measure"] == "viewshed").all() and (df["error"] == "").all()
+    # 2 methods x 3 observers x the 4 default relocations
+    assert len(df) == 2 * 3 * 4 and (df["measure"] == "viewshed").all() and (df["error"] == "").all()
     assert df["n_pairs"].eq(33 * 33).all()  # every sample of T is a target
     # one row by hand: observer 1 relocated by half onto the TIN, its viewshed of T's samples there
     T = small["a"]
@@ -385,6 +411,11 @@ def test_viewshed_measure(small):
     assert row["accuracy"] == (v_t == v_s).mean()
     assert row["false_blocked"] == int((v_t & ~v_s).sum())
     assert row["visible_area_ratio"] == pytest.approx(v_s.sum() / v_t.sum())
+    # the calibrated observer: placed against targets on the surfaces (target_height), partners from the run's seed
+    moved = relocate(eye[None], S, "calibrated", original=T, offset=1.7, target_height=0.0, seed=3)[0]
+    v_c = viewshed(S, moved, at=T)
+    row = df[(df.method == "greedy-insertion") & (df.set == 1) & (df.relocation == "calibrated")].iloc[0]
+    assert row["accuracy"] == (v_t == v_c).mean()
     with pytest.raises(ValueError, match="measure 'viewshed' supports predicate 'exact' only"):
         compare(g, predicate="paper", **kw)
     with pytest.raises(ValueError, match=r"measure must be one of \['pairs', 'viewshed'\]"):

@@ -386,7 +386,8 @@ def test_bad_paths_and_arguments(tmp_path):
         save_dem(HeightGrid(np.zeros((2, 2))).to_tin(), tmp_path / "t.npz")
     with pytest.raises(TypeError, match="terrain must be a terrainvis.HeightGrid or terrainvis.TIN"):
         save_terrain(np.zeros((2, 2)), tmp_path / "t.npz")
-    with pytest.raises(ValueError, match="a TIN can be written as .npz or a mesh"):
+    with pytest.raises(ValueError, match=r"a TIN is written to a raster \(.asc\) by sampling its surface on a grid: "
+                                         r"pass like=<the grid>"):
         save_terrain(HeightGrid(np.zeros((2, 2))).to_tin(), tmp_path / "t.asc")
 
 

@@ -50,3 +50,47 @@ def test_agreement_bad_input():
     with pytest.raises(ValueError, match="V_true must be boolean"):
         agreement(np.full((2, 2), 0.5), np.zeros((2, 2), bool))
     assert np.isnan(agreement(np.ones((1, 1), bool), np.ones((1, 1), bool))["accuracy"])
+
+
+def _cells_by_hand(T, S, counted):
+    """The viewshed counts by a loop over the cells (an independent reference)."""
+    av = ab = fv = fb = 0
+    for t, s, c in zip(T.ravel(), S.ravel(), counted.ravel()):
+        if c:
+            av += t and s
+            ab += (not t) and (not s)
+            fv += (not t) and s
+            fb += t and (not s)
+    return av, ab, fv, fb
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(1, 12), st.integers(1, 12), st.integers(0, 2**31))
+def test_viewshed_agreement_counts_every_counted_cell(rows, cols, seed):
+    from terrainvis.metrics import viewshed_agreement
+
+    rng = np.random.default_rng(seed)
+    T, S, counted = (rng.random((3, rows, cols)) < [[[0.5]], [[0.4]], [[0.7]]])
+    a = viewshed_agreement(T, S, counted)
+    av, ab, fv, fb = _cells_by_hand(T, S, counted)
+    assert (a["agree_visible"], a["agree_blocked"], a["false_visible"], a["false_blocked"]) == (av, ab, fv, fb)
+    n = int(counted.sum())
+    assert a["n_pairs"] == n and np.isnan(a["accuracy_paper"])
+    assert a["accuracy"] == ((av + ab) / n if n else pytest.approx(np.nan, nan_ok=True))
+    if av + fb:
+        assert a["visible_kept"] == av / (av + fb) and a["visible_area_ratio"] == (av + fv) / (av + fb)
+    else:
+        assert np.isnan(a["visible_kept"]) and np.isnan(a["visible_area_ratio"])
+    whole = viewshed_agreement(T, S)
+    assert whole["n_pairs"] == rows * cols
+
+
+def test_viewshed_agreement_bad_input():
+    from terrainvis.metrics import viewshed_agreement
+
+    with pytest.raises(ValueError, match="V_test must have the shape of V_true"):
+        viewshed_agreement(np.zeros((2, 3), bool), np.zeros((3, 2), bool))
+    with pytest.raises(ValueError, match="mask must have the shape of V_true"):
+        viewshed_agreement(np.zeros((2, 3), bool), np.zeros((2, 3), bool), np.ones((2, 2), bool))
+    with pytest.raises(ValueError, match="V_true must be a 2-D array"):
+        viewshed_agreement(np.zeros(4, bool), np.zeros(4, bool))

@@ -21,3 +21,9 @@ def test_explore_notebook_runs():
     tables = [o for o in outputs if "text/html" in o.get("data", {})]
     assert len(images) == 6  # hillshade, views, LOS pairs, accuracy against size, trade-off, viewshed
     assert len(tables) == 1  # Table 1
+    # compare(progress=True) shows its bar (a widget with ipywidgets, else text) and never tqdm's
+    # "IProgress not found" warning when ipywidgets is absent
+    streams = "".join(o.get("text", "") for o in outputs if o.get("output_type") == "stream")
+    widgets = [o for o in outputs if "application/vnd.jupyter.widget-view+json" in o.get("data", {})]
+    assert "IProgress" not in streams
+    assert widgets or "compare: 100%" in streams

@@ -72,7 +72,7 @@ def test_accuracy_vs_distance():
     assert len(fig.axes) == 2
     ax = fig.axes[0]
     assert [t.get_text() for t in ax.get_xticklabels()] == ["5", "10", "all"]
-    assert {ln.get_label() for ln in ax.get_lines()} == {"identity", "full", "half"}
+    assert {ln.get_label() for ln in ax.get_lines()} == {"identity", "full", "half", "calibrated"}
     with pytest.raises(ValueError, match="no distance sweep"):
         plot.accuracy_vs_distance(df[df["max_distance"].isna()])
 

@@ -55,7 +55,7 @@ def test_properties_on_real_simplifications(seed, method):
 def test_bad_input():
     S = _plane()
     P = np.array([[1.0, 1.0, 8.0]])
-    with pytest.raises(ValueError, match=r"how must be one of \['identity', 'full', 'half', 'oracle'\], got 'up'"):
+    with pytest.raises(ValueError, match=r"how must be one of \['identity', 'full', 'half', 'calibrated', 'oracle'\], got 'up'"):
         relocate(P, S, "up")
     with pytest.raises(OutsideFootprintError, match=r"1 of 2 do not \(first at index 1\)"):
         relocate(np.array([[1.0, 1.0, 0.0], [50.0, 1.0, 0.0]]), S, "full")

@@ -122,11 +122,13 @@ import numpy as np
 
 from .._georef import metres_per_degree
 from .._validate import describe
+from ..errors import NotEnoughMemoryError
 from ..terrain import TIN, HeightGrid, as_terrain
 from ._asc import _read_asc, _write_asc
 from ._common import FORMAT, FORMAT_VERSION, _check_band, _check_crs_arg, _check_nodata, _check_path, _Corrupt, _UserError
 from ._geotiff import _read_tif, _write_tif, write_mask_geotiff
 from ._meshfile import _read_mesh, _write_mesh
+from ._metric import to_metric
 from ._npy import _read_npy, _write_npy
 from ._npz import _read_npz, _write_npz
 from ._raster import native_coords
@@ -143,10 +145,11 @@ from ._sample import sample_dem
 #   _geotiff   GeoTIFF through rasterio
 #   _meshfile  .ply, .obj, .stl, .glb
 #   _sample    sample_dem
+#   _metric    to_metric: a lon/lat grid resampled onto a local transverse Mercator grid
 
 __all__ = [
     "load_terrain", "write_mask_geotiff", "save_terrain", "load_dem", "save_dem", "sample_dem", "native_coords",
-    "metres_per_degree",
+    "metres_per_degree", "to_metric",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",
 ]
 
@@ -222,6 +225,11 @@ def load_terrain(path, *, nodata: float | None = None, crs: str | None = None, b
         z = terrain.z.copy()
         z[z == nodata] = np.nan
         terrain = terrain.copy_with(z)
+    if isinstance(terrain, HeightGrid) and not np.isfinite(terrain.z).any():
+        raise ValueError(
+            f"{p.name!r} holds no height: all {terrain.shape[0]}x{terrain.shape[1]} samples are nodata"
+            + (f" (the file's nodata value or nodata={nodata!r})" if nodata is not None else "")
+        )
     terrain.attrs["path"] = str(p)
     return terrain
 
@@ -278,7 +286,7 @@ def _read(p: Path, suffix: str, *, crs, band):
         terrain = readers[suffix](p, crs=crs, band=band)
     except _Corrupt as exc:
         raise ValueError(f"could not read {p.name!r} as a {suffix} file: {exc}") from None
-    except (FileNotFoundError, ImportError, _UserError):
+    except (FileNotFoundError, ImportError, _UserError, NotEnoughMemoryError):
         raise
     except (OSError, EOFError, KeyError, IndexError, TypeError, ValueError, zipfile.BadZipFile, zlib.error) as exc:
         raise ValueError(f"could not read {p.name!r} as a {suffix} file: {type(exc).__name__}: {exc}") from exc
@@ -287,12 +295,17 @@ def _read(p: Path, suffix: str, *, crs, band):
 
 
 # ---------------------------------------------------------------------- public: save
-def save_terrain(terrain, path) -> Path:
+def save_terrain(terrain, path, *, like: HeightGrid | None = None) -> Path:
     """Write a HeightGrid or a TIN so that :func:`load_terrain` reads it back.
 
     Parameters
     ----------
     terrain : HeightGrid or TIN
+    like : HeightGrid, optional
+        For a TIN written to a raster (``.tif``, ``.tiff``, ``.asc``, ``.npy``): the grid
+        whose samples the TIN's surface is sampled at (:meth:`TIN.to_grid`; nodata
+        outside the TIN), with its CRS and transform, usually the DEM the TIN was
+        simplified from. Not used otherwise.
     path : str or Path
         The suffix picks the format (see the module docstring):
 
@@ -334,11 +347,16 @@ def save_terrain(terrain, path) -> Path:
     p, suffix = _check_path(path, TERRAIN_SUFFIXES)
     if p.is_dir():
         raise ValueError(f"path {str(p)!r} is a folder; give a file name ending in {suffix}")
+    if like is not None and not isinstance(like, HeightGrid):
+        raise TypeError(f"like must be a terrainvis.HeightGrid (the grid to sample a TIN on), got {describe(like)}")
     if isinstance(terrain, TIN) and suffix not in (".npz",) + MESH_SUFFIXES:
-        raise ValueError(
-            f"a TIN can be written as .npz or a mesh ({', '.join(MESH_SUFFIXES)}), not {suffix} (a raster format); "
-            f"got {p.name!r}"
-        )
+        if like is None:
+            raise ValueError(
+                f"a TIN is written to a raster ({suffix}) by sampling its surface on a grid: pass like=<the grid> "
+                f"(e.g. the DEM it was simplified from), or write .npz or a mesh ({', '.join(MESH_SUFFIXES)}); "
+                f"got {p.name!r}"
+            )
+        terrain = terrain.to_grid(like)
     if suffix == ".npz":
         _write_npz(terrain, p)
     elif suffix in MESH_SUFFIXES:

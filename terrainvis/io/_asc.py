@@ -11,7 +11,7 @@ import numpy as np
 from .._fileio import atomic_path
 from .._georef import parse_crs
 from ..terrain import HeightGrid
-from ._common import _Corrupt
+from ._common import _check_read_memory, _Corrupt
 from ._raster import _georeference, _nodata_value, _uniform_layout
 
 _ASC_KEYS = {"ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize", "dx", "dy", "nodata_value"}
@@ -23,6 +23,14 @@ def _prj_path(p: Path) -> Path | None:
         if q.exists():
             return q
     return None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _read_asc(p: Path, *, crs=None, band=None) -> HeightGrid:
@@ -37,6 +45,11 @@ def _read_asc(p: Path, *, crs=None, band=None) -> HeightGrid:
             continue
         key = parts[0].lower()
         if key not in _ASC_KEYS:
+            if not _is_number(parts[0]):
+                raise _Corrupt(
+                    f"header line {i + 1} has the unknown key {parts[0]!r}; an ESRI ASCII grid header holds "
+                    f"{', '.join(sorted(_ASC_KEYS))}"
+                )
             break
         if len(parts) != 2:
             raise _Corrupt(f"header line {i + 1} must be 'key value', got {lines[i]!r}")
@@ -52,6 +65,11 @@ def _read_asc(p: Path, *, crs=None, band=None) -> HeightGrid:
         if not (math.isfinite(v) and v == int(v) and v >= 2):
             raise _Corrupt(f"{key} must be a whole number >= 2, got {v!r}")
     ncols, nrows = int(header["ncols"]), int(header["nrows"])
+    size = p.stat().st_size
+    if 2 * ncols * nrows > size:  # every value takes a digit and a separator at least
+        raise _Corrupt(f"the header claims {nrows}x{ncols} values, but the file of {size:,} bytes holds at most {size // 2:,}")
+    # the text, its tokens (Python strings, about 60 bytes each) and the float64 arrays
+    _check_read_memory(p.name, (nrows, ncols), 8, extra_per_sample=64)
     if "cellsize" in header:
         dx = dy = header["cellsize"]
     elif "dx" in header and "dy" in header:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +28,16 @@ class _UserError(ValueError):
 
 
 # ---------------------------------------------------------------------- argument checks
+_URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
+
+
 def _check_path(path, suffixes, name: str = "path") -> tuple[Path, str]:
     if not isinstance(path, (str, Path)):
         raise TypeError(f"{name} must be a str or pathlib.Path, got {describe(path)}")
+    if isinstance(path, str) and _URL.match(path):
+        raise ValueError(
+            f"{name} must be a local file; URLs are not supported, got {path!r}: download the file first"
+        )
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in suffixes:
@@ -70,3 +78,31 @@ def _check_band(band, suffix: str):
     if suffix not in (".tif", ".tiff"):
         raise ValueError(f"band applies to GeoTIFF files (.tif, .tiff), got a {suffix} file")
     return int(band)
+
+
+# ---------------------------------------------------------------------- memory before reading
+#: Bytes a reader holds per sample besides the file's own values: the float64 heights and
+#: the HeightGrid's own copy of them.
+_READ_BYTES_PER_SAMPLE = 16
+
+
+def _check_read_memory(name: str, shape, itemsize: int, extra_per_sample: int = 0) -> None:
+    """Refuse to read ``shape`` samples of ``itemsize`` bytes when they cannot fit in memory."""
+    from .._memory import check_memory
+
+    n = math.prod(int(v) for v in shape)
+    need = n * (int(itemsize) + _READ_BYTES_PER_SAMPLE + extra_per_sample)
+    dims = "x".join(str(int(v)) for v in shape)
+    check_memory(need, f"reading {name!r} ({dims} samples of {itemsize} bytes)")
+
+
+def _npy_header(fh):
+    """``(shape, dtype)`` from the header of a ``.npy`` stream, which is left after the header."""
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+    elif version == (2, 0):
+        shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+    else:
+        shape, _, dtype = np.lib.format._read_array_header(fh, version)
+    return shape, dtype

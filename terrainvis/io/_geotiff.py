@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
 
 from .._fileio import atomic_path
-from .._georef import parse_crs, rasterio_module
+from .._georef import GEOREF_KEYS, parse_crs, rasterio_module
 from ..terrain import HeightGrid
 from ._attrs import _attrs_from_json, _attrs_to_json
-from ._common import _Corrupt, _UserError
+from ._common import _check_read_memory, _Corrupt, _UserError
 from ._raster import _georeference, _nodata_value, _uniform_layout
 
 _ATTRS_TAG = "TERRAINVIS_ATTRS"
@@ -20,7 +21,13 @@ _RESAMPLED_TAG = "TERRAINVIS_RESAMPLED"
 def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
     rasterio = rasterio_module()
     try:
-        with rasterio.open(p) as src:
+        with contextlib.ExitStack() as stack:
+            if _gdal_path(p):
+                src = stack.enter_context(rasterio.open(p))
+            else:  # a name GDAL cannot take: read the bytes through memory
+                from rasterio.io import MemoryFile
+
+                src = stack.enter_context(stack.enter_context(MemoryFile(p.read_bytes())).open())
             if band is None and src.count != 1:
                 raise _UserError(
                     f"{p.name!r} has {src.count} bands; a DEM has one: pass band=k (1..{src.count}) to choose one"
@@ -28,6 +35,8 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
             b = 1 if band is None else band
             if b > src.count:
                 raise _UserError(f"band must be in [1, {src.count}] for {p.name!r}, got {b}")
+            # the band, its mask (1 byte) and the float64 heights
+            _check_read_memory(p.name, (src.height, src.width), np.dtype(src.dtypes[b - 1]).itemsize, extra_per_sample=1)
             data = src.read(b, masked=True)
             scale, offset = src.scales[b - 1], src.offsets[b - 1]
             t = src.transform
@@ -73,9 +82,31 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
                     crs_text = stored
             except ValueError:
                 pass
-    for key in ("crs", "geographic", "xy_to_native"):
+    for key in GEOREF_KEYS:
         attrs.pop(key, None)  # the file's own georeferencing decides
     return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy)
+
+
+#: Rasters with at least this many rows and columns are written in tiles (GDAL's usual 256 x 256).
+_TILE_FROM = 512
+_BLOCK = 256
+
+
+def _creation_options(rows: int, cols: int, dtype: str) -> dict:
+    """What GDAL writes for a DEM: DEFLATE (with the floating-point or integer predictor), tiles when large."""
+    opts = {"compress": "deflate", "bigtiff": "if_safer"}
+    if dtype.startswith("float"):
+        opts["predictor"] = 3
+    if rows >= _TILE_FROM and cols >= _TILE_FROM:
+        opts.update(tiled=True, blockxsize=_BLOCK, blockysize=_BLOCK)
+    return opts
+
+
+def _height_dtype(values: np.ndarray) -> str:
+    """float32 when every value (nodata included) survives the round trip exactly, else float64."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        z32 = values.astype(np.float32)
+    return "float32" if np.array_equal(z32.astype(np.float64), values) else "float64"
 
 
 def _write_tif(grid: HeightGrid, p: Path) -> None:
@@ -85,21 +116,46 @@ def _write_tif(grid: HeightGrid, p: Path) -> None:
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None  # before any file is touched
     rows, cols = z.shape
     transform = _north_up_transform(nx, ny)
-    nodata = _nodata_value(z)
-    north_up = z[::-1] if nodata is None else np.where(np.isnan(z), nodata, z)[::-1]
+    nodata = _nodata_value(z, always=True)  # GIS tools expect the tag even when no sample uses it
+    north_up = np.where(np.isnan(z), nodata, z)[::-1]
+    dtype = _height_dtype(north_up)
     attrs = dict(grid.attrs)
     tags = {}
     if note is not None:
         attrs["resampled"] = note
         tags[_RESAMPLED_TAG] = note
     tags[_ATTRS_TAG] = _attrs_to_json(attrs)
+    profile = dict(height=rows, width=cols, count=1, dtype=dtype, transform=transform, crs=crs, nodata=nodata)
     with atomic_path(p) as tmp:
-        with rasterio.open(
-            tmp, "w", driver="GTiff", height=rows, width=cols, count=1, dtype="float64", transform=transform,
-            crs=crs, nodata=nodata,
-        ) as dst:
-            dst.write(north_up, 1)
-            dst.update_tags(**tags)
+        _write_gtiff(tmp, north_up.astype(dtype, copy=False), profile, tags)
+
+
+def _gdal_path(path: Path) -> bool:
+    """Whether GDAL can be handed ``path``: rasterio passes paths on as UTF-8, so a name
+    that is not valid UTF-8 (bytes kept as surrogates by Python) cannot be."""
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _write_gtiff(path: Path, data: np.ndarray, profile: dict, tags: dict | None = None) -> None:
+    """One band as GDAL writes a GeoTIFF (:func:`_creation_options`); through memory when GDAL cannot take the name."""
+    rasterio = rasterio_module()
+    profile = dict(profile, driver="GTiff", **_creation_options(data.shape[0], data.shape[1], str(data.dtype)))
+    if _gdal_path(path):
+        with rasterio.open(path, "w", **profile) as dst:
+            dst.write(data, 1)
+            dst.update_tags(**(tags or {}))
+        return
+    from rasterio.io import MemoryFile
+
+    with MemoryFile() as mem:
+        with mem.open(**profile) as dst:
+            dst.write(data, 1)
+            dst.update_tags(**(tags or {}))
+        path.write_bytes(mem.read())
 
 
 def _north_up_transform(nx: np.ndarray, ny: np.ndarray):
@@ -143,10 +199,8 @@ def write_mask_geotiff(grid: HeightGrid, mask: np.ndarray, path, *, nodata_mask=
     if nodata_mask is not None:
         data[np.asarray(nodata_mask, dtype=bool)] = 255
     rows, cols = data.shape
+    profile = dict(height=rows, width=cols, count=1, dtype="uint8", transform=_north_up_transform(nx, ny), crs=crs,
+                   nodata=255)
     with atomic_path(p) as tmp:
-        with rasterio.open(
-            tmp, "w", driver="GTiff", height=rows, width=cols, count=1, dtype="uint8",
-            transform=_north_up_transform(nx, ny), crs=crs, nodata=255,
-        ) as dst:
-            dst.write(data[::-1], 1)
+        _write_gtiff(tmp, np.ascontiguousarray(data[::-1]), profile)
     return p

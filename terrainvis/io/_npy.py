@@ -9,11 +9,18 @@ import numpy as np
 from .._fileio import atomic_path
 from .._validate import describe
 from ..terrain import HeightGrid
-from ._common import _Corrupt
+from ._common import _check_read_memory, _Corrupt, _npy_header
 from ._raster import _georeference
 
 
 def _read_npy(p: Path, *, crs=None, band=None) -> HeightGrid:
+    with open(p, "rb") as fh:
+        try:
+            shape, dtype = _npy_header(fh)
+        except ValueError as exc:
+            raise _Corrupt(f"it is not a .npy array file ({exc})") from None
+    if dtype.kind in "iuf" and len(shape) == 2:
+        _check_read_memory(p.name, shape, dtype.itemsize)
     try:
         z = np.load(p, allow_pickle=False)
     except ValueError as exc:

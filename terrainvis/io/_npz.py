@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import zipfile
 import zlib
 from pathlib import Path
@@ -12,11 +13,35 @@ from .._fileio import atomic_path
 from .._georef import IDENTITY
 from ..terrain import TIN, HeightGrid
 from ._attrs import _attrs_from_json, _attrs_to_json
-from ._common import FORMAT, FORMAT_VERSION, _TIN_ORIENTATION, _Corrupt, _UserError
+from .._memory import check_memory, format_bytes
+from ._common import _READ_BYTES_PER_SAMPLE, FORMAT, FORMAT_VERSION, _TIN_ORIENTATION, _Corrupt, _npy_header, _UserError
 from ._raster import _georeference
 
 _GRID_ORIENTATIONS = ("y_increasing", "y_decreasing")
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
+
+
+def _check_npz_memory(p: Path) -> None:
+    """Refuse an archive whose arrays (by their headers) cannot be read into memory.
+
+    A float array costs its own bytes plus the float64 copies a reader makes
+    (``_READ_BYTES_PER_SAMPLE``); other arrays their own bytes.
+    """
+    raw = need = 0
+    with zipfile.ZipFile(p) as zf:
+        for info in zf.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with zf.open(info) as fh:
+                try:
+                    shape, dtype = _npy_header(fh)
+                except ValueError:
+                    continue  # numpy's own reader names the problem
+            n = math.prod(int(v) for v in shape)
+            raw += n * dtype.itemsize
+            need += n * (dtype.itemsize + (_READ_BYTES_PER_SAMPLE if dtype.kind == "f" else 0))
+    if need:
+        check_memory(need, f"reading {p.name!r} (arrays of {format_bytes(raw)})")
 
 
 def _read_npz(p: Path, *, crs=None, band=None):
@@ -26,6 +51,10 @@ def _read_npz(p: Path, *, crs=None, band=None):
         raise _Corrupt("it is a .npy file (one bare array), not a .npz archive; give it the suffix .npy")
     if not head.startswith(_ZIP_MAGIC):
         raise _Corrupt(f"it is not a .npz file (a zip archive of .npy arrays): it starts with {head!r}")
+    try:
+        _check_npz_memory(p)
+    except zipfile.BadZipFile:
+        pass  # numpy's reader below names the damage
     try:
         with np.load(p, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}

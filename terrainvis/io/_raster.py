@@ -64,10 +64,10 @@ def native_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray]:
     return native_axes(grid.xs, grid.ys, affine)
 
 
-def _nodata_value(z: np.ndarray) -> float | None:
-    """None without NaN; else -9999 unless it is a real height, else another value that does not occur."""
+def _nodata_value(z: np.ndarray, *, always: bool = False) -> float | None:
+    """None without NaN (unless ``always``); else -9999 unless it is a real height, else another value that does not occur."""
     nan = np.isnan(z)
-    if not nan.any():
+    if not nan.any() and not always:
         return None
     finite = z[~nan]
     for candidate in (-9999.0, -32768.0, -99999.0, -3.4028234663852886e38):

@@ -1,0 +1,94 @@
+"""The calibrated relocation on the shared real DEMs (issue 18, "Beyond the bundled terrains").
+
+Not a timing: the accuracy measurement behind docs/relocation.md. Two workloads on the
+four DEMs of ``../shared/data/dem``, each a ``terrainvis.compare`` run with every method at
+levels 1-3 and the paper's relocations beside the calibrated one, with a localized sweep
+(``max_distance`` 5, 10, 20, 40 cells and every pair):
+
+* ``crops``: a 120 x 120 window from the middle of each DEM's valid part (West Bijou is
+  67 samples high: 67 x 120), at the paper's settings (points on the surface, 6 sets of
+  50 points);
+* ``whole``: each whole DEM (Mount St Helens cut to its largest window without nodata),
+  observers 1.7 m above the ground (``offset``), 6 sets of 50 points.
+
+It prints, per workload, method and level, the accuracy of full projection and of the
+calibrated relocation on every pair and within each distance, and whether calibrated
+kept at least as many verdicts as full everywhere. Results go to ``OUT/<workload>/``
+(``results.csv``; a rerun resumes).
+
+    python benchmarks/relocation_dems.py --out relocation-dems
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import terrainvis as tv
+
+DEMS = ("green_mountains_vt", "jacksboro_fault_tn", "mount_st_helens_wa", "west_bijou_escarpment_co")
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "dem"
+
+
+def _valid(name: str) -> tv.HeightGrid:
+    grid = tv.load_dem(SHARED / f"{name}.npz")
+    rs, cs = grid.valid_window()
+    return grid.crop(rs, cs)
+
+
+def _crop(grid: tv.HeightGrid, side: int = 120) -> tv.HeightGrid:
+    rows, cols = grid.shape
+    n_r, n_c = min(side, rows), min(side, cols)
+    r0, c0 = (rows - n_r) // 2, (cols - n_c) // 2
+    return grid.crop(rows=(r0, r0 + n_r), cols=(c0, c0 + n_c))
+
+
+def run(workload: str, out: Path, workers: int) -> pd.DataFrame:
+    grids = {name: (_crop(_valid(name)) if workload == "crops" else _valid(name)) for name in DEMS}
+    offset = 0.0 if workload == "crops" else 1.7
+    folder = out / workload
+    folder.mkdir(parents=True, exist_ok=True)
+    csv = folder / "results.csv"
+    return tv.compare(grids, relocations=["identity", "full", "half", "calibrated"], offset=offset,
+                      max_distance=[5, 10, 20, 40, None], distance_unit="cells", workers=workers, out_csv=csv,
+                      resume=csv.exists(), progress=True)
+
+
+def summary(df: pd.DataFrame, workload: str) -> None:
+    ok = df[df["error"].fillna("") == ""]
+    d = ok["max_distance"].fillna(np.inf)
+    mu = 100 * ok.assign(_d=d).groupby(["method", "level", "relocation", "_d"])["accuracy"].mean()
+    table = mu.unstack("relocation")
+    print(f"\n### {workload}: accuracy (%), full against calibrated, by pair distance (cells of T)\n")
+    print("| method | level | distance | full | calibrated | calibrated - full |")
+    print("|---|---|---|---|---|---|")
+    worse = []
+    for (method, level, dist), row in table.iterrows():
+        gain = row["calibrated"] - row["full"]
+        if gain < 0:
+            worse.append((method, level, dist, gain))
+        label = "all" if dist == np.inf else f"{dist:g}"
+        print(f"| {method} | {level} | {label} | {row['full']:.2f} | {row['calibrated']:.2f} | {gain:+.2f} |")
+    allpairs = table.xs(np.inf, level="_d")
+    print(f"\nevery pair: calibrated - full from {(allpairs['calibrated'] - allpairs['full']).min():+.2f} to "
+          f"{(allpairs['calibrated'] - allpairs['full']).max():+.2f} points over {len(allpairs)} method x level cells")
+    print("cells where calibrated keeps fewer verdicts than full:", worse if worse else "none")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, default=Path("relocation-dems"))
+    ap.add_argument("--workloads", nargs="+", default=["crops", "whole"], choices=["crops", "whole"])
+    ap.add_argument("--workers", type=int, default=None)
+    args = ap.parse_args()
+    if not SHARED.exists():
+        raise SystemExit(f"the shared DEMs are not at {SHARED}")
+    for workload in args.workloads:
+        summary(run(workload, args.out, args.workers), workload)
+
+
+if __name__ == "__main__":
+    main()

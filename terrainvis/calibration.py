@@ -1,0 +1,336 @@
+"""The calibrated relocation: a point's height on S(T) chosen so that it sees what it saw on T.
+
+Moving a point of the original terrain T vertically onto its simplification S(T) (the
+paper's full projection) keeps its position but not its view: S(T) smooths ridges and
+fills valleys, so the point sees over crests it was hidden by, or loses sight of what it
+saw. The calibrated relocation instead picks, for each point, the height on S(T) whose
+verdicts agree best with the point's verdicts on T, against *partners* that stand for
+the points it will be tested with.
+
+Partners
+--------
+``n_partners`` positions spread uniformly over the terrain (stratified: one at a random
+place in each cell of a square lattice over T's extent, from ``seed``), standing
+``height`` above the surface: on T at ``T(x, y) + height``, on S(T) where the point's
+real partners will stand. Two settings:
+
+* **points** (``target_height=None``, the pair experiment): the partners are points like
+  the one relocated, carrying the same ``offset`` and relocated the same way. They are
+  calibrated first, jointly: Gauss-Seidel sweeps in which each partner in turn takes its
+  best height against the others at their current heights (each step keeps or raises
+  their total agreement), starting from the full projection, ``sweeps`` times.
+* **targets** (``target_height=h``, the viewshed experiment): the partners are targets
+  standing ``h`` above each surface, as a viewshed's cells do; they do not move.
+
+The partners depend on T, S(T), the setting and the seed, never on the points being
+relocated: a point's new height does not change when the other points change. They are
+computed once per (T, S(T), setting) and cached on S(T).
+
+The best height
+---------------
+Seeing a partner is monotone in the point's height: for each partner there is an exact
+*threshold* above which the point sees it on S(T) (:mod:`terrainvis._calibration_kernels`
+computes it at the breakpoints the LOS engines test, with their trim, tolerance and end
+radius). The agreement with T's verdicts is then a step function of the height, and its
+maximum is found exactly by sorting the thresholds. Among the optimal heights the one
+nearest the full projection is taken, a small margin away from any threshold.
+
+Cost
+----
+Per point, K LOS queries on T and K threshold walks on S(T) (K = ``n_partners``); per
+(T, S(T), setting), once, K² / 2 LOS queries on T and ``sweeps`` x K² walks on S(T).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _calibration_kernels as _ck
+from ._validate import as_int, describe
+from .errors import OutsideFootprintError
+from .terrain import TIN, HeightGrid
+from .visibility import EARTH_RADIUS, curvature_coefficient
+
+__all__ = ["calibrated_heights", "Partners", "partners", "N_PARTNERS", "SWEEPS", "MIN_GAIN"]
+
+#: Default number of partners (K): about where the accuracy saturates on the paper's
+#: terrains (docs/relocation.md gives the figures for 256 to 1024).
+N_PARTNERS = 512
+#: Default Gauss-Seidel sweeps over the partners of the points setting (the first does most).
+SWEEPS = 2
+#: Default least gain (partners' verdicts) that moves a point off the full projection.
+MIN_GAIN = 1
+#: Points per chunk of the T-side verdicts (bounds the temporary (chunk x K) segment arrays).
+_CHUNK_PAIRS = 1 << 20
+#: Height margin kept from thresholds, as a fraction of the terrain's scale (about 5 mm on a 5 km grid).
+MARGIN_REL = 1e-6
+
+
+@dataclass(frozen=True)
+class Partners:
+    """The partners of a calibrated relocation (see the module docstring).
+
+    Attributes
+    ----------
+    xy : (K, 2) float64
+        Positions.
+    z_original : (K,) float64
+        Heights on the original terrain T (its surface plus ``height``).
+    z_simplified : (K,) float64
+        Heights on S(T): calibrated (points setting) or its surface plus ``height`` (targets).
+    ground_simplified : (K,) float64
+        The surface of S(T) under each partner.
+    visible : (K, K) bool or None
+        Their verdicts on T among themselves (points setting only).
+    """
+
+    xy: np.ndarray
+    z_original: np.ndarray
+    z_simplified: np.ndarray
+    ground_simplified: np.ndarray
+    visible: np.ndarray | None
+
+
+def _fingerprint(grid: HeightGrid) -> str:
+    fp = grid._cache.get("fingerprint")
+    if fp is None:
+        h = hashlib.sha256()
+        for a in (grid.z, grid.xs, grid.ys):
+            h.update(np.ascontiguousarray(a).tobytes())
+        fp = grid._cache["fingerprint"] = h.hexdigest()[:16]
+    return fp
+
+
+# ----------------------------------------------------------------------- the surface
+class _Surface:
+    """S(T) as the threshold kernels read it (grid walk or TIN edge buckets), local coordinates."""
+
+    def __init__(self, terrain):
+        from .visibility import clearance_tolerance, terrain_scale, trim_length
+
+        self.terrain = terrain
+        self.grid = isinstance(terrain, HeightGrid)
+        self.delta = float(trim_length(terrain))
+        self.tol = float(clearance_tolerance(terrain))
+        self.margin = MARGIN_REL * float(terrain_scale(terrain))
+        if self.grid:
+            from .visibility.grid import _walk_grid, grid_accel
+
+            acc = grid_accel(terrain)
+            self.x0, self.y0 = acc.x0, acc.y0
+            self.data = _walk_grid(terrain, acc)
+            self.ltop = acc.ltop
+        else:
+            self.x0, self.y0, self.data = _tin_walk(terrain)
+            self.ltop = 0
+
+    def local(self, xy: np.ndarray) -> np.ndarray:
+        out = np.array(xy, dtype=np.float64, copy=True)
+        out[:, 0] -= self.x0
+        out[:, 1] -= self.y0
+        return out
+
+
+def _tin_walk(tin: TIN):
+    """The TIN as the threshold walk reads it (:data:`~terrainvis._calibration_kernels.TinWalk`,
+    local coordinates) and its origin (cached on the TIN)."""
+    cached = tin._cache.get("calibration_walk")
+    if cached is not None:
+        return cached
+    from ._mesh import edge_keys, half_edges
+
+    bk = tin._buckets()
+    faces = np.ascontiguousarray(tin.faces, dtype=np.int64)
+    he = half_edges(faces)  # (3m, 2): edge e of face f is row 3 f + e
+    key = edge_keys(he, tin.n_vertices, directed=True)
+    twin = edge_keys(he[:, ::-1], tin.n_vertices, directed=True)
+    order = np.argsort(key)
+    pos = np.searchsorted(key[order], twin)
+    pos = np.minimum(pos, key.size - 1)
+    found = key[order][pos] == twin
+    nbr = np.where(found, order[pos] // 3, -1).reshape(-1, 3).astype(np.int64)
+    v = tin.vertices
+    walk = _ck.TinWalk(
+        np.ascontiguousarray(v[:, 0] - bk.x0), np.ascontiguousarray(v[:, 1] - bk.y0), np.ascontiguousarray(v[:, 2]),
+        faces, nbr, bk.starts, bk.items, float(bk.bw), float(bk.bh), int(bk.nbx), int(bk.nby),
+    )
+    out = (float(bk.x0), float(bk.y0), walk)
+    tin._cache["calibration_walk"] = out
+    return out
+
+
+# ----------------------------------------------------------------------- partners
+def _positions(original: HeightGrid, simplified, k: int, seed: int) -> np.ndarray:
+    """About ``k`` stratified random positions over T's extent where both surfaces exist."""
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x7E11]))
+    xmin, xmax, ymin, ymax = original.extent
+    n = max(1, int(round(np.sqrt(k))))
+    u = (np.arange(n)[None, :] + rng.random((n, n))) / n
+    v = (np.arange(n)[:, None] + rng.random((n, n))) / n
+    xy = np.column_stack([xmin + u.ravel() * (xmax - xmin), ymin + v.ravel() * (ymax - ymin)])
+    ok = np.isfinite(original.height_at(xy)) & np.isfinite(simplified.height_at(xy))
+    return xy[ok]
+
+
+#: Verdicts on T, kept across calls by content (T's fingerprint and the points' bytes): the
+#: units of a comparison simplify one terrain many ways and relocate the same point sets
+#: onto each, in processes that receive T anew each time, so a cache on T would not last.
+_ON_ORIGINAL: OrderedDict = OrderedDict()
+_ON_ORIGINAL_SIZE = 64
+
+
+def _cached(key, compute):
+    out = _ON_ORIGINAL.get(key)
+    if out is None:
+        out = compute()
+        _ON_ORIGINAL[key] = out
+        while len(_ON_ORIGINAL) > _ON_ORIGINAL_SIZE:
+            _ON_ORIGINAL.popitem(last=False)
+    else:
+        _ON_ORIGINAL.move_to_end(key)
+    return out
+
+
+def _key(original, curve, *arrays):
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return (_fingerprint(original), curvature_coefficient(**curve), h.hexdigest())
+
+
+def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+    """(n, K) verdicts on T between the points ``a`` (n, 3) and the partners ``b`` (K, 3), in chunks (cached)."""
+    return _cached(("pairs",) + _key(original, curve, a, b), lambda: _line_of_sight_rows(original, a, b, curve))
+
+
+def _line_of_sight_rows(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+    from .visibility import line_of_sight
+
+    n, k = a.shape[0], b.shape[0]
+    out = np.empty((n, k), dtype=bool)
+    step = max(1, _CHUNK_PAIRS // max(k, 1))
+    for i in range(0, n, step):
+        j = min(n, i + step)
+        aa = np.repeat(a[i:j], k, axis=0)
+        bb = np.tile(b, (j - i, 1))
+        out[i:j] = line_of_sight(original, aa, bb, engine="grid", **curve).reshape(j - i, k)
+    return out
+
+
+def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_partners: int = N_PARTNERS,
+             sweeps: int = SWEEPS, seed: int = 0, end_radius: float = 0.0, curvature: float = 0.0,
+             earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN) -> Partners:
+    """The partners of a calibrated relocation onto ``simplified`` (cached on it).
+
+    ``move`` True: the points setting (partners calibrated by Gauss-Seidel sweeps);
+    False: the targets setting (partners fixed ``height`` above each surface). See the
+    module docstring. Inputs are validated by :func:`calibrated_heights`; ``curvature``
+    and ``earth_radius`` as in :func:`terrainvis.line_of_sight`, on both surfaces.
+    """
+    kc = curvature_coefficient(curvature, earth_radius)
+    key = ("calibration", _fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
+           int(seed), float(end_radius), kc, int(min_gain))
+    cached = simplified._cache.get(key)
+    if cached is not None:
+        return cached
+    from ._interrupt import call
+
+    xy = _positions(original, simplified, n_partners, seed)
+    z_t = original.height_at(xy) + height
+    ground = simplified.height_at(xy)
+    z_s = ground + height
+    visible = None
+    if move and xy.shape[0] > 1:
+        from .visibility import visibility_matrix
+
+        curve = {"curvature": curvature, "earth_radius": earth_radius}
+        at = np.column_stack([xy, z_t])
+        visible = _cached(("matrix",) + _key(original, curve, at),
+                          lambda: visibility_matrix(original, at, engine="grid", **curve))
+        surf = _Surface(simplified)
+        q = surf.local(np.column_stack([xy, z_s]))
+        order_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
+        k = xy.shape[0]
+        for _ in range(sweeps):
+            order = order_rng.permutation(k).astype(np.int64)
+            if surf.grid:
+                call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc,
+                     surf.margin, min_gain, work=k * k)
+            else:
+                call(_ck.tin_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc, surf.margin,
+                     min_gain, work=k * k)
+        z_s = q[:, 2].copy()
+    out = Partners(xy, z_t, z_s, ground, visible)
+    simplified._cache[key] = out
+    return out
+
+
+# ----------------------------------------------------------------------- relocation
+def calibrated_heights(points, simplified, original, *, offset: float = 0.0, target_height=None,
+                       n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
+                       end_radius: float = 0.0, curvature: float = 0.0,
+                       earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN) -> np.ndarray:
+    """The calibrated height on ``simplified`` of each point of ``original`` (see the module docstring).
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        Validated points on (``offset`` above) the original terrain, inside both footprints.
+    simplified : HeightGrid or TIN
+        S(T); a HeightGrid must be free of nodata.
+    original : HeightGrid
+        T, free of nodata.
+    offset : float
+        The points' height above T (their verdicts on T are taken from there); the
+        reference height on S(T) is its surface plus ``offset``.
+    target_height : float or None
+        None: the points setting; a number: the targets setting (partners that high
+        above each surface).
+    n_partners, sweeps, seed : int
+        The partners (about ``n_partners`` of them), the Gauss-Seidel sweeps of the
+        points setting and the seed of their positions and sweep order.
+    min_gain : int
+        A point (and a partner in a sweep) leaves its reference height only for a
+        height that agrees with at least this many more partners (1: any gain).
+    end_radius : float
+        End radius of the verdicts on S(T) (:func:`terrainvis.line_of_sight`); the
+        verdicts on T are exact.
+    curvature, earth_radius : float
+        Earth curvature and refraction of the verdicts on both surfaces
+        (:func:`terrainvis.line_of_sight`).
+
+    Returns
+    -------
+    (n,) float64
+    """
+    from ._interrupt import call
+
+    pts = np.asarray(points, dtype=np.float64)
+    move = target_height is None
+    height = float(offset if move else target_height)
+    curve = {"curvature": curvature, "earth_radius": earth_radius}
+    kc = curvature_coefficient(curvature, earth_radius)
+    part = partners(original, simplified, height=height, move=move, n_partners=n_partners, sweeps=sweeps,
+                    seed=seed, end_radius=end_radius, min_gain=min_gain, **curve)
+    n = pts.shape[0]
+    if n == 0 or part.xy.shape[0] == 0:
+        return simplified.height_at(pts[:, :2]) + offset
+    vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]), curve)
+    surf = _Surface(simplified)
+    ground = simplified.height_at(pts[:, :2])
+    p = surf.local(np.column_stack([pts[:, :2], ground + offset]))
+    q = surf.local(np.column_stack([part.xy, part.z_simplified]))
+    out = np.empty(n)
+    score = np.empty(n, dtype=np.int64)
+    work = n * part.xy.shape[0]
+    if surf.grid:
+        call(_ck.grid_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
+             out, score, work=work)
+    else:
+        call(_ck.tin_heights, surf.data, p, q, vis, surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
+             out, score, work=work)
+    return out
