@@ -406,12 +406,14 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
                         return best
                 fa = fd
                 t = td
-        # where the track leaves the cell (or the interval ends)
+        # where the track leaves the cell (or the interval ends). Which line it crosses
+        # is told by tx <= ty, not by tn == tx: rounding can put a start on a grid line a
+        # hair inside the cell it leaves, and tn is then raised from tx (or ty) to t
         if tn >= t1:
             xn = ex + t1 * dx
             yn = ey + t1 * dy
             fn = ez + t1 * dz - _cell_z(z, xs, ys, ixw, iyw, r, c, xn, yn)
-        elif tn == tx:
+        elif tx <= ty:
             cn = c + 1 if dx > 0.0 else c
             v = min(max((ey + tn * dy - ys[r]) * iyw[r], 0.0), 1.0)
             fn = ez + tn * dz - (z[r, cn] + v * (z[r + 1, cn] - z[r, cn]))
@@ -1342,7 +1344,7 @@ def bucket_targets(g, eye, tx, ty, nsec, jstop, tstart, torder):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def sweep(g, eye, rules, lay, tg, perm, stats):
+def sweep(g, eye, rules, lay, tg, perm, stats, stop):
     """Decide the targets with rigorous horizon bounds and partial exact walks.
 
     One task per angular sector (``lay.nsec`` sectors, a multiple of 4, ``perm`` spreads
@@ -1355,10 +1357,12 @@ def sweep(g, eye, rules, lay, tg, perm, stats):
     (other targets) get BLOCKED, VISIBLE or UNDECIDED (the caller answers those with the
     pair engine); targets already NOT_TARGET are skipped. ``stats[sector, 0..3]`` counts
     targets decided by ``lb``, by the upper bound and the last rings' walk, by walking
-    blocks of rings, and left undecided.
+    blocks of rings, and left undecided. ``stop`` is the stop flag of
+    :mod:`terrainvis._interrupt`: every sector reads it once per ring and returns when it
+    is set (the codes are then incomplete and never used).
     """
     for it in nb.prange(lay.nsec):
-        _sector(g, eye, rules, lay, tg, perm[it], stats)
+        _sector(g, eye, rules, lay, tg, perm[it], stats, stop)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -1435,17 +1439,18 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _run_segments(g, eye, rules, w, tg, j, q, rn, span, dwin, buf, hidden, counts):
+def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
     """Fill a run's samples and decide the targets on its outer line, segment by segment.
 
-    ``span`` is ``(i0, i1, lo, cells, plo, phi)``: the run's cells in the window, its
+    ``span`` is ``(j, q, i0, i1, lo, cells, plo, phi)``: the sample ring, the quadrant,
+    the run's cells in the window, its
     first row or column, whether annulus j is bounded cell by cell (then each SEG-aligned
     segment is first tested with :func:`_seg_hidden`; a hidden one gets no samples, its
     targets are blocked and ``hidden`` flags it) and the sector's own pseudo-angles
     [plo, phi). Returns how many targets the lower bound blocked; ``counts`` gets the
     others (see :func:`sweep`).
     """
-    i0, i1, lo, cells, plo, phi = span
+    j, q, i0, i1, lo, cells, plo, phi = span
     r0, c0, dr, dc = rn[0], rn[1], rn[2], rn[3]
     vertical = dc == 0
     if vertical:
@@ -1525,7 +1530,7 @@ def _run_segments(g, eye, rules, w, tg, j, q, rn, span, dwin, buf, hidden, count
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _sector(g, eye, rules, lay, tg, s, stats):
+def _sector(g, eye, rules, lay, tg, s, stats, stop):
     """The sweep of one sector (see :func:`sweep`)."""
     xs, ys, z = g.xs, g.ys, g.z
     nsec, b0, r1, jnear, jstop = lay
@@ -1558,6 +1563,8 @@ def _sector(g, eye, rules, lay, tg, s, stats):
     plo = s * 4.0 / nsec
     phi = (s + 1) * 4.0 / nsec
     for j in range(0, jstop + 1):
+        if stop[0] != 0:
+            break
         if j > 0 and j % BLOCK == 0:
             _close_block(w, j, n, r1)
         target_lev = _level(j, r1)
@@ -1597,7 +1604,7 @@ def _sector(g, eye, rules, lay, tg, s, stats):
             ranges[1, run] = i1
             lo = _run_lo(rn, i0, i1)
             ranges[2, run] = lo
-            n_lb += _run_segments(g, eye, rules, w, tg, j, q, rn, (i0, i1, lo, cells, plo, phi), dwin,
+            n_lb += _run_segments(g, eye, rules, w, tg, rn, (j, q, i0, i1, lo, cells, plo, phi), dwin,
                                   buf[run], hidden[run], counts)
         # ---- decide the other targets whose box of rings <= j - 1 the bounds now cover
         if ntg > 0:

@@ -69,6 +69,7 @@ import math
 import numba
 import numpy as np
 
+from .._interrupt import call
 from .._validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..terrain import TIN, HeightGrid, as_terrain
@@ -469,8 +470,9 @@ def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.nd
         _vk.bucket_targets(sg, veye, tx, ty, _N_SECTORS, jstop, tstart, torder)
         targets = _vk.Targets(False, np.zeros((1, 1), dtype=np.int8), tx, ty, tz, tstart, torder,
                               np.full(idx.size, _vk.UNDECIDED, dtype=np.int8))
-    _vk.sweep(sg, veye, _rules(grid, ez, query), _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
-              targets, _sector_order(_N_SECTORS), stats)
+    # through the interrupt helper: Ctrl-C stops the sweep within a ring of each sector
+    call(_vk.sweep, sg, veye, _rules(grid, ez, query), _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
+         targets, _sector_order(_N_SECTORS), stats, work=int(code.size))
     if not own:
         code.ravel()[idx] = targets.tcode
     return tuple(int(v) for v in stats.sum(axis=0)[:3])
