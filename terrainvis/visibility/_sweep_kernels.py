@@ -1097,7 +1097,7 @@ def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h, kc):
     return lbv > st + slack, st, slack
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _decide(g, eye, rules, w, j, win, tg):
     """Verdict of a target that the lower bound did not block, from the wedge bounds
     ``w`` (holding the rings <= j - 1) and exact walks.
@@ -1134,7 +1134,7 @@ def _decide(g, eye, rules, w, j, win, tg):
     return res, (3 if res == UNDECIDED else 2)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _block_walk(g, eye, rules, w, j, win, ray, p, smin, tau, t_end):
     """Exact walk of the target's ray over the rings < j whose wedge maximum reaches
     ``smin`` (the target's slope less its slack; ``p`` its unwrapped pseudo-angle); the
@@ -1213,7 +1213,7 @@ def _block_walk(g, eye, rules, w, j, win, ray, p, smin, tau, t_end):
     return UNDECIDED if ambiguous else VISIBLE
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _walk_rings(g, eye, ray, r_lo, r_hi, tau, t_end, tolm, bulge):
     """Exact minimum clearance of the ray over the annuli r_lo..r_hi (r_hi ``_BEYOND``:
     all annuli from r_lo on), within [tau, t_end] (inf when that is empty; the walk stops
