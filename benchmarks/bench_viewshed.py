@@ -37,12 +37,38 @@ disagreements cluster on the horizon lines, where the two models' horizons cross
 script reports how many disagreeing samples have a sample of the other verdict among
 their 8 neighbours (in our viewshed), and the split by direction.
 
+GIS peers (``--peers``)
+----------------------
+``synthetic_terrain(--kind, --peer-size)`` (30 m cells) is written as a float32 GeoTIFF in
+UTM zone 18N and loaded back with ``terrainvis.load_dem`` (so all three read the same
+heights). From the highest and the lowest sample of the central half, eye ``--eye`` m
+up, targets on the ground, curvature off and on (standard refraction, 0.85714), it times
+
+* ours: the exact viewshed call on the loaded grid (no file I/O);
+* ``gdal_viewshed`` (Debian package gdal-bin), the whole command with reading and writing
+  the GeoTIFF: ``-ox X -oy Y -oz EYE -tz 0 -cc C -vv 1 -iv 0``. GDAL 3.6's ``-cc 0``
+  is a flat earth (its output is identical to ``-cc 1e-9``'s); its default is 0.85714.
+  Its earth radius is the ellipsoid's semi-major axis (WGS84: 6,378,137 m), as ours;
+* ``r.viewshed`` (Debian package grass-core) in a temporary GRASS location made from the
+  GeoTIFF (``grass -c DEM.tif DIR/loc -e``, then ``grass DIR/loc/PERMANENT --exec
+  r.in.gdal input=DEM.tif output=dem`` and ``g.region raster=dem``), the whole
+  ``grass ... --exec r.viewshed input=dem output=vs coordinates=X,Y observer_elevation=EYE
+  target_elevation=0 memory=4000 -b`` command (plus ``-c -r refraction_coeff=0.14286``
+  with curvature);
+
+and prints the medians, the ratios peer / ours, and how many cells each peer answers
+differently, split by direction, with the share of them within one cell of a visibility
+edge of ours. Last, ``terrainvis viewshed DEM --observer X Y --height EYE -o out.tif``
+against the gdal_viewshed command, command to command (curvature off: the command has no
+curvature option yet). Peers that are not installed are skipped with a message.
+
 Example::
 
     python benchmarks/bench_viewshed.py                                  # 1024, 2048, 3601
     python benchmarks/bench_viewshed.py --sizes 512 1024 --repeats 1     # quick
     python benchmarks/bench_viewshed.py --sizes 3601 --no-xrspatial      # ours vs the pair engine
     python benchmarks/bench_viewshed.py --sizes 1024 --kind noisy-plane  # a grazing worst case
+    python benchmarks/bench_viewshed.py --peers --repeats 5              # GDAL and GRASS, 3601^2
 """
 
 from __future__ import annotations
@@ -123,7 +149,17 @@ def main(argv=None) -> None:
     ap.add_argument("--no-xrspatial", action="store_true", help="skip xarray-spatial")
     ap.add_argument("--no-pair", action="store_true", help="skip the pair engine")
     ap.add_argument("--check-flip", action="store_true", help="also run xarray-spatial on the y-flipped raster")
+    ap.add_argument("--peers", action="store_true",
+                    help="ours against gdal_viewshed and r.viewshed instead (see 'GIS peers' above)")
+    ap.add_argument("--peer-size", type=int, default=3601, help="--peers: grid size (default 3601)")
+    ap.add_argument("--eye", type=float, default=10.0, help="--peers: eye height (default 10 m)")
+    ap.add_argument("--grass-repeats", type=int, default=1, help="--peers: runs of r.viewshed (about 25 s each)")
+    ap.add_argument("--no-grass", action="store_true", help="--peers: skip r.viewshed")
+    ap.add_argument("--no-commands", action="store_true", help="--peers: skip the command-to-command timing")
     args = ap.parse_args(argv)
+    if args.peers:
+        peers(args)
+        return
     h = args.observer_height
 
     # compile (or load) every kernel on a small grid first: no JIT time in the figures
@@ -200,6 +236,169 @@ def main(argv=None) -> None:
               f"{r.get('pair', float('nan')):>9.3f} {r.get('pair_ratio', float('nan')):>7.2f} "
               f"{r.get('xrs', float('nan')):>9.3f} {r.get('xrs_ratio', float('nan')):>7.2f} "
               f"{r.get('xrs_diff', -1):>9}")
+
+
+# ------------------------------------------------------------------ GIS peers (--peers)
+#: Standard refraction in GDAL's convention (-cc) and r.viewshed's (-r refraction_coeff).
+STD_CURVATURE = 0.85714
+
+
+def _write_geotiff(grid, path) -> None:
+    """The grid as a float32 GeoTIFF in UTM zone 18N (30 m cells, north up): both peers
+    need a projected CRS; ours then loads the same float32 heights back."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    rows, cols = grid.shape
+    dx = float(grid.xs[1] - grid.xs[0])
+    with rasterio.open(path, "w", driver="GTiff", width=cols, height=rows, count=1, dtype="float32",
+                       crs="EPSG:32618", transform=from_origin(500000.0, 5000000.0 + rows * dx, dx, dx)) as ds:
+        ds.write(np.asarray(grid.z, dtype=np.float32)[::-1], 1)
+
+
+def _read_mask(path) -> np.ndarray:
+    """A peer's 0/1 raster in our row order (south up)."""
+    import rasterio
+
+    with rasterio.open(path) as ds:
+        return ds.read(1)[::-1] == 1
+
+
+def _run_times(cmd, repeats: int, env=None) -> float:
+    """Median wall time of a command (its whole process: start-up, reading, writing)."""
+    import subprocess
+
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def _observers_high_low(g):
+    """The highest and the lowest sample of the grid's central half (rows, cols)."""
+    rows, cols = g.shape
+    r0, c0 = rows // 4, cols // 4
+    sub = g.z[r0 : rows - r0, c0 : cols - c0]
+    hi = np.unravel_index(int(np.nanargmax(sub)), sub.shape)
+    lo = np.unravel_index(int(np.nanargmin(sub)), sub.shape)
+    return {"high": (hi[0] + r0, hi[1] + c0), "low": (lo[0] + r0, lo[1] + c0)}
+
+
+def _differences(name, peer, ours, n_cells) -> dict:
+    differ = peer != ours
+    nd = int(differ.sum())
+    near1 = int((differ & _near_edge(ours)).sum())
+    print(f"    {name}: {nd:,} cells differ ({100 * nd / n_cells:.3f} %): {name} visible / ours hidden "
+          f"{int((peer & ~ours).sum()):,}, {name} hidden / ours visible {int((~peer & ours).sum()):,}; "
+          f"{100 * near1 / max(nd, 1):.1f} % of them within one cell of a visibility edge of ours")
+    return {"diff": nd, "share": nd / n_cells, "near": near1 / max(nd, 1)}
+
+
+def peers(args) -> None:
+    """Ours against gdal_viewshed and r.viewshed on the same GeoTIFF, observers, heights,
+    curvature off and on (see the module docstring, 'GIS peers')."""
+    import os
+    import shutil
+    import subprocess
+    import tempfile
+
+    from terrainvis.io import load_dem
+
+    gdal = shutil.which("gdal_viewshed")
+    grass = shutil.which("grass") if not args.no_grass else None
+    if gdal is None:
+        print("gdal_viewshed not found (Debian: apt-get install gdal-bin): ours alone")
+    if grass is None and not args.no_grass:
+        print("grass not found (Debian: apt-get install grass-core): no r.viewshed")
+    tmp = tempfile.mkdtemp(prefix="bench_viewshed_")
+    dem = os.path.join(tmp, "dem.tif")
+    n = args.peer_size
+    _write_geotiff(synthetic_terrain(args.kind, n), dem)
+    g = load_dem(dem)
+    eye = args.eye
+    print(f"=== {args.kind} {n} x {n}, 30 m cells, float32 GeoTIFF (EPSG:32618) loaded back; eye {eye} m, "
+          f"targets on the ground; medians of {args.repeats} runs (r.viewshed: {args.grass_repeats})")
+    small = synthetic_terrain(args.kind, 64)
+    for c in (0.0, STD_CURVATURE):
+        _viewshed(small, (small.xs[32], small.ys[32]), observer_height=eye, curvature=c)
+    _viewshed(g, (g.xs[1], g.ys[1]), observer_height=eye)  # per-grid caches, as for any repeated use
+    genv = None
+    if grass:
+        genv = dict(os.environ, GRASS_MESSAGE_FORMAT="silent")
+        loc = os.path.join(tmp, "grass", "loc")
+        subprocess.run([grass, "-c", dem, loc, "-e"], check=True, capture_output=True, env=genv)
+        gx = [grass, os.path.join(loc, "PERMANENT"), "--exec"]
+        subprocess.run(gx + ["r.in.gdal", "input=" + dem, "output=dem", "--quiet"], check=True,
+                       capture_output=True, env=genv)
+        subprocess.run(gx + ["g.region", "raster=dem"], check=True, capture_output=True, env=genv)
+    rows = []
+    for oname, (r, c) in _observers_high_low(g).items():
+        x, y = float(g.xs[c]), float(g.ys[r])
+        for curv in (0.0, STD_CURVATURE):
+            label = f"{oname} observer (sample {r}, {c}; x {x:.0f} y {y:.0f}, ground {g.z[r, c]:.1f} m), " \
+                    f"curvature {curv:g}"
+            t_ours, (ours, info) = _time(lambda: _viewshed(g, (x, y), observer_height=eye, curvature=curv),
+                                         args.repeats)
+            print(f"\n{label}\n  ours           {t_ours:7.3f} s  visible {100 * ours.mean():.3f} %  "
+                  f"(lower bound {info['lb']:,}, upper bound + last ring {info['ub']:,}, block walks "
+                  f"{info['walk']:,}, pair engine {info['exact']:,})")
+            row = {"observer": oname, "curvature": curv, "ours": t_ours, "visible": ours.mean()}
+            if gdal:
+                out = os.path.join(tmp, "gdal.tif")
+                cmd = [gdal, "-q", "-ox", repr(x), "-oy", repr(y), "-oz", repr(eye), "-tz", "0",
+                       "-cc", repr(curv), "-vv", "1", "-iv", "0", dem, out]
+                t_g = _run_times(cmd, args.repeats)
+                peer = _read_mask(out)
+                print(f"  gdal_viewshed  {t_g:7.3f} s  (whole command)  ratio GDAL / ours {t_g / t_ours:5.2f}")
+                row.update(gdal=t_g, gdal_ratio=t_g / t_ours, **{"gdal_" + k: v for k, v in
+                                                                  _differences("GDAL", peer, ours, g.z.size).items()})
+            if grass:
+                flags = ["-b"] + (["-c", "-r", "refraction_coeff=0.14286"] if curv else [])
+                cmd = gx + ["r.viewshed", "input=dem", "output=vs", f"coordinates={x!r},{y!r}",
+                            f"observer_elevation={eye!r}", "target_elevation=0", "memory=4000",
+                            "--overwrite", "--quiet"] + flags
+                t_r = _run_times(cmd, args.grass_repeats, env=genv)
+                out = os.path.join(tmp, "grass.tif")
+                subprocess.run(gx + ["r.out.gdal", "input=vs", "output=" + out, "type=Byte", "--overwrite",
+                                     "--quiet", "-f"], check=True, capture_output=True, env=genv)
+                peer = _read_mask(out)
+                print(f"  r.viewshed     {t_r:7.3f} s  (whole command)  ratio GRASS / ours {t_r / t_ours:5.2f}")
+                row.update(grass=t_r, grass_ratio=t_r / t_ours, **{"grass_" + k: v for k, v in
+                                                                    _differences("r.viewshed", peer, ours,
+                                                                                 g.z.size).items()})
+            rows.append(row)
+    if gdal and not args.no_commands:
+        # command to command (curvature off: `terrainvis viewshed` has no curvature option yet)
+        print("\ncommand to command (whole processes: start-up, reading the GeoTIFF, writing the mask), "
+              "curvature off")
+        tv = shutil.which("terrainvis") or os.path.join(os.path.dirname(os.path.abspath(__import__("sys").executable)),
+                                                        "terrainvis")
+        for oname, (r, c) in _observers_high_low(g).items():
+            x, y = float(g.xs[c]), float(g.ys[r])
+            ours_cmd = [tv, "viewshed", dem, "--observer", repr(x), repr(y), "--height", repr(eye),
+                        "-o", os.path.join(tmp, "ours.tif")]
+            gdal_cmd = [gdal, "-q", "-ox", repr(x), "-oy", repr(y), "-oz", repr(eye), "-tz", "0", "-cc", "0",
+                        dem, os.path.join(tmp, "gdal_cmd.tif")]
+            subprocess.run(ours_cmd, check=True, capture_output=True)  # warm the numba cache
+            t_o = _run_times(ours_cmd, args.repeats)
+            t_g = _run_times(gdal_cmd, args.repeats)
+            print(f"  {oname}: terrainvis viewshed {t_o:6.3f} s, gdal_viewshed {t_g:6.3f} s, "
+                  f"ratio GDAL / ours {t_g / t_o:5.2f}")
+    print(f"\nsummary ({args.kind} {n}^2, eye {eye} m; medians; ratios = peer / ours)")
+    heads = ("observer", "curv", "ours s", "GDAL s", "GDAL x", "GDAL diff %", "near %", "GRASS s", "GRASS x",
+             "GRASS diff %", "near %")
+    print(" ".join(f"{h:>12}" for h in heads))
+    nan = float("nan")
+    for rw in rows:
+        vals = (rw["observer"], f"{rw['curvature']:g}", f"{rw['ours']:.3f}", f"{rw.get('gdal', nan):.3f}",
+                f"{rw.get('gdal_ratio', nan):.2f}", f"{100 * rw.get('gdal_share', nan):.3f}",
+                f"{100 * rw.get('gdal_near', nan):.1f}", f"{rw.get('grass', nan):.3f}",
+                f"{rw.get('grass_ratio', nan):.2f}", f"{100 * rw.get('grass_share', nan):.3f}",
+                f"{100 * rw.get('grass_near', nan):.1f}")
+        print(" ".join(f"{v:>12}" for v in vals))
+    shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -143,6 +143,34 @@ def work():
 }
 
 
+# the viewshed sweep (parallel over sectors) on a grazing worst case: a noisy tilted
+# plane seen from a corner, every ray skimming the ground (well over 5 s uninterrupted)
+_CASES["viewshed"] = ("""
+from terrainvis import HeightGrid
+def warm():
+    s = tv.synthetic_terrain("mountains", size=33)
+    tv.viewshed(s, (s.xs[3], s.ys[5]))
+n = 3072
+y, x = np.mgrid[0:n, 0:n] * 30.0
+g = HeightGrid(100.0 + 0.05 * x + 0.02 * y + np.random.default_rng(0).normal(0.0, 0.5, (n, n)), dx=30.0, dy=30.0)
+del x, y
+def work():
+    tv.viewshed(g, (g.xs[0], g.ys[0]), observer_height=2.0)
+""", False)
+# the parallel visibility matrix of the grid engine: 8,000 points, 32 million pairs
+_CASES["visibility-matrix"] = ("""
+def warm():
+    s = tv.synthetic_terrain("mountains", size=33)
+    tv.visibility_matrix(s, np.column_stack([s.xs[:4], s.ys[:4], s.z[0, :4] + 1.0]))
+g = tv.synthetic_terrain("mountains", size=1025)
+rng = np.random.default_rng(0)
+xy = np.column_stack([rng.uniform(0, g.xs[-1], 8000), rng.uniform(0, g.ys[-1], 8000)])
+pts = np.column_stack([xy, g.height_at(xy) + 2.0])
+def work():
+    tv.visibility_matrix(g, pts)
+""", False)
+
+
 def _script(tmp_path, name: str) -> tuple[str, bool]:
     body, measure = _CASES[name]
     path = tmp_path / f"{name}.py"

@@ -236,7 +236,7 @@ def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
     return m
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _locate(v, iw, lo, hi, uniform, x):
     """Index i in [lo, hi) with v[i] <= x < v[i+1] (clamped), v local coordinates from 0."""
     if uniform:
@@ -504,15 +504,19 @@ def grid_pairs(g, a, b, order, delta, end_radius, los, tol, kc, out):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_matrix(g, p, perm, delta, end_radius, tol, kc, out):
+def grid_matrix(g, p, perm, delta, end_radius, tol, kc, out, stop):
     """Visibility matrix of the points ``p`` (already in walk order) on the :data:`WalkGrid` ``g``.
 
     Row k and row n-1-k are handled by the same iteration so every iteration has n-1
     pairs (balanced load). Result (i, j) of the ordered points goes to
-    ``out[perm[i], perm[j]]`` and its mirror; the diagonal is set True.
+    ``out[perm[i], perm[j]]`` and its mirror; the diagonal is set True. ``stop`` is the
+    stop flag of :mod:`terrainvis._interrupt`, read at the start of every iteration (an
+    iteration with it set does nothing; the partial result is then never used).
     """
     n = p.shape[0]
     for k in nb.prange((n + 1) // 2):
+        if stop[0] != 0:
+            continue
         st = new_stack(g.ltop)
         kk = np.int64(k)
         for h in range(2):

@@ -27,8 +27,9 @@ rings ``R1, 2 R1, 4 R1, ...`` so that a wedge is at most about 0.7 cells wide wh
 used). For every wedge the sweep keeps
 
 * an upper bound of ``s`` over every surface point in the wedge of the annuli swept so
-  far (no ray in the wedge has a higher horizon there), per block of ``BLOCK`` rings
-  (``hist``), for the current block (``blk``) and for all completed blocks (``ubp``), and
+  far (no ray in the wedge has a higher horizon there), per ring for the current and the
+  previous block of ``BLOCK`` rings (``rings``), per completed block (``hist``) and for
+  all completed blocks (``ubp``), and
 * ``lb``: a value such that every ray in the wedge crosses a surface point (at a distance
   of at least ``delta`` from the eye) whose slope exceeds it by enough to block any target
   of slope below ``lb`` (the clearance tolerance is folded in).
@@ -41,8 +42,9 @@ undecided and the caller answers them with the pair engine itself.
 *Deciding a target* on sample ring j (the bounds then hold the rings < j): blocked if
 ``lb`` exceeds its slope; otherwise the part of its ray beyond the box of rings < j is
 walked exactly; then it is visible if its slope is at least the upper bound, and
-otherwise the blocks of rings whose bound reaches its slope are walked exactly too (so
-only the parts of the ray near its horizon are walked).
+otherwise the rings (near the target) or blocks of rings (farther back) whose bound
+reaches its slope are walked exactly too (so only the parts of the ray near its horizon
+are walked).
 
 Kernel arguments
 ----------------
@@ -58,7 +60,7 @@ The kernels read their state through named tuples built by
 * :data:`Layout` the sectors and wedges (sectors, wedges near the eye, first refining
   ring, last edge-clipped ring, last ring);
 * :data:`Targets` the targets and their output codes;
-* :data:`Wedges` one sector's wedge bounds (``ubp``, ``blk``, ``lb``, ``hist``).
+* :data:`Wedges` one sector's wedge bounds (``ubp``, ``lb``, ``hist``, ``rings``).
 
 A ray or segment is the 6-tuple ``(ex, ey, ez, dx, dy, dz)`` of the points
 ``E + t d``; a window of wedges is ``(glo, nloc, bsz)`` (first global wedge index held,
@@ -77,6 +79,9 @@ from ._kernels import _canonical, _locate, curved_min, interval_start
 
 _INF = np.inf
 
+#: A ring index beyond every grid (``_box_exit`` of it is inf).
+_BEYOND = 1 << 40
+
 #: Codes of the sweep's output (int8 per sample).
 BLOCKED = 0
 VISIBLE = 1
@@ -93,8 +98,10 @@ _LEPS = 1e-9
 #: The surface, in local coordinates (origin at the grid's first sample): ``z`` (rows,
 #: cols) float64 heights (NaN = nodata); ``xs`` (cols,), ``ys`` (rows,) float64
 #: coordinates; ``ixw`` (cols - 1,), ``iyw`` (rows - 1,) inverse cell widths; ``uniform``
-#: (both spacings uniform) and ``has_nan`` (the grid holds nodata), bools.
-SweepGrid = namedtuple("SweepGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan"])
+#: (both spacings uniform) and ``has_nan`` (the grid holds nodata), bools; ``cmax``
+#: (segments, cols) and ``rmax`` (rows, segments) the largest height of each column's and
+#: each row's aligned runs of SEG cells (:func:`strip_max`).
+SweepGrid = namedtuple("SweepGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan", "cmax", "rmax"])
 #: The eye: its cell ``(re, ce)`` (ints) and its position ``(ex, ey, ez)`` (local coordinates).
 Eye = namedtuple("Eye", ["re", "ce", "ex", "ey", "ez"])
 #: The predicate's numbers and the bounds' margins (floats): ``ht`` target height above
@@ -115,10 +122,12 @@ Layout = namedtuple("Layout", ["nsec", "b0", "r1", "jnear", "jstop"])
 #: ``tcode`` (m,) int8 their codes.
 Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "torder", "tcode"])
 #: One sector's wedge bounds, each (nfin + 2,) float64 (local wedge index i is global
-#: ``s * n - 1 + i``): ``ubp`` upper bounds over the completed blocks of rings, ``blk``
-#: over the current block, ``lb`` lower bounds of the horizon over all rings swept, and
-#: ``hist`` (blocks, nfin + 2) the upper bounds of each completed block.
-Wedges = namedtuple("Wedges", ["ubp", "blk", "lb", "hist"])
+#: ``s * n - 1 + i``): ``ubp`` upper bounds over the completed blocks of rings, ``ubold``
+#: over the completed blocks older than the previous one, ``lb`` lower bounds of the
+#: horizon over all rings swept, ``hist`` (blocks, nfin + 2) the upper bounds of each
+#: completed block, and ``quads`` (2 BLOCK / QUAD, nfin + 2) the upper bounds of each
+#: quad of QUAD rings of the current and the previous block (quad k in row ``k % NQUAD``).
+Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads"])
 
 
 # --------------------------------------------------------------------------- geometry
@@ -161,7 +170,7 @@ def _direction(p):
     return p - 3.0, p - 4.0
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def locate(v, iw, uniform, x):
     """Index i in [0, len(v) - 2] with v[i] <= x < v[i+1] (clamped); v local, from 0."""
     return _locate(v, iw, 0, v.shape[0] - 1, uniform, x)
@@ -326,8 +335,126 @@ def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
     return best
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def walk_min(g, ray, t0, t1, stop, bulge):
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``
+    (:func:`_walk_edges` on a grid without nodata, :func:`_walk_cells` otherwise)."""
+    if g.has_nan:
+        return _walk_cells(g, ray, t0, t1, stop, bulge)
+    return _walk_edges(g, ray, t0, t1, stop, bulge)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _walk_edges(g, ray, t0, t1, stop, bulge):
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on a grid without nodata.
+
+    Cell by cell (a DDA): the clearance is evaluated where the ground track leaves the
+    cell, on the grid line it crosses (the surface there is the interpolation along that
+    edge), and where it crosses the cell's diagonal (along the diagonal); between those
+    points it is linear (under earth curvature, ``bulge > 0``, linear less ``bulge t (1 -
+    t)``, whose minimum on each piece :func:`curved_min` adds). The start is evaluated in
+    its cell. Returns as soon as the minimum falls below ``stop``.
+    """
+    if t1 < t0:
+        return _INF
+    xs, ys, ixw, iyw, z = g.xs, g.ys, g.ixw, g.iyw, g.z
+    ex, ey, ez, dx, dy, dz = ray
+    nr = ys.shape[0]
+    nc = xs.shape[0]
+    x = ex + t0 * dx
+    y = ey + t0 * dy
+    c = locate(xs, ixw, g.uniform, x)
+    r = locate(ys, iyw, g.uniform, y)
+    if dx < 0.0 and c > 0 and x <= xs[c]:
+        c -= 1
+    if dy < 0.0 and r > 0 and y <= ys[r]:
+        r -= 1
+    sx = 1 if dx > 0.0 else -1
+    sy = 1 if dy > 0.0 else -1
+    idx = 1.0 / dx if dx != 0.0 else 0.0
+    idy = 1.0 / dy if dy != 0.0 else 0.0
+    t = t0
+    fa = ez + t * dz - _cell_z(z, xs, ys, ixw, iyw, r, c, x, y)
+    best = fa if bulge == 0.0 else fa - bulge * t * (1.0 - t)
+    if best < stop:
+        return best
+    while True:
+        tx = _INF
+        ty = _INF
+        if dx > 0.0:
+            tx = (xs[c + 1] - ex) * idx
+        elif dx < 0.0:
+            tx = (xs[c] - ex) * idx
+        if dy > 0.0:
+            ty = (ys[r + 1] - ey) * idy
+        elif dy < 0.0:
+            ty = (ys[r] - ey) * idy
+        tn = min(tx, ty, t1)
+        if tn < t:
+            tn = t
+        # the diagonal (r, c)-(r+1, c+1) inside (t, tn)
+        den = dx * ixw[c] - dy * iyw[r]
+        if den != 0.0:
+            td = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
+            if td > t and td < tn:
+                u = (ex + td * dx - xs[c]) * ixw[c]
+                fd = ez + td * dz - (z[r, c] + u * (z[r + 1, c + 1] - z[r, c]))
+                e = fd if bulge == 0.0 else curved_min(fa, fd, t, td, bulge)
+                if e < best:
+                    best = e
+                    if best < stop:
+                        return best
+                fa = fd
+                t = td
+        # where the track leaves the cell (or the interval ends). Which line it crosses
+        # is told by tx <= ty, not by tn == tx: rounding can put a start on a grid line a
+        # hair inside the cell it leaves, and tn is then raised from tx (or ty) to t
+        if tn >= t1:
+            xn = ex + t1 * dx
+            yn = ey + t1 * dy
+            fn = ez + t1 * dz - _cell_z(z, xs, ys, ixw, iyw, r, c, xn, yn)
+        elif tx <= ty:
+            cn = c + 1 if dx > 0.0 else c
+            v = min(max((ey + tn * dy - ys[r]) * iyw[r], 0.0), 1.0)
+            fn = ez + tn * dz - (z[r, cn] + v * (z[r + 1, cn] - z[r, cn]))
+        else:
+            rn = r + 1 if dy > 0.0 else r
+            u = min(max((ex + tn * dx - xs[c]) * ixw[c], 0.0), 1.0)
+            fn = ez + tn * dz - (z[rn, c] + u * (z[rn, c + 1] - z[rn, c]))
+        e = fn if bulge == 0.0 else curved_min(fa, fn, t, tn, bulge)
+        if e < best:
+            best = e
+            if best < stop:
+                return best
+        if tn >= t1:
+            break
+        if tx <= tn:
+            c += sx
+        if ty <= tn:
+            r += sy
+        if c < 0 or c > nc - 2 or r < 0 or r > nr - 2:
+            break
+        fa = fn
+        t = tn
+    return best
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cell_z(z, xs, ys, ixw, iyw, r, c, x, y):
+    """Height of cell (r, c)'s surface at (x, y), clamped into the cell (as the pair engine)."""
+    u = min(max((x - xs[c]) * ixw[c], 0.0), 1.0)
+    v = min(max((y - ys[r]) * iyw[r], 0.0), 1.0)
+    z00 = z[r, c]
+    z11 = z[r + 1, c + 1]
+    if u >= v:
+        z01 = z[r, c + 1]
+        return z00 + u * (z01 - z00) + v * (z11 - z01)
+    z10 = z[r + 1, c]
+    return z00 + v * (z10 - z00) + u * (z11 - z10)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _walk_cells(g, ray, t0, t1, stop, bulge):
     """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``.
 
     ``ray`` is ``(ex, ey, ez, dx, dy, dz)`` in local coordinates. The ground track is
@@ -402,7 +529,7 @@ def walk_targets(g, eye, tx, ty, tz, delta, tol, kc, out):
         if tau < 0.0:
             out[i] = _INF
             continue
-        out[i] = walk_min(g, seg, tau, 1.0 - tau, -tol, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
+        out[i] = _walk_cells(g, seg, tau, 1.0 - tau, -tol, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
 
 
 # --------------------------------------------------------------------------- bounds
@@ -738,7 +865,7 @@ def curvature_pads(kc, diag2, dring, rel, far):
     return kc * (diag + 0.125 * diag2 / dring + rel * far), kc * diag
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _ring_distance(g, eye, k):
     """Horizontal distance from the eye to the boundary of the box of cell rings <= k
     (its sides inside the grid): every point outside the box is at least this far."""
@@ -826,7 +953,7 @@ def _cell_path(q, j, re, ce, nr, nc):
     return (ra, ca0, 0, 1, max(na, 0)), (rb0, cb, 1, 0, max(nb_, 0))
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _box_exit(g, eye, k, dx, dy):
     """Parameter where the ray E + t (dx, dy) leaves the box of cell rings <= k."""
     xs, ys = g.xs, g.ys
@@ -890,38 +1017,45 @@ def _run_range(g, eye, q, run, plo, phi):
     return i0, lo - 1
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _run_lo(run, i0, i1):
+    """First row (vertical run) or column (horizontal run) of cells i0..i1 of a run."""
+    if run[3] == 0:
+        return min(run[0] + i0 * run[2], run[0] + i1 * run[2])
+    return min(run[1] + i0 * run[3], run[1] + i1 * run[3])
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _fill_run(g, eye, q, run, i0, i1, bs, bp, kc):
-    """Slopes and pseudo-angles of the corners of cells i0..i1 of a run, as two lines.
+def _fill(g, eye, q, run, lo, k0, k1, buf, kc):
+    """Slopes, pseudo-angles and distances of the samples k0..k1 of a run's two lines.
 
     Vertical run (dc == 0): line 0 is column c0 and line 1 column c0 + 1, indexed by
-    row - rlo. Horizontal run: line 0 is row r0 and line 1 row r0 + 1, indexed by
-    col - clo. ``bs`` and ``bp`` (2, length) get the slopes and pseudo-angles of the two
-    lines. Returns (rlo or clo, number of samples per line).
+    row - lo. Horizontal run: line 0 is row r0 and line 1 row r0 + 1, indexed by
+    col - lo. ``buf`` (3, 2, length) gets the slopes, pseudo-angles and distances.
     """
-    r0, c0, dr, dc = run[0], run[1], run[2], run[3]
-    m = i1 - i0 + 2
-    if dc == 0:
-        lo = min(r0 + i0 * dr, r0 + i1 * dr)
-    else:
-        lo = min(c0 + i0 * dc, c0 + i1 * dc)
-    for kk in range(2 * m):
-        k = kk >> 1
-        line = kk & 1
-        if dc == 0:
-            rr = lo + k
-            cc = c0 + line
-        else:
-            rr = r0 + line
-            cc = lo + k
-        sv, pv = _sample_val(g, eye, rr, cc, q, kc)
-        bs[line, k] = sv
-        bp[line, k] = pv
-    return lo, m
+    r0, c0, dc = run[0], run[1], run[3]
+    for k in range(k0, k1 + 1):
+        for line in range(2):
+            if dc == 0:
+                rr = lo + k
+                cc = c0 + line
+            else:
+                rr = r0 + line
+                cc = lo + k
+            dx = g.xs[cc] - eye.ex
+            dy = g.ys[rr] - eye.ey
+            d = np.sqrt(dx * dx + dy * dy)
+            buf[0, line, k] = (g.z[rr, cc] - eye.ez) / d - kc * d
+            buf[1, line, k] = _unwrap(diamond(dx, dy), q)
+            buf[2, line, k] = d
 
 
 #: Rings per block of the wedges' history (a multiple of it is where the wedges refine).
 BLOCK = 16
+#: Rings per quad: the recent history's unit (the previous and the current block).
+QUAD = 4
+#: Quads kept (those of two blocks).
+NQUAD = 2 * BLOCK // QUAD
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -935,7 +1069,7 @@ def _wedge_slot(p, bsz, glo):
     return g - glo, fr < 1e-9 * k4, fr > 1.0 - 1e-9 * k4
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _wedge_value(arr, p, bsz, glo):
     """Value of the wedge holding pseudo-angle p (the larger of both near a boundary)."""
     i, at_lo, at_hi = _wedge_slot(p, bsz, glo)
@@ -971,77 +1105,199 @@ def _decide(g, eye, rules, w, j, win, tg):
     ``win`` is ``(s, glo, bsz, b0, r1, nsec)``: the sector, its window of wedges and the
     layout. ``tg`` is ``(p, tdx, tdy, nt, dist, st, slack)``: the target's unwrapped
     pseudo-angle, its offset from the eye, its horizontal distance, its slope and that
-    slope's rounding slack. The part beyond the box of rings <= j - 1 is walked exactly;
-    the upper bound of the wedge is the larger of ``ubp`` (completed blocks of rings) and
-    ``blk`` (the current block). Returns (code, how): how 1 (decided by that walk and the
-    upper bound), 2 (by also walking the blocks of rings whose bound reaches the target's
-    slope) or 3 (undecided).
+    slope's rounding slack. The part beyond the box of rings <= j - 1 (annulus j) is
+    always walked exactly; when the target's slope reaches the wedge's upper bound (the
+    largest of ``ubp``, over the completed blocks, and the current block's quads) the
+    rings whose bounds reach it are walked too, with annulus j as one walk
+    (:func:`_block_walk`). Returns (code, how): how 1 (decided by the last ring's walk
+    and the upper bound), 2 (by walking rings whose bound reaches the target's slope) or
+    3 (undecided).
     """
     glo, bsz = win[1], win[2]
     p, tdx, tdy, nt, dist, st, slack = tg
-    tolm = rules.tol + rules.marg
     length = np.sqrt(dist * dist + nt * nt)
     tau = rules.delta / length
-    tq = max(_box_exit(g, eye, j - 1, tdx, tdy), tau)
     ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
-    bulge = rules.kc * (dist * dist)
-    cl = walk_min(g, ray, tq, 1.0 - tau, -tolm, bulge)
-    if cl < -tolm:
-        return BLOCKED, 1
-    if cl < -rules.tol + rules.marg:
-        return UNDECIDED, 3
-    ubv = max(_wedge_value(w.ubp, p, bsz, glo), _wedge_value(w.blk, p, bsz, glo))
+    ubv = _wedge_value(w.ubp, p, bsz, glo)
+    for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
+        ubv = max(ubv, _wedge_value(w.quads[qk % NQUAD], p, bsz, glo))
     if st - slack >= ubv:
+        # the bounds clear every ring before: only the last one (annulus j) is walked
+        tolm = rules.tol + rules.marg
+        cl = _walk_rings(g, eye, ray, j, _BEYOND, tau, 1.0 - tau, tolm, rules.kc * (dist * dist))
+        if cl < -tolm:
+            return BLOCKED, 1
+        if cl < -rules.tol + rules.marg:
+            return UNDECIDED, 3
         return VISIBLE, 1
-    res = _block_walk(g, eye, rules, w, j, win, ray, p, st - slack, tau, tq)
-    how = 3
-    if res != UNDECIDED:
-        how = 2
-    return res, how
+    res = _block_walk(g, eye, rules, w, j, win, ray, p, st - slack, tau, 1.0 - tau)
+    return res, (3 if res == UNDECIDED else 2)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _block_walk(g, eye, rules, w, j, win, ray, p, smin, tau, t_end):
-    """Exact walk of the target's ray over the blocks of rings < j whose wedge maximum
-    reaches ``smin`` (the target's slope less its slack; ``p`` its unwrapped
-    pseudo-angle); the other blocks are clear.
+    """Exact walk of the target's ray over the rings < j whose wedge maximum reaches
+    ``smin`` (the target's slope less its slack; ``p`` its unwrapped pseudo-angle); the
+    other rings are clear.
 
-    Block b holds rings [BLOCK b, BLOCK b + BLOCK) (``w.hist[b]``; the current, partial
-    block is ``w.blk``) at the wedge resolution of its level; ``win`` as in
-    :func:`_decide`. The walks cover t in [tau, t_end] (t_end: where the exact last-rings
-    walk began). Returns BLOCKED, VISIBLE or UNDECIDED (some part within the margin of
+    Blocks of BLOCK rings older than the previous block are judged whole (``w.hist[b]``),
+    and skipped at once when their common maximum ``w.ubold`` clears; the previous block
+    (unless its maximum ``w.hist`` clears) and the current one quad by quad
+    (``w.quads``), each at the wedge resolution of its level. So near the target, where a
+    visible target's horizon usually is, only the quads of rings that can reach its slope
+    are walked; consecutive rings to walk are walked as one piece. ``win`` as in
+    :func:`_decide`. Annulus j, beyond the bounds, is walked too. The walks cover t in
+    [tau, t_end]. Returns BLOCKED, VISIBLE or UNDECIDED (some part within the margin of
     the threshold, nothing clearly blocked).
     """
-    s, b0, r1, nsec = win[0], win[3], win[4], win[5]
+    s, glo, bsz, b0, r1, nsec = win
     tolm = rules.tol + rules.marg
+    amb = -rules.tol + rules.marg
+    bulge = rules.kc * (ray[3] * ray[3] + ray[4] * ray[4])
     nfull = j // BLOCK
     ambiguous = False
-    for b in range(nfull + 1):
+    run_lo = -1  # first ring of the piece to walk (-1: none open)
+    run_hi = -1
+    b = 0
+    if nfull >= 2 and not _wedge_value(w.ubold, p, bsz, glo) > smin:
+        b = nfull - 1  # every old block clears
+    while b <= nfull:
         r_lo = BLOCK * b
         r_hi = min(r_lo + BLOCK - 1, j - 1)
-        if r_hi < r_lo:
-            continue
         bszb = b0 << _level(r_lo, r1)
-        nb_ = bszb // nsec
-        glob = s * nb_ - 1
+        glob = s * (bszb // nsec) - 1
         if b < nfull:
-            m = _wedge_value(w.hist[b], p, bszb, glob)
+            nparts = 1 if b < nfull - 1 else BLOCK // QUAD
+            clear = not _wedge_value(w.hist[b], p, bszb, glob) > smin
         else:
-            m = _wedge_value(w.blk, p, bszb, glob)
-        if m <= smin:
-            continue
-        t0 = tau
-        if b > 0:
-            t0 = max(t0, _box_exit(g, eye, r_lo - 1, ray[3], ray[4]))
-        t1 = min(_box_exit(g, eye, r_hi, ray[3], ray[4]), t_end)
-        if t1 <= t0:
-            continue
-        cl = walk_min(g, ray, t0, t1, -tolm, rules.kc * (ray[3] * ray[3] + ray[4] * ray[4]))
-        if cl < -tolm:
-            return BLOCKED
-        if cl < -rules.tol + rules.marg:
-            ambiguous = True
+            nparts = (r_hi - r_lo) // QUAD + 1 if r_hi >= r_lo else 0
+            clear = nparts == 0
+        if clear:
+            nparts = 0
+            if run_lo >= 0:
+                cl = _walk_rings(g, eye, ray, run_lo, run_hi, tau, t_end, tolm, bulge)
+                run_lo = -1
+                if cl < -tolm:
+                    return BLOCKED
+                if cl < amb:
+                    ambiguous = True
+        for k in range(nparts):
+            if b < nfull - 1:
+                a_lo = r_lo
+                a_hi = r_hi
+                reach = True
+            else:
+                a_lo = r_lo + QUAD * k
+                a_hi = min(a_lo + QUAD - 1, r_hi)
+                reach = _wedge_value(w.quads[(a_lo // QUAD) % NQUAD], p, bszb, glob) > smin
+            if reach:
+                if run_lo < 0:
+                    run_lo = a_lo
+                run_hi = a_hi
+                continue
+            if run_lo >= 0:
+                cl = _walk_rings(g, eye, ray, run_lo, run_hi, tau, t_end, tolm, bulge)
+                run_lo = -1
+                if cl < -tolm:
+                    return BLOCKED
+                if cl < amb:
+                    ambiguous = True
+        b += 1
+    # the rest of the ray beyond the bounds (annulus j, where an own target stands, or
+    # annuli j and j + 1 for another target) is always walked, joined to an open piece
+    cl = _walk_rings(g, eye, ray, run_lo if run_lo >= 0 else j, _BEYOND, tau, t_end, tolm, bulge)
+    if cl < -tolm:
+        return BLOCKED
+    if cl < amb:
+        ambiguous = True
     return UNDECIDED if ambiguous else VISIBLE
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _walk_rings(g, eye, ray, r_lo, r_hi, tau, t_end, tolm, bulge):
+    """Exact minimum clearance of the ray over the annuli r_lo..r_hi (r_hi ``_BEYOND``:
+    all annuli from r_lo on), within [tau, t_end] (inf when that is empty; the walk stops
+    below ``-tolm``)."""
+    t0 = tau
+    if r_lo > 0:
+        t0 = max(t0, _box_exit(g, eye, r_lo - 1, ray[3], ray[4]))
+    t1 = min(_box_exit(g, eye, r_hi, ray[3], ray[4]), t_end)
+    if t1 <= t0:
+        return _INF
+    return walk_min(g, ray, t0, t1, -tolm, bulge)
+
+
+#: Cells per segment of the hidden test (segments are aligned on the grid: the cells of
+#: rows, or columns, [SEG k, SEG k + SEG) of one run).
+SEG = 8
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def strip_max(z, cmax, rmax):
+    """``cmax[k, c]``: the largest height of column c's samples rows [SEG k, SEG k + SEG];
+    ``rmax[r, k]`` of row r's samples columns [SEG k, SEG k + SEG] (NaN ignored, -inf when
+    all are NaN)."""
+    nr, nc = z.shape
+    cmax[:, :] = -_INF
+    rmax[:, :] = -_INF
+    for r in range(nr):
+        for c in range(nc):
+            v = z[r, c]
+            if not v == v:
+                continue
+            k = r // SEG
+            if k < cmax.shape[0] and v > cmax[k, c]:
+                cmax[k, c] = v
+            if r % SEG == 0 and k > 0 and v > cmax[k - 1, c]:
+                cmax[k - 1, c] = v
+            k = c // SEG
+            if k < rmax.shape[1] and v > rmax[r, k]:
+                rmax[r, k] = v
+            if c % SEG == 0 and k > 0 and v > rmax[r, k - 1]:
+                rmax[r, k - 1] = v
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _seg_hidden(eye, rules, lb, win, rect, zmax, q):
+    """Whether the rectangle ``rect`` = (x0, x1, y0, y1) (relative to the eye, not holding
+    it), whose heights are at most ``zmax``, lies under the lower bound of every wedge of
+    the window ``win`` = (glo, nloc, k4) that it meets: ``(hidden, pmin, pmax)``.
+
+    Every surface point P of a hidden rectangle, and every target standing ``ht`` above
+    one, has a slope below ``lb`` of its wedge, so a higher point on its own ray comes
+    first: the targets are blocked, and P can never be the horizon of a ray through it,
+    so its cells need no bounds (a point dominating P either is in the bounds or is
+    itself dominated by an earlier one, down to the first rings). The slope of any point
+    is at most ``(zmax + ht - ez) / d`` at its distance d, less ``kc d``.
+    """
+    glo, nloc, k4 = win
+    x0, x1, y0, y1 = rect
+    ax = x0 if x0 > 0.0 else (-x1 if x1 < 0.0 else 0.0)
+    ay = y0 if y0 > 0.0 else (-y1 if y1 < 0.0 else 0.0)
+    dmin = np.sqrt(ax * ax + ay * ay)
+    fx = max(abs(x0), abs(x1))
+    fy = max(abs(y0), abs(y1))
+    num = zmax + rules.ht - eye.ez
+    if num >= 0.0:
+        sup = num / dmin
+    else:
+        sup = num / np.sqrt(fx * fx + fy * fy)
+    sup = sup - rules.kc * dmin
+    sup = sup + 2.0 * rules.e_h / dmin + _REL * (abs(sup) + rules.kc * dmin)
+    p0 = _unwrap(diamond(x0, y0), q)
+    p1 = _unwrap(diamond(x1, y0), q)
+    p2 = _unwrap(diamond(x0, y1), q)
+    p3 = _unwrap(diamond(x1, y1), q)
+    pmin = min(min(p0, p1), min(p2, p3))
+    pmax = max(max(p0, p1), max(p2, p3))
+    g0 = int(np.floor((pmin - _PEPS) * k4))
+    g1 = int(np.floor((pmax + _PEPS) * k4))
+    if g0 < glo or g1 > glo + nloc - 1 or not (sup == sup):
+        return False, pmin, pmax
+    for gg in range(g0, g1 + 1):
+        if not lb[gg - glo] > sup:
+            return False, pmin, pmax
+    return True, pmin, pmax
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -1088,7 +1344,7 @@ def bucket_targets(g, eye, tx, ty, nsec, jstop, tstart, torder):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def sweep(g, eye, rules, lay, tg, perm, stats):
+def sweep(g, eye, rules, lay, tg, perm, stats, stop):
     """Decide the targets with rigorous horizon bounds and partial exact walks.
 
     One task per angular sector (``lay.nsec`` sectors, a multiple of 4, ``perm`` spreads
@@ -1101,64 +1357,180 @@ def sweep(g, eye, rules, lay, tg, perm, stats):
     (other targets) get BLOCKED, VISIBLE or UNDECIDED (the caller answers those with the
     pair engine); targets already NOT_TARGET are skipped. ``stats[sector, 0..3]`` counts
     targets decided by ``lb``, by the upper bound and the last rings' walk, by walking
-    blocks of rings, and left undecided.
+    blocks of rings, and left undecided. ``stop`` is the stop flag of
+    :mod:`terrainvis._interrupt`: every sector reads it once per ring and returns when it
+    is set (the codes are then incomplete and never used).
     """
     for it in nb.prange(lay.nsec):
-        _sector(g, eye, rules, lay, tg, perm[it], stats)
+        _sector(g, eye, rules, lay, tg, perm[it], stats, stop)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _close_block(w, j, n):
-    """Close the block of rings j - BLOCK .. j - 1: keep it in the history, fold it into
-    ``ubp`` and start an empty current block."""
+def _close_block(w, j, n, r1):
+    """Close the block of rings j - BLOCK .. j - 1: keep its upper bounds (the largest of
+    its quads') in the history, fold them into ``ubp``, and fold the block before it into
+    ``ubold``."""
     b = j // BLOCK - 1
+    q0 = BLOCK * b // QUAD
     for i in range(n + 2):
-        w.hist[b, i] = w.blk[i]
-        w.ubp[i] = max(w.ubp[i], w.blk[i])
-        w.blk[i] = -_INF
+        v = -_INF
+        for qk in range(q0, q0 + BLOCK // QUAD):
+            v = max(v, w.quads[qk % NQUAD, i])
+        w.hist[b, i] = v
+        w.ubp[i] = max(w.ubp[i], v)
+    if b >= 1:
+        # block b - 1 becomes old; it may hold half as many wedges (refined at block b)
+        coarse = _level(BLOCK * (b - 1), r1) < _level(BLOCK * b, r1)
+        for i in range(n + 2):
+            ic = ((i - 1) >> 1) + 1 if coarse else i
+            w.ubold[i] = max(w.ubold[i], w.hist[b - 1, ic])
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _refine(w, tmp, n):
-    """Split each of the ``n`` wedges (plus guards) in two (at a block boundary, where
-    ``blk`` is empty): local index i covers global ``s * n - 1 + i``."""
+    """Split each of the ``n`` wedges (plus guards) in two (at a block boundary: the new
+    block's rings start at the new resolution): local index i covers global
+    ``s * n - 1 + i``."""
     for i in range(n + 2):
         tmp[0, i] = w.ubp[i]
         tmp[1, i] = w.lb[i]
+        tmp[2, i] = w.ubold[i]
     for i in range(2 * n + 2):
         ic = ((i - 1) >> 1) + 1
         w.ubp[i] = tmp[0, ic]
         w.lb[i] = tmp[1, ic]
-        w.blk[i] = -_INF
+        w.ubold[i] = tmp[2, ic]
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _add_cells(w, win, ann, runs, ranges, bs, bp):
-    """Add the cells of both runs of an annulus (away from the eye) with :func:`_cell_bounds`.
+def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
+    """Add the cells of both runs of annulus ``ring`` (away from the eye) with
+    :func:`_cell_bounds`, except those of hidden segments.
 
     ``runs`` the two runs (:func:`_cell_path`), ``ranges`` (3, 2) int64 each run's first
-    and last cell index and the first row or column of its corner buffers ``bs``, ``bp``
-    (run, line, index).
+    and last cell index and the first row or column of its sample buffers ``buf`` (run,
+    quantity, line, index; see :func:`_fill`); ``hidden`` (run, segment) flags the
+    segments (SEG-aligned, counted from the one holding that first row or column) whose
+    points lie under the lower bound (:func:`_seg_hidden`).
     """
+    cur = w.quads[(ring // QUAD) % NQUAD]
     for run in range(2):
         if ranges[1, run] < ranges[0, run]:
             continue
         r0, c0, dr, dc = runs[run][0], runs[run][1], runs[run][2], runs[run][3]
         lo = ranges[2, run]
+        slo = lo // SEG
         for i in range(ranges[0, run], ranges[1, run] + 1):
             if dc == 0:
-                k = r0 + i * dr - lo
-                sv = (bs[run, 0, k], bs[run, 1, k], bs[run, 0, k + 1], bs[run, 1, k + 1])
-                pv = (bp[run, 0, k], bp[run, 1, k], bp[run, 0, k + 1], bp[run, 1, k + 1])
+                a = r0 + i * dr
+                k = a - lo
+                if hidden[run, a // SEG - slo]:
+                    continue
+                sv = (buf[run, 0, 0, k], buf[run, 0, 1, k], buf[run, 0, 0, k + 1], buf[run, 0, 1, k + 1])
+                pv = (buf[run, 1, 0, k], buf[run, 1, 1, k], buf[run, 1, 0, k + 1], buf[run, 1, 1, k + 1])
             else:
-                k = c0 + i * dc - lo
-                sv = (bs[run, 0, k], bs[run, 0, k + 1], bs[run, 1, k], bs[run, 1, k + 1])
-                pv = (bp[run, 0, k], bp[run, 0, k + 1], bp[run, 1, k], bp[run, 1, k + 1])
-            _cell_bounds(w.blk, w.lb, win, ann, sv, pv)
+                a = c0 + i * dc
+                k = a - lo
+                if hidden[run, a // SEG - slo]:
+                    continue
+                sv = (buf[run, 0, 0, k], buf[run, 0, 0, k + 1], buf[run, 0, 1, k], buf[run, 0, 1, k + 1])
+                pv = (buf[run, 1, 0, k], buf[run, 1, 0, k + 1], buf[run, 1, 1, k], buf[run, 1, 1, k + 1])
+            _cell_bounds(cur, w.lb, win, ann, sv, pv)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _sector(g, eye, rules, lay, tg, s, stats):
+def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
+    """Fill a run's samples and decide the targets on its outer line, segment by segment.
+
+    ``span`` is ``(j, q, i0, i1, lo, cells, plo, phi)``: the sample ring, the quadrant,
+    the run's cells in the window, its
+    first row or column, whether annulus j is bounded cell by cell (then each SEG-aligned
+    segment is first tested with :func:`_seg_hidden`; a hidden one gets no samples, its
+    targets are blocked and ``hidden`` flags it) and the sector's own pseudo-angles
+    [plo, phi). Returns how many targets the lower bound blocked; ``counts`` gets the
+    others (see :func:`sweep`).
+    """
+    j, q, i0, i1, lo, cells, plo, phi = span
+    r0, c0, dr, dc = rn[0], rn[1], rn[2], rn[3]
+    vertical = dc == 0
+    if vertical:
+        outer = 1 if c0 > eye.ce else 0
+    else:
+        outer = 1 if r0 > eye.re else 0
+    glo, bsz = dwin[1], dwin[2]
+    last = lo + i1 - i0  # last cell (row or column)
+    n_lb = 0
+    a = lo
+    slo = lo // SEG
+    while a <= last:
+        b = min((a // SEG + 1) * SEG - 1, last)  # cells a..b: one aligned segment
+        top = b + 1 if b == last else b  # its samples a..top (the next segment starts at b + 1)
+        hid = False
+        pmin = pmax = 0.0
+        if cells:
+            if vertical:
+                zmax = max(g.cmax[a // SEG, c0], g.cmax[a // SEG, c0 + 1])
+                rect = (g.xs[c0] - eye.ex, g.xs[c0 + 1] - eye.ex, g.ys[a] - eye.ey, g.ys[b + 1] - eye.ey)
+            else:
+                zmax = max(g.rmax[r0, a // SEG], g.rmax[r0 + 1, a // SEG])
+                rect = (g.xs[a] - eye.ex, g.xs[b + 1] - eye.ex, g.ys[r0] - eye.ey, g.ys[r0 + 1] - eye.ey)
+            hid, pmin, pmax = _seg_hidden(eye, rules, w.lb, (glo, bsz // dwin[5] + 2, bsz * 0.25), rect, zmax, q)
+        hidden[a // SEG - slo] = hid
+        if hid:
+            if tg.own:
+                whole = pmin >= plo + _PEPS and pmax < phi - _PEPS
+                for k in range(a, top + 1):
+                    if vertical:
+                        rr = k
+                        cc = c0 + outer
+                    else:
+                        rr = r0 + outer
+                        cc = k
+                    if tg.code[rr, cc] != UNDECIDED:
+                        continue
+                    if not whole:
+                        p = _unwrap(diamond(g.xs[cc] - eye.ex, g.ys[rr] - eye.ey), q)
+                        if p < plo or p >= phi:
+                            continue
+                    tg.code[rr, cc] = BLOCKED
+                    n_lb += 1
+            a = b + 1
+            continue
+        _fill(g, eye, q, rn, lo, a - lo, b + 1 - lo, buf, rules.kc)
+        if tg.own:
+            for k in range(a - lo, top - lo + 1):
+                p = buf[1, outer, k]
+                if p < plo or p >= phi:
+                    continue
+                if vertical:
+                    rr = lo + k
+                    cc = c0 + outer
+                else:
+                    rr = r0 + outer
+                    cc = lo + k
+                if tg.code[rr, cc] == NOT_TARGET:
+                    continue
+                dist = buf[2, outer, k]
+                if dist > rules.dmax:
+                    tg.code[rr, cc] = NOT_TARGET
+                    continue
+                nt = g.z[rr, cc] + rules.ht - eye.ez
+                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, rules.kc)
+                if blocked:
+                    tg.code[rr, cc] = BLOCKED
+                    n_lb += 1
+                else:
+                    tdx = g.xs[cc] - eye.ex
+                    tdy = g.ys[rr] - eye.ey
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
+                    tg.code[rr, cc] = res
+                    counts[how] += 1
+        a = b + 1
+    return n_lb
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _sector(g, eye, rules, lay, tg, s, stats, stop):
     """The sweep of one sector (see :func:`sweep`)."""
     xs, ys, z = g.xs, g.ys, g.z
     nsec, b0, r1, jnear, jstop = lay
@@ -1174,11 +1546,12 @@ def _sector(g, eye, rules, lay, tg, s, stats):
     blen = max(nr, nc) + 2
     q = s // (nsec // 4)
     w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
-               np.empty((jstop // BLOCK + 1, nfin + 2)))
-    tmp = np.empty((2, nfin + 2))
-    # corner buffers of the two runs: slopes and pseudo-angles of lines 0 and 1
-    bs = np.empty((2, 2, blen))
-    bp = np.empty((2, 2, blen))
+               np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
+    tmp = np.empty((3, nfin + 2))
+    # sample buffers of the two runs: slopes, pseudo-angles and distances of lines 0 and 1;
+    # the hidden flags of their segments
+    buf = np.empty((2, 3, 2, blen))
+    hidden = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
     ranges = np.zeros((3, 2), dtype=np.int64)  # first cell, last cell, buffer start per run
     # targets decided by the lower bound (counted apart: the hot path), then by the
     # upper bound and the last rings' walk, by block walks, and left undecided
@@ -1190,8 +1563,10 @@ def _sector(g, eye, rules, lay, tg, s, stats):
     plo = s * 4.0 / nsec
     phi = (s + 1) * 4.0 / nsec
     for j in range(0, jstop + 1):
+        if stop[0] != 0:
+            break
         if j > 0 and j % BLOCK == 0:
-            _close_block(w, j, n)
+            _close_block(w, j, n, r1)
         target_lev = _level(j, r1)
         while lev < target_lev:
             _refine(w, tmp, n)
@@ -1200,64 +1575,37 @@ def _sector(g, eye, rules, lay, tg, s, stats):
             lev += 1
         glo = s * n - 1
         nloc = n + 2
+        cur = w.quads[(j // QUAD) % NQUAD]
+        if j % QUAD == 0:
+            cur[:nloc] = -_INF
         if j < 2:
             # no targets yet (the caller answers rings 0 and 1 exactly); the cells next to
             # the eye are always clipped edge by edge
-            _annulus_edges(g, eye, j, (glo, nloc, bsz), w.blk, w.lb, lim)
+            _annulus_edges(g, eye, j, (glo, nloc, bsz), cur, w.lb, lim)
             continue
         dwin = (s, glo, bsz, b0, r1, nsec)
         plo_g = glo * 4.0 / bsz
         phi_g = (glo + nloc) * 4.0 / bsz
+        dring = _ring_distance(g, eye, j - 1)
+        rel = 0.25 * rules.diag2 / (dring * dring) * (1.0 + 1e-12)
+        cells = j > jnear and rel <= 1.0  # cells bounded from their corners, segments tested
         runs = _cell_path(q, j, eye.re, eye.ce, nr, nc)
         for run in range(2):
             ranges[0, run] = 0
             ranges[1, run] = -1
         for run in range(2):
             rn = runs[run]
-            r0, c0, dr, dc, nn = rn
-            if nn <= 0:
+            if rn[4] <= 0:
                 continue
             i0, i1 = _run_range(g, eye, q, rn, plo_g, phi_g)
             if i1 < i0:
                 continue
             ranges[0, run] = i0
             ranges[1, run] = i1
-            lo, m = _fill_run(g, eye, q, rn, i0, i1, bs[run], bp[run], kc)
+            lo = _run_lo(rn, i0, i1)
             ranges[2, run] = lo
-            # ---- decide the samples of sample ring j on the run's outer line
-            if not tg.own:
-                continue
-            if dc == 0:
-                outer = 1 if c0 > eye.ce else 0
-            else:
-                outer = 1 if r0 > eye.re else 0
-            for k in range(m):
-                p = bp[run, outer, k]
-                if p < plo or p >= phi:
-                    continue
-                if dc == 0:
-                    rr = lo + k
-                    cc = c0 + outer
-                else:
-                    rr = r0 + outer
-                    cc = lo + k
-                if tg.code[rr, cc] == NOT_TARGET:
-                    continue
-                tdx = xs[cc] - eye.ex
-                tdy = ys[rr] - eye.ey
-                dist = np.sqrt(tdx * tdx + tdy * tdy)
-                if dist > rules.dmax:
-                    tg.code[rr, cc] = NOT_TARGET
-                    continue
-                nt = z[rr, cc] + rules.ht - eye.ez
-                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, kc)
-                if blocked:
-                    tg.code[rr, cc] = BLOCKED
-                    n_lb += 1
-                else:
-                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
-                    tg.code[rr, cc] = res
-                    counts[how] += 1
+            n_lb += _run_segments(g, eye, rules, w, tg, rn, (j, q, i0, i1, lo, cells, plo, phi), dwin,
+                                  buf[run], hidden[run], counts)
         # ---- decide the other targets whose box of rings <= j - 1 the bounds now cover
         if ntg > 0:
             key = s * (jstop + 2) + j
@@ -1280,14 +1628,12 @@ def _sector(g, eye, rules, lay, tg, s, stats):
                     tg.tcode[t] = res
                     counts[how] += 1
         # ---- add annulus j
-        dring = _ring_distance(g, eye, j - 1)
-        rel = 0.25 * rules.diag2 / (dring * dring) * (1.0 + 1e-12)
-        if j <= jnear or not (rel <= 1.0):
-            _annulus_edges(g, eye, j, (glo, nloc, bsz), w.blk, w.lb, lim)
+        if not cells:
+            _annulus_edges(g, eye, j, (glo, nloc, bsz), cur, w.lb, lim)
             continue
         pad_hi, pad_lo = curvature_pads(kc, rules.diag2, dring, rel, _far_corner(g, eye, j))
         ann = (rel, 2.0 * rules.e_h / dring + pad_hi, (2.0 * rules.e_h + tolm) / dring + pad_lo, dring >= rules.r_lb)
-        _add_cells(w, (glo, nloc, bsz * 0.25), ann, runs, ranges, bs, bp)
+        _add_cells(w, j, (glo, nloc, bsz * 0.25), ann, runs, ranges, buf, hidden)
     counts[0] += n_lb
     for k in range(4):
         stats[s, k] = counts[k]

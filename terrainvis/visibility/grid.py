@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._interrupt import call
 from . import _kernels
 
 __all__ = ["GridAccel", "grid_accel", "grid_clearance", "grid_matrix"]
@@ -186,5 +187,7 @@ def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0
     acc = grid_accel(grid)
     order = _morton_order(points[:, :2], grid.extent).astype(np.int64)
     p = np.ascontiguousarray(_local(points, acc)[order])
-    _kernels.grid_matrix(_walk_grid(grid, acc), p, order, float(delta), float(end_radius), float(tol), float(kc), out)
+    # through the interrupt helper: Ctrl-C stops the parallel kernel within an iteration
+    call(_kernels.grid_matrix, _walk_grid(grid, acc), p, order, float(delta), float(end_radius), float(tol),
+         float(kc), out, work=n * n // 2)
     return out

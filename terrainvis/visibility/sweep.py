@@ -69,6 +69,7 @@ import math
 import numba
 import numpy as np
 
+from .._interrupt import call
 from .._validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..terrain import TIN, HeightGrid, as_terrain
@@ -340,7 +341,20 @@ def _local_axes(grid: HeightGrid):
 def _sweep_grid(grid: HeightGrid) -> _vk.SweepGrid:
     """The grid as the sweep kernels read it (local coordinates; no copies of the heights)."""
     xs, ys, ixw, iyw, uniform = _local_axes(grid)
-    return _vk.SweepGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0))
+    cmax, rmax = _strip_max(grid)
+    return _vk.SweepGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0), cmax, rmax)
+
+
+def _strip_max(grid: HeightGrid):
+    """Cached largest heights of each column's and row's aligned segments (:func:`_vk.strip_max`)."""
+    v = grid._cache.get("viewshed_strip_max")
+    if v is None:
+        rows, cols = grid.shape
+        cmax = np.empty(((rows - 2) // _vk.SEG + 1, cols))
+        rmax = np.empty((rows, (cols - 2) // _vk.SEG + 1))
+        _vk.strip_max(grid.z, cmax, rmax)
+        v = grid._cache["viewshed_strip_max"] = (cmax, rmax)
+    return v
 
 
 def _max_slope(grid: HeightGrid) -> float:
@@ -456,8 +470,9 @@ def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.nd
         _vk.bucket_targets(sg, veye, tx, ty, _N_SECTORS, jstop, tstart, torder)
         targets = _vk.Targets(False, np.zeros((1, 1), dtype=np.int8), tx, ty, tz, tstart, torder,
                               np.full(idx.size, _vk.UNDECIDED, dtype=np.int8))
-    _vk.sweep(sg, veye, _rules(grid, ez, query), _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
-              targets, _sector_order(_N_SECTORS), stats)
+    # through the interrupt helper: Ctrl-C stops the sweep within a ring of each sector
+    call(_vk.sweep, sg, veye, _rules(grid, ez, query), _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
+         targets, _sector_order(_N_SECTORS), stats, work=int(code.size))
     if not own:
         code.ravel()[idx] = targets.tcode
     return tuple(int(v) for v in stats.sum(axis=0)[:3])
