@@ -66,13 +66,22 @@ def as_points(value, name: str, dim: int, *, finite: bool = True) -> np.ndarray:
     return arr
 
 
-def as_positive_finite(value, name: str) -> float:
+def _real_number(value, name: str) -> float:
+    """``float(value)`` for a real number (not a string, bytes or a bool), else a TypeError naming ``name``.
+
+    The one parse behind :func:`as_positive_finite`, :func:`as_nonnegative_finite` and
+    :func:`as_height`, which then check its range.
+    """
     if isinstance(value, (str, bytes, bool, np.bool_)):
         raise TypeError(f"{name} must be a real number, got {describe(value)}")
     try:
-        out = float(value)
+        return float(value)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+
+
+def as_positive_finite(value, name: str) -> float:
+    out = _real_number(value, name)
     if not np.isfinite(out) or out <= 0:
         raise ValueError(f"{name} must be finite and > 0, got {value!r}")
     return out
@@ -80,12 +89,7 @@ def as_positive_finite(value, name: str) -> float:
 
 def as_nonnegative_finite(value, name: str, unit: str = "") -> float:
     """A finite real number >= 0 (``unit`` is named in the message, e.g. "z units")."""
-    if isinstance(value, (str, bytes, bool, np.bool_)):
-        raise TypeError(f"{name} must be a real number, got {describe(value)}")
-    try:
-        out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+    out = _real_number(value, name)
     if not np.isfinite(out) or out < 0:
         suffix = f" ({unit})" if unit else ""
         raise ValueError(f"{name} must be finite and >= 0{suffix}, got {value!r}")
@@ -156,12 +160,7 @@ def as_height(value, name: str, *, scale: float, ground: float = 0.0, tol_rel: f
     ...
     ValueError: observer_height must be within [-4.5e+09, 4.5e+09] for this terrain (float64 resolves ...
     """
-    if isinstance(value, (str, bytes, bool, np.bool_)):
-        raise TypeError(f"{name} must be a real number, got {describe(value)}")
-    try:
-        out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+    out = _real_number(value, name)
     if not np.isfinite(out):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     limit = height_limit(scale, ground, tol_rel)

@@ -225,3 +225,14 @@ def test_finite_scalar_accepts_numbers():
     assert sample_points(g, 1, offset=np.float32(1.5))[0, 2] == 1.5
     assert relocate(np.array([[0.5, 0.5, -4.0]]), g, "half", offset=np.array(2.0))[0, 2] == 2.0
     assert finite(3, "x") == 3.0 and isinstance(finite(3, "x"), float)
+
+
+@pytest.mark.parametrize("bad", ["1.5", b"1", True, np.bool_(False), None, object()])
+def test_real_number_parse_is_shared(bad):
+    """as_positive_finite, as_nonnegative_finite and as_height refuse the same non-numbers alike."""
+    from terrainvis._validate import as_height, as_nonnegative_finite, as_positive_finite
+
+    for check in (lambda: as_positive_finite(bad, "v"), lambda: as_nonnegative_finite(bad, "v"),
+                  lambda: as_height(bad, "v", scale=1000.0)):
+        with pytest.raises(TypeError, match=r"^v must be a real number, got "):
+            check()
