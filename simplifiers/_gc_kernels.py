@@ -60,6 +60,8 @@ import math
 import numba as nb
 import numpy as np
 
+from terrainvis.tolerances import ROW_SPAN_SNAP  # frozen into the kernels when they compile
+
 FREE = 0
 COVERED = 1
 VERTEX = 2
@@ -311,8 +313,8 @@ def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
         if lo > hi:
             continue
         if index_space:
-            c0 = max(cmin, int(math.ceil(lo - 1e-7)))
-            c1 = min(cmax, int(math.floor(hi + 1e-7)))
+            c0 = max(cmin, int(math.ceil(lo - ROW_SPAN_SNAP)))
+            c1 = min(cmax, int(math.floor(hi + ROW_SPAN_SNAP)))
         else:
             c0 = max(cmin, _first_at_least(gx, lo, cmin, cmax) - 1)
             c1 = min(cmax, _first_at_least(gx, hi, cmin, cmax))

@@ -38,6 +38,7 @@ import numpy as np
 from terrainvis._mesh import NotADiskError, boundary_loop, edge_keys, half_edges, signed_area2
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import HeightGrid
+from terrainvis.tolerances import DIVISOR_FLOOR, FACE_AREA_REL, STAR_MARGIN_MIN
 
 __all__ = ["PostError", "PostProcessor"]
 
@@ -86,7 +87,7 @@ class PostProcessor:
         self.corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
         self.corner_tol = corner_tol * min(float(np.diff(grid.xs).min()), float(np.diff(grid.ys).min()))
         span = max(xmax - xmin, ymax - ymin)
-        self.area_eps = 1e-12 * span * span  # twice-area threshold for a face to count as positive
+        self.area_eps = FACE_AREA_REL * span * span  # twice-area threshold for a face to count as positive
 
     # ---------------------------------------------------------------- main
     def run(self, vertices: np.ndarray, faces: np.ndarray, backend: str):
@@ -317,7 +318,7 @@ class PostProcessor:
         B = v[b, :2] - p0
         n = np.column_stack([A[:, 1] - B[:, 1], B[:, 0] - A[:, 0]])
         c = -(A[:, 0] * B[:, 1] - B[:, 0] * A[:, 1])
-        scale = max(float(np.abs(np.concatenate([A.ravel(), B.ravel()])).max()), 1e-300)
+        scale = max(float(np.abs(np.concatenate([A.ravel(), B.ravel()])).max()), DIVISOR_FLOOR)
         if s == INTERIOR:
             from scipy.optimize import linprog
 
@@ -329,7 +330,7 @@ class PostProcessor:
                 [0.0, 0.0, -1.0], A_ub=A_ub, b_ub=b_ub,
                 bounds=[tuple(bounds[0]), tuple(bounds[1]), (None, 1.0)], method="highs",
             )
-            if res.status != 0 or res.x[2] <= 1e-9:
+            if res.status != 0 or res.x[2] <= STAR_MARGIN_MIN:
                 return None
             centre = res.x[:2] * scale
             # the closest point on the way to the centre that leaves every face a margin

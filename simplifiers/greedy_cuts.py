@@ -46,6 +46,7 @@ from terrainvis._interrupt import call
 from terrainvis._validate import as_nonnegative_finite, describe
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.tolerances import EPS_BRACKET_FLOOR_REL, EPS_GUESS_FLOOR_REL
 
 from . import _gc_kernels as K
 from .levels import budget_tolerance, check_budget
@@ -319,7 +320,7 @@ def _model_count(tri: _Triangulator, eps: float, kappa: float) -> float:
 def _first_guess(search: _Search) -> float:
     """ε where the 1-D estimate of the count meets the budget (bisection on log ε)."""
     kappa = _kappa(search.budget / search.grid.size)
-    lo, hi = math.log(search.hi_eps * 1e-7), math.log(search.hi_eps)
+    lo, hi = math.log(search.hi_eps * EPS_GUESS_FLOOR_REL), math.log(search.hi_eps)
     for _ in range(30):
         mid = 0.5 * (lo + hi)
         if _model_count(search.tri, math.exp(mid), kappa) > search.budget:
@@ -355,7 +356,7 @@ def _next_eps(search: _Search, last: _Run) -> float:
     step = (last.n / s.budget) ** (1.0 / _slope(s.budget / s.grid.size))
     eps = last.eps * min(max(step, 1.0 / 8.0), 8.0)
     if not s.lo_eps < eps < s.hi_eps:
-        eps = math.sqrt(max(s.lo_eps, s.hi_eps * 1e-9) * s.hi_eps) if s.lo_eps > 0.0 else 0.5 * s.hi_eps
+        eps = math.sqrt(max(s.lo_eps, s.hi_eps * EPS_BRACKET_FLOOR_REL) * s.hi_eps) if s.lo_eps > 0.0 else 0.5 * s.hi_eps
     return eps
 
 

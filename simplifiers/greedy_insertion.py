@@ -33,6 +33,7 @@ from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis._mesh import signed_area2
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.tolerances import SQUARE_CELL_REL
 
 from . import _gi_kernels as K
 from .levels import check_budget
@@ -92,7 +93,7 @@ class GreedyInserter:
         self._z = np.ascontiguousarray(grid.z, dtype=np.float64).ravel()
         # in-circle test in the space (col * dx, row * dy): only (dy / dx)^2 matters
         ratio = (grid.dy / grid.dx) ** 2
-        self._ratio = 1.0 if abs(ratio - 1.0) <= 1e-12 else float(ratio)
+        self._ratio = 1.0 if abs(ratio - 1.0) <= SQUARE_CELL_REL else float(ratio)
         self._counts = np.zeros(5, dtype=np.int64)
         self._vcap = 0
         self._alloc(min(grid.size, 64))

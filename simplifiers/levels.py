@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from terrainvis._validate import as_int
+from terrainvis.tolerances import BUDGET_WINDOW_REL
 
 __all__ = [
     "coarse_length", "coarse_shape", "coarse_coords", "max_level", "vertex_budget", "budget_tolerance",
@@ -88,8 +89,9 @@ def vertex_budget(shape, level: int) -> int:
 
 
 def budget_tolerance(budget: int) -> int:
-    """Allowed |vertex count - budget|: 1 % of the budget, and at least one vertex."""
-    return max(1, int(0.01 * budget))
+    """Allowed |vertex count - budget|: :data:`~terrainvis.tolerances.BUDGET_WINDOW_REL` (1 %)
+    of the budget, and at least one vertex."""
+    return max(1, int(BUDGET_WINDOW_REL * budget))
 
 
 def check_level(shape, level) -> int:

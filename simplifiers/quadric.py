@@ -80,6 +80,7 @@ from terrainvis._mesh import boundary_edges
 from terrainvis._validate import as_int, describe
 from terrainvis.errors import SimplificationError
 from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.tolerances import TILE_BORDER_REL
 
 from ._quadric_repair import PostError, PostProcessor
 from .levels import budget_tolerance, check_budget
@@ -426,7 +427,7 @@ def _tiled_mesh(grid: HeightGrid, origin: np.ndarray, budget: int, decimate, til
     parts = (max(1, math.ceil((rows - 1) / side)), max(1, math.ceil((cols - 1) / side)))
     re, ce = _tile_edges(rows, parts[0]), _tile_edges(cols, parts[1])
     lx, ly = grid.xs - origin[0], grid.ys - origin[1]
-    tiny = 1e-9 * max(lx[-1] - lx[0], ly[-1] - ly[0])
+    tiny = TILE_BORDER_REL * max(lx[-1] - lx[0], ly[-1] - ly[0])
     keys, verts, faces = [], [], []
     n_stacked = fallbacks = 0
     n_interior = grid.size  # interior vertices take keys from here on (border ones: r * cols + c)

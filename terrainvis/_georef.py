@@ -43,6 +43,8 @@ import warnings
 
 import numpy as np
 
+from .tolerances import DEGREE_CELL_SLACK, EDGE_SNAP_REL, ROUNDING_ULPS, UNIFORM_STEP_REL
+
 __all__ = [
     "GEOREF_KEYS", "IDENTITY", "metres_per_degree", "rasterio_module", "parse_crs", "crs_is_geographic",
     "xy_to_native", "native_axes", "lonlat_to_local", "looks_like_degrees", "warn_if_degrees",
@@ -157,12 +159,21 @@ def native_axes(xs: np.ndarray, ys: np.ndarray, affine) -> tuple[np.ndarray, np.
     return ox + sx * xs, oy + sy * ys
 
 
-def _uniform_step(v: np.ndarray) -> float | None:
+def uniform_step(v: np.ndarray) -> float | None:
+    """The step of an evenly spaced axis, or None (fewer than 2 values, or uneven).
+
+    Evenly spaced means every step within :data:`~terrainvis.tolerances.UNIFORM_STEP_REL`
+    of the mean step, or within the rounding of the coordinates themselves
+    (:data:`~terrainvis.tolerances.ROUNDING_ULPS` of the largest): ``origin + step *
+    arange(n)`` far from 0 is uneven by a few ulps of the largest coordinate (at 5e5
+    with a 0.05 step that is 1e-10, above 1e-9 of the step), and is still the uniform
+    grid it was built as. The one uniform-axis test (``HeightGrid.is_uniform`` uses it).
+    """
     if v.size < 2:
         return None
     d = np.diff(v)
     step = (v[-1] - v[0]) / (v.size - 1)
-    tol = 1e-9 * abs(step) + 8.0 * np.finfo(np.float64).eps * float(np.abs(v).max())
+    tol = UNIFORM_STEP_REL * abs(step) + ROUNDING_ULPS * np.finfo(np.float64).eps * float(np.abs(v).max())
     return float(step) if np.abs(d - step).max() <= tol else None
 
 
@@ -185,7 +196,7 @@ def lonlat_to_local(lon: np.ndarray, lat: np.ndarray, *, dlon: float | None = No
     m_lon, m_lat = metres_per_degree(lat_c)
 
     def axis(v, step, m):
-        step = _uniform_step(v) if step is None else step
+        step = uniform_step(v) if step is None else step
         if step is not None:
             return np.arange(v.size, dtype=np.float64) * (step * m)
         return (v - v[0]) * m
@@ -205,7 +216,7 @@ def looks_like_degrees(xs: np.ndarray, ys: np.ndarray) -> bool:
         return False
     in_range = xs[0] >= -180.0 and xs[-1] <= 360.0 and ys[0] >= -90.0 and ys[-1] <= 90.0
     cell = max(float(np.diff(xs).max()), float(np.diff(ys).max()))
-    return bool(in_range and cell <= 1.0 / 60.0 + 1e-12)
+    return bool(in_range and cell <= 1.0 / 60.0 + DEGREE_CELL_SLACK)
 
 
 def warn_if_degrees(xs: np.ndarray, ys: np.ndarray, source: str, stacklevel: int = 4, *,
@@ -294,7 +305,7 @@ def from_native(attrs: dict, xy, name: str = "xy", extent=None) -> np.ndarray:
         further columns (a height z) are copied unchanged. NaN stays NaN.
     extent : (xmin, xmax, ymin, ymax), optional
         The terrain's footprint in its own frame. A position the conversion's rounding
-        puts just outside it (by at most ``1e-9`` of its span plus a few float64 steps)
+        puts just outside it (by at most ``EDGE_SNAP_REL`` of its span plus a few float64 steps)
         is put on its edge, so that the lon/lat of an edge sample lands on that sample.
 
     Returns
@@ -324,7 +335,7 @@ def from_native(attrs: dict, xy, name: str = "xy", extent=None) -> np.ndarray:
 
 def _onto_edges(v: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """``v`` with the values within rounding outside ``[lo, hi]`` put on ``lo`` or ``hi``."""
-    tol = 1e-9 * (hi - lo) + 8.0 * np.spacing(max(abs(lo), abs(hi)))
+    tol = EDGE_SNAP_REL * (hi - lo) + ROUNDING_ULPS * np.spacing(max(abs(lo), abs(hi)))
     v = np.array(v, dtype=np.float64, copy=True)
     v[(v < lo) & (v >= lo - tol)] = lo
     v[(v > hi) & (v <= hi + tol)] = hi

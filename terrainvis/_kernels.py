@@ -8,6 +8,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .tolerances import BUCKET_SLACK, RASTER_BOX_REL  # frozen into the kernels when they compile
+
 
 @nb.njit(cache=True, nogil=True)
 def _tri_z_at(vx, vy, vz, i0, i1, i2, x, y, rel_eps):
@@ -85,7 +87,7 @@ def locate_heights(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, q
         out[i] = np.nan
         fx = (x - x0) / bw
         fy = (y - y0) / bh
-        if not (fx >= -1e-9 and fy >= -1e-9 and fx <= nbx + 1e-9 and fy <= nby + 1e-9):
+        if not (fx >= -BUCKET_SLACK and fy >= -BUCKET_SLACK and fx <= nbx + BUCKET_SLACK and fy <= nby + BUCKET_SLACK):
             continue
         bx = min(max(int(fx), 0), nbx - 1)
         by = min(max(int(fy), 0), nby - 1)
@@ -118,10 +120,10 @@ def rasterize_tin(vx, vy, vz, faces, xs, ys, out, rel_eps, stop):
         xmax = max(vx[i0], vx[i1], vx[i2])
         ymin = min(vy[i0], vy[i1], vy[i2])
         ymax = max(vy[i0], vy[i1], vy[i2])
-        c0 = np.searchsorted(xs, xmin - 1e-9 * (abs(xmin) + 1.0))
-        c1 = np.searchsorted(xs, xmax + 1e-9 * (abs(xmax) + 1.0), side="right")
-        r0 = np.searchsorted(ys, ymin - 1e-9 * (abs(ymin) + 1.0))
-        r1 = np.searchsorted(ys, ymax + 1e-9 * (abs(ymax) + 1.0), side="right")
+        c0 = np.searchsorted(xs, xmin - RASTER_BOX_REL * (abs(xmin) + 1.0))
+        c1 = np.searchsorted(xs, xmax + RASTER_BOX_REL * (abs(xmax) + 1.0), side="right")
+        r0 = np.searchsorted(ys, ymin - RASTER_BOX_REL * (abs(ymin) + 1.0))
+        r1 = np.searchsorted(ys, ymax + RASTER_BOX_REL * (abs(ymax) + 1.0), side="right")
         for r in range(r0, min(r1, nr)):
             for c in range(c0, min(c1, nc)):
                 if not np.isnan(out[r, c]):

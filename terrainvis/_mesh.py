@@ -14,8 +14,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .tolerances import FOOTPRINT_REL
+
 __all__ = [
-    "signed_area2", "edge_keys", "undirected_edges", "boundary_edges", "boundary_loop", "NotADiskError",
+    "signed_area2", "footprint_matches", "edge_keys", "undirected_edges", "boundary_edges", "boundary_loop", "NotADiskError",
 ]
 
 
@@ -29,6 +31,13 @@ def signed_area2(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     b = vertices[faces[:, 1], :2]
     c = vertices[faces[:, 2], :2]
     return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+
+
+def footprint_matches(footprint: float, area: float, rtol: float = FOOTPRINT_REL) -> bool:
+    """The height-field rule on areas: the faces' summed projected area ``footprint`` equals
+    the extent's ``area`` to ``rtol`` of it (with every face counter-clockwise, the faces
+    then tile the extent once)."""
+    return bool(abs(footprint - area) <= rtol * area)
 
 
 def half_edges(faces: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ import numpy as np
 
 from ._georef import position_crs, xy_to_native
 from ._validate import choice
+from .tolerances import DIVISOR_FLOOR
 
 __all__ = ["FRAMES", "PositionFrame"]
 
@@ -114,7 +115,7 @@ class PositionFrame:
             self._step = self._local_step()
             if not self.identity:
                 bx0, bx1, by0, by1 = self._bounds()
-                self._step *= min((bx1 - bx0) / max(xmax - xmin, 1e-300), (by1 - by0) / max(ymax - ymin, 1e-300))
+                self._step *= min((bx1 - bx0) / max(xmax - xmin, DIVISOR_FLOOR), (by1 - by0) / max(ymax - ymin, DIVISOR_FLOOR))
         return self._step
 
     def _local_step(self) -> float:
@@ -122,7 +123,7 @@ class PositionFrame:
         if hasattr(t, "dx"):
             return min(t.dx, t.dy)
         xmin, xmax, ymin, ymax = t.extent  # a TIN: the mean spacing of its vertices
-        return math.sqrt(max((xmax - xmin) * (ymax - ymin), 1e-300) / max(t.n_vertices, 1))
+        return math.sqrt(max((xmax - xmin) * (ymax - ymin), DIVISOR_FLOOR) / max(t.n_vertices, 1))
 
     def value(self, v: float) -> str:
         """One coordinate with the digits that show a tenth of a cell (``.6g`` would round a UTM northing to 10 m)."""

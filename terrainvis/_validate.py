@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .tolerances import CLEARANCE_REL
+
 
 def describe(value) -> str:
     """A short description of ``value`` for error messages."""
@@ -22,6 +24,24 @@ def as_float_array(value, name: str) -> np.ndarray:
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name} must be numeric array-like, got {describe(value)}") from exc
     return arr
+
+
+def as_finite_scalar(value, name: str) -> float:
+    """``value`` as a float: a 0-d numeric array-like (a number, a numpy scalar) that is finite.
+
+    Examples
+    --------
+    >>> as_finite_scalar(np.float32(1.5), "offset")
+    1.5
+    >>> as_finite_scalar([1.0, 2.0], "offset")
+    Traceback (most recent call last):
+    ...
+    ValueError: offset must be a finite scalar, got list [1.0, 2.0]
+    """
+    arr = as_float_array(value, name)
+    if arr.ndim != 0 or not np.isfinite(arr):
+        raise ValueError(f"{name} must be a finite scalar, got {describe(value)}")
+    return float(arr)
 
 
 def as_points(value, name: str, dim: int, *, finite: bool = True) -> np.ndarray:
@@ -46,13 +66,22 @@ def as_points(value, name: str, dim: int, *, finite: bool = True) -> np.ndarray:
     return arr
 
 
-def as_positive_finite(value, name: str) -> float:
+def _real_number(value, name: str) -> float:
+    """``float(value)`` for a real number (not a string, bytes or a bool), else a TypeError naming ``name``.
+
+    The one parse behind :func:`as_positive_finite`, :func:`as_nonnegative_finite` and
+    :func:`as_height`, which then check its range.
+    """
     if isinstance(value, (str, bytes, bool, np.bool_)):
         raise TypeError(f"{name} must be a real number, got {describe(value)}")
     try:
-        out = float(value)
+        return float(value)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+
+
+def as_positive_finite(value, name: str) -> float:
+    out = _real_number(value, name)
     if not np.isfinite(out) or out <= 0:
         raise ValueError(f"{name} must be finite and > 0, got {value!r}")
     return out
@@ -60,12 +89,7 @@ def as_positive_finite(value, name: str) -> float:
 
 def as_nonnegative_finite(value, name: str, unit: str = "") -> float:
     """A finite real number >= 0 (``unit`` is named in the message, e.g. "z units")."""
-    if isinstance(value, (str, bytes, bool, np.bool_)):
-        raise TypeError(f"{name} must be a real number, got {describe(value)}")
-    try:
-        out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+    out = _real_number(value, name)
     if not np.isfinite(out) or out < 0:
         suffix = f" ({unit})" if unit else ""
         raise ValueError(f"{name} must be finite and >= 0{suffix}, got {value!r}")
@@ -101,12 +125,13 @@ def choice(value, name: str, valid) -> str:
 FLOAT64_EPS = 2.0**-52
 
 
-def height_limit(scale: float, ground: float = 0.0, tol_rel: float = 1e-9) -> float:
+def height_limit(scale: float, ground: float = 0.0, tol_rel: float = CLEARANCE_REL) -> float:
     """The largest |height| (or offset) that float64 resolves against a terrain.
 
     The line-of-sight predicate accepts clearances down to ``-tol`` with ``tol = tol_rel *
-    scale`` (``terrainvis.visibility.clearance_tolerance``: ``1e-9`` times the larger of
-    the extent's diagonal and the relief). An end of a segment at height ``H`` above the
+    scale`` (``terrainvis.visibility.clearance_tolerance``:
+    :data:`~terrainvis.tolerances.CLEARANCE_REL` times the larger of the extent's diagonal
+    and the relief). An end of a segment at height ``H`` above the
     datum is known to ``2**-52 * |H|`` only, so once that exceeds ``tol`` the predicate
     decides on rounding noise. With ``|H| <= |h| + ground`` (``ground`` the largest |z|
     of the terrain), a height ``h`` is resolved while ``|h| <= tol / 2**-52 - ground``.
@@ -119,7 +144,7 @@ def height_limit(scale: float, ground: float = 0.0, tol_rel: float = 1e-9) -> fl
     return tol_rel * scale / FLOAT64_EPS - ground
 
 
-def as_height(value, name: str, *, scale: float, ground: float = 0.0, tol_rel: float = 1e-9,
+def as_height(value, name: str, *, scale: float, ground: float = 0.0, tol_rel: float = CLEARANCE_REL,
               minimum: float | None = None) -> float:
     """``value`` as a finite float within what float64 resolves against a terrain (:func:`height_limit`).
 
@@ -135,12 +160,7 @@ def as_height(value, name: str, *, scale: float, ground: float = 0.0, tol_rel: f
     ...
     ValueError: observer_height must be within [-4.5e+09, 4.5e+09] for this terrain (float64 resolves ...
     """
-    if isinstance(value, (str, bytes, bool, np.bool_)):
-        raise TypeError(f"{name} must be a real number, got {describe(value)}")
-    try:
-        out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a real number, got {describe(value)}") from exc
+    out = _real_number(value, name)
     if not np.isfinite(out):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     limit = height_limit(scale, ground, tol_rel)

@@ -13,9 +13,10 @@ import numpy as np
 
 from . import _volume_kernels
 from ._interrupt import call
-from ._mesh import boundary_edges
+from ._mesh import boundary_edges, footprint_matches
 from ._validate import describe
 from .terrain import TIN, HeightGrid
+from .tolerances import EXTENT_MATCH_REL
 
 __all__ = ["vertical_errors", "volume_error"]
 
@@ -168,7 +169,7 @@ def volume_error(fine: HeightGrid, coarse, *, method: str = "exact") -> float:
     if isinstance(coarse, HeightGrid):
         coarse.require_finite("volume_error")
         coarse = coarse.to_tin()
-    if not np.allclose(coarse.extent, fine.extent, rtol=0, atol=1e-9 * (1 + np.abs(fine.extent).max())):
+    if not np.allclose(coarse.extent, fine.extent, rtol=0, atol=EXTENT_MATCH_REL * (1 + np.abs(fine.extent).max())):
         raise ValueError(f"coarse must cover the extent of fine {fine.extent}, got {coarse.extent}")
     xmin, xmax, ymin, ymax = fine.extent
     area = (xmax - xmin) * (ymax - ymin)
@@ -179,7 +180,7 @@ def volume_error(fine: HeightGrid, coarse, *, method: str = "exact") -> float:
             f"coarse must have counter-clockwise faces (a height field seen from above), but {n_cw} "
             f"face(s) are clockwise, the first is face {first_cw}"
         )
-    if abs(footprint - area) > 1e-9 * area:
+    if not footprint_matches(footprint, area):
         raise ValueError(
             f"coarse must cover the footprint of fine (area {area:g}), but its faces cover {footprint:g}"
         )

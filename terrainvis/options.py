@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_bool, as_float_array, as_int, choice, describe
+from ._validate import as_bool, as_finite_scalar, as_float_array, as_int, choice, describe
 from .calibration import N_PARTNERS
 from .relocation import ORACLE, RELOCATIONS
 from .visibility import EARTH_RADIUS
@@ -167,11 +167,8 @@ def integer(minimum: int | None = None):
 
 
 def finite(value, name: str) -> float:
-    """A check: a finite real number."""
-    arr = as_float_array(value, name)
-    if arr.ndim != 0 or not np.isfinite(arr):
-        raise ValueError(f"{name} must be a finite number, got {describe(value)}")
-    return float(arr)
+    """A check: a finite real number (:func:`terrainvis._validate.as_finite_scalar`)."""
+    return as_finite_scalar(value, name)
 
 
 def _nonnegative(value, name: str) -> float:

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_bool, as_float_array, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
+from ._validate import as_bool, as_finite_scalar, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
 from .calibration import MIN_GAIN, N_PARTNERS, SWEEPS
 from .visibility import EARTH_RADIUS
 from .errors import OutsideFootprintError
@@ -127,10 +127,7 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
     pts = as_points(points, "points", 3)
     as_terrain(simplified, "simplified")
     how = choice(how, "how", RELOCATIONS + (ORACLE,))
-    off = as_float_array(offset, "offset")
-    if off.ndim != 0 or not np.isfinite(off):
-        raise ValueError(f"offset must be a finite scalar, got {describe(offset)}")
-    off = float(off)
+    off = as_finite_scalar(offset, "offset")
     if how == ORACLE:
         curve = {"curvature": curvature, "earth_radius": earth_radius}
         return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_float_array, as_int, describe
+from ._validate import as_finite_scalar, as_int, describe
 from .terrain import TIN, HeightGrid, as_terrain
 
 __all__ = ["sample_points"]
@@ -38,15 +38,13 @@ def sample_points(terrain, n: int, seed=0, offset: float = 0.0) -> np.ndarray:
     """
     as_terrain(terrain)
     n = as_int(n, "n", minimum=0)
-    offset_arr = as_float_array(offset, "offset")
-    if offset_arr.ndim != 0 or not np.isfinite(offset_arr):
-        raise ValueError(f"offset must be a finite scalar, got {describe(offset)}")
+    offset = as_finite_scalar(offset, "offset")
     rng = _generator(seed)
     if isinstance(terrain, TIN):
         xy = _sample_tin(terrain, n, rng)
     else:
         xy = _sample_grid(terrain, n, rng)
-    z = terrain.height_at(xy) + float(offset_arr)
+    z = terrain.height_at(xy) + offset
     return np.column_stack([xy, z])
 
 

@@ -41,10 +41,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels
+from ._georef import uniform_step
 from ._interrupt import call
-from ._mesh import signed_area2
+from ._mesh import footprint_matches, signed_area2
 from ._validate import as_float_array, as_int, as_points, as_positive_finite, describe
 from .errors import NodataError
+from .tolerances import BARYCENTRIC_SLACK, DIVISOR_FLOOR, FOOTPRINT_REL
 
 __all__ = ["HeightGrid", "TIN", "as_terrain"]
 
@@ -549,18 +551,8 @@ def _as_slice(value, name: str, length: int) -> slice:
 
 
 def _is_uniform(v: np.ndarray) -> bool:
-    """Evenly spaced to 1e-9 of the step, or to the rounding of the coordinates themselves.
-
-    ``origin + step * arange(n)`` far from 0 is uneven by a few ulps of the largest
-    coordinate (at 5e5 with a 0.05 step that is 1e-10, above 1e-9 of the step), and is
-    still the uniform grid it was built as.
-    """
-    if v.size < 3:
-        return True
-    d = np.diff(v)
-    step = (v[-1] - v[0]) / (v.size - 1)
-    tol = 1e-9 * abs(step) + 8.0 * np.finfo(np.float64).eps * float(np.abs(v).max())
-    return bool(np.abs(d - step).max() <= tol)
+    """Evenly spaced (:func:`terrainvis._georef.uniform_step`); fewer than 3 values always are."""
+    return v.size < 3 or uniform_step(v) is not None
 
 
 @dataclass(frozen=True)
@@ -664,14 +656,15 @@ class TIN:
         """Sum of the signed projected areas of the faces."""
         return float(self.face_areas().sum())
 
-    def is_height_field(self, rtol: float = 1e-9) -> bool:
-        """True when every face is counter-clockwise in projection and the footprint area equals the extent's."""
+    def is_height_field(self, rtol: float = FOOTPRINT_REL) -> bool:
+        """True when every face is counter-clockwise in projection and the footprint area equals
+        the extent's (to ``rtol`` of it: :func:`terrainvis._mesh.footprint_matches`)."""
         areas = self.face_areas()
         if not (areas > 0).all():
             return False
         xmin, xmax, ymin, ymax = self.extent
         area = (xmax - xmin) * (ymax - ymin)
-        return bool(abs(areas.sum() - area) <= rtol * area)
+        return footprint_matches(areas.sum(), area, rtol)
 
     def _buckets(self) -> _Buckets:
         bk = self._cache.get("buckets")
@@ -679,8 +672,8 @@ class TIN:
             xmin, xmax, ymin, ymax = self.extent
             nf = self.n_faces
             side = max(1, int(math.sqrt(nf / 2.0)))
-            w = max(xmax - xmin, 1e-300)
-            h = max(ymax - ymin, 1e-300)
+            w = max(xmax - xmin, DIVISOR_FLOOR)
+            h = max(ymax - ymin, DIVISOR_FLOOR)
             nbx = max(1, int(round(side * math.sqrt(w / h))))
             nby = max(1, int(round(side * math.sqrt(h / w))))
             bw = w / nbx
@@ -714,7 +707,7 @@ class TIN:
             _kernels.locate_heights,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
             self.faces, bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, 1e-10, work=pts.shape[0],
+            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, BARYCENTRIC_SLACK, work=pts.shape[0],
         )
         return out
 
@@ -775,7 +768,7 @@ class TIN:
         call(
             _kernels.rasterize_tin,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
-            self.faces, xs, ys, out, 1e-10, work=out.size + self.n_faces,
+            self.faces, xs, ys, out, BARYCENTRIC_SLACK, work=out.size + self.n_faces,
         )
         return out
 

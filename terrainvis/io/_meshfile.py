@@ -9,6 +9,7 @@ import numpy as np
 
 from .._fileio import atomic_path
 from ..terrain import TIN, HeightGrid
+from ..tolerances import DIVISOR_FLOOR, FLOAT32_ROUNDING_REL
 from ._attrs import _attrs_from_json, _attrs_to_json
 from ._common import FORMAT, FORMAT_VERSION, _TIN_ORIENTATION, _Corrupt
 
@@ -53,10 +54,10 @@ def _stl_bytes(tin: TIN) -> bytes:
     err = float(np.abs(v.astype(np.float32).astype(np.float64) - v).max())
     lo, hi = v.min(axis=0), v.max(axis=0)
     span = float((hi - lo).max())
-    if err > 1e-6 * max(span, 1e-300):
+    if err > FLOAT32_ROUNDING_REL * max(span, DIVISOR_FLOOR):
         warnings.warn(
             f"STL stores float32: coordinates up to {np.abs(v).max():.6g} are rounded by up to {err:.3g} "
-            f"({err / max(span, 1e-300):.2g} of the terrain's extent); save to .ply, .obj or .npz for exact coordinates",
+            f"({err / max(span, DIVISOR_FLOOR):.2g} of the terrain's extent); save to .ply, .obj or .npz for exact coordinates",
             UserWarning, stacklevel=4,
         )
     mesh = trimesh.Trimesh(vertices=v, faces=tin.faces, process=False, validate=False)

@@ -9,14 +9,12 @@ import numpy as np
 from .._georef import GEOREF_KEYS, IDENTITY, native_axes, parse_crs, transform_xy, xy_to_native
 from .._validate import as_positive_finite, describe
 from ..terrain import HeightGrid
+from ..tolerances import METRIC_EDGE_MARGIN
 
 #: Target samples transformed per block (bounds the temporary arrays to a few tens of MB).
 _BLOCK = 1 << 20
 #: Points per edge of the footprint's boundary when its extent in the projection is found.
 _EDGE_POINTS = 256
-#: Metres kept inside the footprint's edges by ``footprint="inside"``: the edges are curves in the
-#: projection, known at _EDGE_POINTS points; between them they bulge by less than 1e-4 m on a 1-degree tile.
-_MARGIN = 1e-3
 #: What the metric grid covers.
 FOOTPRINTS = ("inside", "cover")
 
@@ -149,8 +147,8 @@ def to_metric(grid: HeightGrid, *, cell=None, footprint: str = "inside") -> Heig
         x0, x1, y0, y1 = bx.min(), bx.max(), by.min(), by.max()
     else:  # inside every edge: the south edge is bl[:n], the east one bl[n:2n], the north bl[2n:3n], the west bl[3n:]
         n = t.size
-        x0, x1 = bx[3 * n:].max() + _MARGIN, bx[n:2 * n].min() - _MARGIN
-        y0, y1 = by[:n].max() + _MARGIN, by[2 * n:3 * n].min() - _MARGIN
+        x0, x1 = bx[3 * n:].max() + METRIC_EDGE_MARGIN, bx[n:2 * n].min() - METRIC_EDGE_MARGIN
+        y0, y1 = by[:n].max() + METRIC_EDGE_MARGIN, by[2 * n:3 * n].min() - METRIC_EDGE_MARGIN
     i0, i1 = math.ceil(x0 / dx), math.floor(x1 / dx)
     j0, j1 = math.ceil(y0 / dy), math.floor(y1 / dy)
     if i1 - i0 < 1 or j1 - j0 < 1:

@@ -12,6 +12,7 @@ import numpy as np
 from .._fileio import atomic_path
 from .._georef import IDENTITY
 from ..terrain import TIN, HeightGrid
+from ..tolerances import SPACING_MATCH_REL
 from ._attrs import _attrs_from_json, _attrs_to_json
 from .._memory import check_memory, format_bytes
 from ._common import _READ_BYTES_PER_SAMPLE, FORMAT, FORMAT_VERSION, _TIN_ORIENTATION, _Corrupt, _npy_header, _UserError
@@ -158,7 +159,7 @@ def _from_north_up(a: dict, z_north_up: np.ndarray) -> HeightGrid:
         for axis, v, d in (("x", xs, dx), ("y", ys, dy)):
             if v.ndim == 1 and v.size >= 2:
                 mean = float((v[-1] - v[0]) / (v.size - 1))
-                if not abs(mean - d) <= 1e-9 * max(abs(d), abs(mean)):
+                if not abs(mean - d) <= SPACING_MATCH_REL * max(abs(d), abs(mean)):
                     raise _Corrupt(
                         f"its d{axis} = {d!r} disagrees with the mean spacing {mean!r} of {axis}s, so it is not a "
                         "file of a known dialect (z, dx, dy, xs, ys as the former save_dem wrote)"

@@ -10,6 +10,7 @@ import numpy as np
 from .._georef import IDENTITY, crs_is_geographic, lonlat_to_local, native_axes, warn_if_degrees, xy_to_native
 from .._validate import describe
 from ..terrain import HeightGrid, _is_uniform
+from ..tolerances import DIVISOR_FLOOR, RESAMPLE_SHIFT_REL
 from ._common import _UserError
 
 
@@ -99,7 +100,7 @@ def _uniform_layout(grid: HeightGrid, suffix: str):
         for axis, old, new in (("x", xs, ux), ("y", ys, uy)):
             shift = np.abs(new - old)
             cell = (old[-1] - old[0]) / (old.size - 1)
-            n = int((shift > 1e-9 * max(abs(cell), 1e-300)).sum())
+            n = int((shift > RESAMPLE_SHIFT_REL * max(abs(cell), DIVISOR_FLOOR)).sum())
             if n:
                 moved.append(f"{n} of {old.size} {axis} positions by up to {shift.max():.6g} ({shift.max() / cell:.3g} cell)")
         note = (

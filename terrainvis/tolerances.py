@@ -1,0 +1,124 @@
+"""Every numeric tolerance of terrainvis and simplifiers, named once, with what it protects.
+
+A tolerance is a small number that decides what counts as "the same" in float64 (or
+float32): an axis evenly spaced, a position on an extent's edge, a point inside a
+triangle, a footprint that covers the extent, a vertex count close enough to its budget.
+Each one lives here, under one name per meaning: two equal values that mean different
+things get two names (so either can change alone), and one meaning used in several
+places gets one name.
+
+Most are *relative*: the docstring says what they multiply (a step, a span, a cell, a
+terrain's scale). The module has no dependencies; every module imports from it, the
+numba kernel modules included.
+
+Kernels: a numba kernel reads a module-level float as a constant frozen when it is
+compiled. The kernel modules import the names they use into their own globals
+(``from ..tolerances import X``) and keep ``cache=True``; numba's on-disk cache is keyed
+on the kernel module's own source file, so after changing a value used by a kernel,
+touch that module (or clear its ``__pycache__``) or the cached machine code keeps the
+old value. The names a kernel reads are marked "(kernel)" below.
+
+Adding one: a ``NAME = value`` here with a ``#:`` line (what it protects, what it is
+relative to), then import it where it is used. ``tests/test_tolerances.py`` fails on a
+float literal below 1e-5 anywhere else in ``terrainvis/`` or ``simplifiers/``.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "CLEARANCE_REL",
+    "UNIFORM_STEP_REL", "ROUNDING_ULPS", "EDGE_SNAP_REL", "DEGREE_CELL_SLACK", "SPACING_MATCH_REL",
+    "RESAMPLE_SHIFT_REL", "METRIC_EDGE_MARGIN", "FLOAT32_ROUNDING_REL",
+    "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
+    "BUDGET_WINDOW_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
+    "TILE_BORDER_REL", "FACE_AREA_REL", "STAR_MARGIN_MIN",
+]
+
+# ------------------------------------------------------------------ line of sight
+#: Clearance band of the line-of-sight predicate, as a fraction of the terrain's scale
+#: (``max(extent diagonal, relief)``): a segment still counts as visible down to a
+#: clearance of ``-CLEARANCE_REL * scale``. Also sets how large a height float64 still
+#: resolves against a terrain (``terrainvis._validate.height_limit``).
+#: (``terrainvis.visibility.TOL_REL`` holds the same value for the visibility package.)
+CLEARANCE_REL = 1e-9
+
+# ------------------------------------------------------------------ grid axes and positions
+#: Uniform-axis test: each step of an axis may differ from the mean step by this fraction
+#: of the step (plus :data:`ROUNDING_ULPS` of the largest coordinate) and the axis is still
+#: uniform (``HeightGrid.is_uniform``, lon/lat axes converted to metres).
+UNIFORM_STEP_REL = 1e-9
+#: Float64 steps (ulps) of the largest |coordinate| allowed as rounding of coordinates that
+#: were computed (``origin + step * i`` far from 0, a transform and its inverse): in the
+#: uniform-axis test and when positions are snapped onto an extent's edge.
+ROUNDING_ULPS = 8.0
+#: Snapping of positions onto an extent's edge: a position outside ``[lo, hi]`` by at most
+#: this fraction of ``hi - lo`` (plus :data:`ROUNDING_ULPS`) is put on the edge (positions
+#: converted from the native CRS round to just outside the terrain).
+EDGE_SNAP_REL = 1e-9
+#: Lon/lat detection: a cell up to one arc-minute plus this many degrees still looks like
+#: degrees (1/60 itself is not exact in float64).
+DEGREE_CELL_SLACK = 1e-12
+#: Reading an .npz of the former ``save_dem`` dialect: its stored ``dx``/``dy`` must equal the
+#: mean spacing of its coordinates to this fraction (of the larger), or the file is refused.
+SPACING_MATCH_REL = 1e-9
+#: Writing a rectilinear grid as a uniform raster: a position moved by at most this fraction
+#: of a cell is rounding, not counted among the moved positions of the warning.
+RESAMPLE_SHIFT_REL = 1e-9
+#: Metres kept inside the footprint's edges by ``footprint="inside"`` of the lon/lat to
+#: metric resampling (``terrainvis.io.to_metric``): the edges are curves in the projection,
+#: known at 256 points per edge; between them they bulge by less than 1e-4 m on a 1-degree tile.
+METRIC_EDGE_MARGIN = 1e-3
+#: float32 margin of mesh files (STL): coordinates rounded to float32 by more than this
+#: fraction of the terrain's extent get a warning that names the rounding.
+FLOAT32_ROUNDING_REL = 1e-6
+
+# ------------------------------------------------------------------ TINs
+#: (kernel) Locating points in a TIN: a point up to this many bucket widths outside the
+#: bucket grid is still looked up (a point on the extent's edge rounds to just outside).
+BUCKET_SLACK = 1e-9
+#: (kernel) Rasterizing a TIN: each face's bounding box is widened by this fraction of
+#: ``|coordinate| + 1`` before the grid nodes inside it are searched, so a node on the box's
+#: edge is not lost to rounding.
+RASTER_BOX_REL = 1e-9
+#: Point in triangle: barycentric coordinates down to ``-BARYCENTRIC_SLACK`` count as
+#: inside, so a point on an edge shared by two faces (or on the footprint's boundary) is
+#: found in one of them.
+BARYCENTRIC_SLACK = 1e-10
+#: Height-field check: the faces' projected area must equal the extent's area to this
+#: fraction of it (``terrainvis._mesh.footprint_matches``: ``TIN.is_height_field``,
+#: ``volume_error``'s coverage check; the registry's check of simplified TINs holds the
+#: same value).
+FOOTPRINT_REL = 1e-9
+#: ``volume_error``: the coarse terrain's extent must equal the fine one's to this fraction
+#: of ``1 + max |extent coordinate|``.
+EXTENT_MATCH_REL = 1e-9
+#: Smallest span divided by: a zero-width extent (one row of samples, coincident vertices)
+#: divides by this instead of 0. Not a tolerance of any comparison.
+DIVISOR_FLOOR = 1e-300
+
+# ------------------------------------------------------------------ simplifiers
+#: Budget window of the irregular methods: a vertex count within this fraction of the
+#: budget (and at least one vertex) meets it (``simplifiers.levels.budget_tolerance``).
+BUDGET_WINDOW_REL = 0.01
+#: (kernel) Greedy cuts, index space: the ends of a face's span along a grid row are
+#: snapped to whole columns within this many columns (the span is computed from the
+#: face's edges and rounds to just inside a column the face touches).
+ROW_SPAN_SNAP = 1e-7
+#: Greedy cuts' first guess of ε: the bisection on log ε searches down to this fraction
+#: of the largest error.
+EPS_GUESS_FLOOR_REL = 1e-7
+#: Greedy cuts' bracket stage: when a step leaves the bracket, the geometric mean of its
+#: ends is taken with the lower end raised to at least this fraction of the upper one.
+EPS_BRACKET_FLOOR_REL = 1e-9
+#: Greedy insertion: cells whose squared aspect ratio ``(dy / dx)**2`` is within this of 1
+#: are square (the in-circle test then runs in index space without the ratio).
+SQUARE_CELL_REL = 1e-12
+#: Quadric, tiled: a decimated tile's boundary vertex matches a border sample when within
+#: this fraction of the grid's larger side.
+TILE_BORDER_REL = 1e-9
+#: Quadric repair: a face counts as counter-clockwise when its twice-area exceeds this
+#: fraction of the square of the grid's larger side.
+FACE_AREA_REL = 1e-12
+#: Quadric repair: a vertex's star has a usable interior (a point strictly inside every
+#: face) when the linear program's margin, in units of the star's size, exceeds this.
+STAR_MARGIN_MIN = 1e-9
