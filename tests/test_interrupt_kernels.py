@@ -132,7 +132,8 @@ def setup(size, n):
     p = surf.local(tv.sample_points(S, n, seed=2))
     vis = np.random.default_rng(0).random((n, 512)) < 0.3
     out, score = np.empty(n), np.empty(n, dtype=np.int64)
-    return (surf.data, p, q, vis, surf.delta, 0.0, surf.tol, 0.0, surf.margin, 1, out, score), n * 512
+    lthr, lvis = np.full((n, 48), -np.inf), np.ones((n, 48), dtype=np.int8)  # neighbours seen at any height
+    return (surf.data, p, q, vis, lthr, lvis, 0.5, surf.delta, 0.0, surf.tol, 0.0, surf.margin, 1, out, score), n * 512
 def warm():
     args, work_ = setup(65, 4)
     call(ck.grid_heights, *args, work=work_)
