@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from terrainvis._memory import check_memory
-from terrainvis._mesh import NotADiskError, boundary_loop, signed_area2
+from terrainvis._mesh import NotADiskError, boundary_loop, footprint_matches, signed_area2
 from terrainvis._validate import as_int, as_nonnegative_finite, describe
 from terrainvis.deviation import vertical_errors
 from terrainvis.errors import SimplificationError
@@ -334,7 +334,7 @@ def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int |
     if not (area2 > 0).all():
         problems.append(f"{int((area2 <= 0).sum())} of {area2.size} faces fold over (not counter-clockwise)")
     area = (xmax - xmin) * (ymax - ymin)
-    if abs(0.5 * area2.sum() - area) > 1e-9 * area:
+    if not footprint_matches(0.5 * area2.sum(), area):
         problems.append(f"the projected area is {0.5 * area2.sum() / area:.6%} of the extent's")
     used = np.zeros(tin.n_vertices, dtype=bool)
     used[tin.faces.ravel()] = True

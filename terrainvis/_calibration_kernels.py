@@ -51,6 +51,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from .tolerances import TRACK_EDGE_SLACK, TRACK_FACE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
 from .visibility._kernels import _cell_height, _locate, new_stack
 
 _INF = np.inf
@@ -340,7 +341,7 @@ def _face_at(w, x, y):
         if low > best_l:  # the face the point is deepest inside (robust on shared edges)
             best_l = low
             best = f
-    if best_l < -1e-9:
+    if best_l < -TRACK_FACE_SLACK:
         return -1
     return best
 
@@ -377,7 +378,7 @@ def _exit(w, f, qx, qy, dx, dy, u):
         ry = w.vy[a] - qy
         ue = (rx * ey - ry * ex) / den
         we = (rx * dy - ry * dx) / den
-        if we < -1e-9 or we > 1.0 + 1e-9 or ue <= u + 1e-12 or ue >= best_u:
+        if we < -TRACK_EDGE_SLACK or we > 1.0 + TRACK_EDGE_SLACK or ue <= u + TRACK_STEP_MIN or ue >= best_u:
             continue
         we = min(max(we, 0.0), 1.0)
         best_u = ue
@@ -390,7 +391,7 @@ def _exit(w, f, qx, qy, dx, dy, u):
 def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
     """A face other than f that holds the track a little after u (steps growing tenfold), and
     that position of the track: (face, u'), or (-1, u1)."""
-    step = 1e-9 * (u1 - u) + 1e-12
+    step = TRACK_PROBE_REL * (u1 - u) + TRACK_STEP_MIN
     while u + step < u1:
         g = _face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
         if g >= 0 and g != f:
@@ -445,7 +446,7 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
         su = se
         g = w.nbr[f, e]
         if g < 0:
-            g = _face_at(w, qx + (u + 1e-9) * dx, qy + (u + 1e-9) * dy)
+            g = _face_at(w, qx + (u + TRACK_PROBE_REL) * dx, qy + (u + TRACK_PROBE_REL) * dy)
             if g < 0:
                 return best
         f = g

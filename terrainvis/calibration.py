@@ -74,6 +74,7 @@ from . import _calibration_kernels as _ck
 from ._validate import as_int, describe
 from .errors import OutsideFootprintError
 from .terrain import TIN, HeightGrid
+from .tolerances import THRESHOLD_MARGIN_REL
 from .visibility import EARTH_RADIUS, curvature_coefficient
 
 __all__ = ["calibrated_heights", "Partners", "partners", "N_PARTNERS", "SWEEPS", "MIN_GAIN"]
@@ -88,7 +89,7 @@ MIN_GAIN = 1
 #: Points per chunk of the T-side verdicts (bounds the temporary (chunk x K) segment arrays).
 _CHUNK_PAIRS = 1 << 20
 #: Height margin kept from thresholds, as a fraction of the terrain's scale (about 5 mm on a 5 km grid).
-MARGIN_REL = 1e-6
+MARGIN_REL = THRESHOLD_MARGIN_REL
 #: The neighbours of a point (see "Short sight lines" in the module docstring): rings at
 #: these distances, in cells of T, ...
 NEIGHBOUR_RINGS = (1.5, 3.0, 5.0, 8.0)

@@ -945,7 +945,9 @@ def _relocate(args) -> int:
     lift = moved[:, 2] - (surface + args.offset)
     print(f"{label}: {_plural(len(points), 'point')} relocated ({args.how}) onto {what}, {seconds:.2f} s")
     if args.how == "calibrated" and len(points):
-        off = np.abs(lift) > 1e-9
+        from .tolerances import MOVED_ABS
+
+        off = np.abs(lift) > MOVED_ABS
         print(f"  {int(off.sum())} off the full projection (S(T) + offset); height change from it "
               f"{lift.min():+.4g} to {lift.max():+.4g}, median {np.median(lift):+.4g} (z units)")
     print(f"  wrote {out}")

@@ -32,6 +32,7 @@ __all__ = [
     "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
     "BUDGET_WINDOW_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
     "TILE_BORDER_REL", "FACE_AREA_REL", "STAR_MARGIN_MIN",
+    "THRESHOLD_MARGIN_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -122,3 +123,28 @@ FACE_AREA_REL = 1e-12
 #: Quadric repair: a vertex's star has a usable interior (a point strictly inside every
 #: face) when the linear program's margin, in units of the star's size, exceeds this.
 STAR_MARGIN_MIN = 1e-9
+
+# ------------------------------------------------------------------ calibrated relocation
+#: Height margin kept from the thresholds, as a fraction of the terrain's scale (about 5 mm
+#: on a 5 km grid): a chosen height stands this far from every threshold, so that the
+#: verdicts the relocation counted are the ones a LOS engine gives there
+#: (``terrainvis.calibration``).
+THRESHOLD_MARGIN_REL = 1e-6
+#: (kernel) The threshold walk over a TIN: a track position counts as inside a face down to
+#: barycentric coordinates of ``-TRACK_FACE_SLACK`` (a track along an edge is found in one
+#: of its two faces).
+TRACK_FACE_SLACK = 1e-9
+#: (kernel) ... a track leaves a face across an edge whose parameter is within this of
+#: [0, 1] (crossings through a vertex are not lost to rounding).
+TRACK_EDGE_SLACK = 1e-9
+#: (kernel) ... the least step in the track's parameter u (in [0, 1]) that counts as
+#: progress: an exit at most this far past the current position is the same position.
+TRACK_STEP_MIN = 1e-12
+#: (kernel) ... probes a little past a vertex or a hole: this fraction of the rest of the
+#: track (the first probe; then tenfold steps), and the step past an edge without a
+#: neighbour.
+TRACK_PROBE_REL = 1e-9
+#: ``terrainvis relocate`` reports a point as moved off the full projection when its height
+#: differs from it by more than this (z units; the margin above is far larger on any real
+#: terrain).
+MOVED_ABS = 1e-9

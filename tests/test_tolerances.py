@@ -41,15 +41,6 @@ ALLOWED = {
     "terrainvis/visibility/sweep.py": {1e-9: 1, 1e-6: 2},
     # visibility: the TIN engine's on-edge epsilon.
     "terrainvis/visibility/tin.py": {1e-12: 1},
-    # cli: "off the full projection" when relocate's calibrated lift exceeds it.
-    "terrainvis/cli.py": {1e-9: 1},
-    # calibration: MARGIN_REL, the height margin kept from thresholds.
-    "terrainvis/calibration.py": {1e-6: 1},
-    # calibration kernels: steps along a track and the barycentric slack of the face walk.
-    "terrainvis/_calibration_kernels.py": {1e-12: 2, 1e-9: 6},
-    # registry: the height-field footprint check (FOOTPRINT_REL's value; it could call
-    # terrainvis._mesh.footprint_matches).
-    "simplifiers/registry.py": {1e-9: 1},
     # Literals that are not tolerances: none. (Divisor floors such as 1e-300 are named too,
     # as DIVISOR_FLOOR, so that one search finds every one of them.)
 }
