@@ -32,7 +32,7 @@ __all__ = [
     "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
     "BUDGET_WINDOW_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
     "TILE_BORDER_REL", "FACE_AREA_REL", "STAR_MARGIN_MIN",
-    "THRESHOLD_MARGIN_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
+    "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -40,8 +40,11 @@ __all__ = [
 #: (``max(extent diagonal, relief)``): a segment still counts as visible down to a
 #: clearance of ``-CLEARANCE_REL * scale``. Also sets how large a height float64 still
 #: resolves against a terrain (``terrainvis._validate.height_limit``).
-#: (``terrainvis.visibility.TOL_REL`` holds the same value for the visibility package.)
+#: (``terrainvis.visibility.TOL_REL`` is this value, under the visibility package's name.)
 CLEARANCE_REL = 1e-9
+#: Segment ends and observers on a grid's edge: a position outside the extent by at most
+#: this fraction of its diagonal still counts as inside (rounding of computed positions).
+EXTENT_INSIDE_REL = 1e-9
 
 # ------------------------------------------------------------------ grid axes and positions
 #: Uniform-axis test: each step of an axis may differ from the mean step by this fraction

@@ -32,13 +32,8 @@ ALLOWED = {
     # visibility: the sweep's slope, pseudo-angle and clipping slacks (_REL, _PEPS, _LEPS),
     # the wedge-boundary and cross-product tests, the ring test.
     "terrainvis/visibility/_sweep_kernels.py": {1e-13: 1, 1e-12: 4, 1e-9: 4, 1e-6: 2},
-    # visibility: Morton-order quantisation of positions (a divisor floor, DIVISOR_FLOOR's value).
-    "terrainvis/visibility/grid.py": {1e-300: 2},
-    # visibility: TOL_REL (CLEARANCE_REL's value, checked below) and the slack of the
-    # points-inside-the-extent check.
-    "terrainvis/visibility/predicate.py": {1e-9: 2},
-    # visibility: the end-of-segment slack, and the trim's margin in the sweep's rules.
-    "terrainvis/visibility/sweep.py": {1e-9: 1, 1e-6: 2},
+    # visibility: the trim's margin in the sweep's rules.
+    "terrainvis/visibility/sweep.py": {1e-6: 2},
     # visibility: the TIN engine's on-edge epsilon.
     "terrainvis/visibility/tin.py": {1e-12: 1},
     # Literals that are not tolerances: none. (Divisor floors such as 1e-300 are named too,

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._interrupt import call
+from ..tolerances import DIVISOR_FLOOR
 from . import _kernels
 
 __all__ = ["GridAccel", "grid_accel", "grid_clearance", "grid_matrix"]
@@ -115,8 +116,8 @@ def _morton_order(xy: np.ndarray, extent, bits: int = 8) -> np.ndarray:
     """
     xmin, xmax, ymin, ymax = extent
     scale = float((1 << bits) - 1)
-    qx = np.clip((xy[:, 0] - xmin) * (scale / max(xmax - xmin, 1e-300)), 0, scale).astype(np.uint32)
-    qy = np.clip((xy[:, 1] - ymin) * (scale / max(ymax - ymin, 1e-300)), 0, scale).astype(np.uint32)
+    qx = np.clip((xy[:, 0] - xmin) * (scale / max(xmax - xmin, DIVISOR_FLOOR)), 0, scale).astype(np.uint32)
+    qy = np.clip((xy[:, 1] - ymin) * (scale / max(ymax - ymin, DIVISOR_FLOOR)), 0, scale).astype(np.uint32)
     key = _spread(qx) | (_spread(qy) << np.uint32(1))
     key = key.astype(np.uint16 if bits <= 8 else np.uint32)
     return np.argsort(key, kind="stable")

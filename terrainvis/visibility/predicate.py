@@ -12,6 +12,7 @@ import numpy as np
 from .._validate import as_nonnegative_finite, as_points, as_positive_finite, describe
 from ..errors import OutsideFootprintError
 from ..terrain import HeightGrid, as_terrain
+from ..tolerances import CLEARANCE_REL, EXTENT_INSIDE_REL
 
 __all__ = [
     "ENGINES", "TRIM_REL", "TOL_REL", "EARTH_RADIUS", "STANDARD_REFRACTION", "terrain_scale", "trim_length",
@@ -23,7 +24,7 @@ ENGINES = ("auto", "grid", "embree")
 #: Trim length as a fraction of the horizontal diagonal (see :func:`trim_length`).
 TRIM_REL = 1e-5
 #: Clearance tolerance as a fraction of :func:`terrain_scale`.
-TOL_REL = 1e-9
+TOL_REL = CLEARANCE_REL
 #: Default earth radius (metres): WGS84's semi-major axis, as GDAL's ``gdal_viewshed`` takes it.
 EARTH_RADIUS = 6378137.0
 #: The curvature coefficient of standard refraction, ``1 - 1/7`` (GDAL's default ``-cc``).
@@ -130,7 +131,7 @@ def _check_inside(terrain, pts: np.ndarray, name: str) -> None:
         return
     if isinstance(terrain, HeightGrid):
         xmin, xmax, ymin, ymax = terrain.extent
-        slack = 1e-9 * _extent_diagonal(terrain)
+        slack = EXTENT_INSIDE_REL * _extent_diagonal(terrain)
         x = pts[:, 0]
         y = pts[:, 1]
         out = (x < xmin - slack) | (x > xmax + slack) | (y < ymin - slack) | (y > ymax + slack)

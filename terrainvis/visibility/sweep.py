@@ -69,6 +69,7 @@ import math
 import numba
 import numpy as np
 
+from ..tolerances import EXTENT_INSIDE_REL
 from .._interrupt import call
 from .._validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
@@ -287,7 +288,7 @@ def _surface_at(terrain, x: float, y: float) -> float:
     if isinstance(terrain, TIN):
         return float(terrain.height_at([[x, y]])[0])
     xs, ys = terrain.xs, terrain.ys
-    slack = 1e-9 * float(np.hypot(xs[-1] - xs[0], ys[-1] - ys[0]))
+    slack = EXTENT_INSIDE_REL * float(np.hypot(xs[-1] - xs[0], ys[-1] - ys[0]))
     if not (xs[0] - slack <= x <= xs[-1] + slack and ys[0] - slack <= y <= ys[-1] + slack):
         return math.nan
     c = int(np.searchsorted(xs, x))
