@@ -9,7 +9,9 @@ entry here and writing its module.
 
 A *regular* method provides a curve operator ``op(f, axis=..., **options)`` that
 reduces one axis of an array; :func:`simplify` applies it along rows, then columns,
-``level`` times (:func:`simplifiers.reverse_faber.reduce_level`). An *irregular* method
+``level`` times (:func:`simplifiers.reverse_faber.reduce_level`); a regular method
+marked ``whole_grid`` instead provides ``op(grid, level, **options) -> HeightGrid`` at
+the same coarse positions (it needs the whole terrain, as ``visopt`` does). An *irregular* method
 provides ``build(grid, n_vertices, **options) -> TIN``; :func:`simplify` computes the
 vertex budget, checks the result against the height-field rules
 (:func:`check_height_field`) and records the metadata.
@@ -63,6 +65,11 @@ class Method:
     cascades : bool
         The method can continue from its own result at a finer level (``start=``), so a
         comparison may simplify level k+1 from level k instead of from the grid.
+    default : bool
+        The method is in a comparison's default method list (:mod:`terrainvis.options`).
+    whole_grid : bool
+        A regular method whose code is ``op(grid, level, **options) -> HeightGrid`` (the
+        coarse grid at the reverse Faber positions) instead of a curve operator.
     memory : (int, int, int or None)
         Peak bytes the method adds per grid sample (for at most the third entry's samples;
         the rest cost :data:`_BYTES_PER_SAMPLE_BEYOND`) and per vertex of the result, the
@@ -81,6 +88,8 @@ class Method:
     style: tuple = ("k", "o")
     cascades: bool = False
     memory: tuple = (32, 0, None)
+    default: bool = True
+    whole_grid: bool = False
 
     def memory_need(self, n_samples: int, n_vertices: int) -> int:
         """Estimated peak bytes of simplifying ``n_samples`` grid samples to ``n_vertices`` vertices."""
@@ -133,6 +142,14 @@ METHODS: dict[str, Method] = {
                options=("weights",), halo=4, cost_rank=5, style=("tab:cyan", "D")),
         Method("feature", "regular", _RF, "feature", "reverse Faber: feature-aware least squares",
                options=("weight",), cost_rank=2, style=("tab:green", "^")),
+        Method(
+            "visopt", "regular", "simplifiers.visopt", "visopt",
+            "visibility-optimized coarse heights for the calibrated relocation (issue 18; docs/visopt.md)",
+            options=("n_train", "rounds", "seed", "trust", "max_breakpoints"), cost_rank=1,
+            style=("tab:olive", "*"), whole_grid=True, default=False,
+            # GLS's solve and the error evaluation; the breakpoints (at most about 320 MB) do not grow with the grid
+            memory=(48, 0, None),
+        ),
     )
 }
 
@@ -219,6 +236,9 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
         t0 = time.perf_counter()
         if target is None:
             out, extra = _apply_regular(grid, info, level, options), {}
+        elif info.whole_grid:
+            out, extra = _whole_grid_within(grid, info, level, target, options)
+            level = extra.pop("level")
         else:
             out, extra = regular_within(grid, info.load(), level, target, options)
             level = extra.pop("level")
@@ -238,6 +258,8 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
 def _apply_regular(grid: HeightGrid, info: Method, level: int, options) -> HeightGrid:
     if level == 0:
         return grid.copy_with()
+    if info.whole_grid:
+        return info.load()(grid, level, **options)
     from .reverse_faber import reduce_level
 
     op = info.load()
@@ -245,6 +267,24 @@ def _apply_regular(grid: HeightGrid, info: Method, level: int, options) -> Heigh
     for _ in range(level):
         z = reduce_level(z, op, **options)
     return HeightGrid.from_coords(z, coarse_coords(grid.xs, level), coarse_coords(grid.ys, level), attrs=grid.attrs)
+
+
+def _whole_grid_within(grid: HeightGrid, info: Method, cap: int, target: float, options):
+    """:func:`simplifiers._target.regular_within` for a ``whole_grid`` method: each level
+    from ``cap`` to the deepest computed from the grid, the coarsest within ``target`` kept."""
+    from .levels import max_level
+
+    levels = [(lv, out, vertical_errors(grid, out)[0])
+              for lv in range(cap, max_level(grid.shape) + 1)
+              for out in [_apply_regular(grid, info, lv, options)]]
+    within = [item for item in levels if item[2] <= target]
+    level, out, err = within[-1] if within else levels[0]
+    if within:
+        note = f"max_error {target:g}: level {level} is the coarsest within it (max error {err:.4g})"
+    else:
+        note = f"max_error {target:g} is not met even at level {level}, the finest allowed (max error {err:.4g})"
+    return out, {"level": level, "max_error_target": target, "stopped_by": "max_error" if within else "budget",
+                 "level_errors": [[lv, e] for lv, _, e in levels], "notes": [note]}
 
 
 def _run_irregular(grid: HeightGrid, info: Method, level, options, target):

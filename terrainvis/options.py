@@ -293,6 +293,12 @@ def _method_names():
     return list(METHODS)
 
 
+def _default_method_names():
+    from simplifiers import METHODS
+
+    return [name for name, info in METHODS.items() if info.default]
+
+
 def _relocation_names():
     from . import relocation
 
@@ -314,9 +320,10 @@ def _engines():
 # ---------------------------------------------------------------------- the options
 _DECLARED = [
     Option(
-        "methods", None, names(_method_names, _method_names),
-        "simplification methods", "sequence of str", default_text="all registered methods",
-        doc="The registry :data:`simplifiers.METHODS` lists them, in the paper's order.",
+        "methods", None, names(_method_names, _default_method_names),
+        "simplification methods", "sequence of str", default_text="all registered methods but visopt",
+        doc=("The registry :data:`simplifiers.METHODS` lists them, in the paper's order; the default is "
+             "every method whose entry has ``default=True`` (all but ``visopt``)."),
         cli=Flag(many=True, metavar="M"),
     ),
     Option(

@@ -32,7 +32,7 @@ __all__ = [
     "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
     "BUDGET_WINDOW_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
     "TILE_BORDER_REL", "FACE_AREA_REL", "STAR_MARGIN_MIN",
-    "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
+    "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "VERTEX_WEIGHT_ZERO", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -151,3 +151,9 @@ TRACK_PROBE_REL = 1e-9
 #: differs from it by more than this (z units; the margin above is far larger on any real
 #: terrain).
 MOVED_ABS = 1e-9
+
+# ------------------------------------------------------------------ visopt
+#: (kernel) visopt's coordinate descent: a sight line's breakpoint whose height depends on
+#: a coarse vertex with a barycentric weight below this is not influenced by that vertex
+#: (``simplifiers._visopt_kernels``).
+VERTEX_WEIGHT_ZERO = 1e-12

@@ -141,6 +141,30 @@ ARGS, WORK = setup(1025, 40000)
 def work():
     call(ck.grid_heights, *ARGS, work=WORK)
 """, False),
+    # one coordinate-descent sweep of visopt (serial over the coarse heights): 120^2 at level 1,
+    # 1200 training points, about 30 s uninterrupted
+    "visopt": ("""
+from simplifiers import visopt as vo, _visopt_kernels as vk
+from terrainvis._interrupt import call
+def warm():
+    vo.visopt(tv.synthetic_terrain("hills", size=33), 1, n_train=20)
+g = tv.synthetic_terrain("hills", size=120)
+S0 = vo.start_grid(g, 1)
+W = tv.sample_points(g, 1200, seed=0)
+p = np.column_stack([W[:, 0] - S0.xs[0], W[:, 1] - S0.ys[0], S0.height_at(W[:, :2])])
+pairs = vo._Pairs(S0, p, 1200, vo.MAX_BREAKPOINTS, np.random.default_rng(0))
+vt = np.ascontiguousarray(tv.visibility_matrix(g, W)[pairs.ii, pairs.jj])
+ev = np.empty((1200, 3), dtype=np.int64)
+ew = np.empty((1200, 3))
+vk.barycentric(pairs.xs, pairs.ys, p[:, 0].copy(), p[:, 1].copy(), ev, ew)
+c0 = S0.z.ravel().copy()
+d = np.zeros(1200)
+rad = np.full(S0.size, 50.0)
+order = np.arange(S0.size, dtype=np.int64)
+def work():
+    call(vk.c_sweep, c0.copy(), c0, rad, d, ev, ew, vt, pairs.ncx, pairs.ii, pairs.jj, pairs.ptr, pairs.bu,
+         pairs.btri, pairs.ba, pairs.bb, pairs.vptr, pairs.items, 1e-6, 1e-6, order, work=pairs.n_breakpoints)
+""", False),
 }
 
 

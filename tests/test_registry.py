@@ -11,10 +11,11 @@ from terrainvis import TIN, HeightGrid, synthetic_terrain
 from terrainvis.errors import NodataError, SimplificationError
 
 
-def test_available_lists_all_seven_in_the_papers_order():
+def test_available_lists_the_papers_seven_in_its_order_then_visopt():
     assert list(available().items()) == [
         ("qec", "irregular"), ("greedy-cuts", "irregular"), ("greedy-insertion", "irregular"),
         ("simple", "regular"), ("gls", "regular"), ("lls", "regular"), ("feature", "regular"),
+        ("visopt", "regular"),
     ]
     assert list(simplifiers.METHODS) == list(available())
 
@@ -29,7 +30,7 @@ def test_budgets_and_levels():
 def test_unknown_method_lists_available():
     g = synthetic_terrain("hills", size=9)
     with pytest.raises(ValueError, match=r"method must be one of \['qec', 'greedy-cuts', 'greedy-insertion', "
-                                         r"'simple', 'gls', 'lls', 'feature'\] \(see simplifiers.available\(\)\)"):
+                                         r"'simple', 'gls', 'lls', 'feature', 'visopt'\] \(see simplifiers.available\(\)\)"):
         simplify(g, "decimate")
 
 
