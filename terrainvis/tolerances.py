@@ -32,7 +32,9 @@ __all__ = [
     "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
     "BUDGET_WINDOW_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
     "TILE_BORDER_REL", "FACE_AREA_REL", "STAR_MARGIN_MIN",
-    "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "VERTEX_WEIGHT_ZERO", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
+    "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "VERTEX_WEIGHT_ZERO",
+    "SLOPE_REL", "PSEUDO_ANGLE_SLACK", "EDGE_CLIP_SLACK", "DIAGONAL_SLACK", "PSEUDO_ANGLE_SPAN_MIN", "PARALLEL_SINE_MIN",
+    "WEDGE_BOUNDARY_SLACK", "RING_BOUND_REL", "TRIM_MARGIN_REL", "TIN_ON_EDGE_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -157,3 +159,31 @@ MOVED_ABS = 1e-9
 #: a coarse vertex with a barycentric weight below this is not influenced by that vertex
 #: (``simplifiers._visopt_kernels``).
 VERTEX_WEIGHT_ZERO = 1e-12
+
+# ------------------------------------------------------------------ viewshed sweep (kernel)
+#: (kernel) Relative slack on the sweep's slopes (rounding of divisions and square roots,
+#: generously): a bound decides a target only beyond it.
+SLOPE_REL = 1e-13
+#: (kernel) Pseudo-angle slack when a value is compared with a wedge boundary.
+PSEUDO_ANGLE_SLACK = 1e-12
+#: (kernel) Slack on the clipping parameters of an edge against a wedge.
+EDGE_CLIP_SLACK = 1e-9
+#: (kernel) A piece of a ray on a cell's diagonal (both ends within this of it, in the
+#: cell's unit coordinates) is tested against the other triangle's plane too.
+DIAGONAL_SLACK = 1e-12
+#: (kernel) An edge whose pseudo-angle span is below this is a point for the wedge clipping.
+PSEUDO_ANGLE_SPAN_MIN = 1e-9
+#: (kernel) A wedge's boundary ray and an edge are parallel (no cut) when the sine of their
+#: angle is below this.
+PARALLEL_SINE_MIN = 1e-6
+#: (kernel) A pseudo-angle within this fraction of a wedge's width of its boundary lies on
+#: it: the neighbouring wedge counts too.
+WEDGE_BOUNDARY_SLACK = 1e-9
+#: (kernel) The ring bound's relative margin (cells bounded from their corners only when
+#: a diagonal is below the ring distance by more than rounding).
+RING_BOUND_REL = 1e-12
+#: The sweep runs only when every cell is wider than both trims by this fraction, and the
+#: trimmed ends it excludes are widened by it.
+TRIM_MARGIN_REL = 1e-6
+#: The TIN engine: a point within this fraction of the extent's diagonal of an edge is on it.
+TIN_ON_EDGE_REL = 1e-12

@@ -26,16 +26,6 @@ SMALL = 1e-5
 #: Small literals still written in place, by file (path from the repository root) and value,
 #: with how many times each may appear. Every entry says why it is still there.
 ALLOWED = {
-    # Owned by other branches while this one was written (the viewshed kernel rewrite, the
-    # new CLI commands, the new method in the registry, the lead's calibration work); the
-    # lead moves them into tolerances.py after merging those branches and empties this list.
-    # visibility: the sweep's slope, pseudo-angle and clipping slacks (_REL, _PEPS, _LEPS),
-    # the wedge-boundary and cross-product tests, the ring test.
-    "terrainvis/visibility/_sweep_kernels.py": {1e-13: 1, 1e-12: 4, 1e-9: 4, 1e-6: 2},
-    # visibility: the trim's margin in the sweep's rules.
-    "terrainvis/visibility/sweep.py": {1e-6: 2},
-    # visibility: the TIN engine's on-edge epsilon.
-    "terrainvis/visibility/tin.py": {1e-12: 1},
     # Literals that are not tolerances: none. (Divisor floors such as 1e-300 are named too,
     # as DIVISOR_FLOOR, so that one search finds every one of them.)
 }

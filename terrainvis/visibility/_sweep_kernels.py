@@ -75,6 +75,11 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from ..tolerances import (
+    DIAGONAL_SLACK, EDGE_CLIP_SLACK, PARALLEL_SINE_MIN, PSEUDO_ANGLE_SLACK, PSEUDO_ANGLE_SPAN_MIN, RING_BOUND_REL,
+    SLOPE_REL, WEDGE_BOUNDARY_SLACK,
+)
+
 from ._kernels import _canonical, _locate, curved_min, interval_start
 
 _INF = np.inf
@@ -89,11 +94,11 @@ UNDECIDED = 2
 NOT_TARGET = 3
 
 #: Relative slack on slopes (rounding of divisions and square roots, generously).
-_REL = 1e-13
+_REL = SLOPE_REL
 #: Pseudo-angle slack when a value is compared with a wedge boundary.
-_PEPS = 1e-12
+_PEPS = PSEUDO_ANGLE_SLACK
 #: Slack on clipping parameters along an edge.
-_LEPS = 1e-9
+_LEPS = EDGE_CLIP_SLACK
 
 #: The surface, in local coordinates (origin at the grid's first sample): ``z`` (rows,
 #: cols) float64 heights (NaN = nodata); ``xs`` (cols,), ``ys`` (rows,) float64
@@ -272,7 +277,7 @@ def _absent_piece(g, r, c, upper, ray, ta, tb, bulge):
         va = (ey + ta * dy - ys[r]) * g.iyw[r]
         ub = (ex + tb * dx - xs[c]) * g.ixw[c]
         vb = (ey + tb * dy - ys[r]) * g.iyw[r]
-        if abs(ua - va) <= 1e-12 and abs(ub - vb) <= 1e-12:
+        if abs(ua - va) <= DIAGONAL_SLACK and abs(ub - vb) <= DIAGONAL_SLACK:
             best = min(best, curved_min(_clear(g, r, c, other, ray, ta), _clear(g, r, c, other, ray, tb), ta, tb,
                                         bulge))
     return best
@@ -615,7 +620,7 @@ def _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz):
     la = l0
     lb_ = l1
     full = False
-    if (pmax - pmin) < 1e-9:
+    if (pmax - pmin) < PSEUDO_ANGLE_SPAN_MIN:
         return la, lb_, full, True
     # parameters where the wedge's two boundary rays cross the edge
     cut = True
@@ -624,14 +629,14 @@ def _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz):
     if lo_p > pmin:
         ux, uy = _direction(lo_p)
         cr = ux * ey_ - uy * ex_
-        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
+        if abs(cr) < PARALLEL_SINE_MIN * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
             cut = False
         else:
             lam_lo = -(ux * wy - uy * wx) / cr
     if hi_p < pmax:
         ux, uy = _direction(hi_p)
         cr = ux * ey_ - uy * ex_
-        if abs(cr) < 1e-6 * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
+        if abs(cr) < PARALLEL_SINE_MIN * np.sqrt(alpha) * np.sqrt(ux * ux + uy * uy):
             cut = False
         else:
             lam_hi = -(ux * wy - uy * wx) / cr
@@ -1066,7 +1071,7 @@ def _wedge_slot(p, bsz, glo):
     gb = p * k4
     g = int(np.floor(gb))
     fr = gb - g
-    return g - glo, fr < 1e-9 * k4, fr > 1.0 - 1e-9 * k4
+    return g - glo, fr < WEDGE_BOUNDARY_SLACK * k4, fr > 1.0 - WEDGE_BOUNDARY_SLACK * k4
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -1587,7 +1592,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
         plo_g = glo * 4.0 / bsz
         phi_g = (glo + nloc) * 4.0 / bsz
         dring = _ring_distance(g, eye, j - 1)
-        rel = 0.25 * rules.diag2 / (dring * dring) * (1.0 + 1e-12)
+        rel = 0.25 * rules.diag2 / (dring * dring) * (1.0 + RING_BOUND_REL)
         cells = j > jnear and rel <= 1.0  # cells bounded from their corners, segments tested
         runs = _cell_path(q, j, eye.re, eye.ce, nr, nc)
         for run in range(2):

@@ -69,7 +69,7 @@ import math
 import numba
 import numpy as np
 
-from ..tolerances import EXTENT_INSIDE_REL
+from ..tolerances import EXTENT_INSIDE_REL, TRIM_MARGIN_REL
 from .._interrupt import call
 from .._validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
@@ -393,7 +393,7 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, s
     tol = clearance_tolerance(grid)
     counts = (0, 0, 0)
     wmin = float(min(np.diff(grid.xs).min(), np.diff(grid.ys).min()))
-    if sweep and wmin > 2.0 * delta * (1.0 + 1e-6) and grid.shape[0] >= 3 and grid.shape[1] >= 3:
+    if sweep and wmin > 2.0 * delta * (1.0 + TRIM_MARGIN_REL) and grid.shape[0] >= 3 and grid.shape[1] >= 3:
         counts = _sweep(grid, at, eye, query, code, zt, own)
     todo = np.flatnonzero(code.ravel() == _vk.UNDECIDED)
     if todo.size:
@@ -441,7 +441,7 @@ def _rules(grid: HeightGrid, ez: float, query) -> _vk.Rules:
     # closer than r_excl to the eye, a point lies in every target's trimmed end
     r_excl = 0.5 * delta * wmin / math.hypot(wmin, dz)
     diag2 = float(np.diff(xs).max() ** 2 + np.diff(ys).max() ** 2)
-    return _vk.Rules(float(h_t), delta, clearance_tolerance(grid), 64.0 * e_h, e_h, r_excl, delta * (1.0 + 1e-6),
+    return _vk.Rules(float(h_t), delta, clearance_tolerance(grid), 64.0 * e_h, e_h, r_excl, delta * (1.0 + TRIM_MARGIN_REL),
                      diag2, float(dmax), float(kc))
 
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..tolerances import TIN_ON_EDGE_REL
+
 from . import _kernels
 
 __all__ = ["tin_clearance", "tin_matrix"]
@@ -37,7 +39,7 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0, kc: float
     v = tin.vertices
     x0, y0 = bk.x0, bk.y0
     xmin, xmax, ymin, ymax = tin.extent
-    eps = 1e-12 * float(np.hypot(xmax - xmin, ymax - ymin))
+    eps = TIN_ON_EDGE_REL * float(np.hypot(xmax - xmin, ymax - ymin))
     # local coordinates (the bucket grid starts at the extent's minimum corner)
     vx = np.ascontiguousarray(v[:, 0] - x0)
     vy = np.ascontiguousarray(v[:, 1] - y0)
