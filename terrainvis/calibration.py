@@ -39,8 +39,8 @@ Short sight lines
 -----------------
 Partners spread over the whole terrain stand, on average, tens of cells from a point, so
 they say little about its short sight lines: chasing one more far partner, a point could
-sink a little into S(T) and lose sight of what is around it (on the shared DEMs, without
-what follows, up to 4 points of accuracy among pairs less than 5 cells apart at level 1).
+sink a little into S(T) and lose sight of what is around it (docs/relocation.md measures
+what that cost on the shared DEMs).
 So each point also has *neighbours* (``neighbours=True``, the default): L = 48 probes on
 rings 1.5, 3, 5 and 8 cells of T around it (:data:`NEIGHBOUR_RINGS`), standing like the
 point (``offset`` or ``target_height`` above T), with the point's verdicts to them on T.

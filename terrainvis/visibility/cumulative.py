@@ -12,8 +12,8 @@ process pool or on a dask cluster, and stops them all on Ctrl-C. A unit returns 
 of its chunk and the caller adds them up as units finish, so memory stays at one count
 raster per running unit whatever K is.
 
-Costs: one viewshed per observer (about 0.1 s per million samples and core on mountains; see
-:func:`terrainvis.viewshed`), plus per unit the transfer of the terrain to the worker
+Costs: one viewshed per observer (:func:`terrainvis.viewshed`; docs/user-guide.md, "Many
+observers", gives the measured figures), plus per unit the transfer of the terrain to the worker
 (a pickle of the grid; on dask the grid is scattered once and shared by the units). A
 worker keeps the last terrain it was sent, with its caches (the pyramid of the exact
 walks, the sweep's bounds), for the units of the same call.
