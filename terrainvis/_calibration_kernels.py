@@ -477,55 +477,10 @@ def best_height(thr, vis, zref, margin, min_gain):
     Among the optimal intervals of z, the one nearest ``zref`` is taken, and in it the
     point nearest ``zref`` that keeps ``margin`` (> 0: an interval holds its lower end,
     not its upper one) from the interval's ends (its middle when it is narrower than
-    twice the margin). ``thr`` = -inf marks partners seen at any height.
+    twice the margin). ``thr`` = -inf marks partners seen at any height. This is
+    :func:`best_height_kept` without neighbours.
     """
-    K = thr.shape[0]
-    order = np.argsort(thr)
-    score = 0
-    for k in range(K):
-        if not vis[k] and thr[k] > -_INF:
-            score += 1
-        elif vis[k] and thr[k] == -_INF:
-            score += 1
-    best = -1
-    best_z = zref
-    best_d = _INF
-    at_ref = -1
-    lo = -_INF
-    j = 0
-    while j <= K:
-        # thresholds equal to lo were passed: z in [lo, hi) sees exactly the partners with thr <= lo
-        hi = _INF if j == K else thr[order[j]]
-        if lo <= zref < hi:
-            at_ref = score
-        if hi > lo and score >= best:
-            if score > best:
-                best = score
-                best_d = _INF
-            m = margin
-            if hi - lo < 2.0 * m:
-                m = 0.5 * (hi - lo)
-            zc = zref
-            if zc < lo + m:
-                zc = lo + m
-            if zc > hi - m:
-                zc = hi - m
-            d = abs(zc - zref)
-            if d < best_d:
-                best_d = d
-                best_z = zc
-        if j == K:
-            break
-        # cross every threshold equal to hi
-        while j < K and thr[order[j]] == hi:
-            k = order[j]
-            if thr[k] > -_INF:
-                score += 1 if vis[k] else -1
-            j += 1
-        lo = hi
-    if best - at_ref < min_gain:
-        return zref, at_ref
-    return best_z, best
+    return best_height_kept(thr, vis, np.empty(0), np.empty(0, dtype=np.int8), 0.0, zref, margin, min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
