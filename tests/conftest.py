@@ -47,3 +47,17 @@ def shared_dem_120(name: str):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+def pytest_configure(config):
+    """Give this process Python's own SIGINT handler if it started with SIGINT ignored.
+
+    A POSIX shell without job control starts a background job (``command &``) with SIGINT
+    ignored, and an ignored disposition survives exec: every subprocess the interrupt
+    tests start would then ignore the Ctrl-C they send and time out. The tests need the
+    disposition a user's terminal gives.
+    """
+    import signal
+
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
