@@ -19,7 +19,14 @@ question from the same eyes). The script prints
   it has no cumulative mode), with the ratio to ours; and how many cells of the summed
   counts differ between it and us on those observers (gdal_viewshed is an approximation,
   see docs/visibility.md), curvature off on both sides unless ``--curvature`` is given
-  (gdal ``-cc``).
+  (gdal ``-cc``);
+* with ``--dask``: the same call on a local dask cluster (``LocalCluster``, 2 worker
+  processes of one thread; the cluster's start-up and the workers' first kernel load are
+  excluded, as a user's long-lived cluster would have them);
+* with ``--cli``: the whole ``terrainvis cumulative DEM.tif --observers OBS.csv -o
+  counts.tif`` command on a GeoTIFF of the grid and a CSV of the observers (start-up,
+  reading, the counts on the default workers, writing the GeoTIFF), and whether the counts
+  it wrote equal the call's.
 
 Timings are noisy on a shared machine: the script prints the load average before and
 after, and the CPU seconds each run used (this process and its worker processes), which
@@ -32,6 +39,7 @@ Example::
     python benchmarks/bench_cumulative.py                                   # 1,000 observers on 1024²
     python benchmarks/bench_cumulative.py --observers 100 --size 512        # quick
     python benchmarks/bench_cumulative.py --curvature 0.85714 --max-distance 10000
+    python benchmarks/bench_cumulative.py --workers 1 --dask --cli          # the call, dask and the command
 """
 
 from __future__ import annotations
@@ -42,6 +50,7 @@ import resource
 import shutil
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -105,6 +114,55 @@ def _ours(grid, obs, workers: int, args):
     return statistics.median(times), statistics.median(cpus), counts
 
 
+def _on_dask(grid, obs, args):
+    """Wall seconds, workers' CPU seconds and counts of the cumulative viewshed on a local dask cluster
+    (2 worker processes of one thread; the cluster is started and warmed up before the clock starts)."""
+    from dask.distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        cumulative_viewshed(grid, obs[:4], client=client, **_options(args))  # workers import and load the kernels
+
+        def cpu():
+            return sum(client.run(lambda: sum(resource.getrusage(resource.RUSAGE_SELF)[:2])).values())
+
+        c = cpu()
+        t = time.perf_counter()
+        counts = cumulative_viewshed(grid, obs, client=client, **_options(args))
+        seconds = time.perf_counter() - t
+        return seconds, cpu() - c, counts
+
+
+def _command(grid, obs, args):
+    """Wall and CPU seconds of ``terrainvis cumulative`` on a GeoTIFF of ``grid`` and a CSV of ``obs``."""
+    import csv
+
+    with tempfile.TemporaryDirectory(prefix="bench_cumulative_cli_") as tmp:
+        folder = Path(tmp)
+        dem = folder / "dem.tif"
+        save_dem(grid, dem)
+        table = folder / "observers.csv"
+        with open(table, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["x", "y"])
+            w.writerows([[repr(float(x)), repr(float(y))] for x, y in obs])
+        exe = Path(sys.executable).with_name("terrainvis")
+        cmd = [str(exe), "cumulative", str(dem), "--observers", str(table), "-o", str(folder / "counts.tif"),
+               "--observer-height", repr(args.observer_height), "--target-height", repr(args.target_height),
+               "--curvature", repr(args.curvature)]
+        if args.max_distance is not None:
+            cmd += ["--max-distance", repr(args.max_distance)]
+        c = _cpu()
+        t = time.perf_counter()
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        seconds, cpu = time.perf_counter() - t, _cpu() - c
+        import rasterio
+
+        with rasterio.open(folder / "counts.tif") as src:
+            counts = src.read(1)[::-1].astype(np.int64)  # north-up file, rows of the grid south-up
+        return seconds, cpu, counts
+
+
 def _gdal(grid, obs, args, folder: Path):
     """Wall and CPU seconds per gdal_viewshed command (medians) and the sum of its viewsheds (rows south-up, as ours)."""
     dem = folder / "dem.tif"
@@ -143,6 +201,11 @@ def main() -> None:
     p.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     p.add_argument("--repeats", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--dask", action="store_true",
+                   help="also run on a local dask cluster (2 worker processes, one thread each; needs the dask extra)")
+    p.add_argument("--cli", action="store_true",
+                   help="also time `terrainvis cumulative` on a GeoTIFF of the grid and a CSV of the observers "
+                        "(the whole command: start-up, reading, the counts, writing the GeoTIFF)")
     args = p.parse_args()
 
     grid = synthetic_terrain(args.kind, args.size)
@@ -160,6 +223,7 @@ def main() -> None:
     print(f"  one viewshed, one thread       {single:8.3f} s per observer (median of {len(peer)}; CPU "
           f"{single_cpu:.3f} s); {k:,} on {cores} cores with no overhead: {floor:.1f} s")
     ours, ours_cpu = {}, {}
+    counts = None
     for w in args.workers:
         seconds, cpu, counts = _ours(grid, obs, w, args)
         ours[w] = seconds
@@ -168,6 +232,16 @@ def main() -> None:
               f"({seconds / floor:.2f} x the floor; CPU {cpu:.1f} s = {cpu / k:.3f} s per observer, "
               f"{cpu / (k * single_cpu):.2f} x one thread's; {cpu / cores:.1f} s on {cores} idle cores); "
               f"seen by any {100 * (counts > 0).mean():.1f} %, max count {int(counts.max())}")
+    if args.dask:
+        seconds, cpu, counts = _on_dask(grid, obs, args)
+        print(f"  ours, dask LocalCluster 2x1     {seconds:8.1f} s  {k / seconds:7.1f} observers/s  (cluster start-up "
+              f"excluded; CPU of the workers {cpu:.1f} s); seen by any {100 * (counts > 0).mean():.1f} %, "
+              f"max count {int(counts.max())}")
+    if args.cli:
+        seconds, cpu, from_file = _command(grid, obs, args)
+        same = "the same counts" if counts is not None and np.array_equal(from_file, counts) else "COUNTS DIFFER"
+        print(f"  terrainvis cumulative (command) {seconds:7.1f} s  {k / seconds:7.1f} observers/s  (whole process with "
+              f"its workers: start-up, reading the GeoTIFF and the CSV, writing the counts; CPU {cpu:.1f} s); {same}")
     if GDAL is None:
         print("  gdal_viewshed: not installed (Debian: apt-get install gdal-bin); peer skipped")
     else:
