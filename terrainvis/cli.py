@@ -349,10 +349,7 @@ def _relocate_parser(sub) -> None:
     r.add_argument("--partners", type=int, default=N_PARTNERS,
                    help=f"calibrated: partners spread over the DEM (default {N_PARTNERS})")
     r.add_argument("--seed", type=int, default=0, help="calibrated: seed of the partners' positions (default 0)")
-    r.add_argument("--curvature", type=_number, default=0.0,
-                   help="calibrated: earth curvature coefficient of the lines of sight (0 flat, 0.85714 GDAL's "
-                        "default; default 0)")
-    r.add_argument("--earth-radius", type=_number, default=6378137.0, help="with --curvature: the earth's radius")
+    _add_earth(r)  # the calibrated relocation's lines of sight
     _add_nodata(r)
     _add_positions(r)
 
@@ -950,6 +947,7 @@ def _relocate(args) -> int:
         off = np.abs(lift) > MOVED_ABS
         print(f"  {int(off.sum())} off the full projection (S(T) + offset); height change from it "
               f"{lift.min():+.4g} to {lift.max():+.4g}, median {np.median(lift):+.4g} (z units)")
+        print(f"  {_earth(args)}")
     print(f"  wrote {out}")
     return 0
 

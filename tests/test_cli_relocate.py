@@ -34,6 +34,7 @@ def test_the_heights_are_the_apis(case, capsys):
     code, text, _ = _run(capsys, ["relocate", "ridges", "--simplified", str(folder / "s.npz"), "--points",
                                   str(folder / "points.csv"), "-o", str(out), "--partners", "100", "--seed", "2"])
     assert code == 0 and "12 points relocated (calibrated)" in text
+    assert "earth: flat" in text  # the model of its lines of sight, as los and viewshed print it
     got = pd.read_csv(out)
     assert list(got.columns) == ["x", "y", "z", "z_original", "ground_simplified"]
     expected = tv.relocate(P, S, "calibrated", original=T, n_partners=100, seed=2)
@@ -64,6 +65,9 @@ def test_given_heights_and_the_papers_relocations(case, capsys):
     (["-m", "lls", "--simplified", "s.npz"], "one of them"),
     (["--simplified", "s.npz", "-l", "2"], "-l goes with -m"),
     (["--simplified", "nowhere.npz"], "--simplified 'nowhere.npz' does not exist"),
+    # the earth model is checked as by los, viewshed and cumulative (0 was accepted and refused later by the API)
+    (["--simplified", "s.npz", "--curvature", "0.85714", "--earth-radius", "0"], "argument --earth-radius: expected a radius > 0, got '0'"),
+    (["--simplified", "s.npz", "--curvature", "-1"], "argument --curvature: expected a coefficient >= 0"),
 ])
 def test_errors_are_one_line(case, capsys, monkeypatch, extra, message):
     folder, *_ = case
