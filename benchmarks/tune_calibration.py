@@ -1,8 +1,9 @@
 """How the calibrated relocation's parameters were chosen, on terrains and seeds it is not reported on.
 
 The default experiment (the bundled terrains, seed 0) is where the relocation is
-reported; its parameters (the number of partners, the Gauss-Seidel sweeps, the minimum
-gain that moves a point off the full projection) are chosen here instead, on five
+reported; its parameters (the number of partners and the size of their jointly calibrated
+core, the Gauss-Seidel sweeps, the minimum gain that moves a point off the full
+projection) are chosen here instead, on five
 synthetic terrains of the same kinds and size made with another seed (11), with point
 sets from another seed (1), and on the partners' own seed 3. For every setting it prints
 the mean accuracy of each method and level against T's verdicts, the time per unit
@@ -10,6 +11,11 @@ the mean accuracy of each method and level against T's verdicts, the time per un
 
     python benchmarks/tune_calibration.py                      # the grid of settings below
     python benchmarks/tune_calibration.py --partners 256 512 --sweeps 2 --methods lls
+    python benchmarks/tune_calibration.py --partners 512 1024 2048 4096 --core 512 1024 --sweeps 2 \
+        --methods gls lls qec greedy-insertion --sets 6 --terrain-seed 12
+
+A setting is (partners, core, sweeps, min gain): the core (at most the partners) is
+calibrated jointly, the other partners are placed against it (terrainvis.calibration).
 """
 
 from __future__ import annotations
@@ -22,12 +28,15 @@ import numpy as np
 
 import simplifiers
 import terrainvis as tv
+from terrainvis import calibration
 from terrainvis.synthetic import KINDS
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--partners", type=int, nargs="+", default=[256, 512, 1024])
+    ap.add_argument("--core", type=int, nargs="+", default=[calibration.CORE_PARTNERS],
+                    help="sizes of the jointly calibrated core (settings with a core above the partners are skipped)")
     ap.add_argument("--sweeps", type=int, nargs="+", default=[0, 1, 2, 3])
     ap.add_argument("--min-gain", type=int, nargs="+", default=[1])
     ap.add_argument("--methods", nargs="+", default=["lls", "greedy-insertion", "qec"])
@@ -50,19 +59,23 @@ def main():
             for P, V in zip(sets, truth):
                 full = tv.relocate(P, S, "full")
                 rows.setdefault((method, level, "full"), []).append(tv.agreement(V, tv.visibility_matrix(S, full))["accuracy"])
-            for k, sw, gain in itertools.product(args.partners, args.sweeps, args.min_gain):
+            for k, core, sw, gain in itertools.product(args.partners, args.core, args.sweeps, args.min_gain):
+                if core > k and core != min(args.core):
+                    continue  # every core at least k is the same setting: all partners calibrated jointly
                 fresh = type(S)(S.vertices, S.faces) if isinstance(S, tv.TIN) else S.copy_with()
+                calibration.CORE_PARTNERS = core
                 t0 = time.perf_counter()
                 moved = [tv.relocate(P, fresh, "calibrated", original=T, n_partners=k, sweeps=sw,
                                      seed=args.partner_seed, min_gain=gain) for P in sets]
-                times.setdefault((k, sw, gain), []).append(time.perf_counter() - t0)
+                setting = (k, min(core, k), sw, gain)
+                times.setdefault(setting, []).append(time.perf_counter() - t0)
                 for M, V in zip(moved, truth):
-                    rows.setdefault((method, level, (k, sw, gain)), []).append(
+                    rows.setdefault((method, level, setting), []).append(
                         tv.agreement(V, tv.visibility_matrix(fresh, M))["accuracy"])
         print(f"{name} done", flush=True)
     settings = sorted({key[2] for key in rows if key[2] != "full"})
     header = " | ".join(f"{m} L{lv}" for m, lv in itertools.product(args.methods, args.levels))
-    print(f"\n| setting (partners, sweeps, min gain) | {header} | s per unit |")
+    print(f"\n| setting (partners, core, sweeps, min gain) | {header} | s per unit |")
     print("|---" * (2 + len(args.methods) * len(args.levels)) + "|")
     for s in ["full"] + settings:
         cells = " | ".join(f"{100 * np.mean(rows[(m, lv, s)]):.2f}" for m, lv in itertools.product(args.methods, args.levels))

@@ -9,16 +9,21 @@ the points it will be tested with.
 
 Partners
 --------
-``n_partners`` positions spread uniformly over the terrain (stratified: one at a random
-place in each cell of a square lattice over T's extent, from ``seed``), standing
+About ``n_partners`` positions spread uniformly over the terrain (stratified: one at a
+random place in each cell of a square lattice over T's extent, from ``seed``), standing
 ``height`` above the surface: on T at ``T(x, y) + height``, on S(T) where the point's
 real partners will stand. Two settings:
 
 * **points** (``target_height=None``, the pair experiment): the partners are points like
-  the one relocated, carrying the same ``offset`` and relocated the same way. They are
-  calibrated first, jointly: Gauss-Seidel sweeps in which each partner in turn takes its
-  best height against the others at their current heights (each step keeps or raises
-  their total agreement), starting from the full projection, ``sweeps`` times.
+  the one relocated, carrying the same ``offset`` and relocated the same way. A *core* of
+  :data:`CORE_PARTNERS` of them is calibrated first, jointly: Gauss-Seidel sweeps in which
+  each core partner in turn takes its best height against the others at their current
+  heights (each step keeps or raises their total agreement), starting from the full
+  projection, ``sweeps`` times. The other partners (a second stratified sample) are then
+  placed against the core one by one, exactly as the points are (with their neighbours).
+  More partners make each point's agreement a finer estimate of what it will meet; the
+  core keeps the joint calibration, whose cost grows with its square, at the size where
+  it pays.
 * **targets** (``target_height=h``, the viewshed experiment): the partners are targets
   standing ``h`` above each surface, as a viewshed's cells do; they do not move.
 
@@ -58,8 +63,9 @@ point alone.
 Cost
 ----
 Per point, K + L LOS queries on T and K + L threshold walks on S(T) (K = ``n_partners``,
-L = 48 neighbours or none);
-per (T, S(T), setting), once, K² / 2 LOS queries on T and ``sweeps`` x K² walks on S(T).
+L = 48 neighbours or none); per (T, S(T), setting), once, C² / 2 LOS queries on T and
+``sweeps`` x C² walks on S(T) for the core (C = :data:`CORE_PARTNERS`), and (K - C) x
+(C + L) of each for the other partners.
 """
 
 from __future__ import annotations
@@ -76,12 +82,17 @@ from .errors import OutsideFootprintError
 from .terrain import TIN, HeightGrid
 from .tolerances import THRESHOLD_MARGIN_REL
 from .visibility import EARTH_RADIUS, curvature_coefficient
+from .visibility._kernels import new_stack
 
-__all__ = ["calibrated_heights", "Partners", "partners", "N_PARTNERS", "SWEEPS", "MIN_GAIN"]
+__all__ = ["calibrated_heights", "best_responses", "Partners", "partners", "N_PARTNERS", "CORE_PARTNERS", "SWEEPS",
+           "MIN_GAIN"]
 
-#: Default number of partners (K): about where the accuracy saturates on the paper's
-#: terrains (docs/relocation.md gives the figures for 256 to 1024).
-N_PARTNERS = 512
+#: Default number of partners (K), the core and the others (see "Partners" in the module
+#: docstring); chosen on the tuning terrains (docs/relocation.md gives the figures).
+N_PARTNERS = 2048
+#: Partners calibrated jointly by Gauss-Seidel sweeps (the core; K² / 2 LOS queries and
+#: ``sweeps`` x K² threshold walks); the other partners are placed against the core.
+CORE_PARTNERS = 512
 #: Default Gauss-Seidel sweeps over the partners of the points setting (the first does most).
 SWEEPS = 2
 #: Default least gain (partners' verdicts) that moves a point off the full projection.
@@ -194,9 +205,11 @@ def _tin_walk(tin: TIN):
 
 
 # ----------------------------------------------------------------------- partners
-def _positions(original: HeightGrid, simplified, k: int, seed: int) -> np.ndarray:
-    """About ``k`` stratified random positions over T's extent where both surfaces exist."""
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x7E11]))
+def _positions(original: HeightGrid, simplified, k: int, seed: int, stream: int = 0) -> np.ndarray:
+    """About ``k`` stratified random positions over T's extent where both surfaces exist
+    (``stream`` 0: the core partners, 1: the others, drawn apart)."""
+    words = [int(seed), 0x7E11] + ([int(stream)] if stream else [])
+    rng = np.random.default_rng(np.random.SeedSequence(words))
     xmin, xmax, ymin, ymax = original.extent
     n = max(1, int(round(np.sqrt(k))))
     u = (np.arange(n)[None, :] + rng.random((n, n))) / n
@@ -253,23 +266,54 @@ def _line_of_sight_rows(original: HeightGrid, a: np.ndarray, b: np.ndarray, curv
 
 def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_partners: int = N_PARTNERS,
              sweeps: int = SWEEPS, seed: int = 0, end_radius: float = 0.0, curvature: float = 0.0,
-             earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN) -> Partners:
+             earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN, neighbours: bool = True,
+             core: int | None = None) -> Partners:
     """The partners of a calibrated relocation onto ``simplified`` (cached on it).
 
-    ``move`` True: the points setting (partners calibrated by Gauss-Seidel sweeps);
-    False: the targets setting (partners fixed ``height`` above each surface). See the
-    module docstring. Inputs are validated by :func:`calibrated_heights`; ``curvature``
-    and ``earth_radius`` as in :func:`terrainvis.line_of_sight`, on both surfaces.
+    ``move`` True: the points setting (the core of ``min(n_partners, core)`` partners
+    calibrated by Gauss-Seidel sweeps, the others placed against the core as the points
+    are, with their ``neighbours`` or without; ``core`` :data:`CORE_PARTNERS` by default);
+    False: the targets setting (partners fixed ``height`` above each surface). See the module docstring. Inputs are validated by
+    :func:`calibrated_heights`; ``curvature`` and ``earth_radius`` as in
+    :func:`terrainvis.line_of_sight`, on both surfaces.
     """
     kc = curvature_coefficient(curvature, earth_radius)
+    core = CORE_PARTNERS if core is None else core
     key = ("calibration", _fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
-           int(seed), float(end_radius), kc, int(min_gain))
+           int(seed), float(end_radius), kc, int(min_gain), bool(neighbours), int(core))
     cached = simplified._cache.get(key)
     if cached is not None:
         return cached
+    curve = {"curvature": curvature, "earth_radius": earth_radius}
+    n_core = min(int(n_partners), int(core))
+    core_key = key[:4] + key[5:10] + ("core", n_core)  # the core does not depend on the neighbours
+    inner = simplified._cache.get(core_key)
+    if inner is None:
+        inner = _core(original, simplified, height, move, n_core, sweeps, seed, end_radius, curve, min_gain)
+        simplified._cache[core_key] = inner
+    out = inner
+    if n_partners > n_core:
+        xy = _positions(original, simplified, int(n_partners) - n_core, seed, stream=1)
+        z_t = original.height_at(xy) + height
+        ground = simplified.height_at(xy)
+        z_s = ground + height
+        if move and xy.shape[0] and inner.xy.shape[0]:
+            z_s = _place(np.column_stack([xy, z_t]), simplified, original, inner, height, neighbours, end_radius,
+                         curve, min_gain)
+        out = Partners(np.concatenate([inner.xy, xy]), np.concatenate([inner.z_original, z_t]),
+                       np.concatenate([inner.z_simplified, z_s]), np.concatenate([inner.ground_simplified, ground]),
+                       inner.visible)
+    simplified._cache[key] = out
+    return out
+
+
+def _core(original: HeightGrid, simplified, height: float, move: bool, k: int, sweeps: int, seed: int,
+          end_radius: float, curve: dict, min_gain: int) -> Partners:
+    """The core partners: ``k`` stratified positions, calibrated jointly by Gauss-Seidel sweeps (``move``)."""
     from ._interrupt import call
 
-    xy = _positions(original, simplified, n_partners, seed)
+    kc = curvature_coefficient(**curve)
+    xy = _positions(original, simplified, k, seed)
     z_t = original.height_at(xy) + height
     ground = simplified.height_at(xy)
     z_s = ground + height
@@ -277,26 +321,23 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
     if move and xy.shape[0] > 1:
         from .visibility import visibility_matrix
 
-        curve = {"curvature": curvature, "earth_radius": earth_radius}
         at = np.column_stack([xy, z_t])
         visible = _cached(("matrix",) + _key(original, curve, at),
                           lambda: visibility_matrix(original, at, engine="grid", **curve))
         surf = _Surface(simplified)
         q = surf.local(np.column_stack([xy, z_s]))
         order_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
-        k = xy.shape[0]
+        n = xy.shape[0]
         for _ in range(sweeps):
-            order = order_rng.permutation(k).astype(np.int64)
+            order = order_rng.permutation(n).astype(np.int64)
             if surf.grid:
                 call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc,
-                     surf.margin, min_gain, work=k * k)
+                     surf.margin, min_gain, work=n * n)
             else:
                 call(_ck.tin_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc, surf.margin,
-                     min_gain, work=k * k)
+                     min_gain, work=n * n)
         z_s = q[:, 2].copy()
-    out = Partners(xy, z_t, z_s, ground, visible)
-    simplified._cache[key] = out
-    return out
+    return Partners(xy, z_t, z_s, ground, visible)
 
 
 # ----------------------------------------------------------------------- relocation
@@ -340,18 +381,27 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     -------
     (n,) float64
     """
-    from ._interrupt import call
-
     pts = np.asarray(points, dtype=np.float64)
     move = target_height is None
     height = float(offset if move else target_height)
     curve = {"curvature": curvature, "earth_radius": earth_radius}
-    kc = curvature_coefficient(curvature, earth_radius)
     part = partners(original, simplified, height=height, move=move, n_partners=n_partners, sweeps=sweeps,
-                    seed=seed, end_radius=end_radius, min_gain=min_gain, **curve)
-    n = pts.shape[0]
-    if n == 0 or part.xy.shape[0] == 0:
+                    seed=seed, end_radius=end_radius, min_gain=min_gain, neighbours=neighbours, **curve)
+    if pts.shape[0] == 0 or part.xy.shape[0] == 0:
         return simplified.height_at(pts[:, :2]) + offset
+    return _place(pts, simplified, original, part, offset, neighbours, end_radius, curve, min_gain, height=height)
+
+
+def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, offset: float, neighbours: bool,
+           end_radius: float, curve: dict, min_gain: int, height: float | None = None) -> np.ndarray:
+    """The best height on S(T) of each point ``pts`` (n, 3; ``offset`` above T) against the
+    partners ``part``, counting its neighbours (standing ``height`` above the surfaces,
+    ``offset`` by default) when ``neighbours``."""
+    from ._interrupt import call
+
+    height = float(offset if height is None else height)
+    kc = curvature_coefficient(**curve)
+    n = pts.shape[0]
     vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]), curve)
     surf = _Surface(simplified)
     ground = simplified.height_at(pts[:, :2])
@@ -370,6 +420,39 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     call(kernel, surf.data, p, q, vis, lthr, near_vis, float(NEIGHBOUR_WEIGHT), surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
          out, score, work=work)
     return out
+
+
+def best_responses(points: np.ndarray, simplified, verdicts: np.ndarray, counted: np.ndarray, *,
+                   end_radius: float = 0.0, curvature: float = 0.0,
+                   earth_radius: float = EARTH_RADIUS) -> tuple[np.ndarray, bool]:
+    """One Gauss-Seidel sweep of exact best responses among ``points`` (the oracle bound's step).
+
+    Each point in turn (in order) takes the height on ``simplified`` that maximises the
+    number of its ``counted`` pairs whose verdict there agrees with ``verdicts`` (n, n),
+    the others standing at their current heights: the thresholds of the calibrated
+    relocation, sorted (:func:`terrainvis._calibration_kernels.best_height`; the height
+    nearest its current one, moved only for a gain). So no step lowers the agreement of
+    the counted pairs. Returns the new (n,) heights and whether any moved.
+    """
+    kc = curvature_coefficient(curvature, earth_radius)
+    surf = _Surface(simplified)
+    q = surf.local(np.asarray(points, dtype=np.float64))
+    n = q.shape[0]
+    thr = np.empty(n)
+    moved = False
+    st = new_stack(surf.ltop) if surf.grid else None
+    for i in range(n):
+        if surf.grid:
+            _ck._grid_row(surf.data, st, q[i, 0], q[i, 1], q[i, 2], q, surf.delta, end_radius, surf.tol, kc, i, thr)
+        else:
+            _ck._tin_row(surf.data, q[i, 0], q[i, 1], q[i, 2], q, surf.delta, end_radius, surf.tol, kc, i, thr)
+        ignore = ~counted[i]
+        row = np.where(ignore, -np.inf, thr)  # a pair that does not count is seen, and agrees, at any height
+        z, _ = _ck.best_height(row, verdicts[i] | ignore, q[i, 2], surf.margin, 1)
+        if z != q[i, 2]:
+            q[i, 2] = z
+            moved = True
+    return q[:, 2].copy(), moved
 
 
 def _neighbour_thresholds(simplified, ref, near, near_vis, tol, end_radius, curve) -> np.ndarray:

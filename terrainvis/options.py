@@ -343,7 +343,8 @@ _DECLARED = [
     Option(
         "n_partners", N_PARTNERS, integer(minimum=1), "partners of the calibrated relocation", "int",
         doc=("The calibrated relocation places each point against about this many partners spread over the "
-             "terrain (:func:`terrainvis.calibration.partners`); their positions come from ``seed``."),
+             "terrain (:func:`terrainvis.calibration.partners`: a core of up to ``CORE_PARTNERS`` = 512 "
+             "calibrated jointly, the others placed against the core); their positions come from ``seed``."),
         cli=Flag("--partners", int),
     ),
     Option(

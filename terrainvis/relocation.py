@@ -16,11 +16,16 @@ S(T). Alderson and Samavati compare three ways of placing them on S(T):
     with (never the other points themselves): :mod:`terrainvis.calibration`. It needs T
     (``original=``).
 ``"oracle"`` (not a practical relocation: an upper bound)
-    Each point takes, from a set of candidate heights spanning the local vertical error
-    of S(T) (plus the three heights above), the height whose row of verdicts on S(T)
-    agrees most with the verdicts on T, by coordinate descent until nothing improves.
-    It needs T's verdicts (``reference=``), which a practical relocation does not have,
-    so it bounds how much any relocation of the points alone could recover.
+    Coordinate descent of the points' heights on the agreement of their own pairs with
+    T's verdicts: from the best of the paper's three (and of ``start``, e.g. the
+    calibrated heights), each point in turn takes the best of a set of candidate heights
+    spanning the local vertical error of S(T), then its exact best height against the
+    others (the calibrated relocation's thresholds, with the true verdicts:
+    :func:`terrainvis.calibration.best_responses`), until nothing improves. It needs T's
+    verdicts (``reference=``), which a practical relocation does not have, so it estimates
+    how much any relocation of the points alone could recover. It is a local optimum, not
+    a proof: no relocation started from it would gain by moving one point, and it is never
+    below its starts.
 
 Observer offsets
 ----------------
@@ -39,8 +44,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_bool, as_finite_scalar, as_height, as_int, as_nonnegative_finite, as_points, choice, describe
-from .calibration import MIN_GAIN, N_PARTNERS, SWEEPS
+from ._validate import (
+    as_bool, as_finite_scalar, as_float_array, as_height, as_int, as_nonnegative_finite, as_points, choice, describe,
+)
+from .calibration import MIN_GAIN, N_PARTNERS, SWEEPS, best_responses
 from .visibility import EARTH_RADIUS
 from .errors import OutsideFootprintError
 from .terrain import HeightGrid, as_terrain
@@ -60,7 +67,8 @@ ORACLE = "oracle"
 def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None, target_height=None,
              end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
              n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, min_gain: int = MIN_GAIN,
-             neighbours: bool = True, reference=None, mask=None, engine: str = "auto", n_candidates: int = 9) -> np.ndarray:
+             neighbours: bool = True, reference=None, mask=None, engine: str = "auto", n_candidates: int = 9,
+             start=None) -> np.ndarray:
     """Place points on a simplified terrain.
 
     Parameters
@@ -108,6 +116,9 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
     n_candidates : int
         ``"oracle"`` only: candidate heights per point spanning the local error (the
         original, full and half heights are always candidates too).
+    start : (n,) array_like of float, optional
+        ``"oracle"`` only: heights to start from besides the paper's three (e.g. the
+        calibrated relocation's), so that the bound is never below them.
 
     Returns
     -------
@@ -130,7 +141,8 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, original=None
     off = as_finite_scalar(offset, "offset")
     if how == ORACLE:
         curve = {"curvature": curvature, "earth_radius": earth_radius}
-        return _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve)
+        return _oracle(pts, simplified, off, (reference, mask, start), original, end_radius, engine, n_candidates,
+                       curve)
     if how == CALIBRATED:
         options = {"end_radius": end_radius, "curvature": curvature, "earth_radius": earth_radius,
                    "n_partners": n_partners, "sweeps": sweeps, "seed": seed, "min_gain": min_gain,
@@ -227,9 +239,9 @@ def _candidates(pts, simplified, ground, off, original, k):
     return np.concatenate([practical, base + span], axis=1)
 
 
-def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine, n_candidates, curve):
-    from .visibility import line_of_sight, visibility_matrix
-
+def _oracle(pts, simplified, off, given, original, end_radius, engine, n_candidates, curve):
+    """The oracle bound (see the module docstring); ``given`` is ``(reference, mask, start)``."""
+    reference, mask, start = given
     n = pts.shape[0]
     if reference is None:
         raise TypeError("relocate(..., 'oracle') needs reference=, the (n, n) verdicts on the original terrain")
@@ -245,37 +257,67 @@ def _oracle(pts, simplified, off, reference, original, mask, end_radius, engine,
     np.fill_diagonal(counted, False)
     k = as_int(n_candidates, "n_candidates", minimum=2)
     radius = as_nonnegative_finite(end_radius, "end_radius")
+    if start is not None:
+        start = as_float_array(start, "start")
+        if start.shape != (n,) or not np.isfinite(start).all():
+            raise ValueError(f"start must hold {n} finite heights (one per point), got {describe(start)}")
     los_kw = {"engine": engine, "end_radius": radius, **curve}
     if n < 2:
         return pts.copy()
-    ground = _ground(simplified, pts)
-    cand = _candidates(pts, simplified, ground, off, original, k)
-    # start from the best practical relocation (so the bound is never below it)
-    best_z, best_score = None, -1
-    for j in range(3):
-        trial = pts.copy()
-        trial[:, 2] = cand[:, j]
-        score = int((visibility_matrix(simplified, trial, **los_kw) == ref)[counted].sum())
-        if score > best_score:
-            best_z, best_score = cand[:, j].copy(), score
-    out = pts.copy()
-    out[:, 2] = best_z
-    m = cand.shape[1]
-    for _ in range(50):  # each sweep raises the agreement or stops; 50 is a safety bound
-        changed = False
-        for i in range(n):
-            others = np.flatnonzero(counted[i])
-            if others.size == 0:
-                continue
-            a = np.repeat(np.column_stack([np.repeat(pts[i:i + 1, :2], m, axis=0), cand[i]]), others.size, axis=0)
-            b = np.tile(out[others], (m, 1))
-            vis = line_of_sight(simplified, a, b, **los_kw).reshape(m, others.size)
-            score = (vis == ref[i, others]).sum(axis=1)
-            current = int(np.flatnonzero(cand[i] == out[i, 2])[0]) if (cand[i] == out[i, 2]).any() else -1
-            j = int(np.argmax(score))
-            if current < 0 or score[j] > score[current]:
-                out[i, 2] = cand[i, j]
-                changed = True
-        if not changed:
+    cand = _candidates(pts, simplified, _ground(simplified, pts), off, original, k)
+    out = _oracle_start(pts, simplified, cand, start, ref, counted, los_kw)
+    for _ in range(50):  # each round raises the agreement or stops; 50 is a safety bound
+        changed = _candidate_pass(pts, simplified, cand, out, ref, counted, los_kw)
+        out[:, 2], moved = best_responses(out, simplified, ref, counted, end_radius=radius, **curve)
+        if not (changed or moved):
             break
     return out
+
+
+def _oracle_start(pts, simplified, cand, start, ref, counted, los_kw):
+    """The best start of the oracle's descent: identity, full, half, or ``start``."""
+    from .visibility import visibility_matrix
+
+    starts = [cand[:, j] for j in range(3)] + ([start] if start is not None else [])
+    best_z, best_score = None, -1
+    for z in starts:
+        trial = pts.copy()
+        trial[:, 2] = z
+        score = int((visibility_matrix(simplified, trial, **los_kw) == ref)[counted].sum())
+        if score > best_score:
+            best_z, best_score = np.array(z, dtype=np.float64), score
+    out = pts.copy()
+    out[:, 2] = best_z
+    return out
+
+
+def _candidate_pass(pts, simplified, cand, out, ref, counted, los_kw) -> bool:
+    """One sweep over the points: each takes the best of its candidate heights against the
+    others (``out``, updated in place) if it beats its current one; whether any moved."""
+    from .visibility import line_of_sight
+
+    m = cand.shape[1]
+    changed = False
+    for i in range(pts.shape[0]):
+        others = np.flatnonzero(counted[i])
+        if others.size == 0:
+            continue
+        a = np.repeat(np.column_stack([np.repeat(pts[i:i + 1, :2], m, axis=0), cand[i]]), others.size, axis=0)
+        b = np.tile(out[others], (m, 1))
+        vis = line_of_sight(simplified, a, b, **los_kw).reshape(m, others.size)
+        score = (vis == ref[i, others]).sum(axis=1)
+        at = np.flatnonzero(cand[i] == out[i, 2])
+        current = (vis[at[0]] == ref[i, others]).sum() if at.size else _row_score(simplified, out, i, others, ref, los_kw)
+        j = int(np.argmax(score))
+        if score[j] > current:
+            out[i, 2] = cand[i, j]
+            changed = True
+    return changed
+
+
+def _row_score(simplified, out, i, others, ref, los_kw) -> int:
+    """How many of point i's pairs with ``others`` agree with ``ref`` at the current heights."""
+    from .visibility import line_of_sight
+
+    a = np.repeat(out[i:i + 1], others.size, axis=0)
+    return int((line_of_sight(simplified, a, out[others], **los_kw) == ref[i, others]).sum())

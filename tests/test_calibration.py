@@ -328,6 +328,45 @@ def test_a_point_does_not_depend_on_the_other_points(hills, neighbours):
     assert np.array_equal(alone, tv.relocate(P[:5], fresh, "calibrated", **kw))
 
 
+@pytest.mark.parametrize("method", ["lls", "greedy-insertion"])
+def test_the_partners_beyond_the_core_stand_where_points_would(hills, method):
+    """Partners beyond the core (``core`` of them calibrated jointly) are placed against the
+    core exactly as points are: their heights are :func:`calibrated_heights` of their
+    positions with the core as the partners, neighbours included; the core is the partners
+    of a call that asks for no more than the core."""
+    T, _ = hills
+    S = simplifiers.simplify(T, method, 2)
+    part = cal.partners(T, S, height=0.0, move=True, n_partners=150, core=64)
+    core = cal.partners(T, S, height=0.0, move=True, n_partners=64)
+    k = core.xy.shape[0]
+    assert part.xy.shape[0] > k + 70  # about 150: 64 + 86 stratified over the extent
+    assert np.array_equal(part.xy[:k], core.xy) and np.array_equal(part.z_simplified[:k], core.z_simplified)
+    assert part.visible.shape == (k, k)
+    outer = np.column_stack([part.xy[k:], T.height_at(part.xy[k:])])
+    assert np.array_equal(part.z_original[k:], outer[:, 2])
+    placed = cal._place(outer, S, T, core, 0.0, True, 0.0, {}, cal.MIN_GAIN)
+    assert np.array_equal(part.z_simplified[k:], placed)
+    assert np.any(placed != S.height_at(outer[:, :2]))  # some moved off the full projection
+    # without neighbours, they are placed without them, as the points would be
+    bare = cal.partners(T, S, height=0.0, move=True, n_partners=150, core=64, neighbours=False)
+    assert np.array_equal(bare.z_simplified[k:], cal._place(outer, S, T, core, 0.0, False, 0.0, {}, cal.MIN_GAIN))
+    # the targets setting: every partner, core or not, stays on the surface
+    fixed = cal.partners(T, S, height=2.0, move=False, n_partners=150, core=64)
+    assert np.array_equal(fixed.z_simplified, S.height_at(fixed.xy) + 2.0)
+
+
+def test_a_point_does_not_depend_on_the_other_points_beyond_the_core(hills):
+    """No peeking with the default layout: a core of CORE_PARTNERS and more partners placed against it."""
+    T, P = hills
+    S = simplifiers.simplify(T, "gls", 3)
+    kw = dict(original=T, n_partners=cal.CORE_PARTNERS + 200)
+    alone = tv.relocate(P[:4], S, "calibrated", **kw)
+    others = tv.sample_points(T, 20, seed=9)
+    together = tv.relocate(np.vstack([others, P[:4]]), S, "calibrated", **kw)
+    assert np.array_equal(alone, together[20:])
+    assert np.array_equal(alone, tv.relocate(P[:4], HeightGrid.from_coords(S.z, S.xs, S.ys), "calibrated", **kw))
+
+
 def test_deterministic_for_a_seed(hills):
     T, P = hills
     S = simplifiers.simplify(T, "gls", 3)

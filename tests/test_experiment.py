@@ -325,6 +325,13 @@ def test_oracle_rows_bound_the_practical_ones(small):
                  **_kw(methods=["lls"], levels=[3], n_sets=1, relocations=["identity", "full", "half", "oracle"]))
     acc = df.set_index("relocation")["accuracy"]
     assert acc["oracle"] >= acc[["identity", "full", "half"]].max()
+    # with the calibrated relocation in the run, the oracle starts from it too: never below it
+    df = compare({"a": small["a"]}, workers=1, n_partners=64,
+                 **_kw(methods=["lls", "greedy-insertion"], levels=[3], n_sets=2,
+                       relocations=["oracle", "calibrated", "full"]))
+    for _, cell in df.groupby(["method", "set"]):
+        acc = cell.set_index("relocation")["accuracy"]
+        assert acc["oracle"] >= acc[["calibrated", "full"]].max()
 
 
 def test_cascade_continues_each_qec_level_from_the_previous(small, tmp_path, monkeypatch):

@@ -106,7 +106,7 @@ ys = np.linspace(g.ys[0], g.ys[-1], 6000)
 def work():
     tin.height_on_grid(xs, ys)
 """, True),
-    # the calibrated relocation's Gauss-Seidel sweeps over 2048 partners (serial; T's verdicts cached first)
+    # the calibrated relocation's Gauss-Seidel sweeps over a core of 2048 partners (serial; T's verdicts cached first)
     "calibrated-sweeps": ("""
 import simplifiers
 from terrainvis import calibration
@@ -115,9 +115,9 @@ def warm():
     calibration.partners(s, simplifiers.simplify(s, "lls", 1), height=0.0, move=True, n_partners=16, sweeps=1)
 g = tv.synthetic_terrain("mountains", size=1025)
 S = simplifiers.simplify(g, "lls", 1)
-calibration.partners(g, S, height=0.0, move=True, n_partners=2048, sweeps=0)  # T's verdicts, cached
+calibration.partners(g, S, height=0.0, move=True, n_partners=2048, core=2048, sweeps=0)  # T's verdicts, cached
 def work():
-    calibration.partners(g, S, height=0.0, move=True, n_partners=2048, sweeps=3)
+    calibration.partners(g, S, height=0.0, move=True, n_partners=2048, core=2048, sweeps=3)
 """, False),
     # the calibrated relocation's best heights of many points (parallel over points)
     "calibrated-points": ("""

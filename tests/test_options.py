@@ -113,6 +113,9 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     with pytest.raises(Stop):
         main(["compare", "--quick", "--points", "9", "--out", str(tmp_path)])
     assert (seen["levels"], seen["n_points"], seen["n_sets"]) == ([1, 3], 9, 2)
+    from terrainvis.calibration import CORE_PARTNERS
+
+    assert seen["n_partners"] == CORE_PARTNERS  # quick: the core partners alone
 
 
 def test_the_help_shows_every_flag_with_its_default(capsys):

@@ -112,6 +112,27 @@ def test_oracle_is_a_local_optimum_of_its_candidates():
             assert _agree(V, S, Q) <= score + 1e-12
 
 
+@pytest.mark.parametrize("method", ["lls", "greedy-insertion"])
+def test_oracle_is_an_exact_best_response_and_never_below_its_start(method):
+    """From the calibrated heights, the oracle ends where no point gains by its exact best
+    height against the others (the true verdicts, every pair counted), above its start."""
+    from terrainvis.calibration import best_responses
+
+    T, S, P, V = _oracle_case(method, seed=2)
+    C = relocate(P, S, "calibrated", original=T, n_partners=64)
+    O = relocate(P, S, "oracle", reference=V, original=T, start=C[:, 2])
+    assert _agree(V, S, O) >= max(_agree(V, S, C), *(_agree(V, S, relocate(P, S, h)) for h in ("full", "half")))
+    counted = ~np.eye(P.shape[0], dtype=bool)
+    z, moved = best_responses(O, S, V, counted)
+    assert not moved and np.array_equal(z, O[:, 2])
+    # one sweep of best responses from the full projection never lowers the agreement
+    F = relocate(P, S, "full")
+    z, moved = best_responses(F, S, V, counted)
+    assert moved and _agree(V, S, np.column_stack([P[:, :2], z])) >= _agree(V, S, F)
+    with pytest.raises(ValueError, match=r"start must hold 25 finite heights \(one per point\)"):
+        relocate(P, S, "oracle", reference=V, start=C[:3, 2])
+
+
 def test_oracle_respects_the_mask_and_needs_its_reference():
     T, S, P, V = _oracle_case()
     d = np.hypot(*(P[:, None, :2] - P[None, :, :2]).transpose(2, 0, 1))
