@@ -33,11 +33,10 @@ The method
    differ only on pairs decided within the LOS engines' trim, 1e-5 of the extent's
    diagonal at each end, which the breakpoints take at the start heights).
 
-Measured on the default experiment (docs/visopt.md): with the calibrated relocation
-98.764 / 97.871 / 96.571 % at levels 1 / 2 / 3 against GLS's 98.739 / 97.766 / 96.499 and
-LLS's 98.723 / 97.753 / 96.417 (paired over 36 cells: against LLS p = 0.23 / 0.035 /
-0.039, against GLS p = 0.41 / 0.059 / 0.12). About 2 to 5 minutes a level on 120² to
-1024² grids on the shared 2-core machine.
+docs/visopt.md gives the measurements on the default experiment: a few hundredths of a
+point above GLS with the calibrated relocation of 512 partners (not significant), none
+with the default of 2,048 partners, at 1,300 to 1,800 times GLS's time. A negative result,
+kept out of compare's default methods.
 
 The pair verdicts of step b are evaluated at the *breakpoints* of each sight line on
 the coarse grid (the ends of its tested interval, its crossings of grid lines and cell

@@ -90,8 +90,8 @@ __all__ = ["calibrated_heights", "best_responses", "Partners", "partners", "N_PA
 #: Default number of partners (K), the core and the others (see "Partners" in the module
 #: docstring); chosen on the tuning terrains (docs/relocation.md gives the figures).
 N_PARTNERS = 2048
-#: Partners calibrated jointly by Gauss-Seidel sweeps (the core; K² / 2 LOS queries and
-#: ``sweeps`` x K² threshold walks); the other partners are placed against the core.
+#: Partners calibrated jointly by Gauss-Seidel sweeps (the core, C of them: C² / 2 LOS
+#: queries and ``sweeps`` x C² threshold walks); the other partners are placed against it.
 CORE_PARTNERS = 512
 #: Default Gauss-Seidel sweeps over the partners of the points setting (the first does most).
 SWEEPS = 2
@@ -125,8 +125,9 @@ class Partners:
         Heights on S(T): calibrated (points setting) or its surface plus ``height`` (targets).
     ground_simplified : (K,) float64
         The surface of S(T) under each partner.
-    visible : (K, K) bool or None
-        Their verdicts on T among themselves (points setting only).
+    visible : (C, C) bool or None
+        The verdicts on T of the core (the first C partners) among themselves (points
+        setting only).
     """
 
     xy: np.ndarray
@@ -273,9 +274,9 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
     ``move`` True: the points setting (the core of ``min(n_partners, core)`` partners
     calibrated by Gauss-Seidel sweeps, the others placed against the core as the points
     are, with their ``neighbours`` or without; ``core`` :data:`CORE_PARTNERS` by default);
-    False: the targets setting (partners fixed ``height`` above each surface). See the module docstring. Inputs are validated by
-    :func:`calibrated_heights`; ``curvature`` and ``earth_radius`` as in
-    :func:`terrainvis.line_of_sight`, on both surfaces.
+    False: the targets setting (partners fixed ``height`` above each surface). See the
+    module docstring. Inputs are validated by :func:`calibrated_heights`; ``curvature``
+    and ``earth_radius`` as in :func:`terrainvis.line_of_sight`, on both surfaces.
     """
     kc = curvature_coefficient(curvature, earth_radius)
     core = CORE_PARTNERS if core is None else core
