@@ -11,6 +11,11 @@ every pair, beside full projection and the partners alone ("none").
     python benchmarks/tune_neighbours.py                      # weights 0.5, 1, 3 and inf
     python benchmarks/tune_neighbours.py --weights 0.25 0.5 --levels 1
 
+A weight is a neighbour's against a partner when there are 512 partners; with K partners
+it counts K / 512 times as much (terrainvis.calibration.neighbour_weight), so the
+neighbours keep their share of the agreement. ``--partners 512`` gives the setting in
+which the weight was chosen (before 2,048 partners became the default).
+
 "inf" is the hard rule (a point never agrees with fewer neighbours than at full
 projection). The variant with neighbours fixed at their full projection, which
 docs/relocation.md also lists, was an earlier version of the code (commit bd7b844).
@@ -41,7 +46,7 @@ def agreement_by_band(v_true, v_test, points, cell) -> dict:
     return {b: (int((same & (d[iu] <= b)).sum()), int((d[iu] <= b).sum())) for b in BANDS}
 
 
-def run(weights, methods, levels, n_sets, terrain_seed, point_seed, partner_seed) -> pd.DataFrame:
+def run(weights, methods, levels, n_sets, terrain_seed, point_seed, partner_seed, n_partners) -> pd.DataFrame:
     rows = []
     for kind in KINDS:
         T = tv.synthetic_terrain(kind, size=120, seed=terrain_seed)
@@ -53,11 +58,13 @@ def run(weights, methods, levels, n_sets, terrain_seed, point_seed, partner_seed
             for s, P in enumerate(sets):
                 v_true = tv.visibility_matrix(T, P)
                 variants = {"full": tv.relocate(P, S, "full"),
-                            "none": tv.relocate(P, S, "calibrated", original=T, seed=partner_seed, neighbours=False)}
+                            "none": tv.relocate(P, S, "calibrated", original=T, seed=partner_seed, neighbours=False,
+                                                n_partners=n_partners)}
                 for w in weights:
                     calibration.NEIGHBOUR_WEIGHT = w
                     try:
-                        variants[f"{w:g}"] = tv.relocate(P, S, "calibrated", original=T, seed=partner_seed)
+                        variants[f"{w:g}"] = tv.relocate(P, S, "calibrated", original=T, seed=partner_seed,
+                                                         n_partners=n_partners)
                     finally:
                         calibration.NEIGHBOUR_WEIGHT = DEFAULT_WEIGHT
                 for name, moved in variants.items():
@@ -78,9 +85,11 @@ def main():
     ap.add_argument("--terrain-seed", type=int, default=11)
     ap.add_argument("--point-seed", type=int, default=1)
     ap.add_argument("--partner-seed", type=int, default=3)
+    ap.add_argument("--partners", type=int, default=calibration.N_PARTNERS,
+                    help=f"partners of the calibrated relocation (default {calibration.N_PARTNERS})")
     args = ap.parse_args()
     df = run(args.weights, args.methods, args.levels, args.sets, args.terrain_seed, args.point_seed,
-             args.partner_seed)
+             args.partner_seed, args.partners)
     for keys in (["level", "variant"], ["method", "level", "variant"]):
         g = df.groupby(keys + ["band"])[["agree", "pairs"]].sum()
         table = (100 * g["agree"] / g["pairs"]).unstack("band").round(2)

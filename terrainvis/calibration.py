@@ -56,9 +56,10 @@ the point, so the point sees the neighbour exactly when its height is at least i
 reference height minus the segment's least clearance there (and the tolerance): a
 threshold again (:func:`_neighbour_thresholds`, from the exact
 :func:`terrainvis.min_clearance`). The best height maximises the partners' agreement plus
-:data:`NEIGHBOUR_WEIGHT` (0.5) times the neighbours'
-(:func:`terrainvis._calibration_kernels.best_height_kept`). The neighbours depend on the
-point alone.
+a weight times the neighbours' (:func:`terrainvis._calibration_kernels.best_height_kept`):
+:data:`NEIGHBOUR_WEIGHT` (0.5) against 512 partners, scaled with the number of partners
+(2 against the default 2,048) so that the neighbours keep their share of the agreement
+(:func:`neighbour_weight`). The neighbours depend on the point alone.
 
 Cost
 ----
@@ -84,8 +85,8 @@ from .tolerances import THRESHOLD_MARGIN_REL
 from .visibility import EARTH_RADIUS, curvature_coefficient
 from .visibility._kernels import new_stack
 
-__all__ = ["calibrated_heights", "best_responses", "Partners", "partners", "N_PARTNERS", "CORE_PARTNERS", "SWEEPS",
-           "MIN_GAIN"]
+__all__ = ["calibrated_heights", "best_responses", "neighbour_weight", "Partners", "partners", "N_PARTNERS",
+           "CORE_PARTNERS", "SWEEPS", "MIN_GAIN"]
 
 #: Default number of partners (K), the core and the others (see "Partners" in the module
 #: docstring); chosen on the tuning terrains (docs/relocation.md gives the figures).
@@ -106,9 +107,20 @@ MARGIN_REL = THRESHOLD_MARGIN_REL
 NEIGHBOUR_RINGS = (1.5, 3.0, 5.0, 8.0)
 #: ... with this many neighbours on each ring (alternate rings turned by half a step).
 NEIGHBOUR_DIRECTIONS = 12
-#: A neighbour's weight against a partner's (inf: never lose a neighbour); chosen on the
-#: tuning terrains (docs/relocation.md).
+#: A neighbour's weight against a partner's when there are 512 partners (inf: never lose a
+#: neighbour); chosen on the tuning terrains (docs/relocation.md). With K partners each
+#: neighbour weighs K / 512 times this (:func:`neighbour_weight`), so that the neighbours
+#: together keep their share of the agreement (24 of 536 votes) whatever K is.
 NEIGHBOUR_WEIGHT = 0.5
+#: The number of partners at which :data:`NEIGHBOUR_WEIGHT` holds as given.
+NEIGHBOUR_WEIGHT_PARTNERS = 512
+
+
+def neighbour_weight(k: int) -> float:
+    """The weight of one neighbour against a partner when a point has ``k`` partners."""
+    if NEIGHBOUR_WEIGHT == np.inf:
+        return np.inf
+    return NEIGHBOUR_WEIGHT * k / NEIGHBOUR_WEIGHT_PARTNERS
 
 
 @dataclass(frozen=True)
@@ -418,8 +430,9 @@ def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, of
     score = np.empty(n, dtype=np.int64)
     work = n * part.xy.shape[0]
     kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
-    call(kernel, surf.data, p, q, vis, lthr, near_vis, float(NEIGHBOUR_WEIGHT), surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
-         out, score, work=work)
+    weight = float(neighbour_weight(q.shape[0]))
+    call(kernel, surf.data, p, q, vis, lthr, near_vis, weight, surf.delta, end_radius, surf.tol, kc, surf.margin,
+         min_gain, out, score, work=work)
     return out
 
 

@@ -240,9 +240,11 @@ def test_best_height_kept_weighs_partners_against_neighbours():
 
 @pytest.mark.parametrize("method", ["lls", "greedy-insertion"])
 def test_the_height_with_neighbours_is_the_best_by_the_exact_engine(method):
-    """Each point's height maximises partners' agreement + NEIGHBOUR_WEIGHT x neighbours'
+    """Each point's height maximises partners' agreement + neighbour_weight(K) x neighbours'
     agreement as the exact engine counts them (the neighbours raised by as much as the point
-    moved off its full projection): no height tried beats it, the full projection included."""
+    moved off its full projection): no height tried beats it, the full projection included;
+    a point left at its full projection is one that no height beats by MIN_GAIN (1) or more
+    (the rule that keeps a point where a fraction of a vote would move it)."""
     T = tv.experiment.resolve_terrains(["rough"])["rough"]
     P = tv.experiment.point_sets(T, "rough", 12, 1, 0, 0.0)[0]
     S = simplifiers.simplify(T, method, 2)
@@ -264,11 +266,12 @@ def test_the_height_with_neighbours_is_the_best_by_the_exact_engine(method):
             partners_agree = np.sum((tv.min_clearance(S, a, q) >= -tol) == vis[i])
             b = nb_ + np.array([0.0, 0.0, h - ground[i]])
             a = np.column_stack([np.repeat(P[i:i + 1, :2], b.shape[0], 0), np.full(b.shape[0], h)])
-            return partners_agree + cal.NEIGHBOUR_WEIGHT * np.sum((tv.min_clearance(S, a, b) >= -tol) == want)
+            return partners_agree + cal.neighbour_weight(q.shape[0]) * np.sum((tv.min_clearance(S, a, b) >= -tol) == want)
 
         best = combined(z[i])
+        slack = 0.0 if z[i] != ground[i] else cal.MIN_GAIN - 1e-9  # stayed: nothing gains a whole vote
         for h in np.concatenate([[ground[i]], ground[i] + rng.uniform(-30, 30, 40)]):
-            assert combined(h) <= best, (i, h, combined(h), best)
+            assert combined(h) <= best + slack, (i, h, combined(h), best)
         moved += z[i] != ground[i]
     assert moved > 0
 
@@ -404,9 +407,11 @@ def test_calibrated_keeps_more_verdicts_than_the_papers_relocations(hills):
 
 
 #: Measured when the test was written (n_partners=144, the default 2 sweeps, seed 0), with
-#: the neighbours (weight 0.5, the default) and without them. 40 points make 780 pairs: the
-#: neighbours cost 4 of them here (over all pairs they cost about 0.1 point at level 3).
-GOLDEN_HILLS_LLS3 = 0.9449
+#: the neighbours and without them; re-measured when the neighbours' weight became relative
+#: to the number of partners (0.5 against 512, so 0.14 against these 144: 0.9449 before).
+#: 40 points make 780 pairs: the neighbours cost 1 of them here (over all pairs they cost
+#: about 0.1 point at level 3).
+GOLDEN_HILLS_LLS3 = 0.9487
 GOLDEN_HILLS_LLS3_PARTNERS_ALONE = 0.95
 
 
