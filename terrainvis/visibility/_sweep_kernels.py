@@ -74,6 +74,10 @@ from collections import namedtuple
 
 import numba as nb
 import numpy as np
+from numba.core import cgutils
+from numba.core import types as nbtypes
+from numba.extending import intrinsic
+from numba.np.arrayobj import make_array
 
 from ..tolerances import (
     DIAGONAL_SLACK, EDGE_CLIP_SLACK, PARALLEL_SINE_MIN, PSEUDO_ANGLE_SLACK, PSEUDO_ANGLE_SPAN_MIN, RING_BOUND_REL,
@@ -133,6 +137,37 @@ Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "tor
 #: completed block, and ``quads`` (2 BLOCK / QUAD, nfin + 2) the upper bounds of each
 #: quad of QUAD rings of the current and the previous block (quad k in row ``k % NQUAD``).
 Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads"])
+
+
+# --------------------------------------------------------------------------- borrowed arrays
+@intrinsic
+def _borrow(typingctx, arr):
+    """A view of ``arr`` without its reference count (no meminfo): valid while ``arr`` is.
+
+    Numba counts references to every array a function receives or binds, with atomic
+    operations on the array's shared counter; in functions as large as the sweep's its
+    pruning pass leaves most of them, so each call of a walk or of a ring's helpers paid
+    about twenty atomic increments and decrements (38 % of a viewshed's time, both threads
+    bouncing the same counters). Views from this function have no counter: their
+    increments and decrements are a test of a null pointer. :func:`_sector` makes them
+    once per sector, from arrays that stay alive until it returns.
+    """
+    if not isinstance(arr, nbtypes.Array):
+        return None
+
+    def codegen(context, builder, sig, args):
+        src = make_array(arr)(context, builder, value=args[0])
+        dst = make_array(arr)(context, builder)
+        dst.data = src.data
+        dst.shape = src.shape
+        dst.strides = src.strides
+        dst.itemsize = src.itemsize
+        dst.nitems = src.nitems
+        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+        dst.parent = cgutils.get_null_value(dst.parent.type)
+        return dst._getvalue()
+
+    return arr(arr), codegen
 
 
 # --------------------------------------------------------------------------- geometry
@@ -1536,31 +1571,53 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _sector(g, eye, rules, lay, tg, s, stats, stop):
-    """The sweep of one sector (see :func:`sweep`)."""
+    """The sweep of one sector (see :func:`sweep`): its work arrays, then
+    :func:`_sector_rings` on views of them and of the inputs without reference counts
+    (:func:`_borrow`; the arrays themselves stay alive until this function returns)."""
+    nsec, b0, r1, jstop = lay.nsec, lay.b0, lay.r1, lay.jstop
+    nfin = (b0 << _level(jstop, r1)) // nsec
+    blen = max(g.ys.shape[0], g.xs.shape[0]) + 2
+    w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
+               np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
+    # the wedges' refinement buffer; the sample buffers of the two runs (slopes,
+    # pseudo-angles and distances of lines 0 and 1); the hidden flags of their segments;
+    # per run its first cell, last cell and buffer start
+    tmp = np.empty((3, nfin + 2))
+    buf = np.empty((2, 3, 2, blen))
+    hidden = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
+    ranges = np.zeros((3, 2), dtype=np.int64)
+    # targets decided by the lower bound, by the upper bound and the last rings' walk, by
+    # block walks, and left undecided
+    counts = np.zeros(4, dtype=np.int64)
+    _sector_rings(
+        SweepGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
+                  _borrow(g.cmax), _borrow(g.rmax)),
+        eye, rules, lay,
+        Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
+                _borrow(tg.torder), _borrow(tg.tcode)),
+        s, stop,
+        (Wedges(_borrow(w.ubp), _borrow(w.ubold), _borrow(w.lb), _borrow(w.hist), _borrow(w.quads)), _borrow(tmp),
+         _borrow(buf), _borrow(hidden), _borrow(ranges), _borrow(counts)),
+    )
+    for k in range(4):
+        stats[s, k] = counts[k]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _sector_rings(g, eye, rules, lay, tg, s, stop, work):
+    """The rings of one sector (see :func:`sweep`); ``work`` is ``(w, tmp, buf, hidden,
+    ranges, counts)``, the work arrays of :func:`_sector`."""
+    w, tmp, buf, hidden, ranges, counts = work
     xs, ys, z = g.xs, g.ys, g.z
     nsec, b0, r1, jnear, jstop = lay
     ntg = tg.tx.shape[0]
     nr = ys.shape[0]
     nc = xs.shape[0]
-    lmax = _level(jstop, r1)
-    nfin = (b0 << lmax) // nsec
     tolm = rules.tol + rules.marg
     kc = rules.kc
     diag = np.sqrt(rules.diag2)
     lim = (rules.r_excl, rules.r_lb, rules.e_h, tolm, kc, diag)
-    blen = max(nr, nc) + 2
     q = s // (nsec // 4)
-    w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
-               np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
-    tmp = np.empty((3, nfin + 2))
-    # sample buffers of the two runs: slopes, pseudo-angles and distances of lines 0 and 1;
-    # the hidden flags of their segments
-    buf = np.empty((2, 3, 2, blen))
-    hidden = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
-    ranges = np.zeros((3, 2), dtype=np.int64)  # first cell, last cell, buffer start per run
-    # targets decided by the lower bound (counted apart: the hot path), then by the
-    # upper bound and the last rings' walk, by block walks, and left undecided
-    counts = np.zeros(4, dtype=np.int64)
     n_lb = 0
     lev = 0
     bsz = b0
@@ -1640,8 +1697,6 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
         ann = (rel, 2.0 * rules.e_h / dring + pad_hi, (2.0 * rules.e_h + tolm) / dring + pad_lo, dring >= rules.r_lb)
         _add_cells(w, j, (glo, nloc, bsz * 0.25), ann, runs, ranges, buf, hidden)
     counts[0] += n_lb
-    for k in range(4):
-        stats[s, k] = counts[k]
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
