@@ -1635,46 +1635,42 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _sector(g, eye, rules, lay, tg, s, stats, stop):
-    """The sweep of one sector (see :func:`sweep`): its work arrays, then
-    :func:`_sector_rings` on views of them and of the inputs without reference counts
-    (:func:`_borrow`; the arrays themselves stay alive until this function returns)."""
-    nsec, b0, r1, jstop = lay.nsec, lay.b0, lay.r1, lay.jstop
-    nfin = (b0 << _level(jstop, r1)) // nsec
-    blen = max(g.ys.shape[0], g.xs.shape[0]) + 2
-    w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
-               np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
-    # the wedges' refinement buffer; the sample buffers of the two runs (slopes,
-    # pseudo-angles and distances of lines 0 and 1); the hidden flags of their segments;
-    # per run its first cell, last cell and buffer start
-    tmp = np.empty((3, nfin + 2))
-    buf = np.empty((2, 3, 2, blen))
-    hidden = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
-    ranges = np.zeros((3, 2), dtype=np.int64)
-    # targets decided by the lower bound, by the upper bound and the last rings' walk, by
-    # block walks, left undecided, and by the upper bound and the last ring's bound
-    counts = np.zeros(5, dtype=np.int64)
-    _sector_rings(
-        SweepGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
-                  _borrow(g.cmax), _borrow(g.rmax)),
-        eye, rules, lay,
-        Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
-                _borrow(tg.torder), _borrow(tg.tcode)),
-        s, stop,
-        (Wedges(_borrow(w.ubp), _borrow(w.ubold), _borrow(w.lb), _borrow(w.hist), _borrow(w.quads)), _borrow(tmp),
-         _borrow(buf), _borrow(hidden), _borrow(ranges), _borrow(counts)),
-    )
-    for k in range(5):
-        stats[s, k] = counts[k]
+def _keep_alive(owners):
+    """Nothing: a use of ``owners`` (numba frees an array after its last use)."""
+    return None
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _sector_rings(g, eye, rules, lay, tg, s, stop, work):
-    """The rings of one sector (see :func:`sweep`); ``work`` is ``(w, tmp, buf, hidden,
-    ranges, counts)``, the work arrays of :func:`_sector`."""
-    w, tmp, buf, hidden, ranges, counts = work
-    xs, ys, z = g.xs, g.ys, g.z
+def _sector(g, eye, rules, lay, tg, s, stats, stop):
+    """The sweep of one sector (see :func:`sweep`), on views of its inputs and of its work
+    arrays without reference counts (:func:`_borrow`)."""
     nsec, b0, r1, jnear, jstop = lay
+    nfin = (b0 << _level(jstop, r1)) // nsec
+    blen = max(g.ys.shape[0], g.xs.shape[0]) + 2
+    # the work arrays: the wedges' bounds and their refinement buffer; the sample buffers
+    # of the two runs (slopes, pseudo-angles and distances of lines 0 and 1); the hidden
+    # flags of their segments; per run its first cell, last cell and buffer start; the
+    # targets decided by the lower bound, by the upper bound and the last rings' walk, by
+    # block walks, left undecided, and by the upper bound and the last ring's bound
+    w_own = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
+                   np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
+    tmp_own = np.empty((3, nfin + 2))
+    buf_own = np.empty((2, 3, 2, blen))
+    hidden_own = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
+    ranges_own = np.zeros((3, 2), dtype=np.int64)
+    counts_own = np.zeros(5, dtype=np.int64)
+    g = SweepGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
+                  _borrow(g.cmax), _borrow(g.rmax))
+    tg = Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
+                 _borrow(tg.torder), _borrow(tg.tcode))
+    w = Wedges(_borrow(w_own.ubp), _borrow(w_own.ubold), _borrow(w_own.lb), _borrow(w_own.hist),
+               _borrow(w_own.quads))
+    tmp = _borrow(tmp_own)
+    buf = _borrow(buf_own)
+    hidden = _borrow(hidden_own)
+    ranges = _borrow(ranges_own)
+    counts = _borrow(counts_own)
+    xs, ys, z = g.xs, g.ys, g.z
     ntg = tg.tx.shape[0]
     nr = ys.shape[0]
     nc = xs.shape[0]
@@ -1770,6 +1766,10 @@ def _sector_rings(g, eye, rules, lay, tg, s, stop, work):
         ann = (rel, hi_slack, (2.0 * rules.e_h + tolm) / dring + pad_lo, dring >= rules.r_lb)
         _add_cells(w, j, (glo, nloc, bsz * 0.25), ann, runs, ranges, buf, hidden)
     counts[0] += n_lb
+    for k in range(5):
+        stats[s, k] = counts[k]
+    # the owners of the views are used last here, so they live until the sector is done
+    _keep_alive((w_own, tmp_own, buf_own, hidden_own, ranges_own, counts_own))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
