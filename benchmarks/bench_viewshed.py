@@ -184,8 +184,9 @@ def main(argv=None) -> None:
         swept = info["lb"] + info["ub"] + info["walk"]
         print(f"ours            {t_ours:8.3f} s   visible {int(ours.sum()):,} "
               f"({100 * ours.mean():.3f} %); decided by the sweep: {swept:,} "
-              f"({100 * swept / info['targets']:.2f} %: lower bound {info['lb']:,}, upper bound + last-ring "
-              f"walk {info['ub']:,}, walks of the blocks above the bound {info['walk']:,}); "
+              f"({100 * swept / info['targets']:.2f} %: lower bound {info['lb']:,}, upper bound + last ring "
+              f"{info['ub']:,} (of which the last ring bounded, not walked, {info['ub_bound']:,}), walks of the "
+              f"blocks above the bound {info['walk']:,}); "
               f"pair engine for the rest: {info['exact']:,}")
         row = {"n": n, "ours": t_ours, "decided": swept / info["targets"]}
 
@@ -342,8 +343,8 @@ def peers(args) -> None:
             t_ours, (ours, info) = _time(lambda: _viewshed(g, (x, y), observer_height=eye, curvature=curv),
                                          args.repeats)
             print(f"\n{label}\n  ours           {t_ours:7.3f} s  visible {100 * ours.mean():.3f} %  "
-                  f"(lower bound {info['lb']:,}, upper bound + last ring {info['ub']:,}, block walks "
-                  f"{info['walk']:,}, pair engine {info['exact']:,})")
+                  f"(lower bound {info['lb']:,}, upper bound + last ring {info['ub']:,} (last ring bounded "
+                  f"{info['ub_bound']:,}), block walks {info['walk']:,}, pair engine {info['exact']:,})")
             row = {"observer": oname, "curvature": curv, "ours": t_ours, "visible": ours.mean()}
             if gdal:
                 out = os.path.join(tmp, "gdal.tif")

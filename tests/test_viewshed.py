@@ -191,6 +191,30 @@ def test_matches_pair_engine_large_grid():
     assert info["targets"] == 90000
 
 
+@pytest.mark.parametrize("curvature", [0.0, 1.0])
+def test_last_ring_bound_matches_pair_engine(curvature):
+    """Visible samples whose last ring the sweep clears with the bound of its cells'
+    corners (no exact walk there): cells up to 3:1 either way, where a ray crosses several
+    cells of its last ring, and a bulge of metres (earth radius 3 km)."""
+    rng = np.random.default_rng(19)
+    base = synthetic_terrain("mountains", 64, seed=3)
+    xs = np.cumsum(rng.uniform(10.0, 30.0, 64))
+    ys = np.cumsum(rng.uniform(10.0, 30.0, 64))
+    g = HeightGrid.from_coords(base.z, xs, ys)
+    X, Y = np.meshgrid(g.xs, g.ys)
+    by_bound = 0
+    for obs in _observers(g):
+        for h_o in (3.0, 300.0):
+            out, info = _viewshed(g, obs, observer_height=h_o, curvature=curvature, earth_radius=3000.0)
+            b = np.column_stack([X.ravel(), Y.ravel(), g.z.ravel()])
+            a = np.repeat(_eye(g, obs, h_o)[None, :], b.shape[0], axis=0)
+            ref = line_of_sight(g, a, b, engine="grid", curvature=curvature, earth_radius=3000.0).reshape(g.shape)
+            ref[_nearest(g, obs)] = True
+            np.testing.assert_array_equal(out, ref, err_msg=f"observer {obs}, height {h_o}")
+            by_bound += info["ub_bound"]
+    assert by_bound > 1000
+
+
 def test_max_distance():
     g = synthetic_terrain("hills", 60, seed=4)
     obs = (700.0, 900.0)

@@ -74,6 +74,10 @@ from collections import namedtuple
 
 import numba as nb
 import numpy as np
+from numba.core import cgutils
+from numba.core import types as nbtypes
+from numba.extending import intrinsic
+from numba.np.arrayobj import make_array
 
 from ..tolerances import (
     DIAGONAL_SLACK, EDGE_CLIP_SLACK, PARALLEL_SINE_MIN, PSEUDO_ANGLE_SLACK, PSEUDO_ANGLE_SPAN_MIN, RING_BOUND_REL,
@@ -133,6 +137,37 @@ Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "tor
 #: completed block, and ``quads`` (2 BLOCK / QUAD, nfin + 2) the upper bounds of each
 #: quad of QUAD rings of the current and the previous block (quad k in row ``k % NQUAD``).
 Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads"])
+
+
+# --------------------------------------------------------------------------- borrowed arrays
+@intrinsic
+def _borrow(typingctx, arr):
+    """A view of ``arr`` without its reference count (no meminfo): valid while ``arr`` is.
+
+    Numba counts references to every array a function receives or binds, with atomic
+    operations on the array's shared counter; in functions as large as the sweep's its
+    pruning pass leaves most of them, so each call of a walk or of a ring's helpers paid
+    about twenty atomic increments and decrements (38 % of a viewshed's time, both threads
+    bouncing the same counters). Views from this function have no counter: their
+    increments and decrements are a test of a null pointer. :func:`_sector` makes them
+    once per sector, from arrays that stay alive until it returns.
+    """
+    if not isinstance(arr, nbtypes.Array):
+        return None
+
+    def codegen(context, builder, sig, args):
+        src = make_array(arr)(context, builder, value=args[0])
+        dst = make_array(arr)(context, builder)
+        dst.data = src.data
+        dst.shape = src.shape
+        dst.strides = src.strides
+        dst.itemsize = src.itemsize
+        dst.nitems = src.nitems
+        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+        dst.parent = cgutils.get_null_value(dst.parent.type)
+        return dst._getvalue()
+
+    return arr(arr), codegen
 
 
 # --------------------------------------------------------------------------- geometry
@@ -1103,20 +1138,22 @@ def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h, kc):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _decide(g, eye, rules, w, j, win, tg):
+def _decide(g, eye, rules, w, j, win, tg, near):
     """Verdict of a target that the lower bound did not block, from the wedge bounds
     ``w`` (holding the rings <= j - 1) and exact walks.
 
     ``win`` is ``(s, glo, bsz, b0, r1, nsec)``: the sector, its window of wedges and the
     layout. ``tg`` is ``(p, tdx, tdy, nt, dist, st, slack)``: the target's unwrapped
     pseudo-angle, its offset from the eye, its horizontal distance, its slope and that
-    slope's rounding slack. The part beyond the box of rings <= j - 1 (annulus j) is
-    always walked exactly; when the target's slope reaches the wedge's upper bound (the
+    slope's rounding slack. ``near`` holds the arguments of :func:`_last_ring_bound` (an
+    upper bound of the slope wherever its ray crosses a grid line or a diagonal in
+    annulus j). The part beyond the box of rings <= j - 1 (annulus j) is walked exactly
+    unless that bound clears it; when the target's slope reaches the wedge's upper bound (the
     largest of ``ubp``, over the completed blocks, and the current block's quads) the
     rings whose bounds reach it are walked too, with annulus j as one walk
     (:func:`_block_walk`). Returns (code, how): how 1 (decided by the last ring's walk
-    and the upper bound), 2 (by walking rings whose bound reaches the target's slope) or
-    3 (undecided).
+    and the upper bound), 4 (by the upper bound and the last ring's bound, no walk), 2
+    (by walking rings whose bound reaches the target's slope) or 3 (undecided).
     """
     glo, bsz = win[1], win[2]
     p, tdx, tdy, nt, dist, st, slack = tg
@@ -1127,7 +1164,10 @@ def _decide(g, eye, rules, w, j, win, tg):
     for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
         ubv = max(ubv, _wedge_value(w.quads[qk % NQUAD], p, bsz, glo))
     if st - slack >= ubv:
-        # the bounds clear every ring before: only the last one (annulus j) is walked
+        # the bounds clear every ring before: only the last one (annulus j) is walked,
+        # unless its corners' bound clears it too
+        if st - slack >= _last_ring_bound(near[0], near[1], near[2], near[3], near[4], near[5]):
+            return VISIBLE, 4
         tolm = rules.tol + rules.marg
         cl = _walk_rings(g, eye, ray, j, _BEYOND, tau, 1.0 - tau, tolm, rules.kc * (dist * dist))
         if cl < -tolm:
@@ -1360,9 +1400,10 @@ def sweep(g, eye, rules, lay, tg, perm, stats, stop):
     ``tg.torder``, see :func:`bucket_targets`), then adds annulus j (exact edge clipping up
     to ring ``lay.jnear``, a cell bound beyond). ``tg.code`` (own samples) or ``tg.tcode``
     (other targets) get BLOCKED, VISIBLE or UNDECIDED (the caller answers those with the
-    pair engine); targets already NOT_TARGET are skipped. ``stats[sector, 0..3]`` counts
+    pair engine); targets already NOT_TARGET are skipped. ``stats[sector, 0..4]`` counts
     targets decided by ``lb``, by the upper bound and the last rings' walk, by walking
-    blocks of rings, and left undecided. ``stop`` is the stop flag of
+    blocks of rings, left undecided, and by the upper bound and the last ring's bound
+    (:func:`_last_ring_bound`, no walk). ``stop`` is the stop flag of
     :mod:`terrainvis._interrupt`: every sector reads it once per ring and returns when it
     is set (the codes are then incomplete and never used).
     """
@@ -1444,7 +1485,60 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
+def _last_ring_bound(buf, k, outer, filled, side, last):
+    """Upper bound of the slope at every point where the ray to the target at index k of a
+    run's outer line crosses a grid line or a cell diagonal in annulus j; inf when this
+    cannot tell (the exact walk of annulus j then decides).
+
+    ``buf`` (3, 2, n) the run's samples (:func:`_fill`), ``filled`` = (k0, k1) the indices
+    filled, ``side`` = (s0, s1) the indices of the inner line that lie on the side of the
+    box of rings <= j - 1, ``last`` = ``(rel, slack)`` the annulus's convexity factor and
+    upper slack (as in :func:`_cell_bounds`; slack inf: no bound). The ray leaves that box
+    through the inner line between inner samples m and m + 1 (their pseudo-angles bracket
+    the target's) when both lie on the side; from there it stays between the two lines,
+    in the cells between index m and the target's. Every point where it crosses a grid
+    line or a diagonal there lies on an edge of those cells that does not end at the
+    target (such an edge meets the ray only at the target), so its slope is at most the
+    largest slope of those cells' corners other than the target, up to the convexity
+    factor and the slack.
+    """
+    rel, slack = last
+    if not slack < _INF:
+        return _INF
+    k0, k1 = filled
+    il = 1 - outer
+    pt = buf[1, outer, k]
+    m = -1
+    for mm in range(max(k - 3, k0), min(k + 3, k1 - 1) + 1):
+        pa = buf[1, il, mm]
+        pb = buf[1, il, mm + 1]
+        if min(pa, pb) - _PEPS <= pt <= max(pa, pb) + _PEPS:
+            m = mm
+            break
+    if m < 0 or m < side[0] or m + 1 > side[1]:
+        return _INF
+    a0 = min(m, k)
+    a1 = max(m + 1, k)
+    # the crossing near an end of the bracket (within rounding) may lie in the next cell
+    if abs(pt - buf[1, il, m]) <= _PEPS:
+        a0 = min(a0, m - 1)
+    if abs(pt - buf[1, il, m + 1]) <= _PEPS:
+        a1 = max(a1, m + 2)
+    if a0 < k0 or a1 > k1:
+        return _INF
+    hi = -_INF
+    for i in range(a0, a1 + 1):
+        hi = max(hi, buf[0, il, i])
+        if i != k:
+            hi = max(hi, buf[0, outer, i])
+    if not hi < _INF:
+        return _INF
+    hi = hi + max(hi, 0.0) * rel
+    return hi + slack + _REL * abs(hi)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, last):
     """Fill a run's samples and decide the targets on its outer line, segment by segment.
 
     ``span`` is ``(j, q, i0, i1, lo, cells, plo, phi)``: the sample ring, the quadrant,
@@ -1453,7 +1547,7 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
     segment is first tested with :func:`_seg_hidden`; a hidden one gets no samples, its
     targets are blocked and ``hidden`` flags it) and the sector's own pseudo-angles
     [plo, phi). Returns how many targets the lower bound blocked; ``counts`` gets the
-    others (see :func:`sweep`).
+    others (see :func:`sweep`). ``last`` as in :func:`_last_ring_bound`.
     """
     j, q, i0, i1, lo, cells, plo, phi = span
     r0, c0, dr, dc = rn[0], rn[1], rn[2], rn[3]
@@ -1463,13 +1557,18 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
     else:
         outer = 1 if r0 > eye.re else 0
     glo, bsz = dwin[1], dwin[2]
-    last = lo + i1 - i0  # last cell (row or column)
+    # the inner line's samples on the side of the box of rings <= j - 1 (buffer indices)
+    if vertical:
+        side = (eye.re - j + 1 - lo, eye.re + j - lo)
+    else:
+        side = (eye.ce - j + 1 - lo, eye.ce + j - lo)
+    end = lo + i1 - i0  # last cell (row or column)
     n_lb = 0
     a = lo
     slo = lo // SEG
-    while a <= last:
-        b = min((a // SEG + 1) * SEG - 1, last)  # cells a..b: one aligned segment
-        top = b + 1 if b == last else b  # its samples a..top (the next segment starts at b + 1)
+    while a <= end:
+        b = min((a // SEG + 1) * SEG - 1, end)  # cells a..b: one aligned segment
+        top = b + 1 if b == end else b  # its samples a..top (the next segment starts at b + 1)
         hid = False
         pmin = pmax = 0.0
         if cells:
@@ -1527,7 +1626,8 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
                 else:
                     tdx = g.xs[cc] - eye.ex
                     tdy = g.ys[rr] - eye.ey
-                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack),
+                                       (buf, k, outer, (a - lo, b + 1 - lo), side, last))
                     tg.code[rr, cc] = res
                     counts[how] += 1
         a = b + 1
@@ -1535,32 +1635,50 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
+def _keep_alive(owners):
+    """Nothing: a use of ``owners`` (numba frees an array after its last use)."""
+    return None
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _sector(g, eye, rules, lay, tg, s, stats, stop):
-    """The sweep of one sector (see :func:`sweep`)."""
-    xs, ys, z = g.xs, g.ys, g.z
+    """The sweep of one sector (see :func:`sweep`), on views of its inputs and of its work
+    arrays without reference counts (:func:`_borrow`)."""
     nsec, b0, r1, jnear, jstop = lay
+    nfin = (b0 << _level(jstop, r1)) // nsec
+    blen = max(g.ys.shape[0], g.xs.shape[0]) + 2
+    # the work arrays: the wedges' bounds and their refinement buffer; the sample buffers
+    # of the two runs (slopes, pseudo-angles and distances of lines 0 and 1); the hidden
+    # flags of their segments; per run its first cell, last cell and buffer start; the
+    # targets decided by the lower bound, by the upper bound and the last rings' walk, by
+    # block walks, left undecided, and by the upper bound and the last ring's bound
+    w_own = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
+                   np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
+    tmp_own = np.empty((3, nfin + 2))
+    buf_own = np.empty((2, 3, 2, blen))
+    hidden_own = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
+    ranges_own = np.zeros((3, 2), dtype=np.int64)
+    counts_own = np.zeros(5, dtype=np.int64)
+    g = SweepGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
+                  _borrow(g.cmax), _borrow(g.rmax))
+    tg = Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
+                 _borrow(tg.torder), _borrow(tg.tcode))
+    w = Wedges(_borrow(w_own.ubp), _borrow(w_own.ubold), _borrow(w_own.lb), _borrow(w_own.hist),
+               _borrow(w_own.quads))
+    tmp = _borrow(tmp_own)
+    buf = _borrow(buf_own)
+    hidden = _borrow(hidden_own)
+    ranges = _borrow(ranges_own)
+    counts = _borrow(counts_own)
+    xs, ys, z = g.xs, g.ys, g.z
     ntg = tg.tx.shape[0]
     nr = ys.shape[0]
     nc = xs.shape[0]
-    lmax = _level(jstop, r1)
-    nfin = (b0 << lmax) // nsec
     tolm = rules.tol + rules.marg
     kc = rules.kc
     diag = np.sqrt(rules.diag2)
     lim = (rules.r_excl, rules.r_lb, rules.e_h, tolm, kc, diag)
-    blen = max(nr, nc) + 2
     q = s // (nsec // 4)
-    w = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
-               np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
-    tmp = np.empty((3, nfin + 2))
-    # sample buffers of the two runs: slopes, pseudo-angles and distances of lines 0 and 1;
-    # the hidden flags of their segments
-    buf = np.empty((2, 3, 2, blen))
-    hidden = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
-    ranges = np.zeros((3, 2), dtype=np.int64)  # first cell, last cell, buffer start per run
-    # targets decided by the lower bound (counted apart: the hot path), then by the
-    # upper bound and the last rings' walk, by block walks, and left undecided
-    counts = np.zeros(4, dtype=np.int64)
     n_lb = 0
     lev = 0
     bsz = b0
@@ -1594,6 +1712,11 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
         dring = _ring_distance(g, eye, j - 1)
         rel = 0.25 * rules.diag2 / (dring * dring) * (1.0 + RING_BOUND_REL)
         cells = j > jnear and rel <= 1.0  # cells bounded from their corners, segments tested
+        pad_hi, pad_lo = curvature_pads(kc, rules.diag2, dring, rel, _far_corner(g, eye, j))
+        # what an upper bound of annulus j from its corners' slopes adds (see _cell_bounds);
+        # inf: none (near the eye, the last ring is walked)
+        hi_slack = 2.0 * rules.e_h / dring + pad_hi
+        last = (rel, hi_slack if cells and not g.has_nan else _INF)
         runs = _cell_path(q, j, eye.re, eye.ce, nr, nc)
         for run in range(2):
             ranges[0, run] = 0
@@ -1610,7 +1733,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
             lo = _run_lo(rn, i0, i1)
             ranges[2, run] = lo
             n_lb += _run_segments(g, eye, rules, w, tg, rn, (j, q, i0, i1, lo, cells, plo, phi), dwin,
-                                  buf[run], hidden[run], counts)
+                                  buf[run], hidden[run], counts, last)
         # ---- decide the other targets whose box of rings <= j - 1 the bounds now cover
         if ntg > 0:
             key = s * (jstop + 2) + j
@@ -1629,19 +1752,24 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
                     tg.tcode[t] = BLOCKED
                     n_lb += 1
                 else:
-                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack))
+                    # no bound of the last ring here (int64 zeros, not literals: one
+                    # compiled _decide for both kinds of targets)
+                    zero = np.int64(0)
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack),
+                                       (buf[0], zero, zero, (zero, zero), (zero, zero), (0.0, _INF)))
                     tg.tcode[t] = res
                     counts[how] += 1
         # ---- add annulus j
         if not cells:
             _annulus_edges(g, eye, j, (glo, nloc, bsz), cur, w.lb, lim)
             continue
-        pad_hi, pad_lo = curvature_pads(kc, rules.diag2, dring, rel, _far_corner(g, eye, j))
-        ann = (rel, 2.0 * rules.e_h / dring + pad_hi, (2.0 * rules.e_h + tolm) / dring + pad_lo, dring >= rules.r_lb)
+        ann = (rel, hi_slack, (2.0 * rules.e_h + tolm) / dring + pad_lo, dring >= rules.r_lb)
         _add_cells(w, j, (glo, nloc, bsz * 0.25), ann, runs, ranges, buf, hidden)
     counts[0] += n_lb
-    for k in range(4):
+    for k in range(5):
         stats[s, k] = counts[k]
+    # the owners of the views are used last here, so they live until the sector is done
+    _keep_alive((w_own, tmp_own, buf_own, hidden_own, ranges_own, counts_own))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

@@ -27,9 +27,11 @@ sweeps compute) are only approximations; here they are replaced by *rigorous bou
    corners with a convexity correction of the distance.
 2. A sample on ring j (the boundary of the box of cell rings <= j) is decided when the
    sweep reaches it, its wedge then holding the rings < j: blocked if ``lb > s_T``;
-   otherwise its last ring (the 1-3 cells between ring j - 1 and the sample, with the trim
-   at the sample) is walked exactly, and it is visible if that part clears and
-   ``s_T >= ub``. Otherwise (the sample is near its horizon) the wedge's upper bounds per
+   otherwise, if ``s_T >= ub``, it is visible when its last ring (the 1-3 cells between
+   ring j - 1 and the sample, with the trim at the sample) clears: ``s_T`` at least the
+   bound of the corners of the cells its ray crosses there (the sample itself left out:
+   no edge through it meets the ray elsewhere), or else an exact walk of that part.
+   Otherwise (the sample is near its horizon) the wedge's upper bounds per
    block of 16 rings tell which parts of the ray can reach ``s_T``, and only those are
    walked exactly. Targets that are not the grid's samples (``at`` with other
    coordinates) are first sorted by sector and ring (counting sort) and decided the same
@@ -214,9 +216,10 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     """:func:`viewshed` and a dict of counts: how the samples were decided.
 
     Keys: ``targets`` (samples that are targets), ``lb`` / ``ub`` (decided by the sweep's
-    lower bound / by its upper bound and the exact last-ring walk), ``walk`` (decided by
-    exact walks of the blocks of rings whose bound reached the target), ``exact``
-    (answered by the pair engine, or the nodata-aware walk, or Embree, or the TIN clipper).
+    lower bound / by its upper bound and the last ring: its exact walk, or for ``ub_bound``
+    of them the bound of its cells' corners), ``walk`` (decided by exact walks of the
+    blocks of rings whose bound reached the target), ``exact`` (answered by the pair
+    engine, or the nodata-aware walk, or Embree, or the TIN clipper).
     """
     as_terrain(terrain)
     kc = curvature_coefficient(curvature, earth_radius)
@@ -391,7 +394,7 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, s
     code, zt = _target_codes(grid, at, eye, dmax, own)
     delta = trim_length(grid)
     tol = clearance_tolerance(grid)
-    counts = (0, 0, 0)
+    counts = (0, 0, 0, 0)
     wmin = float(min(np.diff(grid.xs).min(), np.diff(grid.ys).min()))
     if sweep and wmin > 2.0 * delta * (1.0 + TRIM_MARGIN_REL) and grid.shape[0] >= 3 and grid.shape[1] >= 3:
         counts = _sweep(grid, at, eye, query, code, zt, own)
@@ -401,7 +404,7 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, s
         vis = _exact(grid, eye, (at.xs[c], at.ys[r], zt[r, c] + h_t), delta, tol, kc)
         code.ravel()[todo] = np.where(vis, _vk.VISIBLE, _vk.BLOCKED)
     info = {"targets": int(code.size - np.count_nonzero(code == _vk.NOT_TARGET)), "lb": counts[0],
-            "ub": counts[1], "walk": counts[2], "exact": int(todo.size)}
+            "ub": counts[1], "walk": counts[2], "exact": int(todo.size), "ub_bound": counts[3]}
     return code == _vk.VISIBLE, info
 
 
@@ -447,7 +450,8 @@ def _rules(grid: HeightGrid, ez: float, query) -> _vk.Rules:
 
 def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.ndarray, zt, own: bool):
     """Run the sweep kernel: ``code`` gets its verdicts (UNDECIDED where it cannot decide);
-    returns how many targets the lower bound, the upper bound and the block walks decided."""
+    returns how many targets the lower bound, the upper bound (and the last ring) and the
+    block walks decided, and how many of the upper bound's needed no walk of the last ring."""
     sg = _sweep_grid(grid)
     ex = float(eye[0] - grid.xs[0])
     ey = float(eye[1] - grid.ys[0])
@@ -456,7 +460,7 @@ def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.nd
     re = int(_vk.locate(sg.ys, sg.iyw, sg.uniform, ey))
     veye = _vk.Eye(re, ce, ex, ey, ez)
     jstop = _last_ring(sg.xs, sg.ys, re, ce, ex, ey, query[1])
-    stats = np.zeros((_N_SECTORS, 4), dtype=np.int64)
+    stats = np.zeros((_N_SECTORS, 5), dtype=np.int64)
     if own:
         targets = _vk.Targets(True, code, np.empty(0), np.empty(0), np.empty(0), np.zeros(1, dtype=np.int64),
                               np.zeros(1, dtype=np.int64), np.empty(0, dtype=np.int8))
@@ -476,7 +480,8 @@ def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.nd
          targets, _sector_order(_N_SECTORS), stats, work=int(code.size))
     if not own:
         code.ravel()[idx] = targets.tcode
-    return tuple(int(v) for v in stats.sum(axis=0)[:3])
+    n = stats.sum(axis=0)
+    return int(n[0]), int(n[1] + n[4]), int(n[2]), int(n[4])
 
 
 def _exact(grid: HeightGrid, eye, targets, delta: float, tol: float, kc: float) -> np.ndarray:
@@ -548,7 +553,7 @@ def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine: st
         ok &= (at.xs[None, :] - eye[0]) ** 2 + (at.ys[:, None] - eye[1]) ** 2 <= dmax * dmax
     idx = np.flatnonzero(ok.ravel())
     out = np.zeros(rows * cols, dtype=bool)
-    info = {"targets": int(idx.size), "lb": 0, "ub": 0, "walk": 0, "exact": int(idx.size)}
+    info = {"targets": int(idx.size), "lb": 0, "ub": 0, "walk": 0, "exact": int(idx.size), "ub_bound": 0}
     delta = trim_length(terrain)
     tol = clearance_tolerance(terrain)
     zflat = zt.ravel()
