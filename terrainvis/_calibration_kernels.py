@@ -55,6 +55,9 @@ from .tolerances import TRACK_EDGE_SLACK, TRACK_FACE_SLACK, TRACK_PROBE_REL, TRA
 from .visibility._kernels import _cell_height, _locate, new_stack
 
 _INF = np.inf
+#: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
+#: would compile the row loop once more for the literal).
+_NO_SKIP = np.int64(-1)
 
 
 # --------------------------------------------------------------------------- grid
@@ -605,7 +608,7 @@ def grid_heights(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, m
             continue
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
+        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
         out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
 
 
@@ -617,7 +620,7 @@ def tin_heights(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, 
         if stop[0] != 0:
             continue
         thr = np.empty(q.shape[0])
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
         out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
 
 
