@@ -68,6 +68,7 @@ import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from . import _calibration_kernels as _ck
@@ -366,7 +367,10 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     out = np.empty(n)
     score = np.empty(n, dtype=np.int64)
     work = n * part.xy.shape[0]
-    kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
+    if numba.get_num_threads() > 1:
+        kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
+    else:  # one thread: the serial twins (no parfor to compile)
+        kernel = _ck.grid_heights_serial if surf.grid else _ck.tin_heights_serial
     call(kernel, surf.data, p, q, vis, lthr, near_vis, float(NEIGHBOUR_WEIGHT), surf.delta, end_radius, surf.tol, kc, surf.margin, min_gain,
          out, score, work=work)
     return out
