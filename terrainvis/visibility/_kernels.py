@@ -500,7 +500,7 @@ PAIR_CHUNK = 512
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_walks(g, a, b, order, perm, delta, end_radius, los, tol, kc, clear, vis, stop):
+def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop):
     """The parallel pair loops of the grid walk: segments or a visibility matrix (see "Compile time").
 
     ``g`` is a :data:`WalkGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
@@ -508,18 +508,18 @@ def grid_walks(g, a, b, order, perm, delta, end_radius, los, tol, kc, clear, vis
     the stop flag of :mod:`terrainvis._interrupt`, read at the start of every iteration
     (an iteration with it set does nothing; the partial result is then never used).
 
-    * Segments, ``vis`` empty (shape (0, 0)): ``clear[order[k]]`` = clearance of the
-      segment ``a[order[k]] -> b[order[k]]`` (``los`` as in :func:`segment_min`),
-      :data:`PAIR_CHUNK` segments per iteration; ``perm`` is unused.
+    * Segments, ``vis`` empty (shape (0, 0)): ``clear[index[k]]`` = clearance of the
+      segment ``a[index[k]] -> b[index[k]]`` (``los`` as in :func:`segment_min`; ``index``
+      the order to walk them in), :data:`PAIR_CHUNK` segments per iteration.
     * Matrix, ``vis`` (n, n) bool: the verdict of every pair of the points ``a`` (already
-      in walk order; ``b`` is ``a``; ``los`` True, ``order`` and ``clear`` unused). Row k
-      and row n-1-k are handled by the same iteration so every iteration has n-1 pairs
-      (balanced load). Result (i, j) of the ordered points goes to
-      ``vis[perm[i], perm[j]]`` and its mirror; the diagonal is set True.
+      in walk order; ``b`` is ``a``; ``los`` True, ``clear`` unused). Row k and row n-1-k
+      are handled by the same iteration so every iteration has n-1 pairs (balanced load).
+      Result (i, j) of the ordered points goes to ``vis[index[i], index[j]]`` and its
+      mirror (``index`` the permutation that ordered them); the diagonal is set True.
     """
     matrix = vis.shape[0] > 0
     n = a.shape[0]
-    m = order.shape[0]
+    m = index.shape[0]
     niter = (n + 1) // 2 if matrix else (m + PAIR_CHUNK - 1) // PAIR_CHUNK
     for it in nb.prange(niter):
         if stop[0] != 0:
@@ -536,19 +536,19 @@ def grid_walks(g, a, b, order, perm, delta, end_radius, los, tol, kc, clear, vis
                         break
                 lo = i + 1
                 hi = n
-                pi = perm[i]
+                pi = index[i]
                 vis[pi, pi] = True
             else:
                 lo = kk * PAIR_CHUNK
                 hi = min(m, lo + PAIR_CHUNK)
             for j in range(lo, hi):
-                ia = i if matrix else order[j]
+                ia = i if matrix else index[j]
                 ib = j if matrix else ia
                 c = _pair_min(g, (a[ia, 0], a[ia, 1], a[ia, 2]), (b[ib, 0], b[ib, 1], b[ib, 2]), delta, end_radius,
                               los, tol, kc, st)
                 if matrix:
                     seen = c >= -tol
-                    pj = perm[j]
+                    pj = index[j]
                     vis[pi, pj] = seen
                     vis[pj, pi] = seen
                 else:

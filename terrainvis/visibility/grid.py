@@ -174,8 +174,8 @@ def grid_clearance(
     else:
         order = np.arange(m, dtype=np.int64)
     _kernels.grid_walks(
-        _walk_grid(grid, acc), la, lb, order, np.zeros(0, dtype=np.int64), float(delta), float(end_radius), bool(los),
-        float(tol), float(kc), out, np.zeros((0, 0), dtype=np.bool_), new_flag(),
+        _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los), float(tol), float(kc), out,
+        np.zeros((0, 0), dtype=np.bool_), new_flag(),
     )
     return out
 
@@ -190,6 +190,6 @@ def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0
     order = _morton_order(points[:, :2], grid.extent).astype(np.int64)
     p = np.ascontiguousarray(_local(points, acc)[order])
     # through the interrupt helper: Ctrl-C stops the parallel kernel within an iteration
-    call(_kernels.grid_walks, _walk_grid(grid, acc), p, p, np.zeros(0, dtype=np.int64), order, float(delta),
-         float(end_radius), True, float(tol), float(kc), np.zeros(0), out, work=n * n // 2)
+    call(_kernels.grid_walks, _walk_grid(grid, acc), p, p, order, float(delta), float(end_radius), True, float(tol),
+         float(kc), np.zeros(0), out, work=n * n // 2)
     return out
