@@ -9,8 +9,8 @@ it meets, as on a fresh install. The script prints (medians over ``--repeats``):
   warm-up parts compiled side by side on the pool, then the units);
 * ``warm quick``: the same command again on the filled cache;
 * one line per warm-up part of that run (:func:`terrainvis.plan.warm_up_parts`): the part
-  alone, in one process with an empty cache, minus the import time: what compiling its
-  kernels costs on one core (a part that follows others, :func:`terrainvis.plan.part_needs`,
+  alone, in one process with an empty cache and one numba thread (as a worker), minus
+  the import time: what compiling its kernels costs on one core (a part that follows others, :func:`terrainvis.plan.part_needs`,
   is timed after them, on the cache they filled, as the run takes it).
 
 Usage::
@@ -32,6 +32,8 @@ import time
 
 PART = """
 import sys
+import numba
+numba.set_num_threads(1)  # as in a worker of a 2-worker run on 2 cores (terrainvis.runner)
 from terrainvis import experiment
 from terrainvis.plan import part_needs, warm_up_parts
 from terrainvis.units import warm_up_part

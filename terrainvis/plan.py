@@ -294,13 +294,14 @@ def warm_up_parts(planned, grids: dict, settings: Settings | None = None) -> lis
 
 
 #: CPU seconds to compile each warm-up part's kernels with an empty numba cache, in one
-#: process, measured on this project's 2-core machine (``python
-#: benchmarks/bench_cold_start.py``; "tin" after "grid", whose kernels it then loads).
-#: Parts not listed count as the median. The weights of an estimate and of the order of
-#: the work (:func:`work_order`); the progress bar rescales them as parts finish.
+#: process with one numba thread as a worker has, measured on this project's 2-core
+#: machine (``python benchmarks/bench_cold_start.py``; "tin" after "grid", whose kernels
+#: it then loads). Parts not listed count as the median. The weights of an estimate and
+#: of the order of the work (:func:`work_order`); the progress bar rescales them as parts
+#: finish.
 COMPILE_SECONDS = {
-    "grid": 17.6, "greedy-cuts": 8.9, "tin": 6.1, "greedy-insertion": 4.6, "volume": 4.3, "feature": 3.3,
-    "gls": 1.8, "qec": 1.1, "lls": 1.1, "simple": 0.7,
+    "grid": 16.2, "greedy-cuts": 9.0, "tin": 4.8, "volume": 3.7, "greedy-insertion": 3.5, "feature": 1.9,
+    "gls": 1.9, "lls": 1.2, "qec": 1.1, "simple": 0.8,
 }
 
 #: A unit's weight in :func:`work_order` (only orders the units that can start before
