@@ -9,8 +9,9 @@ it meets, as on a fresh install. The script prints (medians over ``--repeats``):
   warm-up parts compiled side by side on the pool, then the units);
 * ``warm quick``: the same command again on the filled cache;
 * one line per warm-up part of that run (:func:`terrainvis.plan.warm_up_parts`): the part
-  alone, in one process with an empty cache, minus the import time: what compiling its
-  kernels costs on one core.
+  alone, in one process with an empty cache and one numba thread (as a worker), minus
+  the import time: what compiling its kernels costs on one core (a part that follows others, :func:`terrainvis.plan.part_needs`,
+  is timed after them, on the cache they filled, as the run takes it).
 
 Usage::
 
@@ -31,18 +32,23 @@ import time
 
 PART = """
 import sys
+import numba
+numba.set_num_threads(1)  # as in a worker of a 2-worker run on 2 cores (terrainvis.runner)
 from terrainvis import experiment
-from terrainvis.plan import warm_up_parts
+from terrainvis.plan import part_needs, warm_up_parts
 from terrainvis.units import warm_up_part
 grids = experiment.resolve_terrains(["hills", "ridges"])
 settings = experiment._settings(grids, levels=[1, 3], n_points=20, n_sets=2)
-parts = warm_up_parts(experiment._tasks(grids, settings), grids)
+parts = warm_up_parts(experiment._tasks(grids, settings), grids, settings)
 if sys.argv[1] == "list":
     print(repr(parts))
 else:
     import time
+    part = eval(sys.argv[1])
+    for before in part_needs(part, parts):
+        warm_up_part(before, settings)
     t0 = time.perf_counter()
-    warm_up_part(eval(sys.argv[1]), settings)
+    warm_up_part(part, settings)
     print(time.perf_counter() - t0)
 """
 

@@ -96,6 +96,9 @@ INTERRUPTED = 4
 
 _HOT = {"cache": True, "nogil": True, "_nrt": False}  # helpers that allocate nothing
 
+#: 0 as an int64 (not a literal): numba compiles a callee again for every literal argument.
+_ZERO = np.int64(0)
+
 
 @nb.njit(**_HOT)
 def _orient(ax, ay, bx, by, cx, cy):
@@ -104,12 +107,20 @@ def _orient(ax, ay, bx, by, cx, cy):
 
 @nb.njit(cache=True, nogil=True)
 def _grow(arr, n):
-    """``arr`` itself when it has a row ``n``, else a copy with twice the rows."""
+    """``arr`` itself when it has a row ``n``, else a copy with twice the rows.
+
+    The copy loops over the flat data (both arrays are C-contiguous with the same rows,
+    so ``arr``'s data is the start of ``new``'s): a slice assignment would compile
+    numba's shape-mismatch message (string formatting), about 2 s per cold start.
+    """
     if n < arr.shape[0]:
         return arr
     shape = (max(2 * arr.shape[0], n + 1),) + arr.shape[1:]
     new = np.empty(shape, dtype=arr.dtype)
-    new[: arr.shape[0]] = arr
+    src = arr.ravel()
+    dst = new.ravel()
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
     return new
 
 
@@ -830,7 +841,7 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
     scr[S_FREE] = -1
     queue = np.empty((4 * cap, 2), dtype=np.int64)  # (node, version)
     qhead = 0
-    qtail = 0
+    qtail = _ZERO  # typed int64 from the start: a literal 0 would compile _grow once more for it
     tris = np.empty((2 * cap, 3), dtype=np.int64)
     ntri = 0
     changed = np.empty(3, dtype=np.int64)
@@ -975,7 +986,9 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
         if qtail + nch > queue.shape[0]:
             if 2 * qhead >= queue.shape[0]:  # the live part fits below qhead: move it down
                 m = qtail - qhead
-                queue[:m] = queue[qhead:qtail]
+                for j in range(m):  # a loop, not a slice assignment (see _grow)
+                    queue[j, 0] = queue[qhead + j, 0]
+                    queue[j, 1] = queue[qhead + j, 1]
                 qhead = 0
                 qtail = m
             else:

@@ -37,8 +37,15 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numba as nb
+import numpy as np
 
 NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
+
+#: Indices as int64, not literals: numba compiles a callee once per argument type, and a
+#: literal (0, -1) or an int32 read from the int32 arrays is a type of its own; the
+#: triangle and heap helpers get int64 only (one compilation each; the int32 arrays
+#: store the same values).
+_I0, _I1, _I2, _I3, _NONE = np.int64(0), np.int64(1), np.int64(2), np.int64(3), np.int64(-1)
 
 #: The state of a greedy-insertion run (see the module docstring for each array):
 #: vertices ``vx``, ``vy`` (int64 column, row); half-edge triangulation ``tri``, ``half``
@@ -191,7 +198,7 @@ def _heap_down(heap, hval, pos, i, n):
 
 @nb.njit(cache=True, nogil=True)
 def _heap_remove(heap, hval, pos, counts, t):
-    i = pos[t]
+    i = np.int64(pos[t])
     pos[t] = -1
     n = counts[NH] - 1
     counts[NH] = n
@@ -208,7 +215,7 @@ def _heap_remove(heap, hval, pos, counts, t):
 
 @nb.njit(cache=True, nogil=True)
 def _heap_set(heap, hval, pos, counts, t, v):
-    i = pos[t]
+    i = np.int64(pos[t])
     if i < 0:
         i = counts[NH]
         counts[NH] = i + 1
@@ -306,7 +313,7 @@ def _rescan(z, W, st, npend):
     vx, vy, tri, cand, terr = st.vx, st.vy, st.tri, st.cand, st.terr
     heap, hval, pos, pend, pmark, counts = st.heap, st.hval, st.pos, st.pend, st.pmark, st.counts
     for k in range(npend):
-        t = pend[k]
+        t = np.int64(pend[k])
         pmark[t] = False
         e = 3 * t
         i0 = tri[e]
@@ -340,9 +347,8 @@ def init_state(z, W, H, st):
     counts[NT] = 2
     counts[NH] = 0
     half[:6] = -1
-    npend = 0
-    npend = _set_tri(tri, half, pend, pmark, npend, 0, 0, 1, 2, -1, -1, -1)
-    npend = _set_tri(tri, half, pend, pmark, npend, 1, 0, 2, 3, 2, -1, -1)
+    npend = _set_tri(tri, half, pend, pmark, _I0, _I0, _I0, _I1, _I2, _NONE, _NONE, _NONE)
+    npend = _set_tri(tri, half, pend, pmark, npend, _I1, _I0, _I2, _I3, _I2, _NONE, _NONE)
     _rescan(z, W, st, npend)
 
 
@@ -363,7 +369,7 @@ def run(z, W, ratio, st, n_target, max_error, stop):
             break
         if stop[0] != 0:
             break
-        t = heap[0]
+        t = np.int64(heap[0])
         _heap_remove(heap, hval, pos, counts, t)
         idx = cand[t]
         px = idx % W
@@ -374,9 +380,9 @@ def run(z, W, ratio, st, n_target, max_error, stop):
         counts[NV] = pn + 1
 
         e0 = 3 * t
-        p0 = tri[e0]
-        p1 = tri[e0 + 1]
-        p2 = tri[e0 + 2]
+        p0 = np.int64(tri[e0])
+        p1 = np.int64(tri[e0 + 1])
+        p2 = np.int64(tri[e0 + 2])
         on = -1
         if _orient(vx[p0], vy[p0], vx[p1], vy[p1], px, py) == 0:
             on = e0
@@ -384,19 +390,19 @@ def run(z, W, ratio, st, n_target, max_error, stop):
             on = e0 + 1
         elif _orient(vx[p2], vy[p2], vx[p0], vy[p0], px, py) == 0:
             on = e0 + 2
-        npend = 0
+        npend = _I0
         nt = counts[NT]
         if on < 0:
             # strictly inside: split in 3
-            h0 = half[e0]
-            h1 = half[e0 + 1]
-            h2 = half[e0 + 2]
+            h0 = np.int64(half[e0])
+            h1 = np.int64(half[e0 + 1])
+            h2 = np.int64(half[e0 + 2])
             t0 = t
             t1 = nt
             t2 = nt + 1
             counts[NT] = nt + 2
-            npend = _set_tri(tri, half, pend, pmark, npend, t0, p0, p1, pn, h0, -1, -1)
-            npend = _set_tri(tri, half, pend, pmark, npend, t1, p1, p2, pn, h1, -1, 3 * t0 + 1)
+            npend = _set_tri(tri, half, pend, pmark, npend, t0, p0, p1, pn, h0, _NONE, _NONE)
+            npend = _set_tri(tri, half, pend, pmark, npend, t1, p1, p2, pn, h1, _NONE, 3 * t0 + 1)
             npend = _set_tri(tri, half, pend, pmark, npend, t2, p2, p0, pn, h2, 3 * t0 + 2, 3 * t1 + 1)
             npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t0, ratio)
             npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1, ratio)
@@ -406,19 +412,19 @@ def run(z, W, ratio, st, n_target, max_error, stop):
             a = on
             an = e0 + (a + 1) % 3
             ap = e0 + (a + 2) % 3
-            pa = tri[a]
-            pb = tri[an]
-            pc = tri[ap]
-            h_bc = half[an]
-            h_ca = half[ap]
-            b = half[a]
+            pa = np.int64(tri[a])
+            pb = np.int64(tri[an])
+            pc = np.int64(tri[ap])
+            h_bc = np.int64(half[an])
+            h_ca = np.int64(half[ap])
+            b = np.int64(half[a])
             if b < 0:
                 # on a boundary edge: split in 2
                 t0 = t
                 t1 = nt
                 counts[NT] = nt + 1
-                npend = _set_tri(tri, half, pend, pmark, npend, t0, pn, pb, pc, -1, h_bc, -1)
-                npend = _set_tri(tri, half, pend, pmark, npend, t1, pn, pc, pa, 3 * t0 + 2, h_ca, -1)
+                npend = _set_tri(tri, half, pend, pmark, npend, t0, pn, pb, pc, _NONE, h_bc, _NONE)
+                npend = _set_tri(tri, half, pend, pmark, npend, t1, pn, pc, pa, 3 * t0 + 2, h_ca, _NONE)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t0 + 1, ratio)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1 + 1, ratio)
             else:
@@ -426,9 +432,9 @@ def run(z, W, ratio, st, n_target, max_error, stop):
                 b0 = b - b % 3
                 bn = b0 + (b + 1) % 3
                 bp = b0 + (b + 2) % 3
-                pd = tri[bp]
-                h_ad = half[bn]
-                h_db = half[bp]
+                pd = np.int64(tri[bp])
+                h_ad = np.int64(half[bn])
+                h_db = np.int64(half[bp])
                 tb = b0 // 3
                 if pos[tb] >= 0:
                     _heap_remove(heap, hval, pos, counts, tb)
@@ -437,9 +443,9 @@ def run(z, W, ratio, st, n_target, max_error, stop):
                 t2 = tb
                 t3 = nt + 1
                 counts[NT] = nt + 2
-                npend = _set_tri(tri, half, pend, pmark, npend, t0, pn, pb, pc, -1, h_bc, -1)
-                npend = _set_tri(tri, half, pend, pmark, npend, t1, pn, pc, pa, 3 * t0 + 2, h_ca, -1)
-                npend = _set_tri(tri, half, pend, pmark, npend, t2, pn, pa, pd, 3 * t1 + 2, h_ad, -1)
+                npend = _set_tri(tri, half, pend, pmark, npend, t0, pn, pb, pc, _NONE, h_bc, _NONE)
+                npend = _set_tri(tri, half, pend, pmark, npend, t1, pn, pc, pa, 3 * t0 + 2, h_ca, _NONE)
+                npend = _set_tri(tri, half, pend, pmark, npend, t2, pn, pa, pd, 3 * t1 + 2, h_ad, _NONE)
                 npend = _set_tri(tri, half, pend, pmark, npend, t3, pn, pd, pb, 3 * t2 + 2, h_db, 3 * t0)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t0 + 1, ratio)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1 + 1, ratio)

@@ -87,7 +87,7 @@ def _real_array_axis(value, name: str, axis):
 
 
 def _as_curves(f, axis, op: str):
-    """Validate ``f`` and ``axis``; return the (A, m, B) C-contiguous float64 view and shapes."""
+    """Validate ``f`` and ``axis``; return the (A, m, B) C-contiguous float64 view (read-only) and shapes."""
     if isinstance(f, HeightGrid):
         raise TypeError(
             f"f must be an array of heights; to reduce a HeightGrid use simplifiers.simplify(grid, {op!r}, level)"
@@ -104,7 +104,12 @@ def _as_curves(f, axis, op: str):
     b = math.prod(arr.shape[axis + 1:])
     n = (m + 1) // 2
     out_shape = arr.shape[:axis] + (n,) + arr.shape[axis + 1:]
-    return arr.reshape(a, m, b), out_shape, axis, m, n
+    # always a read-only view: the kernels only read their input, and numba compiles a
+    # kernel once per signature, so a writable input (the rows' pass output, a user's
+    # array) and a read-only one (a HeightGrid's z) would each cost a compilation
+    view = arr.reshape(a, m, b)
+    view.flags.writeable = False
+    return view, out_shape, axis, m, n
 
 
 def _raise_nonfinite(f3, op: str):

@@ -33,6 +33,14 @@ at ``u* = sqrt(-A / B)``: :func:`_piece_max` checks it.
 * :func:`tin_max_slope` walks the TIN from face to face across the edges the track
   crosses (the faces' neighbours), from the face under the interval's start.
 
+Compile time
+------------
+A ``prange`` loop costs about 1.5 s of CPU to compile however small its body (numba's
+parfor lowering), and gains nothing with one thread, as in the workers of a
+:func:`terrainvis.compare` run. :func:`grid_heights` and :func:`tin_heights` have serial
+twins (:func:`grid_heights_serial`, :func:`tin_heights_serial`: the same heights) that
+:mod:`terrainvis.calibration` calls when numba has one thread.
+
 Best heights
 ------------
 Given the thresholds ``thr[k]`` of one point against K partners and the partners'
@@ -55,6 +63,9 @@ from .tolerances import TRACK_EDGE_SLACK, TRACK_FACE_SLACK, TRACK_PROBE_REL, TRA
 from .visibility._kernels import _cell_height, _locate, new_stack
 
 _INF = np.inf
+#: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
+#: would compile the row loop once more for the literal).
+_NO_SKIP = np.int64(-1)
 
 
 # --------------------------------------------------------------------------- grid
@@ -605,7 +616,7 @@ def grid_heights(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, m
             continue
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
+        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
         out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
 
 
@@ -617,7 +628,33 @@ def tin_heights(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, 
         if stop[0] != 0:
             continue
         thr = np.empty(q.shape[0])
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, -1, thr)
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_heights_serial(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
+                        stop):
+    """:func:`grid_heights` in the calling thread (the same heights): with one thread a
+    ``prange`` loop gains nothing and costs a parfor compilation (see "Compile time")."""
+    st = new_stack(g.ltop)
+    thr = np.empty(q.shape[0])
+    for i in range(p.shape[0]):
+        if stop[0] != 0:
+            return
+        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_heights_serial(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
+                       stop):
+    """:func:`tin_heights` in the calling thread (see :func:`grid_heights_serial`)."""
+    thr = np.empty(q.shape[0])
+    for i in range(p.shape[0]):
+        if stop[0] != 0:
+            return
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
         out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
 
 

@@ -75,6 +75,7 @@ import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from . import _calibration_kernels as _ck
@@ -429,7 +430,10 @@ def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, of
     out = np.empty(n)
     score = np.empty(n, dtype=np.int64)
     work = n * part.xy.shape[0]
-    kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
+    if numba.get_num_threads() > 1:
+        kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
+    else:  # one thread: the serial twins (no parfor to compile)
+        kernel = _ck.grid_heights_serial if surf.grid else _ck.tin_heights_serial
     weight = float(neighbour_weight(q.shape[0]))
     call(kernel, surf.data, p, q, vis, lthr, near_vis, weight, surf.delta, end_radius, surf.tol, kc, surf.margin,
          min_gain, out, score, work=work)

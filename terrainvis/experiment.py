@@ -199,12 +199,16 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
     """Run the tasks (after the warm-up parts of a cold numba cache); every finished unit goes to ``store``."""
     from .runner import run_units
 
+    from .plan import work_order
+
     todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
-    work = [((t, m, g), (_run_unit, grids[t], t, m, g, settings, save_dir)) for t, m, g in tasks]
     n_local = (os.cpu_count() or 1) if workers is None else workers
     cold = bool(tasks) and client is None and _kernels_cached() is False
-    parts = _warm_up_parts(tasks, grids) if cold and ((n_local > 1 and len(work) > 1) or progress) else []
-    work = [(("warm-up", part), (_warm_up, part, settings)) for part in parts] + work
+    parts = _warm_up_parts(tasks, grids, settings) if cold and ((n_local > 1 and len(tasks) > 1) or progress) else []
+    # the parts and the units interleaved so that no two workers compile the same kernels
+    work = [(("warm-up", x), (_warm_up, x, settings)) if kind == "part" else
+            (x, (_run_unit, grids[x[0]], x[0], x[1], x[2], settings, save_dir))
+            for kind, x in work_order(parts, tasks, min(n_local, len(parts) + len(tasks)))]
     bars = _Progress(progress and bool(tasks), parts, todo, min(n_local, len(work)))
     new_rows: list[dict] = []
 

@@ -27,7 +27,8 @@ from .terrain import HeightGrid
 
 __all__ = [
     "DEFAULT_TERRAINS", "JACKSBORO_WINDOW", "resolve_terrains", "settings_for", "check_memory", "unit_bytes",
-    "tasks", "cascades", "run_record", "fingerprint", "warm_up_parts", "compile_seconds", "kernels_cached",
+    "tasks", "cascades", "run_record", "fingerprint", "warm_up_parts", "work_order", "compile_seconds",
+    "kernels_cached",
 ]
 
 #: The default terrains: the five bundled 120x120 terrains and a 120x120 window of the real Jacksboro DEM.
@@ -264,16 +265,18 @@ def tasks(grids: dict, settings: Settings, done=frozenset(), *,
 
 
 # ---------------------------------------------------------------------- compiling
-def warm_up_parts(planned, grids: dict) -> list[tuple]:
+def warm_up_parts(planned, grids: dict, settings: Settings | None = None) -> list[tuple]:
     """What a run must compile, as parts that two workers can compile side by side.
 
     With a cold numba cache every worker would compile every kernel it meets (about 80 s
     of compilation each for a full run). Compiled once by whichever worker takes the part,
     a kernel is loaded from the on-disk cache by the others. The parts: each method's
-    kernels, and the measurements on a grid and on a TIN (line of sight, relocation, volume,
-    viewshed). They go longest first (:data:`COMPILE_SECONDS`, measured), so that no long
-    part is left to finish alone while the units wait for its kernels (or compile them a
-    second time).
+    kernels; the measurements on a grid S(T) (which hold the grid line-of-sight engine
+    that every unit uses on T), on a TIN S(T) (the rest: TIN walks and relocation) and
+    the volume between T and S(T) (unless ``settings.volume`` is off). No two parts
+    compile the same kernel when :func:`work_order` runs them: the TIN measure follows
+    the grid one (:func:`part_needs`). They go longest first (:data:`COMPILE_SECONDS`,
+    measured).
     """
     from simplifiers import METHODS
 
@@ -285,17 +288,25 @@ def warm_up_parts(planned, grids: dict) -> list[tuple]:
     side = min(1024, max(33, int(np.ceil(np.sqrt(largest)))))
     parts = [("method", m, side if METHODS[m].regular else 33) for m in methods]
     parts += [("measure", k, 33) for k in kinds]
+    if methods and (settings is None or settings.volume):
+        parts.append(("measure", "volume", 33))
     return sorted(parts, key=compile_weight, reverse=True)  # stable: equal weights keep this order
 
 
-#: Seconds to compile each warm-up part's kernels with an empty numba cache, in one
-#: process, measured on this project's 2-core machine while other work shared it (load
-#: average about 3; ``python benchmarks/bench_cold_start.py``). Parts not listed count as
-#: the median. The weights of an estimate: the progress bar rescales them as parts finish.
+#: CPU seconds to compile each warm-up part's kernels with an empty numba cache, in one
+#: process with one numba thread as a worker has, measured on this project's 2-core
+#: machine (``python benchmarks/bench_cold_start.py``; "tin" after "grid", whose kernels
+#: it then loads). Parts not listed count as the median. The weights of an estimate and
+#: of the order of the work (:func:`work_order`); the progress bar rescales them as parts
+#: finish.
 COMPILE_SECONDS = {
-    "greedy-cuts": 32.6, "grid": 18.9, "tin": 18.4, "greedy-insertion": 10.1, "feature": 8.5, "gls": 3.8,
-    "qec": 2.5, "lls": 2.2, "simple": 1.6,
+    "grid": 16.2, "greedy-cuts": 9.0, "tin": 4.8, "volume": 3.7, "greedy-insertion": 3.5, "feature": 1.9,
+    "gls": 1.9, "lls": 1.2, "qec": 1.1, "simple": 0.8,
 }
+
+#: A unit's weight in :func:`work_order` (only orders the units that can start before
+#: the last parts are compiled; a quick run's units take about a second each).
+UNIT_SECONDS = 1.0
 
 
 def compile_weight(part: tuple) -> float:
@@ -304,12 +315,62 @@ def compile_weight(part: tuple) -> float:
     return COMPILE_SECONDS.get(part[1], known[len(known) // 2])
 
 
+def part_needs(part: tuple, parts) -> list[tuple]:
+    """The parts of ``parts`` whose kernels ``part`` also runs: the TIN measure needs the grid
+    measure (line of sight on T, the best heights), which it would otherwise compile again."""
+    if part[:2] == ("measure", "tin"):
+        return [p for p in parts if p[:2] == ("measure", "grid")]
+    return []
+
+
+def unit_needs(task: tuple, parts) -> list[tuple]:
+    """The parts a unit of ``task`` = (terrain, method, levels) runs: its method's, the measure on
+    its kind of surface (and what that needs) and the volume."""
+    from simplifiers import METHODS
+
+    kind = "grid" if METHODS[task[1]].regular else "tin"
+    own = [p for p in parts if p[:2] in (("method", task[1]), ("measure", kind), ("measure", "volume"))]
+    return own + [q for p in own for q in part_needs(p, parts)]
+
+
+def work_order(parts, tasks, at_once: int) -> list[tuple]:
+    """The warm-up parts and the tasks as one list, in the order a pool of ``at_once`` workers should take them.
+
+    Each item is ``("part", part)`` or ``("task", task)``. A pool hands out work first in,
+    first out; :func:`_simulate` plays it with the estimated durations: a worker that
+    comes free takes the first item, parts longest first and then the tasks in their
+    order, whose parts (:func:`part_needs`, :func:`unit_needs`) are finished by then. So
+    no worker compiles a kernel that another is still compiling, and the units of the
+    methods compiled first start while the others compile.
+    """
+    return [item for item, _ in _simulate(parts, tasks, at_once)]
+
+
+def _simulate(parts, tasks, at_once: int) -> list[tuple]:
+    """``(item, finish)`` in the order of :func:`work_order`, with the estimated finish times
+    (:data:`COMPILE_SECONDS`, :data:`UNIT_SECONDS`). An item that nothing lets start (its
+    parts still compiling on every other worker) is counted from when they are done."""
+    items = [("part", p) for p in sorted(parts, key=compile_weight, reverse=True)] + [("task", t) for t in tasks]
+    needs = {it: part_needs(it[1], parts) if it[0] == "part" else unit_needs(it[1], parts) for it in items}
+    seconds = {it: compile_weight(it[1]) if it[0] == "part" else UNIT_SECONDS for it in items}
+    free = [0.0] * max(1, at_once)
+    finish: dict = {}
+    out = []
+    while items:
+        w = free.index(min(free))
+        ready = [it for it in items if all(finish.get(d, np.inf) <= free[w] for d in needs[it])]
+        it = ready[0] if ready else min(items, key=lambda i: max([finish.get(d, np.inf) for d in needs[i]]))
+        start = max([free[w]] + [finish.get(d, np.inf) for d in needs[it]])
+        finish[it[1] if it[0] == "part" else it] = free[w] = start + seconds[it]
+        items.remove(it)
+        out.append((it, free[w]))
+    return out
+
+
 def compile_seconds(parts, at_once: int) -> float:
-    """An estimate of the wall time ``parts`` take to compile on ``at_once`` workers (:data:`COMPILE_SECONDS`)."""
-    lanes = [0.0] * max(1, at_once)
-    for t in sorted(map(compile_weight, parts), reverse=True):  # longest first onto the least loaded worker
-        lanes[lanes.index(min(lanes))] += t
-    return max(lanes)
+    """An estimate of the wall time ``parts`` take to compile on ``at_once`` workers (:data:`COMPILE_SECONDS`,
+    in the order of :func:`work_order`)."""
+    return max([finish for _, finish in _simulate(parts, [], at_once)], default=0.0)
 
 
 def kernels_cached() -> bool | None:
@@ -319,7 +380,7 @@ def kernels_cached() -> bool | None:
 
         from .visibility import _kernels
 
-        return os.path.exists(_kernels.grid_matrix._cache._cache_file._index_path)
+        return os.path.exists(_kernels.grid_walks._cache._cache_file._index_path)
     except Exception:  # numba internals: a best-effort hint only
         return None
 

@@ -294,7 +294,13 @@ def warm_up(part: tuple, settings: Settings) -> list:
 
 
 def warm_up_part(part: tuple, settings: Settings) -> None:
-    """Run one part of :func:`terrainvis.plan.warm_up_parts` (exceptions propagate)."""
+    """Run one part of :func:`terrainvis.plan.warm_up_parts` (exceptions propagate).
+
+    ``("method", m, side)`` simplifies a synthetic grid with ``m``; ``("measure", "volume", 33)``
+    measures a volume; ``("measure", kind, 33)`` runs the measure of ``settings`` on a small
+    grid and its simplification of that kind (a grid by "simple", or the grid's TIN),
+    with every relocation.
+    """
     from simplifiers import simplify
 
     from .deviation import volume_error
@@ -305,10 +311,12 @@ def warm_up_part(part: tuple, settings: Settings) -> None:
     if what == "method":
         simplify(grid, name, 1)
         return
+    if name == "volume":  # its own part: the same kernels for a grid S(T) (as a TIN) and a TIN
+        if settings.volume:
+            volume_error(grid, grid.to_tin())
+        return
     small = settings.replace(n_points=6, n_sets=1, n_observers=1, repeats=1)
     simplified = simplify(grid, "simple", 1) if name == "grid" else grid.to_tin()
-    if small.volume:
-        volume_error(grid, simplified)
     base = {"end_radius": end_radius_for(simplified, grid, 1, small.predicate)}
     if small.measure == "viewshed":
         _viewshed_rows(grid, simplified, base, small, observers(grid, "warm-up", small))

@@ -252,8 +252,9 @@ def test_a_cold_cache_shows_what_compiles_and_how_far(capsys, monkeypatch):
     compare(["hills"], methods=["lls", "qec"], levels=[1], n_points=5, n_sets=1, repeats=1, workers=1,
             progress=True)
     err = capsys.readouterr().err
-    assert "first run: compiling the numba kernels this run needs (4 parts, about" in err
-    assert "compiling: 100%" in err and "4/4" in err and "compare: 100%" in err
+    # lls, qec, the measures on a grid and on a TIN, the volume
+    assert "first run: compiling the numba kernels this run needs (5 parts, about" in err
+    assert "compiling: 100%" in err and "5/5" in err and "compare: 100%" in err
 
 
 def test_the_compile_estimate_packs_parts_on_the_workers():
@@ -261,10 +262,36 @@ def test_the_compile_estimate_packs_parts_on_the_workers():
 
     parts = [("method", "greedy-cuts", 33), ("method", "lls", 33), ("measure", "grid", 33)]
     assert compile_seconds(parts, 1) == pytest.approx(sum(COMPILE_SECONDS[p[1]] for p in parts))
-    # two workers: greedy cuts (the longest) on one, the grid measure and LLS on the other
-    assert COMPILE_SECONDS["grid"] + COMPILE_SECONDS["lls"] < COMPILE_SECONDS["greedy-cuts"]
-    assert compile_seconds(parts, 2) == COMPILE_SECONDS["greedy-cuts"]
-    assert compile_seconds(parts, 3) == COMPILE_SECONDS["greedy-cuts"]
+    # two workers: the grid measure (the longest) on one, greedy cuts and LLS on the other
+    assert COMPILE_SECONDS["greedy-cuts"] + COMPILE_SECONDS["lls"] < COMPILE_SECONDS["grid"]
+    assert compile_seconds(parts, 2) == COMPILE_SECONDS["grid"]
+    assert compile_seconds(parts, 3) == COMPILE_SECONDS["grid"]
+    # the TIN measure waits for the grid one (it would compile the grid's kernels again)
+    tin = parts + [("measure", "tin", 33)]
+    assert compile_seconds(tin, 3) == pytest.approx(COMPILE_SECONDS["grid"] + COMPILE_SECONDS["tin"])
+
+
+def test_the_work_order_starts_nothing_before_what_it_compiles_is_there():
+    from terrainvis import experiment
+    from terrainvis.plan import compile_weight, part_needs, unit_needs, warm_up_parts, work_order
+
+    grids = experiment.resolve_terrains(["hills", "ridges"])
+    settings = experiment._settings(grids, levels=[1, 3], n_points=20, n_sets=2)
+    tasks = experiment._tasks(grids, settings)
+    parts = warm_up_parts(tasks, grids, settings)
+    assert ("measure", "volume", 33) in parts and ("measure", "tin", 33) in parts
+    assert ("measure", "volume", 33) not in warm_up_parts(tasks, grids, settings.replace(volume=False))
+    everything = sorted([("part", p) for p in parts] + [("task", t) for t in tasks], key=repr)
+    assert sorted(work_order(parts, tasks, 3), key=repr) == everything
+    for at_once in (1, 2):  # this machine's two cores: a worker never has to wait
+        order = work_order(parts, tasks, at_once)
+        assert sorted(order, key=repr) == everything
+        free, finish = [0.0] * at_once, {}  # replay it as a first-in, first-out pool with the estimates
+        for kind, x in order:
+            w = free.index(min(free))
+            needs = part_needs(x, parts) if kind == "part" else unit_needs(x, parts)
+            assert all(finish[d] <= free[w] for d in needs), (at_once, kind, x)
+            finish[x] = free[w] = free[w] + (compile_weight(x) if kind == "part" else 1.0)
 
 
 _KERNEL = """

@@ -10,12 +10,23 @@ two scalars, built by ``terrainvis.visibility.grid``), keeps its descent on a
 :data:`WalkStack` (scratch arrays, one per thread, from :func:`new_stack`) and takes a
 segment as the 6-tuple ``seg = (ax, ay, az, dx, dy, dz)``, the points ``a + t * d``.
 The per-cell and per-pair functions (``_cell_min``, :func:`segment_min`, ``_pair_min``)
-are inlined at numba IR level (``inline="always"``) into the parallel pair loops. As
+are inlined at numba IR level (``inline="always"``) into the parallel pair loop. As
 separate calls they cost 1-4 % of the LOS throughput against the earlier kernels that
 took two dozen positional arrays (every call updates the reference counts of the named
 tuples' arrays); inlined, ``line_of_sight`` is 9-17 % faster than with those kernels,
 with the same bits (docs/visibility.md, "Performance"). The TIN clipper reads its mesh
 and bucket grid through a :data:`TinMesh`.
+
+Compile time
+------------
+The walk inlined into a ``prange`` loop is the costliest compilation of a first run
+(numba's inlining and parfor passes over the whole walk: about 9 s of CPU per loop). So
+one parallel loop, :func:`grid_walks`, serves both the segments (``line_of_sight``,
+``min_clearance``) and the visibility matrix, with the walk inlined once; it compiles
+in about the time one of the two loops it replaced took. Moving the walk out of the
+``prange`` body into a serial function called per chunk compiles faster still, but
+ran 10-25 % slower (measured with one thread; numpy's error model and no-alias
+arguments, which numba gives a ``prange`` body, did not close the gap).
 
 Tested interval
 ---------------
@@ -484,54 +495,64 @@ def _pair_min(g, a, b, delta, end_radius, los, tol, kc, st):
     return segment_min(g, seg, t0, 1.0 - t0, los, tol, kc * (seg[3] * seg[3] + seg[4] * seg[4]), st)
 
 
+#: Segments per ``prange`` iteration of :func:`grid_walks` (segment mode).
+PAIR_CHUNK = 512
+
+
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_pairs(g, a, b, order, delta, end_radius, los, tol, kc, out):
-    """``out[order[k]]`` = clearance of segment a[order[k]] -> b[order[k]] (parallel).
+def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop):
+    """The parallel pair loops of the grid walk: segments or a visibility matrix (see "Compile time").
 
     ``g`` is a :data:`WalkGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
-    ``kc`` the curvature coefficient over twice the earth's radius (0: flat).
+    ``kc`` the curvature coefficient over twice the earth's radius (0: flat). ``stop`` is
+    the stop flag of :mod:`terrainvis._interrupt`, read at the start of every iteration
+    (an iteration with it set does nothing; the partial result is then never used).
+
+    * Segments, ``vis`` empty (shape (0, 0)): ``clear[index[k]]`` = clearance of the
+      segment ``a[index[k]] -> b[index[k]]`` (``los`` as in :func:`segment_min`; ``index``
+      the order to walk them in), :data:`PAIR_CHUNK` segments per iteration.
+    * Matrix, ``vis`` (n, n) bool: the verdict of every pair of the points ``a`` (already
+      in walk order; ``b`` is ``a``; ``los`` True, ``clear`` unused). Row k and row n-1-k
+      are handled by the same iteration so every iteration has n-1 pairs (balanced load).
+      Result (i, j) of the ordered points goes to ``vis[index[i], index[j]]`` and its
+      mirror (``index`` the permutation that ordered them); the diagonal is set True.
     """
-    m = order.shape[0]
-    chunk = 512
-    nchunk = (m + chunk - 1) // chunk
-    for ch in nb.prange(nchunk):
-        st = new_stack(g.ltop)
-        for k in range(ch * chunk, min(m, (ch + 1) * chunk)):
-            i = order[k]
-            out[i] = _pair_min(
-                g, (a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]), delta, end_radius, los, tol, kc, st
-            )
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def grid_matrix(g, p, perm, delta, end_radius, tol, kc, out, stop):
-    """Visibility matrix of the points ``p`` (already in walk order) on the :data:`WalkGrid` ``g``.
-
-    Row k and row n-1-k are handled by the same iteration so every iteration has n-1
-    pairs (balanced load). Result (i, j) of the ordered points goes to
-    ``out[perm[i], perm[j]]`` and its mirror; the diagonal is set True. ``stop`` is the
-    stop flag of :mod:`terrainvis._interrupt`, read at the start of every iteration (an
-    iteration with it set does nothing; the partial result is then never used).
-    """
-    n = p.shape[0]
-    for k in nb.prange((n + 1) // 2):
+    matrix = vis.shape[0] > 0
+    n = a.shape[0]
+    m = index.shape[0]
+    niter = (n + 1) // 2 if matrix else (m + PAIR_CHUNK - 1) // PAIR_CHUNK
+    for it in nb.prange(niter):
         if stop[0] != 0:
             continue
         st = new_stack(g.ltop)
-        kk = np.int64(k)
-        for h in range(2):
-            i = kk if h == 0 else np.int64(n - 1) - kk
-            if h == 1 and i == kk:
-                break
-            pi = perm[i]
-            out[pi, pi] = True
-            pa = (p[i, 0], p[i, 1], p[i, 2])
-            for j in range(i + 1, n):
-                m = _pair_min(g, pa, (p[j, 0], p[j, 1], p[j, 2]), delta, end_radius, True, tol, kc, st)
-                vis = m >= -tol
-                pj = perm[j]
-                out[pi, pj] = vis
-                out[pj, pi] = vis
+        kk = np.int64(it)
+        for h in range(2 if matrix else 1):
+            i = kk
+            pi = 0
+            if matrix:
+                if h == 1:
+                    i = np.int64(n - 1) - kk
+                    if i == kk:
+                        break
+                lo = i + 1
+                hi = n
+                pi = index[i]
+                vis[pi, pi] = True
+            else:
+                lo = kk * PAIR_CHUNK
+                hi = min(m, lo + PAIR_CHUNK)
+            for j in range(lo, hi):
+                ia = i if matrix else index[j]
+                ib = j if matrix else ia
+                c = _pair_min(g, (a[ia, 0], a[ia, 1], a[ia, 2]), (b[ib, 0], b[ib, 1], b[ib, 2]), delta, end_radius,
+                              los, tol, kc, st)
+                if matrix:
+                    seen = c >= -tol
+                    pj = index[j]
+                    vis[pi, pj] = seen
+                    vis[pj, pi] = seen
+                else:
+                    clear[ia] = c
 
 
 # --------------------------------------------------------------------------- TIN
@@ -673,6 +694,19 @@ def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out):
     """
     m = a.shape[0]
     for i in nb.prange(m):
+        seg, length = _canonical((a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]))
+        t0 = interval_start(seg, length, delta, end_radius)
+        if t0 < 0.0:
+            out[i] = _INF
+            continue
+        out[i] = _tin_segment_min(mesh, seg, t0, 1.0 - t0, eps, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_pairs_serial(mesh, a, b, delta, end_radius, eps, kc, out):
+    """:func:`tin_pairs` in the calling thread (the same clearances): with one thread the
+    ``prange`` loop gains nothing and costs a parfor compilation (about 1 s of CPU)."""
+    for i in range(a.shape[0]):
         seg, length = _canonical((a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]))
         t0 = interval_start(seg, length, delta, end_radius)
         if t0 < 0.0:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._interrupt import call
+from .._interrupt import call, new_flag
 from ..tolerances import DIVISOR_FLOOR
 from . import _kernels
 
@@ -173,8 +173,9 @@ def grid_clearance(
         order = _morton_order(a[:, :2], grid.extent).astype(np.int64)
     else:
         order = np.arange(m, dtype=np.int64)
-    _kernels.grid_pairs(
-        _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los), float(tol), float(kc), out
+    _kernels.grid_walks(
+        _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los), float(tol), float(kc), out,
+        np.zeros((0, 0), dtype=np.bool_), new_flag(),
     )
     return out
 
@@ -189,6 +190,6 @@ def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0
     order = _morton_order(points[:, :2], grid.extent).astype(np.int64)
     p = np.ascontiguousarray(_local(points, acc)[order])
     # through the interrupt helper: Ctrl-C stops the parallel kernel within an iteration
-    call(_kernels.grid_matrix, _walk_grid(grid, acc), p, order, float(delta), float(end_radius), float(tol),
-         float(kc), out, work=n * n // 2)
+    call(_kernels.grid_walks, _walk_grid(grid, acc), p, p, order, float(delta), float(end_radius), True, float(tol),
+         float(kc), np.zeros(0), out, work=n * n // 2)
     return out

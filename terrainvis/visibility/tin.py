@@ -10,6 +10,7 @@ Functions here take validated float64 arrays; :mod:`terrainvis.visibility` valid
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ..tolerances import TIN_ON_EDGE_REL
@@ -51,7 +52,8 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0, kc: float
     la[:, 1] -= y0
     lb[:, 1] -= y0
     mesh = _kernels.TinMesh(vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby)
-    _kernels.tin_pairs(mesh, la, lb, float(delta), float(end_radius), eps, float(kc), out)
+    kernel = _kernels.tin_pairs if numba.get_num_threads() > 1 else _kernels.tin_pairs_serial
+    kernel(mesh, la, lb, float(delta), float(end_radius), eps, float(kc), out)
     return out
 
 
