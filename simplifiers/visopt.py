@@ -34,9 +34,8 @@ The method
    diagonal at each end, which the breakpoints take at the start heights).
 
 docs/visopt.md gives the measurements on the default experiment: a few hundredths of a
-point above GLS with the calibrated relocation of 512 partners (not significant), none
-with the default of 2,048 partners, at 1,300 to 1,800 times GLS's time. A negative result,
-kept out of compare's default methods.
+point above GLS with the calibrated relocation (not significant at any level), at 1,300
+to 1,800 times GLS's time. Kept out of compare's default methods.
 
 The pair verdicts of step b are evaluated at the *breakpoints* of each sight line on
 the coarse grid (the ends of its tested interval, its crossings of grid lines and cell
