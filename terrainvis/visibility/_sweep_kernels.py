@@ -1098,6 +1098,7 @@ QUAD = 4
 #: Blocks per group: the coarsest unit of the old blocks' history (``GROUP * BLOCK``
 #: divides the first refining ring, so a group's rings share one wedge resolution).
 GROUP = 8
+NQUAD = 2 * BLOCK // QUAD
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -1174,7 +1175,7 @@ def _decide(g, eye, rules, w, j, win, tg, sl, near):
     ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
     ubv = _slot_max(w.ubp, sl)
     for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
-        ubv = max(ubv, _slot_max(w.quads[qk], sl))
+        ubv = max(ubv, _slot_max(w.quads[qk % NQUAD], sl))
     if st - slack >= ubv:
         # the bounds clear every ring before: only the last one (annulus j) is walked,
         # unless its corners' bound clears it too
@@ -1238,7 +1239,14 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
                 skip = min(b + GROUP, nfull - 1) - b  # the group's old blocks clear
             elif not _slot_max(w.hist[b], slq) > smin:
                 skip = 1
-        if skip == 0 and _slot_max(w.quads[qk], slq) > smin:
+        if skip == 0 and b < nfull - 1:
+            # an old block that reaches: walked whole
+            if run_lo < 0:
+                run_lo = r_lo
+            run_hi = r_lo + BLOCK - 1
+            qk += qpb
+            continue
+        if skip == 0 and _slot_max(w.quads[qk % NQUAD], slq) > smin:
             if run_lo < 0:
                 run_lo = r_lo
             run_hi = min(r_lo + QUAD - 1, j - 1)
@@ -1425,7 +1433,7 @@ def _close_block(w, j, n, r1):
     for i in range(n + 2):
         v = -_INF
         for qk in range(q0, q0 + BLOCK // QUAD):
-            v = max(v, w.quads[qk, i])
+            v = max(v, w.quads[qk % NQUAD, i])
         w.hist[b, i] = v
         w.ubp[i] = max(w.ubp[i], v)
     if b >= 1:
@@ -1469,7 +1477,7 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
     segments (SEG-aligned, counted from the one holding that first row or column) whose
     points lie under the lower bound (:func:`_seg_hidden`).
     """
-    cur = w.quads[ring // QUAD]
+    cur = w.quads[(ring // QUAD) % NQUAD]
     for run in range(2):
         if ranges[1, run] < ranges[0, run]:
             continue
@@ -1664,7 +1672,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     # targets decided by the lower bound, by the upper bound and the last rings' walk, by
     # block walks, left undecided, and by the upper bound and the last ring's bound
     w_own = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
-                   np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((jstop // QUAD + 1, nfin + 2)),
+                   np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)),
                    np.empty((jstop // (GROUP * BLOCK) + 1, nfin + 2)))
     tmp_own = np.empty((3, nfin + 2))
     buf_own = np.empty((2, 3, 2, blen))
@@ -1710,7 +1718,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
             lev += 1
         glo = s * n - 1
         nloc = n + 2
-        cur = w.quads[j // QUAD]
+        cur = w.quads[(j // QUAD) % NQUAD]
         if j % QUAD == 0:
             cur[:nloc] = -_INF
         if j < 2:
