@@ -134,9 +134,10 @@ Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "tor
 #: ``s * n - 1 + i``): ``ubp`` upper bounds over the completed blocks of rings, ``ubold``
 #: over the completed blocks older than the previous one, ``lb`` lower bounds of the
 #: horizon over all rings swept, ``hist`` (blocks, nfin + 2) the upper bounds of each
-#: completed block, and ``quads`` (2 BLOCK / QUAD, nfin + 2) the upper bounds of each
-#: quad of QUAD rings of the current and the previous block (quad k in row ``k % NQUAD``).
-Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads"])
+#: completed block, ``quads`` (quads, nfin + 2) those of each quad of QUAD rings swept,
+#: and ``grp`` (groups, nfin + 2) those of the old blocks (older than the previous one) of
+#: each group of GROUP blocks. Each row is at the wedge resolution of its rings' level.
+Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads", "grp"])
 
 
 # --------------------------------------------------------------------------- borrowed arrays
@@ -1090,11 +1091,13 @@ def _fill(g, eye, q, run, lo, k0, k1, buf, kc):
             buf[2, line, k] = d
 
 
-#: Rings per block of the wedges' history (a multiple of it is where the wedges refine).
+#: Rings per block of the wedges' history.
 BLOCK = 16
-#: Rings per quad: the recent history's unit (the previous and the current block).
+#: Rings per quad: the finest unit of the history (the walks' pieces).
 QUAD = 4
-#: Quads kept (those of two blocks).
+#: Blocks per group: the coarsest unit of the old blocks' history (``GROUP * BLOCK``
+#: divides the first refining ring, so a group's rings share one wedge resolution).
+GROUP = 8
 NQUAD = 2 * BLOCK // QUAD
 
 
@@ -1110,42 +1113,53 @@ def _wedge_slot(p, bsz, glo):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _wedge_value(arr, p, bsz, glo):
-    """Value of the wedge holding pseudo-angle p (the larger of both near a boundary)."""
+def _slot(p, bsz, glo):
+    """The wedges to read for pseudo-angle p at resolution ``bsz`` (window starting at global
+    wedge ``glo``): ``(i, i_lo, i_hi)``, the local index of the wedge holding p and the
+    first and last of those counted with it (its neighbour when p lies on a boundary
+    within rounding). Computed once per target and resolution, read for every bound."""
     i, at_lo, at_hi = _wedge_slot(p, bsz, glo)
+    return i, (i - 1 if at_lo else i), (i + 1 if at_hi else i)
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _slot_max(arr, sl):
+    """Value of the wedges of slot ``sl`` (:func:`_slot`): the largest of them."""
+    i, i_lo, i_hi = sl
     v = arr[i]
-    if at_lo:
-        v = max(v, arr[i - 1])
-    if at_hi:
-        v = max(v, arr[i + 1])
+    if i_lo < i:
+        v = max(v, arr[i_lo])
+    if i_hi > i:
+        v = max(v, arr[i_hi])
     return v
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _lb_blocks(lb, p, bsz, glo, nt, dist, e_h, kc):
-    """Whether the lower bound of the target's wedge proves it blocked, and its slope and
-    slack: ``(blocked, s_T, slack)`` (the slope lowered by ``kc * dist`` under earth
-    curvature)."""
-    i_b, at_lo, at_hi = _wedge_slot(p, bsz, glo)
+def _lb_blocks(lb, sl, nt, dist, e_h, kc):
+    """Whether the lower bound of the target's wedges (slot ``sl``) proves it blocked, and
+    its slope and slack: ``(blocked, s_T, slack)`` (the slope lowered by ``kc * dist`` under
+    earth curvature)."""
+    i_b, i_lo, i_hi = sl
     lbv = lb[i_b]
-    if at_lo:
-        lbv = min(lbv, lb[i_b - 1])
-    if at_hi:
-        lbv = min(lbv, lb[i_b + 1])
+    if i_lo < i_b:
+        lbv = min(lbv, lb[i_lo])
+    if i_hi > i_b:
+        lbv = min(lbv, lb[i_hi])
     st = nt / dist - kc * dist
     slack = 2.0 * e_h / dist + _REL * (abs(st) + kc * dist)
     return lbv > st + slack, st, slack
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _decide(g, eye, rules, w, j, win, tg, near):
+def _decide(g, eye, rules, w, j, win, tg, sl, near):
     """Verdict of a target that the lower bound did not block, from the wedge bounds
     ``w`` (holding the rings <= j - 1) and exact walks.
 
     ``win`` is ``(s, glo, bsz, b0, r1, nsec)``: the sector, its window of wedges and the
     layout. ``tg`` is ``(p, tdx, tdy, nt, dist, st, slack)``: the target's unwrapped
     pseudo-angle, its offset from the eye, its horizontal distance, its slope and that
-    slope's rounding slack. ``near`` holds the arguments of :func:`_last_ring_bound` (an
+    slope's rounding slack; ``sl`` its slot at the current resolution (:func:`_slot`).
+    ``near`` holds the arguments of :func:`_last_ring_bound` (an
     upper bound of the slope wherever its ray crosses a grid line or a diagonal in
     annulus j). The part beyond the box of rings <= j - 1 (annulus j) is walked exactly
     unless that bound clears it; when the target's slope reaches the wedge's upper bound (the
@@ -1155,14 +1169,13 @@ def _decide(g, eye, rules, w, j, win, tg, near):
     and the upper bound), 4 (by the upper bound and the last ring's bound, no walk), 2
     (by walking rings whose bound reaches the target's slope) or 3 (undecided).
     """
-    glo, bsz = win[1], win[2]
     p, tdx, tdy, nt, dist, st, slack = tg
     length = np.sqrt(dist * dist + nt * nt)
     tau = rules.delta / length
     ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
-    ubv = _wedge_value(w.ubp, p, bsz, glo)
+    ubv = _slot_max(w.ubp, sl)
     for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
-        ubv = max(ubv, _wedge_value(w.quads[qk % NQUAD], p, bsz, glo))
+        ubv = max(ubv, _slot_max(w.quads[qk % NQUAD], sl))
     if st - slack >= ubv:
         # the bounds clear every ring before: only the last one (annulus j) is walked,
         # unless its corners' bound clears it too
@@ -1175,79 +1188,78 @@ def _decide(g, eye, rules, w, j, win, tg, near):
         if cl < -rules.tol + rules.marg:
             return UNDECIDED, 3
         return VISIBLE, 1
-    res = _block_walk(g, eye, rules, w, j, win, ray, p, st - slack, tau, 1.0 - tau)
+    res = _block_walk(g, eye, rules, w, j, win, ray, sl, p, st - slack, tau, 1.0 - tau)
     return res, (3 if res == UNDECIDED else 2)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _block_walk(g, eye, rules, w, j, win, ray, p, smin, tau, t_end):
+def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
     """Exact walk of the target's ray over the rings < j whose wedge maximum reaches
-    ``smin`` (the target's slope less its slack; ``p`` its unwrapped pseudo-angle); the
-    other rings are clear.
+    ``smin`` (the target's slope less its slack; ``p`` its unwrapped pseudo-angle, ``sl``
+    its slot at the current resolution); the other rings are clear.
 
-    Blocks of BLOCK rings older than the previous block are judged whole (``w.hist[b]``),
-    and skipped at once when their common maximum ``w.ubold`` clears; the previous block
-    (unless its maximum ``w.hist`` clears) and the current one quad by quad
-    (``w.quads``), each at the wedge resolution of its level. So near the target, where a
-    visible target's horizon usually is, only the quads of rings that can reach its slope
-    are walked; consecutive rings to walk are walked as one piece. ``win`` as in
-    :func:`_decide`. Annulus j, beyond the bounds, is walked too. The walks cover t in
-    [tau, t_end]. Returns BLOCKED, VISIBLE or UNDECIDED (some part within the margin of
-    the threshold, nothing clearly blocked).
+    The unit is the quad of QUAD rings (``w.quads``): the quads whose maximum reaches
+    ``smin`` are walked, consecutive ones as one piece, so near the target, where a
+    visible target's horizon usually is, and around a far horizon, only the rings that
+    can reach its slope are walked. The history is read coarse to fine: every old block
+    (older than the previous one) is skipped at once when their common maximum
+    ``w.ubold`` clears, a group of GROUP old blocks when its maximum ``w.grp`` does, a
+    completed block when its maximum ``w.hist`` does, each at the wedge resolution of its
+    level (the target's slot computed once per level). ``win`` as in :func:`_decide`.
+    Annulus j, beyond the bounds, is walked too. The walks cover t in [tau, t_end].
+    Returns BLOCKED, VISIBLE or UNDECIDED (some part within the margin of the threshold,
+    nothing clearly blocked).
     """
     s, glo, bsz, b0, r1, nsec = win
     tolm = rules.tol + rules.marg
     amb = -rules.tol + rules.marg
     bulge = rules.kc * (ray[3] * ray[3] + ray[4] * ray[4])
-    nfull = j // BLOCK
+    nfull = j // BLOCK  # completed blocks; the old ones are 0 .. nfull - 2
+    nq = (j + QUAD - 1) // QUAD  # quads holding rings 0 .. j - 1
+    qpb = BLOCK // QUAD
     ambiguous = False
     run_lo = -1  # first ring of the piece to walk (-1: none open)
     run_hi = -1
-    b = 0
-    if nfull >= 2 and not _wedge_value(w.ubold, p, bsz, glo) > smin:
-        b = nfull - 1  # every old block clears
-    while b <= nfull:
-        r_lo = BLOCK * b
-        r_hi = min(r_lo + BLOCK - 1, j - 1)
-        bszb = b0 << _level(r_lo, r1)
-        glob = s * (bszb // nsec) - 1
-        if b < nfull:
-            nparts = 1 if b < nfull - 1 else BLOCK // QUAD
-            clear = not _wedge_value(w.hist[b], p, bszb, glob) > smin
-        else:
-            nparts = (r_hi - r_lo) // QUAD + 1 if r_hi >= r_lo else 0
-            clear = nparts == 0
-        if clear:
-            nparts = 0
-            if run_lo >= 0:
-                cl = _walk_rings(g, eye, ray, run_lo, run_hi, tau, t_end, tolm, bulge)
-                run_lo = -1
-                if cl < -tolm:
-                    return BLOCKED
-                if cl < amb:
-                    ambiguous = True
-        for k in range(nparts):
-            if b < nfull - 1:
-                a_lo = r_lo
-                a_hi = r_hi
-                reach = True
-            else:
-                a_lo = r_lo + QUAD * k
-                a_hi = min(a_lo + QUAD - 1, r_hi)
-                reach = _wedge_value(w.quads[(a_lo // QUAD) % NQUAD], p, bszb, glob) > smin
-            if reach:
-                if run_lo < 0:
-                    run_lo = a_lo
-                run_hi = a_hi
-                continue
-            if run_lo >= 0:
-                cl = _walk_rings(g, eye, ray, run_lo, run_hi, tau, t_end, tolm, bulge)
-                run_lo = -1
-                if cl < -tolm:
-                    return BLOCKED
-                if cl < amb:
-                    ambiguous = True
-        b += 1
+    qk = 0
+    if nfull >= 2 and not _slot_max(w.ubold, sl) > smin:
+        qk = (nfull - 1) * qpb  # every old block clears
+    lev_end = -1  # first ring beyond the level of the slot in hand
+    slq = sl
+    while qk < nq:
+        r_lo = QUAD * qk
+        if r_lo >= lev_end:
+            lev = _level(r_lo, r1)
+            lev_end = r1 << lev
+            bszb = b0 << lev
+            slq = sl if bszb == bsz else _slot(p, bszb, s * (bszb // nsec) - 1)
+        b = qk // qpb
+        skip = 0
+        if qk % qpb == 0 and b < nfull:
+            if b % GROUP == 0 and b <= nfull - 2 and not _slot_max(w.grp[b // GROUP], slq) > smin:
+                skip = min(b + GROUP, nfull - 1) - b  # the group's old blocks clear
+            elif not _slot_max(w.hist[b], slq) > smin:
+                skip = 1
+        if skip == 0 and b < nfull - 1:
+            # an old block that reaches: walked whole
+            if run_lo < 0:
+                run_lo = r_lo
+            run_hi = r_lo + BLOCK - 1
+            qk += qpb
+            continue
+        if skip == 0 and _slot_max(w.quads[qk % NQUAD], slq) > smin:
+            if run_lo < 0:
+                run_lo = r_lo
+            run_hi = min(r_lo + QUAD - 1, j - 1)
+            qk += 1
+            continue
+        if run_lo >= 0:
+            cl = _walk_rings(g, eye, ray, run_lo, run_hi, tau, t_end, tolm, bulge)
+            run_lo = -1
+            if cl < -tolm:
+                return BLOCKED
+            if cl < amb:
+                ambiguous = True
+        qk += skip * qpb if skip > 0 else 1
     # the rest of the ray beyond the bounds (annulus j, where an own target stands, or
     # annuli j and j + 1 for another target) is always walked, joined to an open piece
     cl = _walk_rings(g, eye, ray, run_lo if run_lo >= 0 else j, _BEYOND, tau, t_end, tolm, bulge)
@@ -1415,7 +1427,7 @@ def sweep(g, eye, rules, lay, tg, perm, stats, stop):
 def _close_block(w, j, n, r1):
     """Close the block of rings j - BLOCK .. j - 1: keep its upper bounds (the largest of
     its quads') in the history, fold them into ``ubp``, and fold the block before it into
-    ``ubold``."""
+    ``ubold`` and into its group's ``grp``."""
     b = j // BLOCK - 1
     q0 = BLOCK * b // QUAD
     for i in range(n + 2):
@@ -1430,6 +1442,12 @@ def _close_block(w, j, n, r1):
         for i in range(n + 2):
             ic = ((i - 1) >> 1) + 1 if coarse else i
             w.ubold[i] = max(w.ubold[i], w.hist[b - 1, ic])
+        # its group (at its own resolution: a group never straddles a refinement)
+        grow = w.grp[(b - 1) // GROUP]
+        first = (b - 1) % GROUP == 0
+        for i in range(((n >> 1) if coarse else n) + 2):
+            v = w.hist[b - 1, i]
+            grow[i] = v if first else max(grow[i], v)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -1619,14 +1637,15 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                     tg.code[rr, cc] = NOT_TARGET
                     continue
                 nt = g.z[rr, cc] + rules.ht - eye.ez
-                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, rules.kc)
+                sl = _slot(p, bsz, glo)
+                blocked, st, slack = _lb_blocks(w.lb, sl, nt, dist, rules.e_h, rules.kc)
                 if blocked:
                     tg.code[rr, cc] = BLOCKED
                     n_lb += 1
                 else:
                     tdx = g.xs[cc] - eye.ex
                     tdy = g.ys[rr] - eye.ey
-                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack),
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack), sl,
                                        (buf, k, outer, (a - lo, b + 1 - lo), side, last))
                     tg.code[rr, cc] = res
                     counts[how] += 1
@@ -1653,7 +1672,8 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     # targets decided by the lower bound, by the upper bound and the last rings' walk, by
     # block walks, left undecided, and by the upper bound and the last ring's bound
     w_own = Wedges(np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF), np.full(nfin + 2, -_INF),
-                   np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)))
+                   np.empty((jstop // BLOCK + 1, nfin + 2)), np.empty((NQUAD, nfin + 2)),
+                   np.empty((jstop // (GROUP * BLOCK) + 1, nfin + 2)))
     tmp_own = np.empty((3, nfin + 2))
     buf_own = np.empty((2, 3, 2, blen))
     hidden_own = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
@@ -1664,7 +1684,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     tg = Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
                  _borrow(tg.torder), _borrow(tg.tcode))
     w = Wedges(_borrow(w_own.ubp), _borrow(w_own.ubold), _borrow(w_own.lb), _borrow(w_own.hist),
-               _borrow(w_own.quads))
+               _borrow(w_own.quads), _borrow(w_own.grp))
     tmp = _borrow(tmp_own)
     buf = _borrow(buf_own)
     hidden = _borrow(hidden_own)
@@ -1747,7 +1767,8 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
                     continue
                 p = _unwrap(diamond(tdx, tdy), q)
                 nt = tg.tz[t] - eye.ez
-                blocked, st, slack = _lb_blocks(w.lb, p, bsz, glo, nt, dist, rules.e_h, kc)
+                sl = _slot(p, bsz, glo)
+                blocked, st, slack = _lb_blocks(w.lb, sl, nt, dist, rules.e_h, kc)
                 if blocked:
                     tg.tcode[t] = BLOCKED
                     n_lb += 1
@@ -1755,7 +1776,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
                     # no bound of the last ring here (int64 zeros, not literals: one
                     # compiled _decide for both kinds of targets)
                     zero = np.int64(0)
-                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack),
+                    res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack), sl,
                                        (buf[0], zero, zero, (zero, zero), (zero, zero), (0.0, _INF)))
                     tg.tcode[t] = res
                     counts[how] += 1
