@@ -449,6 +449,20 @@ def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop):
     return vol, vol_c, cov, cov_c
 
 
+@nb.njit(cache=True, nogil=True)
+def _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, stop):
+    """Row ``ch`` of ``out``: the compensated sums of chunk ``ch`` of ``nchunks`` equal runs
+    of ``order`` (``buf`` the clipping scratch of the calling thread)."""
+    nf = faces.shape[0]
+    f0 = ch * nf // nchunks
+    f1 = (ch + 1) * nf // nchunks
+    v, vc, a, ac = volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop)
+    out[ch, VOL] = v
+    out[ch, VOL_C] = vc
+    out[ch, AREA] = a
+    out[ch, AREA_C] = ac
+
+
 @nb.njit(cache=True, nogil=True, parallel=True)
 def volume_between(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, stop):
     """:func:`volume_faces` over ``nchunks`` equal runs of ``order`` spread over the threads.
@@ -457,32 +471,18 @@ def volume_between(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, stop):
     chunks depend only on ``nchunks``, so the result does not depend on the thread count.
     Every chunk reads the stop flag ``stop`` before each face (:mod:`terrainvis._interrupt`).
     """
-    nf = faces.shape[0]
     for ch in nb.prange(nchunks):
         buf = np.empty((2, MAX_POLY, N_PCOL))
-        f0 = ch * nf // nchunks
-        f1 = (ch + 1) * nf // nchunks
-        v, vc, a, ac = volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop)
-        out[ch, VOL] = v
-        out[ch, VOL_C] = vc
-        out[ch, AREA] = a
-        out[ch, AREA_C] = ac
+        _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, stop)
 
 
 @nb.njit(cache=True, nogil=True)
 def volume_between_serial(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, stop):
     """:func:`volume_between` in the calling thread, chunk after chunk (the same sums): with
     one thread the ``prange`` loop gains nothing and costs a parfor compilation (about 1 s of CPU)."""
-    nf = faces.shape[0]
     buf = np.empty((2, MAX_POLY, N_PCOL))
     for ch in range(nchunks):
-        f0 = ch * nf // nchunks
-        f1 = (ch + 1) * nf // nchunks
-        v, vc, a, ac = volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop)
-        out[ch, VOL] = v
-        out[ch, VOL_C] = vc
-        out[ch, AREA] = a
-        out[ch, AREA_C] = ac
+        _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, stop)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -684,6 +684,17 @@ def _tin_segment_min(mesh, seg, t0, t1, eps, bulge):
     return best
 
 
+@nb.njit(cache=True, nogil=True)
+def _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc):
+    """Exact minimum clearance of segment ``i`` (rows of ``a``, ``b``) over the TIN, as
+    :func:`tin_pairs` gives it (infinite when the segment is shorter than its end radii)."""
+    seg, length = _canonical((a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]))
+    t0 = interval_start(seg, length, delta, end_radius)
+    if t0 < 0.0:
+        return _INF
+    return _tin_segment_min(mesh, seg, t0, 1.0 - t0, eps, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
+
+
 @nb.njit(cache=True, nogil=True, parallel=True)
 def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out):
     """Exact minimum clearance of each segment over a TIN (clip against every face crossed).
@@ -694,12 +705,7 @@ def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out):
     """
     m = a.shape[0]
     for i in nb.prange(m):
-        seg, length = _canonical((a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]))
-        t0 = interval_start(seg, length, delta, end_radius)
-        if t0 < 0.0:
-            out[i] = _INF
-            continue
-        out[i] = _tin_segment_min(mesh, seg, t0, 1.0 - t0, eps, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
+        out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -707,9 +713,4 @@ def tin_pairs_serial(mesh, a, b, delta, end_radius, eps, kc, out):
     """:func:`tin_pairs` in the calling thread (the same clearances): with one thread the
     ``prange`` loop gains nothing and costs a parfor compilation (about 1 s of CPU)."""
     for i in range(a.shape[0]):
-        seg, length = _canonical((a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]))
-        t0 = interval_start(seg, length, delta, end_radius)
-        if t0 < 0.0:
-            out[i] = _INF
-            continue
-        out[i] = _tin_segment_min(mesh, seg, t0, 1.0 - t0, eps, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
+        out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)
