@@ -29,7 +29,6 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from ._validate import as_int, describe
 from .terrain import HeightGrid
@@ -52,6 +51,8 @@ def _octave(rng: np.random.Generator, size: int, cells: int) -> np.ndarray:
     lattice = rng.uniform(-1.0, 1.0, size=(cells + 4, cells + 4))
     t = np.linspace(0.0, cells, size) + 1.5  # stay clear of the lattice edge for the spline
     yy, xx = np.meshgrid(t, t, indexing="ij")
+    from scipy import ndimage  # here, not at import: every command that resolves a DEM imports this module
+
     return ndimage.map_coordinates(lattice, [yy, xx], order=3, mode="nearest")
 
 
