@@ -133,8 +133,9 @@ class HeightGrid:
         if not (math.isfinite(ox) and math.isfinite(oy)):
             raise ValueError(f"origin must be finite, got {origin!r}")
         rows, cols = zz.shape
-        xs = ox + dx * np.arange(cols, dtype=np.float64)
-        ys = oy + dy * np.arange(rows, dtype=np.float64)
+        with np.errstate(over="ignore"):  # an overflow is refused just below, with its own message
+            xs = ox + dx * np.arange(cols, dtype=np.float64)
+            ys = oy + dy * np.arange(rows, dtype=np.float64)
         for name, v, o, d in (("x", xs, ox, dx), ("y", ys, oy, dy)):
             if not np.isfinite(v[-1]):
                 raise ValueError(f"origin {name}0 = {o!r} plus d{name} = {d!r} times {v.size - 1} overflows float64")
