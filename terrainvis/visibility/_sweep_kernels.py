@@ -1135,22 +1135,31 @@ def _slot_max(arr, sl):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _lb_blocks(lb, sl, nt, dist, e_h, kc):
-    """Whether the lower bound of the target's wedges (slot ``sl``) proves it blocked, and
-    its slope and slack: ``(blocked, s_T, slack)`` (the slope lowered by ``kc * dist`` under
-    earth curvature)."""
+def _lb_blocks(lb, sl, st, dist, e_h, kc):
+    """Whether the lower bound of the target's wedges (slot ``sl``) proves it blocked, given
+    its slope ``st`` (lowered by ``kc * dist`` under earth curvature): ``(blocked, slack)``
+    with the slope's slack."""
     i_b, i_lo, i_hi = sl
     lbv = lb[i_b]
     if i_lo < i_b:
         lbv = min(lbv, lb[i_lo])
     if i_hi > i_b:
         lbv = min(lbv, lb[i_hi])
-    st = nt / dist - kc * dist
     slack = 2.0 * e_h / dist + _REL * (abs(st) + kc * dist)
-    return lbv > st + slack, st, slack
+    return lbv > st + slack, slack
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _ub_max(w, j, sl):
+    """Upper bound of the slope over the rings < j in the wedges of slot ``sl``: the
+    largest of ``ubp`` (the completed blocks) and of the current block's quads."""
+    ubv = _slot_max(w.ubp, sl)
+    for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
+        ubv = max(ubv, _slot_max(w.quads[qk % NQUAD], sl))
+    return ubv
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _decide(g, eye, rules, w, j, win, tg, sl, near):
     """Verdict of a target that the lower bound did not block, from the wedge bounds
     ``w`` (holding the rings <= j - 1) and exact walks.
@@ -1170,17 +1179,13 @@ def _decide(g, eye, rules, w, j, win, tg, sl, near):
     (by walking rings whose bound reaches the target's slope) or 3 (undecided).
     """
     p, tdx, tdy, nt, dist, st, slack = tg
-    length = np.sqrt(dist * dist + nt * nt)
-    tau = rules.delta / length
     ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
-    ubv = _slot_max(w.ubp, sl)
-    for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
-        ubv = max(ubv, _slot_max(w.quads[qk % NQUAD], sl))
-    if st - slack >= ubv:
+    if st - slack >= _ub_max(w, j, sl):
         # the bounds clear every ring before: only the last one (annulus j) is walked,
         # unless its corners' bound clears it too
         if st - slack >= _last_ring_bound(near[0], near[1], near[2], near[3], near[4], near[5]):
             return VISIBLE, 4
+        tau = rules.delta / np.sqrt(dist * dist + nt * nt)
         tolm = rules.tol + rules.marg
         cl = _walk_rings(g, eye, ray, j, _BEYOND, tau, 1.0 - tau, tolm, rules.kc * (dist * dist))
         if cl < -tolm:
@@ -1188,6 +1193,7 @@ def _decide(g, eye, rules, w, j, win, tg, sl, near):
         if cl < -rules.tol + rules.marg:
             return UNDECIDED, 3
         return VISIBLE, 1
+    tau = rules.delta / np.sqrt(dist * dist + nt * nt)
     res = _block_walk(g, eye, rules, w, j, win, ray, sl, p, st - slack, tau, 1.0 - tau)
     return res, (3 if res == UNDECIDED else 2)
 
@@ -1351,10 +1357,17 @@ def _seg_hidden(eye, rules, lb, win, rect, zmax, q):
     g1 = int(np.floor((pmax + _PEPS) * k4))
     if g0 < glo or g1 > glo + nloc - 1 or not (sup == sup):
         return False, pmin, pmax
-    for gg in range(g0, g1 + 1):
-        if not lb[gg - glo] > sup:
-            return False, pmin, pmax
-    return True, pmin, pmax
+    return _all_above(lb, np.uint64(g0 - glo), np.uint64(g1 - glo), sup), pmin, pmax
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _all_above(v, i0, i1, x):
+    """Whether ``v[i0..i1]`` all exceed x (unsigned indices and no early exit, so that the
+    loop is vectorised: most segments tested are hidden and read every wedge)."""
+    ok = True
+    for i in range(i0, i1 + np.uint64(1)):
+        ok &= v[i] > x
+    return ok
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -1637,11 +1650,19 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                     tg.code[rr, cc] = NOT_TARGET
                     continue
                 nt = g.z[rr, cc] + rules.ht - eye.ez
+                # on the ground the target's slope is its sample's, bit for bit (z + 0.0 is z)
+                st = buf[0, outer, k] if rules.ht == 0.0 else nt / dist - rules.kc * dist
                 sl = _slot(p, bsz, glo)
-                blocked, st, slack = _lb_blocks(w.lb, sl, nt, dist, rules.e_h, rules.kc)
+                blocked, slack = _lb_blocks(w.lb, sl, st, dist, rules.e_h, rules.kc)
                 if blocked:
                     tg.code[rr, cc] = BLOCKED
                     n_lb += 1
+                elif st - slack >= _ub_max(w, j, sl) and st - slack >= _last_ring_bound(
+                        buf, k, outer, (a - lo, b + 1 - lo), side, last):
+                    # what _decide would find first, without its call (the most common case
+                    # after the lower bound from a high observer)
+                    tg.code[rr, cc] = VISIBLE
+                    counts[4] += 1
                 else:
                     tdx = g.xs[cc] - eye.ex
                     tdy = g.ys[rr] - eye.ey
@@ -1768,7 +1789,8 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
                 p = _unwrap(diamond(tdx, tdy), q)
                 nt = tg.tz[t] - eye.ez
                 sl = _slot(p, bsz, glo)
-                blocked, st, slack = _lb_blocks(w.lb, sl, nt, dist, rules.e_h, kc)
+                st = nt / dist - kc * dist
+                blocked, slack = _lb_blocks(w.lb, sl, st, dist, rules.e_h, kc)
                 if blocked:
                     tg.tcode[t] = BLOCKED
                     n_lb += 1
