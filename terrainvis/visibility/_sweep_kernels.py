@@ -1160,7 +1160,7 @@ def _ub_max(w, j, sl):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _decide(g, eye, rules, w, j, win, tg, sl, near):
+def _decide(g, eye, rules, w, j, win, tg, sl, ub_clear):
     """Verdict of a target that the lower bound did not block, from the wedge bounds
     ``w`` (holding the rings <= j - 1) and exact walks.
 
@@ -1168,23 +1168,18 @@ def _decide(g, eye, rules, w, j, win, tg, sl, near):
     layout. ``tg`` is ``(p, tdx, tdy, nt, dist, st, slack)``: the target's unwrapped
     pseudo-angle, its offset from the eye, its horizontal distance, its slope and that
     slope's rounding slack; ``sl`` its slot at the current resolution (:func:`_slot`).
-    ``near`` holds the arguments of :func:`_last_ring_bound` (an
-    upper bound of the slope wherever its ray crosses a grid line or a diagonal in
-    annulus j). The part beyond the box of rings <= j - 1 (annulus j) is walked exactly
-    unless that bound clears it; when the target's slope reaches the wedge's upper bound (the
-    largest of ``ubp``, over the completed blocks, and the current block's quads) the
-    rings whose bounds reach it are walked too, with annulus j as one walk
-    (:func:`_block_walk`). Returns (code, how): how 1 (decided by the last ring's walk
-    and the upper bound), 4 (by the upper bound and the last ring's bound, no walk), 2
-    (by walking rings whose bound reaches the target's slope) or 3 (undecided).
+    ``ub_clear``: whether the slope less its slack clears the wedge's upper bound (the
+    largest of ``ubp``, over the completed blocks, and the current block's quads:
+    :func:`_ub_max`). Then only the part beyond the box of rings <= j - 1 (annulus j) is
+    walked (the caller first tries the bound of its cells, :func:`_last_ring_bound`);
+    otherwise the rings whose bounds reach the slope are walked too, with annulus j as
+    one walk (:func:`_block_walk`). Returns (code, how): how 1 (decided by the last
+    ring's walk and the upper bound), 2 (by walking rings whose bound reaches the
+    target's slope) or 3 (undecided).
     """
     p, tdx, tdy, nt, dist, st, slack = tg
     ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
-    if st - slack >= _ub_max(w, j, sl):
-        # the bounds clear every ring before: only the last one (annulus j) is walked,
-        # unless its corners' bound clears it too
-        if st - slack >= _last_ring_bound(near[0], near[1], near[2], near[3], near[4], near[5]):
-            return VISIBLE, 4
+    if ub_clear:
         tau = rules.delta / np.sqrt(dist * dist + nt * nt)
         tolm = rules.tol + rules.marg
         cl = _walk_rings(g, eye, ray, j, _BEYOND, tau, 1.0 - tau, tolm, rules.kc * (dist * dist))
@@ -1515,7 +1510,7 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
             _cell_bounds(cur, w.lb, win, ann, sv, pv)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _last_ring_bound(buf, k, outer, filled, side, last):
     """Upper bound of the slope at every point where the ray to the target at index k of a
     run's outer line crosses a grid line or a cell diagonal in annulus j; inf when this
@@ -1657,17 +1652,17 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                 if blocked:
                     tg.code[rr, cc] = BLOCKED
                     n_lb += 1
-                elif st - slack >= _ub_max(w, j, sl) and st - slack >= _last_ring_bound(
-                        buf, k, outer, (a - lo, b + 1 - lo), side, last):
-                    # what _decide would find first, without its call (the most common case
-                    # after the lower bound from a high observer)
+                    continue
+                ub_clear = st - slack >= _ub_max(w, j, sl)
+                if ub_clear and st - slack >= _last_ring_bound(buf, k, outer, (a - lo, b + 1 - lo), side, last):
+                    # the bounds clear every ring before and the last one's cells: visible
                     tg.code[rr, cc] = VISIBLE
                     counts[4] += 1
                 else:
                     tdx = g.xs[cc] - eye.ex
                     tdy = g.ys[rr] - eye.ey
                     res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack), sl,
-                                       (buf, k, outer, (a - lo, b + 1 - lo), side, last))
+                                       ub_clear)
                     tg.code[rr, cc] = res
                     counts[how] += 1
         a = b + 1
@@ -1795,11 +1790,9 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
                     tg.tcode[t] = BLOCKED
                     n_lb += 1
                 else:
-                    # no bound of the last ring here (int64 zeros, not literals: one
-                    # compiled _decide for both kinds of targets)
-                    zero = np.int64(0)
+                    # no bound of the last ring here
                     res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack), sl,
-                                       (buf[0], zero, zero, (zero, zero), (zero, zero), (0.0, _INF)))
+                                       st - slack >= _ub_max(w, j, sl))
                     tg.tcode[t] = res
                     counts[how] += 1
         # ---- add annulus j
