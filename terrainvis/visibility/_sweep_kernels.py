@@ -1607,8 +1607,11 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
             hid, pmin, pmax = _seg_hidden(eye, rules, w.lb, (glo, bsz // dwin[5] + 2, bsz * 0.25), rect, zmax, q)
         hidden[a // SEG - slo] = hid
         if hid:
-            if tg.own:
-                whole = pmin >= plo + _PEPS and pmax < phi - _PEPS
+            if tg.own and pmin >= plo + _PEPS and pmax < phi - _PEPS:
+                # every sample of the segment is in the sector: no pseudo-angle to test, and
+                # no branch (an already decided or non-target sample is written back as is)
+                n_lb += _block_line(tg.code, vertical, r0 + outer if not vertical else c0 + outer, a, top)
+            elif tg.own:
                 for k in range(a, top + 1):
                     if vertical:
                         rr = k
@@ -1618,10 +1621,9 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                         cc = k
                     if tg.code[rr, cc] != UNDECIDED:
                         continue
-                    if not whole:
-                        p = _unwrap(diamond(g.xs[cc] - eye.ex, g.ys[rr] - eye.ey), q)
-                        if p < plo or p >= phi:
-                            continue
+                    p = _unwrap(diamond(g.xs[cc] - eye.ex, g.ys[rr] - eye.ey), q)
+                    if p < plo or p >= phi:
+                        continue
                     tg.code[rr, cc] = BLOCKED
                     n_lb += 1
             a = b + 1
@@ -1667,6 +1669,27 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                     counts[how] += 1
         a = b + 1
     return n_lb
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _block_line(code, vertical, line, a, top):
+    """Mark BLOCKED the undecided samples a..top of column ``line`` (``vertical``) or row
+    ``line``; returns how many."""
+    n = 0
+    if vertical:
+        for rr in range(a, top + 1):
+            v = code[rr, line]
+            blk = v == UNDECIDED
+            code[rr, line] = BLOCKED if blk else v
+            n += blk
+    else:
+        row = code[line]
+        for cc in range(a, top + 1):
+            v = row[cc]
+            blk = v == UNDECIDED
+            row[cc] = BLOCKED if blk else v
+            n += blk
+    return n
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
