@@ -1135,6 +1135,19 @@ def _slot_max(arr, sl):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _row_max(arr, row, sl):
+    """:func:`_slot_max` of row ``row`` of a 2-D history, indexed in place (a row view
+    would cost a reference count increment and decrement, a call each)."""
+    i, i_lo, i_hi = sl
+    v = arr[row, i]
+    if i_lo < i:
+        v = max(v, arr[row, i_lo])
+    if i_hi > i:
+        v = max(v, arr[row, i_hi])
+    return v
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _lb_blocks(lb, sl, st, dist, e_h, kc):
     """Whether the lower bound of the target's wedges (slot ``sl``) proves it blocked, given
     its slope ``st`` (lowered by ``kc * dist`` under earth curvature): ``(blocked, slack)``
@@ -1155,7 +1168,7 @@ def _ub_max(w, j, sl):
     largest of ``ubp`` (the completed blocks) and of the current block's quads."""
     ubv = _slot_max(w.ubp, sl)
     for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
-        ubv = max(ubv, _slot_max(w.quads[qk % NQUAD], sl))
+        ubv = max(ubv, _row_max(w.quads, qk % NQUAD, sl))
     return ubv
 
 
@@ -1236,9 +1249,9 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
         b = qk // qpb
         skip = 0
         if qk % qpb == 0 and b < nfull:
-            if b % GROUP == 0 and b <= nfull - 2 and not _slot_max(w.grp[b // GROUP], slq) > smin:
+            if b % GROUP == 0 and b <= nfull - 2 and not _row_max(w.grp, b // GROUP, slq) > smin:
                 skip = min(b + GROUP, nfull - 1) - b  # the group's old blocks clear
-            elif not _slot_max(w.hist[b], slq) > smin:
+            elif not _row_max(w.hist, b, slq) > smin:
                 skip = 1
         if skip == 0 and b < nfull - 1:
             # an old block that reaches: walked whole
@@ -1247,7 +1260,7 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
             run_hi = r_lo + BLOCK - 1
             qk += qpb
             continue
-        if skip == 0 and _slot_max(w.quads[qk % NQUAD], slq) > smin:
+        if skip == 0 and _row_max(w.quads, qk % NQUAD, slq) > smin:
             if run_lo < 0:
                 run_lo = r_lo
             run_hi = min(r_lo + QUAD - 1, j - 1)
