@@ -1496,7 +1496,8 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
     and last cell index and the first row or column of its sample buffers ``buf`` (run,
     quantity, line, index; see :func:`_fill`); ``hidden`` (run, segment) flags the
     segments (SEG-aligned, counted from the one holding that first row or column) whose
-    points lie under the lower bound (:func:`_seg_hidden`).
+    points lie under the lower bound (:func:`_seg_hidden`). The cells are visited segment
+    by segment in increasing row or column (the bounds are maxima: the order is free).
     """
     cur = w.quads[(ring // QUAD) % NQUAD]
     for run in range(2):
@@ -1504,23 +1505,28 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
             continue
         r0, c0, dr, dc = runs[run][0], runs[run][1], runs[run][2], runs[run][3]
         lo = ranges[2, run]
+        if dc == 0:
+            last = max(r0 + ranges[0, run] * dr, r0 + ranges[1, run] * dr)
+        else:
+            last = max(c0 + ranges[0, run] * dc, c0 + ranges[1, run] * dc)
+        s_0 = buf[run, 0, 0]
+        s_1 = buf[run, 0, 1]
+        p_0 = buf[run, 1, 0]
+        p_1 = buf[run, 1, 1]
         slo = lo // SEG
-        for i in range(ranges[0, run], ranges[1, run] + 1):
-            if dc == 0:
-                a = r0 + i * dr
-                k = a - lo
-                if hidden[run, a // SEG - slo]:
-                    continue
-                sv = (buf[run, 0, 0, k], buf[run, 0, 1, k], buf[run, 0, 0, k + 1], buf[run, 0, 1, k + 1])
-                pv = (buf[run, 1, 0, k], buf[run, 1, 1, k], buf[run, 1, 0, k + 1], buf[run, 1, 1, k + 1])
-            else:
-                a = c0 + i * dc
-                k = a - lo
-                if hidden[run, a // SEG - slo]:
-                    continue
-                sv = (buf[run, 0, 0, k], buf[run, 0, 0, k + 1], buf[run, 0, 1, k], buf[run, 0, 1, k + 1])
-                pv = (buf[run, 1, 0, k], buf[run, 1, 0, k + 1], buf[run, 1, 1, k], buf[run, 1, 1, k + 1])
-            _cell_bounds(cur, w.lb, win, ann, sv, pv)
+        a = lo
+        while a <= last:
+            b = min((a // SEG + 1) * SEG - 1, last)
+            if not hidden[run, a // SEG - slo]:
+                if dc == 0:
+                    for k in range(a - lo, b - lo + 1):
+                        _cell_bounds(cur, w.lb, win, ann, (s_0[k], s_1[k], s_0[k + 1], s_1[k + 1]),
+                                     (p_0[k], p_1[k], p_0[k + 1], p_1[k + 1]))
+                else:
+                    for k in range(a - lo, b - lo + 1):
+                        _cell_bounds(cur, w.lb, win, ann, (s_0[k], s_0[k + 1], s_1[k], s_1[k + 1]),
+                                     (p_0[k], p_0[k + 1], p_1[k], p_1[k + 1]))
+            a = b + 1
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
