@@ -1135,23 +1135,45 @@ def _slot_max(arr, sl):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _lb_blocks(lb, sl, nt, dist, e_h, kc):
-    """Whether the lower bound of the target's wedges (slot ``sl``) proves it blocked, and
-    its slope and slack: ``(blocked, s_T, slack)`` (the slope lowered by ``kc * dist`` under
-    earth curvature)."""
+def _row_max(arr, row, sl):
+    """:func:`_slot_max` of row ``row`` of a 2-D history, indexed in place (a row view
+    would cost a reference count increment and decrement, a call each)."""
+    i, i_lo, i_hi = sl
+    v = arr[row, i]
+    if i_lo < i:
+        v = max(v, arr[row, i_lo])
+    if i_hi > i:
+        v = max(v, arr[row, i_hi])
+    return v
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _lb_blocks(lb, sl, st, dist, e_h, kc):
+    """Whether the lower bound of the target's wedges (slot ``sl``) proves it blocked, given
+    its slope ``st`` (lowered by ``kc * dist`` under earth curvature): ``(blocked, slack)``
+    with the slope's slack."""
     i_b, i_lo, i_hi = sl
     lbv = lb[i_b]
     if i_lo < i_b:
         lbv = min(lbv, lb[i_lo])
     if i_hi > i_b:
         lbv = min(lbv, lb[i_hi])
-    st = nt / dist - kc * dist
     slack = 2.0 * e_h / dist + _REL * (abs(st) + kc * dist)
-    return lbv > st + slack, st, slack
+    return lbv > st + slack, slack
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _decide(g, eye, rules, w, j, win, tg, sl, near):
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _ub_max(w, j, sl):
+    """Upper bound of the slope over the rings < j in the wedges of slot ``sl``: the
+    largest of ``ubp`` (the completed blocks) and of the current block's quads."""
+    ubv = _slot_max(w.ubp, sl)
+    for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
+        ubv = max(ubv, _row_max(w.quads, qk % NQUAD, sl))
+    return ubv
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _decide(g, eye, rules, w, j, win, tg, sl, ub_clear):
     """Verdict of a target that the lower bound did not block, from the wedge bounds
     ``w`` (holding the rings <= j - 1) and exact walks.
 
@@ -1159,28 +1181,19 @@ def _decide(g, eye, rules, w, j, win, tg, sl, near):
     layout. ``tg`` is ``(p, tdx, tdy, nt, dist, st, slack)``: the target's unwrapped
     pseudo-angle, its offset from the eye, its horizontal distance, its slope and that
     slope's rounding slack; ``sl`` its slot at the current resolution (:func:`_slot`).
-    ``near`` holds the arguments of :func:`_last_ring_bound` (an
-    upper bound of the slope wherever its ray crosses a grid line or a diagonal in
-    annulus j). The part beyond the box of rings <= j - 1 (annulus j) is walked exactly
-    unless that bound clears it; when the target's slope reaches the wedge's upper bound (the
-    largest of ``ubp``, over the completed blocks, and the current block's quads) the
-    rings whose bounds reach it are walked too, with annulus j as one walk
-    (:func:`_block_walk`). Returns (code, how): how 1 (decided by the last ring's walk
-    and the upper bound), 4 (by the upper bound and the last ring's bound, no walk), 2
-    (by walking rings whose bound reaches the target's slope) or 3 (undecided).
+    ``ub_clear``: whether the slope less its slack clears the wedge's upper bound (the
+    largest of ``ubp``, over the completed blocks, and the current block's quads:
+    :func:`_ub_max`). Then only the part beyond the box of rings <= j - 1 (annulus j) is
+    walked (the caller first tries the bound of its cells, :func:`_last_ring_bound`);
+    otherwise the rings whose bounds reach the slope are walked too, with annulus j as
+    one walk (:func:`_block_walk`). Returns (code, how): how 1 (decided by the last
+    ring's walk and the upper bound), 2 (by walking rings whose bound reaches the
+    target's slope) or 3 (undecided).
     """
     p, tdx, tdy, nt, dist, st, slack = tg
-    length = np.sqrt(dist * dist + nt * nt)
-    tau = rules.delta / length
     ray = (eye.ex, eye.ey, eye.ez, tdx, tdy, nt)
-    ubv = _slot_max(w.ubp, sl)
-    for qk in range(BLOCK * (j // BLOCK) // QUAD, (j - 1) // QUAD + 1):
-        ubv = max(ubv, _slot_max(w.quads[qk % NQUAD], sl))
-    if st - slack >= ubv:
-        # the bounds clear every ring before: only the last one (annulus j) is walked,
-        # unless its corners' bound clears it too
-        if st - slack >= _last_ring_bound(near[0], near[1], near[2], near[3], near[4], near[5]):
-            return VISIBLE, 4
+    if ub_clear:
+        tau = rules.delta / np.sqrt(dist * dist + nt * nt)
         tolm = rules.tol + rules.marg
         cl = _walk_rings(g, eye, ray, j, _BEYOND, tau, 1.0 - tau, tolm, rules.kc * (dist * dist))
         if cl < -tolm:
@@ -1188,6 +1201,7 @@ def _decide(g, eye, rules, w, j, win, tg, sl, near):
         if cl < -rules.tol + rules.marg:
             return UNDECIDED, 3
         return VISIBLE, 1
+    tau = rules.delta / np.sqrt(dist * dist + nt * nt)
     res = _block_walk(g, eye, rules, w, j, win, ray, sl, p, st - slack, tau, 1.0 - tau)
     return res, (3 if res == UNDECIDED else 2)
 
@@ -1235,9 +1249,9 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
         b = qk // qpb
         skip = 0
         if qk % qpb == 0 and b < nfull:
-            if b % GROUP == 0 and b <= nfull - 2 and not _slot_max(w.grp[b // GROUP], slq) > smin:
+            if b % GROUP == 0 and b <= nfull - 2 and not _row_max(w.grp, b // GROUP, slq) > smin:
                 skip = min(b + GROUP, nfull - 1) - b  # the group's old blocks clear
-            elif not _slot_max(w.hist[b], slq) > smin:
+            elif not _row_max(w.hist, b, slq) > smin:
                 skip = 1
         if skip == 0 and b < nfull - 1:
             # an old block that reaches: walked whole
@@ -1246,7 +1260,7 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
             run_hi = r_lo + BLOCK - 1
             qk += qpb
             continue
-        if skip == 0 and _slot_max(w.quads[qk % NQUAD], slq) > smin:
+        if skip == 0 and _row_max(w.quads, qk % NQUAD, slq) > smin:
             if run_lo < 0:
                 run_lo = r_lo
             run_hi = min(r_lo + QUAD - 1, j - 1)
@@ -1351,10 +1365,17 @@ def _seg_hidden(eye, rules, lb, win, rect, zmax, q):
     g1 = int(np.floor((pmax + _PEPS) * k4))
     if g0 < glo or g1 > glo + nloc - 1 or not (sup == sup):
         return False, pmin, pmax
-    for gg in range(g0, g1 + 1):
-        if not lb[gg - glo] > sup:
-            return False, pmin, pmax
-    return True, pmin, pmax
+    return _all_above(lb, np.uint64(g0 - glo), np.uint64(g1 - glo), sup), pmin, pmax
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _all_above(v, i0, i1, x):
+    """Whether ``v[i0..i1]`` all exceed x (unsigned indices and no early exit, so that the
+    loop is vectorised: most segments tested are hidden and read every wedge)."""
+    ok = True
+    for i in range(i0, i1 + np.uint64(1)):
+        ok &= v[i] > x
+    return ok
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -1475,7 +1496,8 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
     and last cell index and the first row or column of its sample buffers ``buf`` (run,
     quantity, line, index; see :func:`_fill`); ``hidden`` (run, segment) flags the
     segments (SEG-aligned, counted from the one holding that first row or column) whose
-    points lie under the lower bound (:func:`_seg_hidden`).
+    points lie under the lower bound (:func:`_seg_hidden`). The cells are visited segment
+    by segment in increasing row or column (the bounds are maxima: the order is free).
     """
     cur = w.quads[(ring // QUAD) % NQUAD]
     for run in range(2):
@@ -1483,26 +1505,31 @@ def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
             continue
         r0, c0, dr, dc = runs[run][0], runs[run][1], runs[run][2], runs[run][3]
         lo = ranges[2, run]
+        if dc == 0:
+            last = max(r0 + ranges[0, run] * dr, r0 + ranges[1, run] * dr)
+        else:
+            last = max(c0 + ranges[0, run] * dc, c0 + ranges[1, run] * dc)
+        s_0 = buf[run, 0, 0]
+        s_1 = buf[run, 0, 1]
+        p_0 = buf[run, 1, 0]
+        p_1 = buf[run, 1, 1]
         slo = lo // SEG
-        for i in range(ranges[0, run], ranges[1, run] + 1):
-            if dc == 0:
-                a = r0 + i * dr
-                k = a - lo
-                if hidden[run, a // SEG - slo]:
-                    continue
-                sv = (buf[run, 0, 0, k], buf[run, 0, 1, k], buf[run, 0, 0, k + 1], buf[run, 0, 1, k + 1])
-                pv = (buf[run, 1, 0, k], buf[run, 1, 1, k], buf[run, 1, 0, k + 1], buf[run, 1, 1, k + 1])
-            else:
-                a = c0 + i * dc
-                k = a - lo
-                if hidden[run, a // SEG - slo]:
-                    continue
-                sv = (buf[run, 0, 0, k], buf[run, 0, 0, k + 1], buf[run, 0, 1, k], buf[run, 0, 1, k + 1])
-                pv = (buf[run, 1, 0, k], buf[run, 1, 0, k + 1], buf[run, 1, 1, k], buf[run, 1, 1, k + 1])
-            _cell_bounds(cur, w.lb, win, ann, sv, pv)
+        a = lo
+        while a <= last:
+            b = min((a // SEG + 1) * SEG - 1, last)
+            if not hidden[run, a // SEG - slo]:
+                if dc == 0:
+                    for k in range(a - lo, b - lo + 1):
+                        _cell_bounds(cur, w.lb, win, ann, (s_0[k], s_1[k], s_0[k + 1], s_1[k + 1]),
+                                     (p_0[k], p_1[k], p_0[k + 1], p_1[k + 1]))
+                else:
+                    for k in range(a - lo, b - lo + 1):
+                        _cell_bounds(cur, w.lb, win, ann, (s_0[k], s_0[k + 1], s_1[k], s_1[k + 1]),
+                                     (p_0[k], p_0[k + 1], p_1[k], p_1[k + 1]))
+            a = b + 1
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _last_ring_bound(buf, k, outer, filled, side, last):
     """Upper bound of the slope at every point where the ray to the target at index k of a
     run's outer line crosses a grid line or a cell diagonal in annulus j; inf when this
@@ -1599,8 +1626,11 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
             hid, pmin, pmax = _seg_hidden(eye, rules, w.lb, (glo, bsz // dwin[5] + 2, bsz * 0.25), rect, zmax, q)
         hidden[a // SEG - slo] = hid
         if hid:
-            if tg.own:
-                whole = pmin >= plo + _PEPS and pmax < phi - _PEPS
+            if tg.own and pmin >= plo + _PEPS and pmax < phi - _PEPS:
+                # every sample of the segment is in the sector: no pseudo-angle to test, and
+                # no branch (an already decided or non-target sample is written back as is)
+                n_lb += _block_line(tg.code, vertical, r0 + outer if not vertical else c0 + outer, a, top)
+            elif tg.own:
                 for k in range(a, top + 1):
                     if vertical:
                         rr = k
@@ -1610,10 +1640,9 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                         cc = k
                     if tg.code[rr, cc] != UNDECIDED:
                         continue
-                    if not whole:
-                        p = _unwrap(diamond(g.xs[cc] - eye.ex, g.ys[rr] - eye.ey), q)
-                        if p < plo or p >= phi:
-                            continue
+                    p = _unwrap(diamond(g.xs[cc] - eye.ex, g.ys[rr] - eye.ey), q)
+                    if p < plo or p >= phi:
+                        continue
                     tg.code[rr, cc] = BLOCKED
                     n_lb += 1
             a = b + 1
@@ -1637,20 +1666,49 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                     tg.code[rr, cc] = NOT_TARGET
                     continue
                 nt = g.z[rr, cc] + rules.ht - eye.ez
+                # on the ground the target's slope is its sample's, bit for bit (z + 0.0 is z)
+                st = buf[0, outer, k] if rules.ht == 0.0 else nt / dist - rules.kc * dist
                 sl = _slot(p, bsz, glo)
-                blocked, st, slack = _lb_blocks(w.lb, sl, nt, dist, rules.e_h, rules.kc)
+                blocked, slack = _lb_blocks(w.lb, sl, st, dist, rules.e_h, rules.kc)
                 if blocked:
                     tg.code[rr, cc] = BLOCKED
                     n_lb += 1
+                    continue
+                ub_clear = st - slack >= _ub_max(w, j, sl)
+                if ub_clear and st - slack >= _last_ring_bound(buf, k, outer, (a - lo, b + 1 - lo), side, last):
+                    # the bounds clear every ring before and the last one's cells: visible
+                    tg.code[rr, cc] = VISIBLE
+                    counts[4] += 1
                 else:
                     tdx = g.xs[cc] - eye.ex
                     tdy = g.ys[rr] - eye.ey
                     res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack), sl,
-                                       (buf, k, outer, (a - lo, b + 1 - lo), side, last))
+                                       ub_clear)
                     tg.code[rr, cc] = res
                     counts[how] += 1
         a = b + 1
     return n_lb
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _block_line(code, vertical, line, a, top):
+    """Mark BLOCKED the undecided samples a..top of column ``line`` (``vertical``) or row
+    ``line``; returns how many."""
+    n = 0
+    if vertical:
+        for rr in range(a, top + 1):
+            v = code[rr, line]
+            blk = v == UNDECIDED
+            code[rr, line] = BLOCKED if blk else v
+            n += blk
+    else:
+        row = code[line]
+        for cc in range(a, top + 1):
+            v = row[cc]
+            blk = v == UNDECIDED
+            row[cc] = BLOCKED if blk else v
+            n += blk
+    return n
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -1768,16 +1826,15 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
                 p = _unwrap(diamond(tdx, tdy), q)
                 nt = tg.tz[t] - eye.ez
                 sl = _slot(p, bsz, glo)
-                blocked, st, slack = _lb_blocks(w.lb, sl, nt, dist, rules.e_h, kc)
+                st = nt / dist - kc * dist
+                blocked, slack = _lb_blocks(w.lb, sl, st, dist, rules.e_h, kc)
                 if blocked:
                     tg.tcode[t] = BLOCKED
                     n_lb += 1
                 else:
-                    # no bound of the last ring here (int64 zeros, not literals: one
-                    # compiled _decide for both kinds of targets)
-                    zero = np.int64(0)
+                    # no bound of the last ring here
                     res, how = _decide(g, eye, rules, w, j, dwin, (p, tdx, tdy, nt, dist, st, slack), sl,
-                                       (buf[0], zero, zero, (zero, zero), (zero, zero), (0.0, _INF)))
+                                       st - slack >= _ub_max(w, j, sl))
                     tg.tcode[t] = res
                     counts[how] += 1
         # ---- add annulus j
