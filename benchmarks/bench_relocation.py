@@ -64,7 +64,7 @@ def default(args) -> None:
     from terrainvis.experiment import DEFAULT_TERRAINS, point_sets, resolve_terrains
 
     grids = resolve_terrains(list(DEFAULT_TERRAINS))
-    methods = [name for name, info in simplifiers.METHODS.items() if info.default]  # compare's default
+    methods = simplifiers.default_methods()  # compare's
     totals = {"relocation": 0.0, "matrices": 0.0}
     acc = {}
     warm = tv.synthetic_terrain("hills", size=65, seed=0)

@@ -46,7 +46,7 @@ def score(v_true, grid_s, placed, mask) -> float:
 
 
 def run(levels, split_seed: int) -> pd.DataFrame:
-    methods = [name for name, info in simplifiers.METHODS.items() if info.default]
+    methods = simplifiers.default_methods()
     rows = []
     for name, T in resolve_terrains(list(DEFAULT_TERRAINS)).items():
         sets = point_sets(T, name, 50, 6, 0, 0.0)

@@ -12,10 +12,10 @@ from __future__ import annotations
 import importlib
 
 from .levels import budget_tolerance, coarse_length, coarse_shape, max_level, vertex_budget
-from .registry import METHODS, Method, available, check_height_field, method_info, simplify
+from .registry import METHODS, Method, available, check_height_field, default_methods, method_info, simplify
 
 __all__ = [
-    "simplify", "available", "METHODS", "Method", "method_info", "check_height_field",
+    "simplify", "available", "default_methods", "METHODS", "Method", "method_info", "check_height_field",
     "max_level", "vertex_budget", "budget_tolerance", "coarse_length", "coarse_shape",
     "faber_subdivide", "reverse_faber", "quadric", "greedy_insertion", "greedy_cuts", "blockwise", "levels",
 ]

@@ -35,7 +35,7 @@ from terrainvis.terrain import TIN, HeightGrid
 from ._target import qec_within, regular_within
 from .levels import check_budget, check_level, check_vertex_count, coarse_coords, vertex_budget
 
-__all__ = ["Method", "METHODS", "available", "method_info", "simplify", "check_height_field"]
+__all__ = ["Method", "METHODS", "available", "default_methods", "method_info", "simplify", "check_height_field"]
 
 
 @dataclass(frozen=True)
@@ -163,6 +163,17 @@ def available() -> dict[str, str]:
     ('regular', 'irregular')
     """
     return {name: m.kind for name, m in METHODS.items()}
+
+
+def default_methods() -> list[str]:
+    """The methods a comparison runs unless told otherwise (``default=True``), in the paper's order.
+
+    Examples
+    --------
+    >>> "visopt" in default_methods(), default_methods()[:2]
+    (False, ['qec', 'greedy-cuts'])
+    """
+    return [name for name, m in METHODS.items() if m.default]
 
 
 def method_info(method) -> Method:

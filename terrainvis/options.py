@@ -294,9 +294,9 @@ def _method_names():
 
 
 def _default_method_names():
-    from simplifiers import METHODS
+    from simplifiers import default_methods
 
-    return [name for name, info in METHODS.items() if info.default]
+    return default_methods()
 
 
 def _relocation_names():

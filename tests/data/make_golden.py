@@ -38,12 +38,12 @@ def golden_terrain(name: str):
 
 
 def simplify_table() -> pd.DataFrame:
-    from simplifiers import METHODS, simplify
+    from simplifiers import default_methods, simplify
 
     rows = []
     for name in SIMPLIFY_TERRAINS:
         grid = golden_terrain(name)
-        for method in [m for m, info in METHODS.items() if info.default]:  # the paper's methods (not visopt)
+        for method in default_methods():  # the paper's methods (not visopt)
             for level in (1, 2, 3):
                 a = simplify(grid, method, level).attrs
                 rows.append({"terrain": name, "method": method, "level": level, "n_vertices": a["n_vertices"],
