@@ -62,7 +62,7 @@ import threading
 
 import numpy as np
 
-__all__ = ["call", "new_flag", "THREAD_MIN_WORK", "deferred_signals", "import_library"]
+__all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
@@ -75,6 +75,16 @@ _JOIN_STEP = 0.25
 def new_flag() -> np.ndarray:
     """A fresh stop flag: a ``(1,)`` int64 array holding 0 (go on)."""
     return np.zeros(1, dtype=np.int64)
+
+
+def for_threads(parallel, serial):
+    """``parallel`` (a ``prange`` kernel), or its serial twin ``serial`` when numba has one
+    thread, as in a worker of a :func:`terrainvis.compare` run: the twin computes the same,
+    and spares the parfor compilation (about 1-1.5 s of CPU) that gains nothing there
+    (``tests/test_serial_twins.py`` checks each pair)."""
+    import numba
+
+    return parallel if numba.get_num_threads() > 1 else serial
 
 
 def call(kernel, *args, work: int):

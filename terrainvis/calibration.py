@@ -75,7 +75,6 @@ import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from . import _calibration_kernels as _ck
@@ -411,7 +410,7 @@ def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, of
     """The best height on S(T) of each point ``pts`` (n, 3; ``offset`` above T) against the
     partners ``part``, counting its neighbours (standing ``height`` above the surfaces,
     ``offset`` by default) when ``neighbours``."""
-    from ._interrupt import call
+    from ._interrupt import call, for_threads
 
     height = float(offset if height is None else height)
     kc = curvature_coefficient(**curve)
@@ -430,10 +429,10 @@ def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, of
     out = np.empty(n)
     score = np.empty(n, dtype=np.int64)
     work = n * part.xy.shape[0]
-    if numba.get_num_threads() > 1:
-        kernel = _ck.grid_heights if surf.grid else _ck.tin_heights
-    else:  # one thread: the serial twins (no parfor to compile)
-        kernel = _ck.grid_heights_serial if surf.grid else _ck.tin_heights_serial
+    if surf.grid:
+        kernel = for_threads(_ck.grid_heights, _ck.grid_heights_serial)
+    else:
+        kernel = for_threads(_ck.tin_heights, _ck.tin_heights_serial)
     weight = float(neighbour_weight(q.shape[0]))
     call(kernel, surf.data, p, q, vis, lthr, near_vis, weight, surf.delta, end_radius, surf.tol, kc, surf.margin,
          min_gain, out, score, work=work)

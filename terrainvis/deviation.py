@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 from . import _volume_kernels
-from ._interrupt import call
+from ._interrupt import call, for_threads
 from ._mesh import boundary_edges, footprint_matches
 from ._validate import describe
 from .terrain import TIN, HeightGrid
@@ -230,8 +229,7 @@ def _volume_exact(fine: HeightGrid, coarse: TIN) -> tuple[float, float]:
     nchunks = int(min(faces.shape[0], _VOLUME_CHUNKS))
     out = np.zeros((nchunks, vk.N_OUT))
     # work: the fine cells and the coarse faces visited
-    kernel = vk.volume_between if numba.get_num_threads() > 1 else vk.volume_between_serial  # no parfor for one
-    call(kernel, xs, ys, fine.z, vx, vy, vz, faces, order, nchunks, out, work=fine.size + faces.shape[0])
+    call(for_threads(vk.volume_between, vk.volume_between_serial), xs, ys, fine.z, vx, vy, vz, faces, order, nchunks, out, work=fine.size + faces.shape[0])
     volume = math.fsum(np.concatenate([out[:, vk.VOL], out[:, vk.VOL_C]]))
     covered = math.fsum(np.concatenate([out[:, vk.AREA], out[:, vk.AREA_C]]))
     return volume, covered

@@ -41,3 +41,11 @@ def test_one_thread_and_two_give_the_same_bits():
     two = _with_threads(2, run)
     for a, b in zip(one, two):
         assert np.array_equal(a, b)
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two numba threads")
+def test_for_threads_picks_the_serial_twin_with_one_thread():
+    from terrainvis._interrupt import for_threads
+
+    assert _with_threads(1, lambda: for_threads("parallel", "serial")) == "serial"
+    assert _with_threads(2, lambda: for_threads("parallel", "serial")) == "parallel"

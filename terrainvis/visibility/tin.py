@@ -10,9 +10,9 @@ Functions here take validated float64 arrays; :mod:`terrainvis.visibility` valid
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from .._interrupt import for_threads
 from ..tolerances import TIN_ON_EDGE_REL
 
 from . import _kernels
@@ -52,8 +52,7 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0, kc: float
     la[:, 1] -= y0
     lb[:, 1] -= y0
     mesh = _kernels.TinMesh(vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby)
-    kernel = _kernels.tin_pairs if numba.get_num_threads() > 1 else _kernels.tin_pairs_serial
-    kernel(mesh, la, lb, float(delta), float(end_radius), eps, float(kc), out)
+    for_threads(_kernels.tin_pairs, _kernels.tin_pairs_serial)(mesh, la, lb, float(delta), float(end_radius), eps, float(kc), out)
     return out
 
 
