@@ -221,7 +221,7 @@ def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
                 on_result(futures[fut], fut.result())
             signals.check()
     except BrokenProcessPool as exc:
-        _stop_pool(pool, futures)
+        _stop_pool(pool)
         if signals.pending is not None:  # the same signal reached a worker too: the user's stop
             raise Interrupted(signals.pending) from None
         raise RuntimeError(
@@ -231,7 +231,7 @@ def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
             f"Units finished before the failure are in out_csv if one was given ({exc})"
         ) from exc
     except BaseException as exc:
-        _stop_pool(pool, futures)
+        _stop_pool(pool)
         if isinstance(exc, KeyboardInterrupt):
             raise _as_interrupted(exc) from None
         raise
@@ -262,15 +262,20 @@ def _workers_start_ignoring_sigint():
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
-def _stop_pool(pool: ProcessPoolExecutor, futures) -> None:
-    """Cancel what has not started and terminate the workers now (no waiting for running units)."""
-    for fut in futures:
-        fut.cancel()
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel what has not started and terminate the workers now (no waiting for running units).
+
+    The pool's own ``shutdown(cancel_futures=True)`` cancels the pending units, in its
+    manager thread. Cancelling them here as well raced with that thread: once the workers
+    die it marks every unit it still holds as broken, and on Python 3.11 a unit cancelled
+    from this thread made it raise ``InvalidStateError`` and print a traceback after the
+    "interrupted" line (seen once in CI, Ctrl-C while the workers were starting).
+    """
     processes = list(getattr(pool, "_processes", {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         with contextlib.suppress(Exception):
             p.terminate()
-    pool.shutdown(wait=False, cancel_futures=True)
     deadline = time.monotonic() + 5.0
     for p in processes:
         with contextlib.suppress(Exception):
