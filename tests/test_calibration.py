@@ -145,7 +145,9 @@ def test_the_pyramid_walk_equals_the_cell_walk():
         dx, dy = p[k, 0] - q[k, 0], p[k, 1] - q[k, 1]
         bulge = (k % 2) * 1e-7 * (dx * dx + dy * dy)  # every other track under a strong curvature
         a = ck.grid_max_slope(surf.data, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge, stack)
-        b = ck.grid_dda_max_slope(surf.data, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge)
+        g = surf.data
+        b = ck.grid_dda_max_slope(g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6,
+                                  1 - 1e-6, surf.tol, bulge)
         assert a == pytest.approx(b, rel=1e-12, abs=1e-12)
 
 
