@@ -32,6 +32,17 @@ from terrainvis import calibration
 from terrainvis.synthetic import KINDS
 
 
+def _relocated(sets, S, T, core, **kwargs):
+    """The calibrated relocation of every set with a core of ``core`` partners (relocate has
+    no keyword for it: :data:`terrainvis.calibration.CORE_PARTNERS`, set for the call and restored)."""
+    default = calibration.CORE_PARTNERS
+    calibration.CORE_PARTNERS = core
+    try:
+        return [tv.relocate(P, S, "calibrated", original=T, **kwargs) for P in sets]
+    finally:
+        calibration.CORE_PARTNERS = default
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--partners", type=int, nargs="+", default=[256, 512, 1024])
@@ -63,10 +74,9 @@ def main():
                 if core > k and core != min(args.core):
                     continue  # every core at least k is the same setting: all partners calibrated jointly
                 fresh = type(S)(S.vertices, S.faces) if isinstance(S, tv.TIN) else S.copy_with()
-                calibration.CORE_PARTNERS = core
                 t0 = time.perf_counter()
-                moved = [tv.relocate(P, fresh, "calibrated", original=T, n_partners=k, sweeps=sw,
-                                     seed=args.partner_seed, min_gain=gain) for P in sets]
+                moved = _relocated(sets, fresh, T, core, n_partners=k, sweeps=sw, seed=args.partner_seed,
+                                   min_gain=gain)
                 setting = (k, min(core, k), sw, gain)
                 times.setdefault(setting, []).append(time.perf_counter() - t0)
                 for M, V in zip(moved, truth):
