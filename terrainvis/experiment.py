@@ -34,6 +34,7 @@ import sys
 
 import pandas as pd
 
+from ._progress import progress_bar_class
 from .collect import COLUMNS, TIMING_COLUMNS, UNIT_KEY, order, rows_per_unit, table  # noqa: F401
 from .options import (  # noqa: F401
     CASCADE_AUTO_MIN_SAMPLES, DEFAULTS, DISTANCE_UNITS, MEASURES, OPTIONS, PREDICATES, Settings,
@@ -275,28 +276,6 @@ class _Progress:
         for bar in (self.compile, self.units):
             if bar is not None:
                 bar.close()
-
-
-def progress_bar_class():
-    """tqdm's notebook bar in a Jupyter kernel that has ipywidgets, else the plain one.
-
-    ``tqdm.auto`` would pick the notebook bar in any Jupyter kernel and, without
-    ipywidgets, warn "IProgress not found" and fall back; this asks first.
-    """
-    from tqdm.std import tqdm as plain
-
-    try:
-        shell = sys.modules["IPython"].get_ipython() if "IPython" in sys.modules else None
-        kernel = "ipykernel.zmqshell" in sys.modules or (shell is not None and "IPKernelApp" in shell.config)
-        if not kernel:
-            return plain
-        import ipywidgets  # noqa: F401
-
-        from tqdm import notebook
-
-        return notebook.tqdm if getattr(notebook, "IProgress", None) is not None else plain
-    except Exception:  # no ipywidgets, or an IPython without .config
-        return plain
 
 
 def _signature() -> inspect.Signature:

@@ -287,7 +287,7 @@ def _progress_bar(k: int, show: bool):
     from tqdm.std import tqdm
 
     if show:
-        from ..experiment import progress_bar_class  # the notebook's bar in Jupyter
+        from .._progress import progress_bar_class  # the notebook's bar in Jupyter
 
         tqdm = progress_bar_class()
     return tqdm(total=k, desc="cumulative viewshed", unit="observer", file=sys.stderr, disable=not show)
