@@ -195,6 +195,23 @@ def work():
     tv.visibility_matrix(g, pts)
 """, False)
 
+# the parallel pair walks of min_clearance (and line_of_sight) on the grid engine: the
+# exact least clearance of 6 million segments across a 1025² grid (no early exits)
+_CASES["min-clearance"] = ("""
+def warm():
+    s = tv.synthetic_terrain("mountains", size=33)
+    p = np.column_stack([s.xs[:4], s.ys[:4], s.z[0, :4] + 1.0])
+    tv.min_clearance(s, p, p[::-1])
+g = tv.synthetic_terrain("mountains", size=1025)
+rng = np.random.default_rng(0)
+def ends(k):
+    xy = np.column_stack([rng.uniform(0, g.xs[-1], k), rng.uniform(0, g.ys[-1], k)])
+    return np.column_stack([xy, g.height_at(xy) + 2.0])
+a, b = ends(6_000_000), ends(6_000_000)
+def work():
+    tv.min_clearance(g, a, b)
+""", True)
+
 
 def _script(tmp_path, name: str) -> tuple[str, bool]:
     body, measure = _CASES[name]

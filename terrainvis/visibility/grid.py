@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._interrupt import call, new_flag
+from .._interrupt import call
 from ..tolerances import DIVISOR_FLOOR
 from . import _kernels
 
@@ -173,10 +173,9 @@ def grid_clearance(
         order = _morton_order(a[:, :2], grid.extent).astype(np.int64)
     else:
         order = np.arange(m, dtype=np.int64)
-    _kernels.grid_walks(
-        _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los), float(tol), float(kc), out,
-        np.zeros((0, 0), dtype=np.bool_), new_flag(),
-    )
+    # through the interrupt helper: Ctrl-C stops the parallel kernel within an iteration
+    call(_kernels.grid_walks, _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los),
+         float(tol), float(kc), out, np.zeros((0, 0), dtype=np.bool_), work=m)
     return out
 
 
