@@ -297,7 +297,7 @@ def _cumulative_parser(sub) -> None:
     c.add_argument("--max-distance", type=_distance_arg, default=None,
                    help="each observer sees only the samples within this distance")
     c.add_argument("--workers", type=_workers_arg, default=None,
-                   help="local worker processes (default: number of CPUs; 1 runs in this process)")
+                   help="local worker processes (default 1: in this process, each viewshed on every core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler "
                                                                         "(needs the dask extra)")
     _add_earth(c)
@@ -834,21 +834,18 @@ def _cumulative(args) -> int:
     valid = np.isfinite(grid.z)
     n_valid = max(int(valid.sum()), 1)
     seen = counts[valid]
-    where = "the dask cluster" if client is not None else _plural(args.workers or _cpus(), "worker")
+    if client is not None:
+        where = "on the dask cluster"
+    else:
+        where = "in this process" if (args.workers or 1) == 1 else "on " + _plural(args.workers, "worker")
     print(f"{label}: {_plural(len(xy), 'observer')}, eyes {_heights_text(heights)} above the surface, target "
           f"{args.target_height:g}" + (f", within {args.max_distance:g}" if args.max_distance is not None else ""))
     print(f"  {_earth(args)}")
     print(f"  seen by any {int((seen > 0).sum()):,} of {_plural(n_valid, 'sample')} ({100 * (seen > 0).mean():.2f} %), "
           f"by all {100 * (seen == len(xy)).mean():.2f} %, most observers on one sample {int(seen.max()):,}; "
-          f"{seconds:.1f} s on {where} ({len(xy) / seconds:.1f} observers/s)")
+          f"{seconds:.1f} s {where} ({len(xy) / seconds:.1f} observers/s)")
     print(f"  wrote {out}" + (f" and {png}" if png is not None else ""))
     return 0
-
-
-def _cpus() -> int:
-    import os
-
-    return os.cpu_count() or 1
 
 
 def _heights_text(heights) -> str:

@@ -62,7 +62,7 @@ def test_counts_geotiff_is_aligned_with_the_dem_and_equals_the_api(tmp_path, cap
     seen = 100 * (expected > 0).mean()
     assert f"seen by any {int((expected > 0).sum()):,} of 44,556 samples ({seen:.2f} %)" in lines[2]
     assert f"most observers on one sample {int(expected.max())}" in lines[2]
-    assert "1 worker" in lines[2]
+    assert " s in this process (" in lines[2]
     assert lines[3] == f"  wrote {tmp_path / 'c.tif'} and {tmp_path / 'c.png'}"
 
 
