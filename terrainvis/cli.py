@@ -87,6 +87,14 @@ def _distance_arg(text: str) -> float:
     return value
 
 
+def _add_target_height(p) -> None:
+    p.add_argument("--target-height", type=_height, default=0.0, help="target height above the surface, >= 0 (default 0)")
+
+
+def _add_max_distance(p, help_text: str) -> None:
+    p.add_argument("--max-distance", type=_distance_arg, default=None, help=help_text)
+
+
 def _add_nodata(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--fill", choices=["nearest", "linear"], default=None,
@@ -241,8 +249,7 @@ def _los_parser(sub) -> None:
     los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2 (lon, lat on a "
                                                    "lon/lat DEM)")
     los.add_argument("--height", type=_height, default=1.7, help="observer height above the surface, >= 0 (default 1.7)")
-    los.add_argument("--target-height", type=_height, default=0.0,
-                     help="target height above the surface, >= 0 (default 0)")
+    _add_target_height(los)
     los.add_argument("--end-radius", type=_distance_arg, default=0.0,
                      help="ignore the surface within this distance of each end (default 0)")
     _add_earth(los)
@@ -263,9 +270,8 @@ def _viewshed_parser(sub) -> None:
     v.add_argument("--observer", nargs=2, type=_number, required=True, metavar=("X", "Y"),
                    help="observer position (lon lat on a lon/lat DEM; see --frame)")
     v.add_argument("--height", type=_height, default=1.7, help="eye height above the surface, >= 0 (default 1.7)")
-    v.add_argument("--target-height", type=_height, default=0.0,
-                   help="target height above the surface, >= 0 (default 0)")
-    v.add_argument("--max-distance", type=_number, default=None, help="only samples within this distance")
+    _add_target_height(v)
+    _add_max_distance(v, "only samples within this distance")
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
     _add_earth(v)
     _add_nodata(v)
@@ -292,10 +298,8 @@ def _cumulative_parser(sub) -> None:
     c.add_argument("--png", metavar="PNG", help="also draw the counts over the hillshade into this .png")
     c.add_argument("--observer-height", "--height", dest="height", type=_height, default=1.7,
                    help="eye height above the surface, >= 0, for observers without a height column (default 1.7)")
-    c.add_argument("--target-height", type=_height, default=0.0,
-                   help="target height above the surface, >= 0 (default 0)")
-    c.add_argument("--max-distance", type=_distance_arg, default=None,
-                   help="each observer sees only the samples within this distance")
+    _add_target_height(c)
+    _add_max_distance(c, "each observer sees only the samples within this distance")
     c.add_argument("--workers", type=_workers_arg, default=None,
                    help="local worker processes (default 1: in this process, each viewshed on every core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler "

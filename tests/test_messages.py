@@ -87,6 +87,16 @@ def test_non_finite_numbers_have_their_own_message(argv, flag, capsys):
     assert f"argument {flag}: expected a finite number" in err and "outside" not in err
 
 
+
+def test_a_negative_max_distance_is_refused_by_its_option(tmp_path, capsys):
+    """viewshed and cumulative check --max-distance alike, naming the option (not the API's max_distance)."""
+    obs = tmp_path / "obs.csv"
+    obs.write_text("x,y\n100,100\n")
+    for argv in (["viewshed", "hills", "--observer", "100", "100", "-o", str(tmp_path / "v.npz")],
+                 ["cumulative", "hills", "--observers", str(obs), "-o", str(tmp_path / "c.npz")]):
+        err = _err(capsys, 2, argv + ["--max-distance", "-5"])
+        assert "argument --max-distance: expected a distance >= 0, got '-5'" in err, err
+
 def test_heights_above_the_surface_are_never_negative(tmp_path, capsys):
     base = ["--from", "100", "100", "--to", "900", "900"]
     for argv in (["los", "hills", *base, "--height", "-100"], ["los", "hills", *base, "--target-height", "-1"],
