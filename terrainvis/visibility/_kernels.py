@@ -696,21 +696,27 @@ def _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out):
+def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out, stop):
     """Exact minimum clearance of each segment over a TIN (clip against every face crossed).
 
     ``mesh`` is a :data:`TinMesh`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
     ``kc`` the curvature coefficient over twice the earth's radius (0: flat). The segment
     is tested over the interval of :func:`interval_start` (see :func:`_tin_segment_min`).
+    Segments not started once the stop flag ``stop`` is set are skipped
+    (:mod:`terrainvis._interrupt`).
     """
     m = a.shape[0]
     for i in nb.prange(m):
+        if stop[0] != 0:
+            continue
         out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_pairs_serial(mesh, a, b, delta, end_radius, eps, kc, out):
+def tin_pairs_serial(mesh, a, b, delta, end_radius, eps, kc, out, stop):
     """:func:`tin_pairs` in the calling thread (the same clearances): with one thread the
     ``prange`` loop gains nothing and costs a parfor compilation (about 1 s of CPU)."""
     for i in range(a.shape[0]):
+        if stop[0] != 0:
+            return
         out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)

@@ -10,9 +10,11 @@ Functions here take validated float64 arrays; :mod:`terrainvis.visibility` valid
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .._interrupt import for_threads
+from .._interrupt import call, for_threads
 from ..tolerances import TIN_ON_EDGE_REL
 
 from . import _kernels
@@ -52,7 +54,10 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0, kc: float
     la[:, 1] -= y0
     lb[:, 1] -= y0
     mesh = _kernels.TinMesh(vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby)
-    for_threads(_kernels.tin_pairs, _kernels.tin_pairs_serial)(mesh, la, lb, float(delta), float(end_radius), eps, float(kc), out)
+    # through the interrupt helper: Ctrl-C stops the kernel within a segment (work: the
+    # faces a segment across the TIN crosses, about the square root of their number, each)
+    call(for_threads(_kernels.tin_pairs, _kernels.tin_pairs_serial), mesh, la, lb, float(delta), float(end_radius), eps,
+         float(kc), out, work=m * math.isqrt(tin.faces.shape[0]))
     return out
 
 
