@@ -24,25 +24,12 @@ import time
 import warnings
 from pathlib import Path
 
+from .errors import OutputError
+
 __all__ = [
     "atomic_path", "atomic_write_text", "check_writable_dir", "check_output_file", "refuse_protected",
     "protected_folders", "OutputError", "RunLock", "OutputBusyError",
 ]
-
-
-class OutputError(OSError):
-    """Writing ``filename`` failed (a full disk, no permission, ...): the message names the file."""
-
-    def __init__(self, path, cause: BaseException, tmp=None):
-        reason = (cause.strerror if isinstance(cause, OSError) and cause.strerror else str(cause)) or type(cause).__name__
-        if tmp is not None:
-            reason = reason.replace(str(tmp), str(path))
-        super().__init__(getattr(cause, "errno", None), reason)
-        self.filename = str(path)
-        self.reason = reason
-
-    def __str__(self) -> str:
-        return f"could not write {self.filename}: {self.reason}"
 
 
 @contextlib.contextmanager

@@ -5,7 +5,7 @@ Every exception subclasses a built-in one, so ``except ValueError`` keeps workin
 
 from __future__ import annotations
 
-__all__ = ["NodataError", "OutsideFootprintError", "SimplificationError", "NotEnoughMemoryError"]
+__all__ = ["NodataError", "OutsideFootprintError", "SimplificationError", "NotEnoughMemoryError", "OutputError"]
 
 
 class NodataError(ValueError):
@@ -39,3 +39,18 @@ class NotEnoughMemoryError(MemoryError, ValueError):
     method), so callers that report bad input in one line report this one too. The
     message says how much is needed and how much is available.
     """
+
+
+class OutputError(OSError):
+    """Writing ``filename`` failed (a full disk, no permission, ...): the message names the file."""
+
+    def __init__(self, path, cause: BaseException, tmp=None):
+        reason = (cause.strerror if isinstance(cause, OSError) and cause.strerror else str(cause)) or type(cause).__name__
+        if tmp is not None:
+            reason = reason.replace(str(tmp), str(path))
+        super().__init__(getattr(cause, "errno", None), reason)
+        self.filename = str(path)
+        self.reason = reason
+
+    def __str__(self) -> str:
+        return f"could not write {self.filename}: {self.reason}"

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -141,21 +144,81 @@ def _gdal_path(path: Path) -> bool:
 
 
 def _write_gtiff(path: Path, data: np.ndarray, profile: dict, tags: dict | None = None) -> None:
-    """One band as GDAL writes a GeoTIFF (:func:`_creation_options`); through memory when GDAL cannot take the name."""
+    """One band as GDAL writes a GeoTIFF (:func:`_creation_options`); through memory when GDAL cannot take the name.
+
+    GDAL reports some failed writes (a full disk while it flushes its tiles on closing
+    the file) only as lines that libtiff prints on stderr, and closes the file as if it
+    were complete. So those lines are captured while GDAL writes, and the file is read
+    back and compared with ``data`` before it is handed on: a damaged file raises
+    :class:`OSError` with the first line GDAL printed, which
+    :func:`~terrainvis._fileio.atomic_path` turns into an
+    :class:`~terrainvis._fileio.OutputError` without renaming the file over the
+    destination. After a good write the captured lines (warnings) are printed as GDAL
+    would have printed them.
+    """
     rasterio = rasterio_module()
     profile = dict(profile, driver="GTiff", **_creation_options(data.shape[0], data.shape[1], str(data.dtype)))
-    if _gdal_path(path):
-        with rasterio.open(path, "w", **profile) as dst:
-            dst.write(data, 1)
-            dst.update_tags(**(tags or {}))
-        return
-    from rasterio.io import MemoryFile
+    tags = {k: str(v) for k, v in (tags or {}).items()}
+    if not _gdal_path(path):
+        from rasterio.io import MemoryFile
 
-    with MemoryFile() as mem:
-        with mem.open(**profile) as dst:
-            dst.write(data, 1)
-            dst.update_tags(**(tags or {}))
-        path.write_bytes(mem.read())
+        with MemoryFile() as mem:
+            with mem.open(**profile) as dst:
+                dst.write(data, 1)
+                dst.update_tags(**tags)
+            path.write_bytes(mem.read())  # a failed Python write raises
+        return
+    with _stderr_lines() as printed:
+        try:
+            with rasterio.open(path, "w", **profile) as dst:
+                dst.write(data, 1)
+                dst.update_tags(**tags)
+            failed = None if _reads_back(path, data, tags) else "the file does not read back as written"
+        except rasterio.errors.RasterioError as exc:
+            failed = str(exc)
+    if failed is not None:
+        reason = next((line.strip().rstrip(".") for line in printed if line.strip()), failed)
+        raise OSError(f"GDAL could not write the GeoTIFF: {reason}")
+    if printed:
+        sys.stderr.write("".join(line + "\n" for line in printed))
+
+
+def _reads_back(path: Path, data: np.ndarray, tags: dict) -> bool:
+    """Whether the GeoTIFF ``path`` reads back as ``data`` with ``tags``."""
+    rasterio = rasterio_module()
+    with rasterio.open(path) as src:
+        back = src.read(1)
+        stored = src.tags()
+    same = back.shape == data.shape and back.dtype == data.dtype and np.array_equal(back, data, equal_nan=True)
+    return same and all(stored.get(k) == v for k, v in tags.items())
+
+
+@contextlib.contextmanager
+def _stderr_lines():
+    """Capture what C code prints on file descriptor 2 while the block runs; yield the list of its lines.
+
+    The list is filled when the block ends. The capture is held in memory (a memfd where
+    the platform has one), so a full disk does not lose it; where no capture can be set
+    up, nothing is captured and the list stays empty.
+    """
+    lines: list[str] = []
+    try:
+        sys.stderr.flush()
+        sink = os.fdopen(os.memfd_create("terrainvis-gdal"), "w+b") if hasattr(os, "memfd_create") else \
+            tempfile.TemporaryFile()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no fd 2 (an embedded interpreter), no memory
+        yield lines
+        return
+    os.dup2(sink.fileno(), 2)
+    try:
+        yield lines
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        sink.seek(0)
+        lines.extend(sink.read().decode("utf-8", "replace").splitlines())
+        sink.close()
 
 
 def _north_up_transform(nx: np.ndarray, ny: np.ndarray):
