@@ -1,20 +1,27 @@
-"""The output folder of ``terrainvis compare``: which files a run writes there.
+"""The output folder of ``terrainvis compare``: which files a run writes there, and which it wrote.
 
 A run writes ``results.csv`` and ``results.settings.json`` (:class:`~terrainvis.results.ResultStore`),
 ``tables.md``, the figures and ``simplified/<terrain>__<method>__level<k>.npz``, and holds
-``results.lock`` while it runs (:class:`~terrainvis._fileio.RunLock`). :func:`earlier_run`
-finds the files an earlier run left, by these names and the terrains, methods and
-relocations that run recorded, so ``--overwrite`` removes exactly those and never a file
-terrainvis did not write.
+``results.lock`` while it runs (:class:`~terrainvis._fileio.RunLock`). A file is an earlier
+run's only when it can be recognised as written by terrainvis: the settings file by its
+settings, ``results.csv`` by its columns beside such a settings file, ``tables.md`` by its
+first line, the figures by the mark terrainvis puts in their PNG text
+(:data:`FIGURE_SOFTWARE`), the simplified terrains by the terrainvis ``.npz`` format.
+:func:`earlier_run` lists those, so ``--overwrite`` removes exactly them;
+:func:`foreign_files` lists the files at the names a run writes that terrainvis did not
+write, which a run refuses to replace.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import re
+import struct
 from pathlib import Path
 
-__all__ = ["RESULTS", "TABLES", "SIMPLIFIED", "LOCK", "figure_names", "earlier_run", "describe", "remove"]
+__all__ = ["RESULTS", "TABLES", "SIMPLIFIED", "LOCK", "FIGURE_SOFTWARE", "figure_names", "figure_metadata",
+           "earlier_run", "foreign_files", "written_by_terrainvis", "describe", "remove"]
 
 RESULTS = "results.csv"
 TABLES = "tables.md"
@@ -22,6 +29,14 @@ SIMPLIFIED = "simplified"
 LOCK = "results.lock"
 #: Figures every run may write, whatever its terrains and relocations.
 FIXED_FIGURES = ("accuracy_vs_size.png", "accuracy_vs_distance.png")
+#: The PNG ``Software`` text of every figure terrainvis draws: how a figure is recognised as its own.
+FIGURE_SOFTWARE = "terrainvis"
+#: The first line of every ``tables.md`` a run writes.
+TABLES_TITLE = "# terrainvis compare"
+#: Settings every stored settings file of ``compare`` holds, whatever its version.
+_SETTINGS_KEYS = frozenset({"terrains", "methods", "levels", "relocations", "seed", "n_points", "n_sets"})
+#: Columns every results file of ``compare`` starts with, whatever its version.
+_RESULT_COLUMNS = ("terrain", "set", "method")
 
 
 def figure_names(terrains, relocations) -> list[str]:
@@ -29,41 +44,118 @@ def figure_names(terrains, relocations) -> list[str]:
     return list(FIXED_FIGURES) + [f"tradeoff_{r}.png" for r in relocations] + [f"views_{t}.png" for t in terrains]
 
 
-def _recorded(out: Path) -> tuple[list, list, list]:
-    """The terrains, methods and relocations the earlier run recorded (its settings, else its rows)."""
+def figure_metadata() -> dict:
+    """The PNG text (``savefig(..., metadata=...)``) that marks a figure as drawn by terrainvis."""
+    import matplotlib
+
+    from . import __version__
+
+    return {"Software": f"{FIGURE_SOFTWARE} {__version__} (matplotlib {matplotlib.__version__})"}
+
+
+# ---------------------------------------------------------------------- recognising our files
+def _png_text(path: Path, limit: int = 1 << 20) -> dict:
+    """The ``tEXt`` chunks of a PNG before its image data (empty when it is no PNG)."""
+    out = {}
+    with contextlib.suppress(OSError, struct.error, ValueError):
+        with open(path, "rb") as fh:
+            if fh.read(8) != b"\x89PNG\r\n\x1a\n":
+                return {}
+            while fh.tell() < limit:
+                head = fh.read(8)
+                if len(head) < 8:
+                    break
+                length, kind = struct.unpack(">I4s", head)
+                if kind in (b"IDAT", b"IEND"):
+                    break
+                body = fh.read(length)
+                fh.read(4)  # the chunk's CRC
+                if kind == b"tEXt" and b"\0" in body:
+                    key, _, value = body.partition(b"\0")
+                    out[key.decode("latin-1")] = value.decode("latin-1")
+    return out
+
+
+def _settings_file(out: Path) -> Path:
     from .results import settings_path
 
-    with contextlib.suppress(OSError, ValueError, AttributeError):
-        stored = json.loads(settings_path(out / RESULTS).read_text(encoding="utf-8"))
-        return list(stored.get("terrains") or []), list(stored.get("methods") or []), list(
-            stored.get("relocations") or [])
+    return settings_path(out / RESULTS)
+
+
+def _stored_settings(out: Path) -> dict | None:
+    """The earlier run's settings, or None when there is no settings file terrainvis wrote."""
+    with contextlib.suppress(OSError, ValueError):
+        stored = json.loads(_settings_file(out).read_text(encoding="utf-8"))
+        if isinstance(stored, dict) and _SETTINGS_KEYS <= stored.keys():
+            return stored
+    return None
+
+
+def _first_line(path: Path) -> str:
+    with contextlib.suppress(OSError), open(path, "rb") as fh:
+        return fh.readline(4096).decode("utf-8", "replace").rstrip("\r\n")
+    return ""
+
+
+def _terrainvis_npz(path: Path) -> bool:
+    from .io._common import FORMAT
+
     with contextlib.suppress(Exception):
-        import pandas as pd
+        import numpy as np
 
-        rows = pd.read_csv(out / RESULTS, usecols=["terrain", "method", "relocation"], dtype=str)
-        return [sorted(set(rows[c].dropna())) for c in ("terrain", "method", "relocation")]
-    return [], [], []
+        with np.load(path, allow_pickle=False) as a:
+            return "format" in a.files and str(a["format"]) == FORMAT
+    return False
 
 
-def earlier_run(out) -> list[Path]:
-    """The files of an earlier run in the folder ``out`` (existing ones only; none: no earlier run).
+def written_by_terrainvis(path) -> bool:
+    """Whether ``path``, a file at one of the names a run writes in its folder, was written by terrainvis.
 
-    ``results.csv``, its settings file, ``tables.md``, their leftover temporary files (a
-    write cut off by SIGKILL), the figures of the terrains and relocations the run
-    recorded, and its simplified terrains (``simplified/<terrain>__<method>__level<k>.npz``).
+    ``results.csv`` and ``tables.md`` count only beside a settings file terrainvis wrote
+    (the settings are stored first, before any row).
     """
-    from . import relocation
-    from .results import settings_path
+    p = Path(path)
+    if not p.is_file():
+        return False
+    out = p.parent.parent if p.parent.name == SIMPLIFIED else p.parent
+    if p.parent.name == SIMPLIFIED and p.suffix == ".npz":
+        return _terrainvis_npz(p)
+    if p.name == _settings_file(out).name:
+        return _stored_settings(out) is not None
+    if p.name == RESULTS:
+        return _stored_settings(out) is not None and _first_line(p).split(",")[:3] == list(_RESULT_COLUMNS)
+    if p.name == TABLES:
+        return _first_line(p) == TABLES_TITLE
+    if p.name == LOCK:
+        with contextlib.suppress(OSError, ValueError):
+            text = p.read_text(encoding="utf-8").strip()
+            return text == "" or "pid" in json.loads(text)
+        return False
+    if p.suffix == ".png":
+        return _png_text(p).get("Software", "").startswith(FIGURE_SOFTWARE + " ")
+    return False
 
-    out = Path(out)
-    fixed = [out / RESULTS, settings_path(out / RESULTS), out / TABLES]
-    if not any(p.is_file() for p in fixed):
-        return []
-    terrains, methods, relocations = _recorded(out)
+
+def _leftover(name: str, of: str) -> bool:
+    """A temporary file of an atomic write of ``of`` cut off by SIGKILL (``tempfile.mkstemp``'s names)."""
+    stem, suffix = of, Path(of).suffix
+    return re.fullmatch(re.escape(f".{stem}.") + r"[a-z0-9_]{8}" + re.escape(suffix), name) is not None
+
+
+def _recorded(out: Path) -> tuple[list, list, list]:
+    """The terrains, methods and relocations the earlier run recorded in its settings."""
+    stored = _stored_settings(out) or {}
+    return list(stored.get("terrains") or []), list(stored.get("methods") or []), list(
+        stored.get("relocations") or [])
+
+
+def _candidates(out: Path, terrains, methods, relocations) -> list[Path]:
+    """Every existing file at a name a run on these terrains, methods and relocations writes."""
+    from . import relocation
+
+    fixed = [out / RESULTS, _settings_file(out), out / TABLES]
+    relocations = list(dict.fromkeys(list(relocations) + list(relocation.RELOCATIONS) + [relocation.ORACLE]))
     found = [p for p in fixed if p.is_file()]
-    leftovers = tuple(f".{p.name}." for p in fixed)  # atomic writes cut off by SIGKILL
-    found += [q for q in out.iterdir() if q.is_file() and q.name.startswith(leftovers)]
-    relocations = list(dict.fromkeys(relocations + list(relocation.RELOCATIONS) + [relocation.ORACLE]))
     found += [out / f for f in figure_names(terrains, relocations) if (out / f).is_file()]
     folder = out / SIMPLIFIED
     prefixes = [f"{t}__{m}__level" for t in terrains for m in methods]
@@ -72,7 +164,42 @@ def earlier_run(out) -> list[Path]:
             if q.is_file() and q.suffix == ".npz" and any(
                     q.name.startswith(p) and q.name[len(p):-len(".npz")].isdigit() for p in prefixes):
                 found.append(q)
+    return found
+
+
+def earlier_run(out) -> list[Path]:
+    """The files an earlier run wrote in the folder ``out`` (none: no earlier run).
+
+    Only files recognised as written by terrainvis (:func:`written_by_terrainvis`):
+    ``results.csv``, its settings file, ``tables.md``, their leftover temporary files (a
+    write cut off by SIGKILL), the figures of the terrains and relocations the run
+    recorded, and its simplified terrains (``simplified/<terrain>__<method>__level<k>.npz``).
+    """
+    out = Path(out)
+    if _stored_settings(out) is None and not (out / TABLES).is_file():
+        return []
+    terrains, methods, relocations = _recorded(out)
+    found = [p for p in _candidates(out, terrains, methods, relocations) if written_by_terrainvis(p)]
+    if not found:
+        return []
+    names = (RESULTS, _settings_file(out).name, TABLES)
+    found += [q for q in out.iterdir() if q.is_file() and any(_leftover(q.name, n) for n in names)]
     return sorted(set(found))
+
+
+def foreign_files(out, terrains=(), methods=(), relocations=()) -> list[Path]:
+    """Files terrainvis did not write at the names a run on these terrains, methods and relocations writes.
+
+    A run refuses to start over them: it would replace them (``--overwrite`` removes
+    only what :func:`earlier_run` lists).
+    """
+    out = Path(out)
+    if not out.is_dir():
+        return []
+    names = _candidates(out, terrains, methods, relocations)
+    if (out / LOCK).is_file():
+        names.append(out / LOCK)
+    return sorted(p for p in set(names) if not written_by_terrainvis(p))
 
 
 def describe(files) -> str:

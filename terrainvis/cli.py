@@ -458,10 +458,13 @@ def _client(address: str):
 
 def _compare(args) -> int:
     from ._fileio import RunLock, check_writable_dir, refuse_protected
-    from ._outdir import LOCK
+    from ._outdir import LOCK, foreign_files
 
     refuse_protected(args.out, "--out")
     out = check_writable_dir(args.out, "--out")
+    foreign = foreign_files(out)  # a results.lock terrainvis did not write: the lock would replace it
+    if foreign:
+        raise UsageError(_foreign_message(out, foreign))
     with RunLock(out / LOCK, f"--out {str(out)!r}", "terrainvis compare"):
         return _compare_in(out, args)
 
@@ -484,7 +487,7 @@ def _compare_in(out: Path, args) -> int:
         grids[label] = grid
     grids = resolve_terrains(grids)
     settings = settings_for(grids, options)  # compare checks them again; here before anything is removed
-    _earlier_run(out, args, inputs=[t for t in terrains if Path(t).is_file()])
+    _earlier_run(out, args, list(grids), settings, inputs=[t for t in terrains if Path(t).is_file()])
     client = _client(args.scheduler) if args.scheduler else None
     t0 = time.perf_counter()
     df = compare(grids, **options, workers=args.workers, client=client, out_csv=out / "results.csv",
@@ -492,10 +495,17 @@ def _compare_in(out: Path, args) -> int:
     return _compare_report(df, grids, settings, out, args, time.perf_counter() - t0)
 
 
-def _earlier_run(out: Path, args, inputs) -> None:
-    """An earlier run's results in ``out``: refused without --resume or --overwrite; --overwrite removes them."""
-    from ._outdir import describe, earlier_run, remove
+def _earlier_run(out: Path, args, names, settings, inputs) -> None:
+    """An earlier run's results in ``out``: refused without --resume or --overwrite; --overwrite removes them.
 
+    Files at the names this run writes that terrainvis did not write are refused in any
+    case: neither the run nor --overwrite replaces them.
+    """
+    from ._outdir import describe, earlier_run, foreign_files, remove
+
+    foreign = foreign_files(out, names, settings.methods, settings.relocations)
+    if foreign:
+        raise UsageError(_foreign_message(out, foreign))
     files = earlier_run(out)
     if not files or args.resume:
         return
@@ -511,6 +521,20 @@ def _earlier_run(out: Path, args, inputs) -> None:
                                  "move it out of --out first")
     remove(out, files)
     print(f"terrainvis compare: --overwrite: removed the earlier run's {describe(files)}", file=sys.stderr)
+
+
+def _foreign_message(out: Path, files) -> str:
+    names = [p.relative_to(out).as_posix() for p in files]
+    if len(names) == 1:
+        shown = names[0]
+    elif len(names) <= 4:
+        shown = ", ".join(names[:-1]) + " and " + names[-1]
+    else:
+        shown = ", ".join(names[:4]) + f" and {len(names) - 4} more"
+    which = "it" if len(names) == 1 else "them"
+    return (f"--out {str(out)!r} holds {shown}, which terrainvis did not write but a run writes under "
+            f"{'that name' if len(names) == 1 else 'those names'}; terrainvis never replaces a file it did not "
+            f"write: move {which} away or choose another --out")
 
 
 def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int:
@@ -570,12 +594,13 @@ def _write_plots(df, grids, out: Path) -> None:
 
     from . import plot
     from ._fileio import atomic_path
+    from ._outdir import figure_metadata
     from .io import load_terrain
     from .units import simplified_path
 
     def save(fig, name, dpi):
         with atomic_path(out / name) as tmp:
-            fig.savefig(tmp, dpi=dpi, format="png")
+            fig.savefig(tmp, dpi=dpi, format="png", metadata=figure_metadata())
 
     ok = df[df["error"] == ""]
     if ok.empty:
@@ -761,9 +786,11 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observe
     if suffix == ".png":
         from . import plot
 
+        from ._outdir import figure_metadata
+
         fig = plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed")
         with atomic_path(out) as tmp:
-            fig.savefig(tmp, dpi=110, format="png")
+            fig.savefig(tmp, dpi=110, format="png", metadata=figure_metadata())
         return
     if suffix == ".npz":
         from .io import save_terrain
@@ -893,10 +920,11 @@ def _write_counts(grid, counts, out: Path, suffix: str, args, k: int) -> None:
 def _write_counts_png(grid, counts, xy, png: Path, label: str) -> None:
     from . import plot
     from ._fileio import atomic_path
+    from ._outdir import figure_metadata
 
     fig = plot.cumulative_viewshed(grid, counts, observers=xy, title=f"{label}: cumulative viewshed")
     with atomic_path(png) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=110, format="png", metadata=figure_metadata())
 
 
 # ------------------------------------------------------------------ relocate

@@ -147,11 +147,28 @@ class ResultStore:
         if self.path.is_dir():
             raise ValueError(f"out_csv {str(self.path)!r} is a folder; give the path of a .csv file inside it")
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if not resume and self.path.exists() and not self._ours():
+            raise ValueError(
+                f"out_csv {str(self.path)!r} exists and was not written by terrainvis (no settings file "
+                f"{settings_path(self.path).name!r} beside it, or not a results file's columns); terrainvis never "
+                "replaces a file it did not write: choose another out_csv"
+            )
         if resume and self.path.exists():
             self._resume(rows_per_unit)
         else:
             atomic_write_text(settings_path(self.path), json.dumps(self.settings, indent=1, sort_keys=True) + "\n")
         self._write()
+
+    def _ours(self) -> bool:
+        """Whether the existing file is a results file terrainvis wrote: a settings file it wrote
+        beside it, and a header that holds the unit's columns."""
+        try:
+            stored = json.loads(settings_path(self.path).read_text(encoding="utf-8"))
+            with open(self.path, encoding="utf-8", errors="replace") as fh:
+                header = next(csv.reader([fh.readline(1 << 16)]), [])
+        except (OSError, ValueError):
+            return False
+        return isinstance(stored, dict) and (not header or set(self.unit_key) <= set(header))
 
     # ---------------------------------------------------------------- resume
     def _resume(self, rows_per_unit) -> None:

@@ -183,6 +183,59 @@ def test_a_folder_with_an_earlier_run_needs_resume_or_overwrite(tmp_path, capsys
     assert main(argv[:-1] + ["--resume", "--no-plots"]) == 0
 
 
+def test_overwrite_never_removes_files_terrainvis_did_not_write(tmp_path, capsys):
+    """A results.csv, tables.md, figure or lock file of the user's own, at the names a run
+    writes, is neither removed by --overwrite nor replaced by the run (issue 31 B)."""
+    out = tmp_path / "run"
+    out.mkdir()
+    mine = {"results.csv": "id,value\n1,2\n", "tables.md": "# my own tables\n"}
+    for name, text in mine.items():
+        (out / name).write_text(text)
+    for flags in ([], ["--overwrite"], ["--resume"]):
+        err = _err(capsys, 2, ["compare", *SMALL, "--out", str(out), *flags])
+        assert "holds results.csv and tables.md, which terrainvis did not write" in err
+        assert "never replaces a file it did not write" in err
+    assert {p.name: p.read_text() for p in out.iterdir()} == mine
+    # beside an earlier run of terrainvis: its own files go, the user's tables.md stays and is refused
+    (out / "results.csv").unlink()
+    assert main(["compare", *SMALL[:-1], "--out", str(tmp_path / "other")]) == 0  # with figures
+    for name in ("results.csv", "results.settings.json"):
+        (out / name).write_bytes((tmp_path / "other" / name).read_bytes())
+    err = _err(capsys, 2, ["compare", *SMALL, "--out", str(out), "--overwrite"])
+    assert "holds tables.md, which terrainvis did not write" in err
+    assert (out / "results.csv").exists() and (out / "tables.md").read_text() == mine["tables.md"]
+    # a figure of the user's at a figure's name, and a lock file that is not terrainvis's
+    (out / "tables.md").unlink()
+    (out / "accuracy_vs_size.png").write_bytes((tmp_path / "other" / "accuracy_vs_size.png").read_bytes()[:8] + b"x")
+    err = _err(capsys, 2, ["compare", *SMALL, "--out", str(out), "--overwrite"])
+    assert "holds accuracy_vs_size.png, which terrainvis did not write" in err
+    (out / "accuracy_vs_size.png").unlink()
+    (out / "results.lock").write_text("my lock notes\n")
+    err = _err(capsys, 2, ["compare", *SMALL, "--out", str(out), "--overwrite"])
+    assert "holds results.lock, which terrainvis did not write" in err
+    assert (out / "results.lock").read_text() == "my lock notes\n"
+    (out / "results.lock").unlink()
+    # what terrainvis wrote is recognised and removed
+    assert main(["compare", *SMALL[:-1], "--out", str(out), "--overwrite"]) == 0
+    assert "removed the earlier run's results.csv" in capsys.readouterr().err
+
+
+def test_compare_refuses_an_out_csv_terrainvis_did_not_write(tmp_path):
+    from terrainvis import compare
+
+    csv = tmp_path / "mine.csv"
+    csv.write_text("id,value\n1,2\n")
+    with pytest.raises(ValueError, match="exists and was not written by terrainvis"):
+        compare(["hills"], methods=["simple"], levels=[1], n_points=8, n_sets=1, relocations=["full"], out_csv=csv)
+    assert csv.read_text() == "id,value\n1,2\n"
+    # a results file of an earlier run is replaced, as before
+    compare(["hills"], methods=["simple"], levels=[1], n_points=8, n_sets=1, relocations=["full"],
+            out_csv=tmp_path / "r.csv")
+    df = compare(["hills"], methods=["lls"], levels=[1], n_points=8, n_sets=1, relocations=["full"],
+                 out_csv=tmp_path / "r.csv")
+    assert set(pd.read_csv(tmp_path / "r.csv")["method"]) == {"lls"} == set(df["method"])
+
+
 def test_overwrite_never_removes_an_input(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["compare", *SMALL, "--out", str(out)]) == 0
