@@ -283,6 +283,14 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
             if p.is_alive():
                 p.kill()
                 p.join(1.0)
+    # The pool's manager thread closes its wake-up pipe once it has seen the workers die.
+    # Wait for it: at exit Python writes to that pipe, and a close racing with the write
+    # printed "Exception ignored ... OSError: [Errno 9] Bad file descriptor" after the
+    # "interrupted" line (seen in a full test run, Ctrl-C in a cumulative viewshed).
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if manager is not None:
+        with contextlib.suppress(Exception):
+            manager.join(max(1.0, deadline - time.monotonic()))
 
 
 # ---------------------------------------------------------------- dask
