@@ -8,9 +8,9 @@ it meets, as on a fresh install. The script prints (medians over ``--repeats``):
 * ``cold quick``: ``terrainvis compare --quick --no-plots`` with an empty cache (the
   warm-up parts compiled side by side on the pool, then the units);
 * ``warm quick``: the same command again on the filled cache;
-* one line per warm-up part of that run (:func:`terrainvis.plan.warm_up_parts`): the part
+* one line per warm-up part of that run (:func:`terrainvis.experiment.plan.warm_up_parts`): the part
   alone, in one process with an empty cache and one numba thread (as a worker), minus
-  the import time: what compiling its kernels costs on one core (a part that follows others, :func:`terrainvis.plan.part_needs`,
+  the import time: what compiling its kernels costs on one core (a part that follows others, :func:`terrainvis.experiment.plan.part_needs`,
   is timed after them, on the cache they filled, as the run takes it).
 
 Usage::
@@ -33,13 +33,12 @@ import time
 PART = """
 import sys
 import numba
-numba.set_num_threads(1)  # as in a worker of a 2-worker run on 2 cores (terrainvis.runner)
-from terrainvis import experiment
-from terrainvis.plan import part_needs, warm_up_parts
-from terrainvis.units import warm_up_part
-grids = experiment.resolve_terrains(["hills", "ridges"])
-settings = experiment._settings(grids, levels=[1, 3], n_points=20, n_sets=2)
-parts = warm_up_parts(experiment._tasks(grids, settings), grids, settings)
+numba.set_num_threads(1)  # as in a worker of a 2-worker run on 2 cores (terrainvis.core.runner)
+from terrainvis.experiment.plan import part_needs, resolve_terrains, settings_for, tasks, warm_up_parts
+from terrainvis.experiment.units import warm_up_part
+grids = resolve_terrains(["hills", "ridges"])
+settings = settings_for(grids, dict(levels=[1, 3], n_points=20, n_sets=2))
+parts = warm_up_parts(tasks(grids, settings), grids, settings)
 if sys.argv[1] == "list":
     print(repr(parts))
 else:

@@ -59,7 +59,7 @@ import numba
 import numpy as np
 
 from terrainvis import cumulative_viewshed, save_dem, viewshed
-from terrainvis.synthetic import synthetic_terrain
+from terrainvis.core.synthetic import synthetic_terrain
 
 GDAL = shutil.which("gdal_viewshed")
 

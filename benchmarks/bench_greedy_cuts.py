@@ -42,8 +42,8 @@ import numpy as np
 from simplifiers import simplify, vertex_budget
 from simplifiers.greedy_cuts import build, greedy_cuts
 from terrainvis import TIN, HeightGrid, bundled_terrain, load_dem, synthetic_terrain
-from terrainvis.deviation import vertical_errors
-from terrainvis.synthetic import KINDS
+from terrainvis.core.deviation import vertical_errors
+from terrainvis.core.synthetic import KINDS
 
 SHARED_DEM = Path(__file__).resolve().parents[2] / "shared" / "data" / "dem"
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from simplifiers.greedy_insertion import build
 from terrainvis import TIN, HeightGrid, synthetic_terrain
-from terrainvis.deviation import vertical_errors
+from terrainvis.core.deviation import vertical_errors
 
 
 def pydelatin_tin(z: np.ndarray, n: int):

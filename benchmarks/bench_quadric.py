@@ -50,7 +50,7 @@ import numpy as np
 
 from simplifiers import quadric, vertex_budget
 from terrainvis import TIN
-from terrainvis.synthetic import synthetic_terrain
+from terrainvis.core.synthetic import synthetic_terrain
 
 BACKENDS = quadric.BACKENDS
 
@@ -156,7 +156,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[1024])
     ap.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3])
-    ap.add_argument("--kind", default="mountains", help="synthetic terrain kind (terrainvis.synthetic.KINDS)")
+    ap.add_argument("--kind", default="mountains", help="synthetic terrain kind (terrainvis.core.synthetic.KINDS)")
     ap.add_argument("--backends", nargs="+", default=list(BACKENDS), choices=list(BACKENDS))
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--cascade", action="store_true", help="also run levels cascaded from the previous one")

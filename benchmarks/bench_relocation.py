@@ -26,6 +26,7 @@ import numpy as np
 
 import simplifiers
 import terrainvis as tv
+from terrainvis.relocation import calibrated
 
 
 def _timed(fn, *args, **kwargs):
@@ -48,7 +49,7 @@ def scale(args) -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for level in args.levels:
         S = simplifiers.simplify(T, "lls", level)
-        _, t_part = _timed(tv.calibration.partners, T, S, height=args.offset, move=True)
+        _, t_part = _timed(calibrated.partners, T, S, height=args.offset, move=True)
         moved, t_points = _timed(tv.relocate, P, S, "calibrated", original=T, offset=args.offset)
         full = tv.relocate(P, S, "full", offset=args.offset)
         V_S, t_vs = _timed(tv.visibility_matrix, S, moved)
@@ -61,7 +62,7 @@ def scale(args) -> None:
 
 
 def default(args) -> None:
-    from terrainvis.experiment import DEFAULT_TERRAINS, point_sets, resolve_terrains
+    from terrainvis.experiment.comparison import DEFAULT_TERRAINS, point_sets, resolve_terrains
 
     grids = resolve_terrains(list(DEFAULT_TERRAINS))
     methods = simplifiers.default_methods()  # compare's

@@ -273,7 +273,7 @@ def section_all(args) -> None:
 
     import simplifiers
     from terrainvis import HeightGrid
-    from terrainvis.synthetic import synthetic_terrain
+    from terrainvis.core.synthetic import synthetic_terrain
 
     methods = args.methods or list(simplifiers.available())
     print("\n== all methods: simplify(grid, method, level) on a synthetic 'mountains' terrain ==")

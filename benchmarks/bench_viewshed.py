@@ -80,7 +80,7 @@ import time
 
 import numpy as np
 
-from terrainvis.synthetic import synthetic_terrain
+from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import clearance_tolerance, trim_length
 from terrainvis.visibility.grid import grid_accel, grid_clearance
 from terrainvis.visibility.sweep import _viewshed

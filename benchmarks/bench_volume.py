@@ -37,7 +37,7 @@ import numpy as np
 
 from simplifiers import simplify
 from terrainvis import TIN, HeightGrid, synthetic_terrain
-from terrainvis.deviation import volume_error
+from terrainvis.core.deviation import volume_error
 
 
 def _status_kb(field: str) -> int | None:

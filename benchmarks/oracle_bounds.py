@@ -28,9 +28,9 @@ import pandas as pd
 
 import simplifiers
 import terrainvis as tv
-from terrainvis.plan import DEFAULT_TERRAINS, resolve_terrains
-from terrainvis.relocation import _candidate_pass, _candidates, _ground, _oracle_start
-from terrainvis.units import point_sets
+from terrainvis.experiment.plan import DEFAULT_TERRAINS, resolve_terrains
+from terrainvis.relocation.registry import _candidate_pass, _candidates, _ground, _oracle_start
+from terrainvis.experiment.units import point_sets
 
 #: Candidate heights per point (relocate's default ``n_candidates``, as when the issue was filed).
 N_CANDIDATES = 9

@@ -28,8 +28,8 @@ import pandas as pd
 
 import simplifiers
 import terrainvis as tv
-from terrainvis.plan import DEFAULT_TERRAINS, resolve_terrains
-from terrainvis.units import point_sets
+from terrainvis.experiment.plan import DEFAULT_TERRAINS, resolve_terrains
+from terrainvis.experiment.units import point_sets
 
 
 def halves(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

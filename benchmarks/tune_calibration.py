@@ -15,7 +15,7 @@ the mean accuracy of each method and level against T's verdicts, the time per un
         --methods gls lls qec greedy-insertion --sets 6 --terrain-seed 12
 
 A setting is (partners, core, sweeps, min gain): the core (at most the partners) is
-calibrated jointly, the other partners are placed against it (terrainvis.calibration).
+calibrated jointly, the other partners are placed against it (terrainvis.relocation.calibrated).
 """
 
 from __future__ import annotations
@@ -28,13 +28,13 @@ import numpy as np
 
 import simplifiers
 import terrainvis as tv
-from terrainvis import calibration
-from terrainvis.synthetic import KINDS
+from terrainvis.relocation import calibrated as calibration
+from terrainvis.core.synthetic import KINDS
 
 
 def _relocated(sets, S, T, core, **kwargs):
     """The calibrated relocation of every set with a core of ``core`` partners (relocate has
-    no keyword for it: :data:`terrainvis.calibration.CORE_PARTNERS`, set for the call and restored)."""
+    no keyword for it: :data:`terrainvis.relocation.calibrated.CORE_PARTNERS`, set for the call and restored)."""
     default = calibration.CORE_PARTNERS
     calibration.CORE_PARTNERS = core
     try:

@@ -1,6 +1,6 @@
 """How the calibrated relocation's neighbours were chosen, by pair distance, on terrains it is not reported on.
 
-Not a timing. The neighbours (``relocate(..., neighbours=True)``, terrainvis.calibration)
+Not a timing. The neighbours (``relocate(..., neighbours=True)``, terrainvis.relocation.calibrated)
 guard each point's short sight lines; their weight against the partners trades accuracy
 among close pairs for accuracy over all pairs. This sweeps the weight on five synthetic
 120x120 terrains of the bundled kinds made with seed 11, point sets from seed 1 (a
@@ -12,7 +12,7 @@ every pair, beside full projection and the partners alone ("none").
     python benchmarks/tune_neighbours.py --weights 0.25 0.5 --levels 1
 
 A weight is a neighbour's against a partner when there are 512 partners; with K partners
-it counts K / 512 times as much (terrainvis.calibration.neighbour_weight), so the
+it counts K / 512 times as much (terrainvis.relocation.calibrated.neighbour_weight), so the
 neighbours keep their share of the agreement. ``--partners 512`` gives the setting in
 which the weight was chosen (before 2,048 partners became the default).
 
@@ -31,8 +31,8 @@ import pandas as pd
 
 import simplifiers
 import terrainvis as tv
-from terrainvis import calibration
-from terrainvis.synthetic import KINDS
+from terrainvis.relocation import calibrated as calibration
+from terrainvis.core.synthetic import KINDS
 
 BANDS = (5.0, 10.0, 20.0, 40.0, np.inf)
 DEFAULT_WEIGHT = calibration.NEIGHBOUR_WEIGHT

@@ -438,7 +438,7 @@ def feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1, stop):
     Task ``t`` is the block of ``bs`` curves number ``t % nblk`` of ``a = t // nblk``
     (bs = ``_FEATURE_BLOCK`` when B > 1, else 1; A * ceil(B / bs) tasks). The block is
     gathered (reading whole row segments) into a contiguous buffer, solved curve by
-    curve and scattered back. The stop flag ``stop`` (:mod:`terrainvis._interrupt`) is
+    curve and scattered back. The stop flag ``stop`` (:mod:`terrainvis.core.interrupt`) is
     read before every task; once it is set the remaining tasks are skipped.
     """
     A, m, B = f.shape

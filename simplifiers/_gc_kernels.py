@@ -39,7 +39,7 @@ adding no vertex: ears and connections to the front), ``N_BITES`` (triangles add
 vertex, fallback insertions included), ``N_SPLITS`` (fallback insertions), ``STATUS``
 (``DONE``; ``STUCK``: an edge found no valid triangle; ``STEP_LIMIT``; ``OVER_BUDGET``:
 stopped early because the vertex count passed ``max_vertices``; ``INTERRUPTED``: the stop
-flag was set, see :mod:`terrainvis._interrupt`), ``N_EVAL_EAR``,
+flag was set, see :mod:`terrainvis.core.interrupt`), ``N_EVAL_EAR``,
 ``N_EVAL_BITE``, ``N_EVAL_SPLIT`` (triangles evaluated by each step), ``N_CANDIDATES``
 (fallback candidates gathered), ``N_VERTICES`` (vertices so far: the initial front's
 plus one per bite) and ``N_COVERED`` (samples no longer free: in a finished triangle or
@@ -811,7 +811,7 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
     max_vertices : int
         Stop (``counts[STATUS] = OVER_BUDGET``) as soon as the vertex count exceeds this.
     stop : (1,) int64
-        The stop flag (:mod:`terrainvis._interrupt`), read before every step; when it is
+        The stop flag (:mod:`terrainvis.core.interrupt`), read before every step; when it is
         set the run ends with ``counts[STATUS] = INTERRUPTED``.
 
     Returns

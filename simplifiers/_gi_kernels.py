@@ -356,7 +356,7 @@ def init_state(z, W, H, st):
 def run(z, W, ratio, st, n_target, max_error, stop):
     """Insert the worst candidate until there are ``n_target`` vertices, no candidate is left,
     the worst error is <= ``max_error`` (ignored when negative) or the stop flag ``stop[0]``
-    is set (:mod:`terrainvis._interrupt`; checked before every insertion).
+    is set (:mod:`terrainvis.core.interrupt`; checked before every insertion).
 
     ``st`` is the :class:`State`, ``z`` the (H * W,) heights and ``ratio`` the in-circle
     aspect ``(dy / dx) ** 2``. Returns the largest vertical error of the current TIN over

@@ -26,7 +26,7 @@ rules of :func:`simplifiers.registry.check_height_field`:
    caller's last resort when a library cannot get closer to a vertex budget.
 
 Everything here works in world coordinates on plain arrays; the mesh helpers (signed
-areas, edge keys, the boundary loop) come from :mod:`terrainvis._mesh`.
+areas, edge keys, the boundary loop) come from :mod:`terrainvis.core.mesh`.
 """
 
 from __future__ import annotations
@@ -35,9 +35,9 @@ import math
 
 import numpy as np
 
-from terrainvis._mesh import NotADiskError, boundary_loop, edge_keys, half_edges, signed_area2
+from terrainvis.core.mesh import NotADiskError, boundary_loop, edge_keys, half_edges, signed_area2
 from terrainvis.errors import SimplificationError
-from terrainvis.terrain import HeightGrid
+from terrainvis.core.terrain import HeightGrid
 from terrainvis.tolerances import DIVISOR_FLOOR, FACE_AREA_REL, STAR_MARGIN_MIN
 
 __all__ = ["PostError", "PostProcessor"]

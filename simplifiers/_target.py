@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 import time
 
-from terrainvis.deviation import vertical_errors
-from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.core.deviation import vertical_errors
+from terrainvis.core.terrain import TIN, HeightGrid
 
 from .levels import budget_tolerance, coarse_coords, max_level
 

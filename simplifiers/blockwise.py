@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from terrainvis._validate import as_int, describe
-from terrainvis.terrain import HeightGrid
+from terrainvis.core.validate import as_int, describe
+from terrainvis.core.terrain import HeightGrid
 
 from .levels import coarse_coords, coarse_length
 from .registry import METHODS, method_info
@@ -189,7 +189,7 @@ def simplify_dataarray(da, method: str = "lls", level: int = 1, *, x=None, y=Non
     """
     import dask.array as dsa
 
-    from terrainvis._xarray import find_dims, raw_to_heights, xarray_module
+    from terrainvis.core.dataarray import find_dims, raw_to_heights, xarray_module
 
     xr = xarray_module()
     if not isinstance(da, xr.DataArray):

@@ -42,10 +42,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from terrainvis._interrupt import call
-from terrainvis._validate import as_nonnegative_finite, describe
+from terrainvis.core.interrupt import call
+from terrainvis.core.validate import as_nonnegative_finite, describe
 from terrainvis.errors import SimplificationError
-from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.core.terrain import TIN, HeightGrid
 from terrainvis.tolerances import EPS_BRACKET_FLOOR_REL, EPS_GUESS_FLOOR_REL
 
 from . import _gc_kernels as K

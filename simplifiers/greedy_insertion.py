@@ -28,11 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from terrainvis._interrupt import call
-from terrainvis._validate import as_int, as_nonnegative_finite, describe
-from terrainvis._mesh import signed_area2
+from terrainvis.core.interrupt import call
+from terrainvis.core.validate import as_int, as_nonnegative_finite, describe
+from terrainvis.core.mesh import signed_area2
 from terrainvis.errors import SimplificationError
-from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.core.terrain import TIN, HeightGrid
 from terrainvis.tolerances import SQUARE_CELL_REL
 
 from . import _gi_kernels as K

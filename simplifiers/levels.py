@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from terrainvis._validate import as_int
+from terrainvis.core.validate import as_int
 from terrainvis.tolerances import BUDGET_WINDOW_REL
 
 __all__ = [

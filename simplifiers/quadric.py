@@ -74,12 +74,12 @@ import time
 
 import numpy as np
 
-from terrainvis._interrupt import import_library
-from terrainvis._memory import release_freed_memory
-from terrainvis._mesh import boundary_edges
-from terrainvis._validate import as_int, describe
+from terrainvis.core.interrupt import import_library
+from terrainvis.core.memory import release_freed_memory
+from terrainvis.core.mesh import boundary_edges
+from terrainvis.core.validate import as_int, describe
 from terrainvis.errors import SimplificationError
-from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.core.terrain import TIN, HeightGrid
 from terrainvis.tolerances import TILE_BORDER_REL
 
 from ._quadric_repair import PostError, PostProcessor

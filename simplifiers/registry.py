@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from terrainvis._memory import check_memory
-from terrainvis._mesh import NotADiskError, boundary_loop, footprint_matches, signed_area2
-from terrainvis._validate import as_int, as_nonnegative_finite, describe
-from terrainvis.deviation import vertical_errors
+from terrainvis.core.memory import check_memory
+from terrainvis.core.mesh import NotADiskError, boundary_loop, footprint_matches, signed_area2
+from terrainvis.core.validate import as_int, as_nonnegative_finite, describe
+from terrainvis.core.deviation import vertical_errors
 from terrainvis.errors import SimplificationError
-from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.core.terrain import TIN, HeightGrid
 
 from ._target import qec_within, regular_within
 from .levels import check_budget, check_level, check_vertex_count, coarse_coords, vertex_budget
@@ -66,7 +66,7 @@ class Method:
         The method can continue from its own result at a finer level (``start=``), so a
         comparison may simplify level k+1 from level k instead of from the grid.
     default : bool
-        The method is in a comparison's default method list (:mod:`terrainvis.options`).
+        The method is in a comparison's default method list (:mod:`terrainvis.experiment.options`).
     whole_grid : bool
         A regular method whose code is ``op(grid, level, **options) -> HeightGrid`` (the
         coarse grid at the reverse Faber positions) instead of a curve operator.

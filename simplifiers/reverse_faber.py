@@ -46,9 +46,9 @@ import math
 import numba
 import numpy as np
 
-from terrainvis._interrupt import call
-from terrainvis._validate import as_int, as_nonnegative_finite, describe
-from terrainvis.terrain import HeightGrid
+from terrainvis.core.interrupt import call
+from terrainvis.core.validate import as_int, as_nonnegative_finite, describe
+from terrainvis.core.terrain import HeightGrid
 
 from . import _faber_kernels as _k
 
@@ -137,7 +137,7 @@ def _run(kernel, parallel_kernel, args, ntasks: int, work: int, *, stoppable: bo
     Waking the thread pool costs far more than filtering a few thousand samples (and
     much more on a loaded machine), so inputs below ``_PARALLEL_MIN`` samples of work
     run in the calling thread. A ``stoppable`` kernel takes the stop flag last and runs
-    through :func:`terrainvis._interrupt.call` (the filters stream at memory speed and
+    through :func:`terrainvis.core.interrupt.call` (the filters stream at memory speed and
     need none; the feature-aware solve does).
     """
     threads = numba.get_num_threads()

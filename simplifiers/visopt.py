@@ -2,7 +2,7 @@
 
 A HeightGrid at exactly the coarse positions of the reverse Faber levels (the grid of
 ``gls``/``lls`` at the same level), whose coarse heights are chosen so that points
-relocated onto it with the *calibrated* relocation (:mod:`terrainvis.calibration`)
+relocated onto it with the *calibrated* relocation (:mod:`terrainvis.relocation.calibrated`)
 keep the line-of-sight verdicts they had on the original terrain T.
 
 The method
@@ -16,7 +16,7 @@ The method
    a. *Calibrate* the training points on S jointly, as the calibrated relocation
       calibrates its partners: Gauss-Seidel sweeps in which each point takes its best
       height against the others' T verdicts at their current heights
-      (:func:`terrainvis._calibration_kernels.grid_sweep`: exact thresholds, sorted;
+      (:func:`terrainvis.relocation._threshold_kernels.grid_sweep`: exact thresholds, sorted;
       3 sweeps in the first round, 1 afterwards).
    b. One sweep of exact *coordinate descent* over the coarse heights: each coarse
       height in turn (random order) takes the value that maximises the number of
@@ -47,7 +47,7 @@ is kept (their own seed) so that it fits; the calibration step always uses every
 Parameters (fixed from the research, docs/visopt.md)
 ----------------------------------------------------
 ``n_train=1200``, ``rounds=3``, ``trust=1.0``, start GLS: chosen on synthetic terrains
-of seeds 11 and 12 (``terrainvis.synthetic.synthetic_terrain(kind, 120, seed)``, the
+of seeds 11 and 12 (``terrainvis.core.synthetic.synthetic_terrain(kind, 120, seed)``, the
 five kinds), point sets of seed 1000, level 3 -- never on the bundled terrains (seed 0)
 or Jacksboro on which it is reported. Tried and left: 400 and 800 training points,
 5 and 10 rounds, LLS as the start, no trust region, an L1 pull towards S0, a margin
@@ -64,8 +64,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from terrainvis._validate import as_int, as_nonnegative_finite, describe
-from terrainvis.terrain import HeightGrid
+from terrainvis.core.validate import as_int, as_nonnegative_finite, describe
+from terrainvis.core.terrain import HeightGrid
 
 from .levels import check_level, coarse_coords
 
@@ -152,7 +152,7 @@ class _Pairs:
     """The training pairs kept, their breakpoints on the coarse grid and the vertex -> pairs incidence."""
 
     def __init__(self, S0: HeightGrid, p: np.ndarray, n: int, budget: int, rng: np.random.Generator):
-        from terrainvis._interrupt import call
+        from terrainvis.core.interrupt import call
         from terrainvis.visibility import trim_length
 
         from . import _visopt_kernels as _vk
@@ -193,7 +193,7 @@ class _Pairs:
 
     def visible(self, c: np.ndarray, z: np.ndarray, tol: float) -> np.ndarray:
         """Verdicts of the kept pairs on the coarse heights ``c`` (flat), points at heights ``z``."""
-        from terrainvis._interrupt import call
+        from terrainvis.core.interrupt import call
 
         from . import _visopt_kernels as _vk
 
@@ -216,10 +216,10 @@ def optimize(grid: HeightGrid, level: int, *, n_train: int = N_TRAIN, rounds: in
                                                                    max_breakpoints)
     if level == 0:
         return grid.copy_with(), {"history": [], "pairs": 0, "pairs_kept": 0, "breakpoints": 0}
-    from terrainvis import _calibration_kernels as _ck
-    from terrainvis._interrupt import call
-    from terrainvis.calibration import MARGIN_REL, _Surface
-    from terrainvis.sampling import sample_points
+    from terrainvis.relocation import _threshold_kernels as _ck
+    from terrainvis.core.interrupt import call
+    from terrainvis.relocation.calibrated import MARGIN_REL, _Surface
+    from terrainvis.core.sampling import sample_points
     from terrainvis.visibility import clearance_tolerance, terrain_scale, visibility_matrix
 
     from . import _visopt_kernels as _vk

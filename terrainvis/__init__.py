@@ -17,31 +17,37 @@ os.environ.setdefault("NUMBA_THREADING_LAYER_PRIORITY", "omp tbb workqueue")
 __version__ = "0.1.0"
 
 _API = {
-    "HeightGrid": "terrainvis.terrain",
-    "TIN": "terrainvis.terrain",
-    "sample_points": "terrainvis.sampling",
+    "HeightGrid": "terrainvis.core.terrain",
+    "TIN": "terrainvis.core.terrain",
+    "sample_points": "terrainvis.core.sampling",
     "load_dem": "terrainvis.io",
     "save_dem": "terrainvis.io",
     "load_terrain": "terrainvis.io",
     "save_terrain": "terrainvis.io",
     "native_coords": "terrainvis.io",
     "sample_dem": "terrainvis.io",
-    "synthetic_terrain": "terrainvis.synthetic",
-    "bundled_terrain": "terrainvis.synthetic",
+    "synthetic_terrain": "terrainvis.core.synthetic",
+    "bundled_terrain": "terrainvis.io",
     "min_clearance": "terrainvis.visibility",
     "line_of_sight": "terrainvis.visibility",
     "visibility_matrix": "terrainvis.visibility",
     "viewshed": "terrainvis.visibility",
     "cumulative_viewshed": "terrainvis.visibility",
     "relocate": "terrainvis.relocation",
-    "agreement": "terrainvis.metrics",
-    "vertical_errors": "terrainvis.deviation",
-    "volume_error": "terrainvis.deviation",
+    "agreement": "terrainvis.core.metrics",
+    "vertical_errors": "terrainvis.core.deviation",
+    "volume_error": "terrainvis.core.deviation",
     "compare": "terrainvis.experiment",
 }
+#: Modules reachable as attributes (``terrainvis.io``), imported on first use.
 _MODULES = {
-    "errors", "synthetic", "io", "visibility", "relocation", "deviation", "metrics", "experiment", "report", "plot",
-    "cli", "terrain", "sampling", "options", "calibration",
+    "errors": "terrainvis.errors", "tolerances": "terrainvis.tolerances", "core": "terrainvis.core",
+    "io": "terrainvis.io", "visibility": "terrainvis.visibility", "relocation": "terrainvis.relocation",
+    "experiment": "terrainvis.experiment", "cli": "terrainvis.cli",
+    "terrain": "terrainvis.core.terrain", "synthetic": "terrainvis.core.synthetic",
+    "sampling": "terrainvis.core.sampling", "deviation": "terrainvis.core.deviation",
+    "metrics": "terrainvis.core.metrics", "report": "terrainvis.experiment.report",
+    "plot": "terrainvis.experiment.plot", "options": "terrainvis.experiment.options",
 }
 
 __all__ = sorted(_API) + sorted(_MODULES)
@@ -53,7 +59,7 @@ def __getattr__(name):
         globals()[name] = value
         return value
     if name in _MODULES:
-        module = importlib.import_module(f"terrainvis.{name}")
+        module = importlib.import_module(_MODULES[name])
         globals()[name] = module
         return module
     raise AttributeError(f"module 'terrainvis' has no attribute {name!r}")

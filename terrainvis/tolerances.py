@@ -41,7 +41,7 @@ __all__ = [
 #: Clearance band of the line-of-sight predicate, as a fraction of the terrain's scale
 #: (``max(extent diagonal, relief)``): a segment still counts as visible down to a
 #: clearance of ``-CLEARANCE_REL * scale``. Also sets how large a height float64 still
-#: resolves against a terrain (``terrainvis._validate.height_limit``).
+#: resolves against a terrain (``terrainvis.core.validate.height_limit``).
 #: (``terrainvis.visibility.TOL_REL`` is this value, under the visibility package's name.)
 CLEARANCE_REL = 1e-9
 #: Segment ends and observers on a grid's edge: a position outside the extent by at most
@@ -91,7 +91,7 @@ RASTER_BOX_REL = 1e-9
 #: found in one of them.
 BARYCENTRIC_SLACK = 1e-10
 #: Height-field check: the faces' projected area must equal the extent's area to this
-#: fraction of it (``terrainvis._mesh.footprint_matches``: ``TIN.is_height_field``,
+#: fraction of it (``terrainvis.core.mesh.footprint_matches``: ``TIN.is_height_field``,
 #: ``volume_error``'s coverage check; the registry's check of simplified TINs holds the
 #: same value).
 FOOTPRINT_REL = 1e-9
@@ -133,7 +133,7 @@ STAR_MARGIN_MIN = 1e-9
 #: Height margin kept from the thresholds, as a fraction of the terrain's scale (about 5 mm
 #: on a 5 km grid): a chosen height stands this far from every threshold, so that the
 #: verdicts the relocation counted are the ones a LOS engine gives there
-#: (``terrainvis.calibration``).
+#: (``terrainvis.relocation.calibrated``).
 THRESHOLD_MARGIN_REL = 1e-6
 #: (kernel) The threshold walk over a TIN: a track position counts as inside a face down to
 #: barycentric coordinates of ``-TRACK_FACE_SLACK`` (a track along an edge is found in one

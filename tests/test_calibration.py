@@ -14,10 +14,10 @@ from hypothesis import strategies as st
 
 import simplifiers
 import terrainvis as tv
-from terrainvis import _calibration_kernels as ck
-from terrainvis import calibration as cal
+from terrainvis.relocation import _threshold_kernels as ck
+from terrainvis.relocation import calibrated as cal
 from terrainvis.errors import OutsideFootprintError
-from terrainvis.terrain import TIN, HeightGrid
+from terrainvis.core.terrain import TIN, HeightGrid
 
 
 def _random_grid(seed, rows=9, cols=11, rectilinear=False):
@@ -131,7 +131,7 @@ def test_tin_walk_through_vertices_and_along_edges():
 
 def test_the_pyramid_walk_equals_the_cell_walk():
     """Large grids walk the pyramid, small ones every cell: the same maxima."""
-    from terrainvis.synthetic import synthetic_terrain
+    from terrainvis.core.synthetic import synthetic_terrain
 
     grid = synthetic_terrain("rough", size=300, seed=4)
     surf = cal._Surface(grid)

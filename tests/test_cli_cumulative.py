@@ -115,7 +115,7 @@ def test_nodata_is_the_largest_value_and_two_workers_agree(tmp_path, capsys):
 def test_observers_in_degrees_on_a_lonlat_dem(tmp_path, capsys):
     """The bundled Jacksboro window is lon/lat: the CSV takes degrees (native), or metres with --frame local."""
     rasterio = pytest.importorskip("rasterio", reason="the geo extra is not installed")
-    from terrainvis.plan import resolve_one
+    from terrainvis.experiment.plan import resolve_one
 
     grid = resolve_one(None, "jacksboro", 0)[1]  # as the commands load it
     local = np.array([[grid.xs[20], grid.ys[30]], [grid.xs[90], grid.ys[70]], [grid.xs[60], grid.ys[100]]])

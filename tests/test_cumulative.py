@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from terrainvis import HeightGrid, cumulative_viewshed, viewshed
 from terrainvis.errors import OutsideFootprintError
-from terrainvis.synthetic import synthetic_terrain
+from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import line_of_sight
 from terrainvis.visibility.cumulative import _chunks, _count_dtype
 from terrainvis.visibility.sweep import _surface_at
@@ -265,8 +265,8 @@ _SCRIPT = """
 import sys
 import numpy as np
 from terrainvis import cumulative_viewshed
-from terrainvis.runner import Interrupted
-from terrainvis.synthetic import synthetic_terrain
+from terrainvis.core.runner import Interrupted
+from terrainvis.core.synthetic import synthetic_terrain
 
 if __name__ == "__main__":
     grid = synthetic_terrain("mountains", 512)
@@ -311,7 +311,7 @@ def test_ctrl_c_stops_the_workers(tmp_path):
 
 # ----------------------------------------------------------------- the figure
 def test_plot_draws_the_counts_over_the_hillshade(hills):
-    from terrainvis import plot
+    from terrainvis.experiment import plot
 
     obs = _observers(hills, 6)
     counts = cumulative_viewshed(hills, obs, workers=1)

@@ -27,8 +27,8 @@ from hypothesis import strategies as st
 
 from conftest import shared_dem_120
 from terrainvis import HeightGrid, TIN
-from terrainvis.sampling import sample_points
-from terrainvis.synthetic import synthetic_terrain
+from terrainvis.core.sampling import sample_points
+from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import (
     clearance_tolerance,
     curvature_coefficient,

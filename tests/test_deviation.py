@@ -1,4 +1,4 @@
-"""Vertical errors and the volume between two surfaces (terrainvis.deviation).
+"""Vertical errors and the volume between two surfaces (terrainvis.core.deviation).
 
 The exact volume (the default) is checked against manifold3d's boolean volume (the
 ``method="manifold"`` reference) on the bundled terrains, real DEM crops, every
@@ -18,9 +18,9 @@ from hypothesis import strategies as st
 from simplifiers import simplify
 from simplifiers.levels import max_level
 from terrainvis import TIN, HeightGrid, bundled_terrain, synthetic_terrain
-from terrainvis._mesh import signed_area2
-from terrainvis._volume_kernels import abs_integral_tri, inside_one_edge
-from terrainvis.deviation import _volume_exact, vertical_errors, volume_error
+from terrainvis.core.mesh import signed_area2
+from terrainvis.core._volume_kernels import abs_integral_tri, inside_one_edge
+from terrainvis.core.deviation import _volume_exact, vertical_errors, volume_error
 from terrainvis.errors import NodataError
 
 from conftest import shared_dem_120

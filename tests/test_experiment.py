@@ -9,9 +9,15 @@ import pandas as pd
 import pytest
 
 from terrainvis import HeightGrid, compare, synthetic_terrain
-from terrainvis.experiment import COLUMNS, DEFAULT_TERRAINS, JACKSBORO_WINDOW, TIMING_COLUMNS, resolve_terrains
-from terrainvis.results import settings_path
-from terrainvis.relocation import PAPER_RELOCATIONS
+from terrainvis.experiment.comparison import (
+    COLUMNS,
+    DEFAULT_TERRAINS,
+    JACKSBORO_WINDOW,
+    TIMING_COLUMNS,
+    resolve_terrains,
+)
+from terrainvis.experiment.results import settings_path
+from terrainvis.relocation.registry import PAPER_RELOCATIONS
 
 MEASURED = ["accuracy", "visible_kept", "blocked_kept", "agree_visible", "agree_blocked", "false_visible",
             "false_blocked", "n_vertices", "nbytes", "max_error", "rms_error", "volume_error"]
@@ -57,7 +63,7 @@ def test_agreement_is_the_one_of_the_matrices(small, serial):
     from simplifiers import simplify
 
     from terrainvis import agreement, relocate, visibility_matrix, volume_error
-    from terrainvis.experiment import point_sets
+    from terrainvis.experiment.comparison import point_sets
 
     row = serial[(serial.terrain == "b") & (serial.method == "lls") & (serial.level == 2)
                  & (serial.relocation == "half") & (serial.set == 1)].iloc[0]
@@ -75,7 +81,7 @@ def test_deterministic_and_pool_equals_serial(small, serial):
 
 
 def test_point_sets_depend_on_seed_and_name_only(small):
-    from terrainvis.experiment import point_sets
+    from terrainvis.experiment.comparison import point_sets
 
     a = point_sets(small["a"], "a", 5, 2, 0, 0.0)
     b = point_sets(small["a"], "a", 5, 2, 0, 0.0)
@@ -87,7 +93,7 @@ def test_point_sets_depend_on_seed_and_name_only(small):
 def test_max_distance_restricts_pairs(small):
     df = compare({"a": small["a"]}, workers=1, **_kw(max_distance=300.0, methods=["lls"], levels=[1]))
     assert (df["n_pairs"] < 66).all() and (df["n_pairs"] > 0).all()
-    from terrainvis.experiment import point_sets
+    from terrainvis.experiment.comparison import point_sets
 
     P = point_sets(small["a"], "a", 12, 2, 3, 0.0)[0]
     d = np.hypot(*(P[:, None, :2] - P[None, :, :2]).transpose(2, 0, 1))
@@ -146,7 +152,7 @@ def test_everything_is_validated_before_any_unit_runs(small):
 
 def _interrupt_after(monkeypatch, n_finished: int):
     """Make the (n_finished + 1)-th unit raise KeyboardInterrupt, as a Ctrl-C would."""
-    from terrainvis import experiment
+    from terrainvis.experiment import comparison as experiment
 
     calls = []
     real = experiment._run_unit
@@ -162,7 +168,7 @@ def _interrupt_after(monkeypatch, n_finished: int):
 
 
 def test_incremental_csv_and_resume(small, tmp_path, monkeypatch, serial):
-    from terrainvis import experiment
+    from terrainvis.experiment import comparison as experiment
 
     out = tmp_path / "results.csv"
     calls, real = _interrupt_after(monkeypatch, 2)
@@ -215,7 +221,7 @@ def test_resume_is_strict_about_settings(small, tmp_path):
 
 
 def test_a_cut_off_last_row_is_dropped_with_a_warning(small, tmp_path, monkeypatch):
-    from terrainvis import experiment
+    from terrainvis.experiment import comparison as experiment
 
     out = tmp_path / "results.csv"
     kw = _kw(methods=["simple", "lls"], levels=[1])
@@ -268,7 +274,7 @@ def test_save_dir_keeps_every_simplified_terrain(small, tmp_path):
     from simplifiers import simplify
 
     from terrainvis import TIN, load_terrain
-    from terrainvis.experiment import simplified_path
+    from terrainvis.experiment.comparison import simplified_path
 
     compare({"a": small["a"]}, workers=1, save_dir=tmp_path, **_kw(n_sets=1))
     for method in ("simple", "lls", "greedy-insertion"):
@@ -337,7 +343,7 @@ def test_oracle_rows_bound_the_practical_ones(small):
 def test_cascade_continues_each_qec_level_from_the_previous(small, tmp_path, monkeypatch):
     from simplifiers import simplify
 
-    from terrainvis import experiment
+    from terrainvis.experiment import comparison as experiment
 
     kw = _kw(methods=["qec", "lls"], levels=[1, 2], n_sets=1)
     g = {"a": small["a"]}
@@ -380,7 +386,7 @@ def test_calibrated_in_a_comparison(small):
     from simplifiers import simplify
 
     from terrainvis import agreement, relocate, visibility_matrix
-    from terrainvis.experiment import point_sets
+    from terrainvis.experiment.comparison import point_sets
 
     T = small["a"]
     df = compare({"a": T}, workers=1, methods=["lls"], levels=[2], n_points=20, n_sets=1, seed=3, repeats=1,
@@ -399,7 +405,7 @@ def test_viewshed_measure(small):
     from simplifiers import simplify
 
     from terrainvis import relocate, viewshed
-    from terrainvis.experiment import Settings, _observers
+    from terrainvis.experiment.comparison import Settings, _observers
 
     g = {"a": small["a"]}
     kw = dict(methods=["lls", "greedy-insertion"], levels=[2], seed=3, repeats=1, measure="viewshed", n_observers=3,
@@ -434,20 +440,20 @@ _WARM_UP_SCRIPT = """
 import sys
 from numba.core import event
 import terrainvis as tv
-from terrainvis import experiment
+from terrainvis.experiment import plan, units
 
 measure, predicate = sys.argv[1:]
-grids = experiment.resolve_terrains(["hills"])
-settings = experiment._settings(
-    grids, methods=None, levels=[1], relocations=["identity", "full", "half"] + (["oracle"] if measure == "pairs" else []), n_points=8, n_sets=1,
+grids = plan.resolve_terrains(["hills"])
+settings = plan.settings_for(grids, dict(
+    methods=None, levels=[1], relocations=["identity", "full", "half"] + (["oracle"] if measure == "pairs" else []), n_points=8, n_sets=1,
     seed=0, max_distance=[None, 500.0], distance_unit="world", offset=1.0, engine="auto", predicate=predicate,
-    volume=True, repeats=1, cascade=False, measure=measure, n_observers=1, target_height=0.0)
-tasks = experiment._tasks(grids, settings)
-for part in experiment._warm_up_parts(tasks, grids):
-    experiment._warm_up_part(part, settings)  # not _warm_up: a failure must show here
+    volume=True, repeats=1, cascade=False, measure=measure, n_observers=1, target_height=0.0))
+tasks = plan.tasks(grids, settings)
+for part in plan.warm_up_parts(tasks, grids):
+    units.warm_up_part(part, settings)  # not warm_up: a failure must show here
 with event.install_recorder("numba:compile") as rec:
     for t, m, levels in tasks:
-        rows = experiment._run_unit(grids[t], t, m, levels, settings, None)
+        rows = units.run_unit(grids[t], t, m, levels, settings, None)
         assert not any(r["error"] for r in rows), rows[0]["error"]
 compiled = sorted({ev.data["dispatcher"].py_func.__qualname__ for _, ev in rec.buffer if "dispatcher" in ev.data})
 print(compiled)

@@ -16,7 +16,7 @@ from conftest import shared_dem_path
 
 import simplifiers
 from terrainvis import TIN, HeightGrid, load_dem, save_dem, synthetic_terrain
-from terrainvis._validate import FLOAT64_EPS, as_height, height_limit
+from terrainvis.core.validate import FLOAT64_EPS, as_height, height_limit
 from terrainvis.errors import NotEnoughMemoryError
 from terrainvis.io import load_terrain, save_terrain, write_mask_geotiff
 
@@ -145,7 +145,7 @@ def test_a_header_claiming_too_much_is_refused_before_reading(tmp_path):
 
 
 def test_simplify_checks_its_memory_first(monkeypatch):
-    import terrainvis._memory as mem
+    import terrainvis.core.memory as mem
 
     g = synthetic_terrain("hills", size=65)
     monkeypatch.setattr(mem, "available_memory", lambda: 10_000)

@@ -14,7 +14,8 @@ from simplifiers import budget_tolerance, check_height_field, vertex_budget
 from simplifiers.greedy_cuts import _Triangulator, build, greedy_cuts
 from terrainvis import HeightGrid, synthetic_terrain
 from terrainvis.errors import NodataError, SimplificationError
-from terrainvis.synthetic import KINDS, bundled_terrain
+from terrainvis.core.synthetic import KINDS
+from terrainvis.io import bundled_terrain
 
 
 # ------------------------------------------------------------- brute-force references

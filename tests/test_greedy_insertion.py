@@ -13,8 +13,8 @@ from simplifiers import vertex_budget
 from simplifiers.greedy_insertion import GreedyInserter, build
 from terrainvis import TIN, HeightGrid, bundled_terrain
 from terrainvis.errors import NodataError
-from terrainvis.deviation import vertical_errors
-from terrainvis.synthetic import KINDS
+from terrainvis.core.deviation import vertical_errors
+from terrainvis.core.synthetic import KINDS
 
 from conftest import DEM_NAMES, shared_dem_120
 

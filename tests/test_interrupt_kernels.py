@@ -1,4 +1,4 @@
-"""Every long kernel stops within about a second of SIGINT or SIGTERM (terrainvis._interrupt).
+"""Every long kernel stops within about a second of SIGINT or SIGTERM (terrainvis.core.interrupt).
 
 Each test runs the work in a subprocess on a grid large enough to take several seconds,
 sends the signal while the kernel runs and checks that the process ends with the right
@@ -109,7 +109,7 @@ def work():
     # the calibrated relocation's Gauss-Seidel sweeps over a core of 2048 partners (serial; T's verdicts cached first)
     "calibrated-sweeps": ("""
 import simplifiers
-from terrainvis import calibration
+from terrainvis.relocation import calibrated as calibration
 def warm():
     s = tv.synthetic_terrain("mountains", size=65)
     calibration.partners(s, simplifiers.simplify(s, "lls", 1), height=0.0, move=True, n_partners=16, sweeps=1)
@@ -122,8 +122,8 @@ def work():
     # the calibrated relocation's best heights of many points (parallel over points)
     "calibrated-points": ("""
 import simplifiers
-from terrainvis import calibration, _calibration_kernels as ck
-from terrainvis._interrupt import call
+from terrainvis.relocation import calibrated as calibration, _threshold_kernels as ck
+from terrainvis.core.interrupt import call
 def setup(size, n):
     g = tv.synthetic_terrain("mountains", size=size)
     S = simplifiers.simplify(g, "lls", 1)
@@ -145,7 +145,7 @@ def work():
     # 1200 training points, about 30 s uninterrupted
     "visopt": ("""
 from simplifiers import visopt as vo, _visopt_kernels as vk
-from terrainvis._interrupt import call
+from terrainvis.core.interrupt import call
 def warm():
     vo.visopt(tv.synthetic_terrain("hills", size=33), 1, n_train=20)
 g = tv.synthetic_terrain("hills", size=120)
@@ -338,7 +338,7 @@ def _failures(out_dir) -> list[str]:
 
 _IMPORT_SCRIPT = """
 import os, signal, sys, threading, time
-from terrainvis._interrupt import import_library
+from terrainvis.core.interrupt import import_library
 threading.Timer(0.05, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
 try:
     import_library("pymeshlab")

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from terrainvis.experiment import COLUMNS, TIMING_COLUMNS
+from terrainvis.experiment.comparison import COLUMNS, TIMING_COLUMNS
 
 psutil = pytest.importorskip("psutil", reason="psutil (installed with the dask extra) lists the worker processes")
 
@@ -111,7 +111,7 @@ def test_interrupted_runs_resume_to_the_uninterrupted_result(tmp_path):
 
 _POOL_SCRIPT = """
 import sys, time
-from terrainvis.runner import Interrupted, run_units
+from terrainvis.core.runner import Interrupted, run_units
 
 def nap(i):
     time.sleep(60)
@@ -158,7 +158,7 @@ def test_an_interrupt_swallowed_inside_a_unit_still_stops_a_serial_run():
     """numba's compiler runs Python callbacks from C, where the handler's exception is printed
     and dropped (seen as "Exception ignored on calling ctypes callback function"): the run
     must stop after that unit all the same, without saving what the unit returned."""
-    from terrainvis.runner import Interrupted, run_units
+    from terrainvis.core.runner import Interrupted, run_units
 
     def unit(i):
         if i == 1:

@@ -12,7 +12,7 @@ from conftest import DEM_NAMES, REPO, shared_dem_path
 
 from terrainvis import TIN, HeightGrid, bundled_terrain, load_dem, sample_dem, save_dem, synthetic_terrain
 from terrainvis.io import FORMAT_VERSION, load_terrain, metres_per_degree, native_coords, save_terrain
-from terrainvis.synthetic import KINDS
+from terrainvis.core.synthetic import KINDS
 
 # Figures from shared/data/dem/README.md: shape, dx, dy, min, max, NaN cells.
 SHARED = {
@@ -156,7 +156,7 @@ def test_bundled_files_are_pinned_and_read_one_way(name):
     assert digest == BUNDLED_SHA256[name]
     assert (g.z[0, 0], g.z[119, 7]) == BUNDLED_VALUES[name]
     assert g.attrs == {"name": name, "seed": 0, "synthetic": True, "bundled": True}
-    path = REPO / "data" / f"{name}.npz"
+    path = REPO / "terrainvis" / "data" / f"{name}.npz"
     # load_dem and load_terrain read the file exactly as bundled_terrain does (not mirrored).
     assert_grid_equal(load_dem(path), g)
     assert_grid_equal(load_terrain(path), g)
@@ -727,7 +727,7 @@ FORMATS = [".npz", ".npy", ".asc", ".tif", ".ply", ".obj", ".stl", ".glb"]
 def test_failed_write_leaves_the_old_file(tmp_path, suffix, monkeypatch):
     if suffix in (".tif", ".asc"):
         _rasterio()
-    import terrainvis._fileio as fileio
+    import terrainvis.core.fileio as fileio
 
     p = tmp_path / f"old{suffix}"
     p.write_bytes(b"the old file")

@@ -122,7 +122,7 @@ def test_seed_minus_one_names_the_seed():
 # ---------------------------------------------------------------------- outputs
 def test_an_unwritable_output_is_refused_before_computing(tmp_path, capsys, monkeypatch):
     import simplifiers
-    import terrainvis._fileio as fileio
+    import terrainvis.core.fileio as fileio
 
     def no_probe(*a, **k):
         raise PermissionError(errno.EACCES, "Permission denied")
@@ -134,7 +134,7 @@ def test_an_unwritable_output_is_refused_before_computing(tmp_path, capsys, monk
 
 
 def test_a_full_disk_exits_1_naming_the_real_file(tmp_path, capsys, monkeypatch):
-    import terrainvis._fileio as fileio
+    import terrainvis.core.fileio as fileio
 
     def full(path):
         raise OSError(errno.ENOSPC, "No space left on device")
@@ -187,7 +187,7 @@ def test_coordinates_print_to_the_grid_s_resolution(capsys):
 # ---------------------------------------------------------------------- words
 def test_sigterm_message_ends_cleanly(capsys, monkeypatch):
     from terrainvis import cli
-    from terrainvis.runner import Interrupted
+    from terrainvis.core.runner import Interrupted
 
     def stopped(args):
         raise Interrupted(signal.SIGTERM)
@@ -222,7 +222,7 @@ def test_counts_are_singular_when_one(tmp_path, capsys):
 
 # ---------------------------------------------------------------------- memory
 def test_a_run_that_cannot_fit_in_memory_is_refused_before_it_starts(tmp_path, capsys):
-    from terrainvis._memory import available_memory, format_bytes
+    from terrainvis.core.memory import available_memory, format_bytes
 
     have = available_memory()
     assert have is None or have > 0
@@ -255,7 +255,7 @@ def test_the_cli_turns_a_memory_error_into_one_line(capsys, monkeypatch):
 
 # ---------------------------------------------------------------------- progress
 def test_a_cold_cache_shows_what_compiles_and_how_far(capsys, monkeypatch):
-    from terrainvis import experiment
+    from terrainvis.experiment import comparison as experiment
 
     monkeypatch.setattr(experiment, "_kernels_cached", lambda: False)  # as on a fresh install
     capsys.readouterr()
@@ -268,7 +268,7 @@ def test_a_cold_cache_shows_what_compiles_and_how_far(capsys, monkeypatch):
 
 
 def test_the_compile_estimate_packs_parts_on_the_workers():
-    from terrainvis.plan import COMPILE_SECONDS, compile_seconds
+    from terrainvis.experiment.plan import COMPILE_SECONDS, compile_seconds
 
     parts = [("method", "greedy-cuts", 33), ("method", "lls", 33), ("measure", "grid", 33)]
     assert compile_seconds(parts, 1) == pytest.approx(sum(COMPILE_SECONDS[p[1]] for p in parts))
@@ -282,8 +282,8 @@ def test_the_compile_estimate_packs_parts_on_the_workers():
 
 
 def test_the_work_order_starts_nothing_before_what_it_compiles_is_there():
-    from terrainvis import experiment
-    from terrainvis.plan import compile_weight, part_needs, unit_needs, warm_up_parts, work_order
+    from terrainvis.experiment import comparison as experiment
+    from terrainvis.experiment.plan import compile_weight, part_needs, unit_needs, warm_up_parts, work_order
 
     grids = experiment.resolve_terrains(["hills", "ridges"])
     settings = experiment._settings(grids, levels=[1, 3], n_points=20, n_sets=2)
@@ -313,7 +313,7 @@ ipython.get_ipython = lambda: types.SimpleNamespace(config={"IPKernelApp": {}}) 
 sys.modules["IPython"] = ipython
 sys.modules["ipykernel.zmqshell"] = types.ModuleType("ipykernel.zmqshell")  # how tqdm.auto recognises a kernel
 import terrainvis as tv
-from terrainvis.experiment import progress_bar_class
+from terrainvis.core._progress import progress_bar_class
 print(progress_bar_class().__module__)
 tv.compare(["hills"], methods=["lls"], levels=[1], n_points=5, n_sets=1, repeats=1, workers=1, progress=True)
 """
@@ -336,7 +336,7 @@ for name in ("IntProgress", "HBox", "HTML", "FloatProgress"):
 widgets.__version__ = "8.1.0"
 sys.modules["ipywidgets"] = widgets
 sys.modules["ipykernel.zmqshell"] = types.ModuleType("ipykernel.zmqshell")
-from terrainvis.experiment import progress_bar_class
+from terrainvis.core._progress import progress_bar_class
 print(progress_bar_class().__module__)
 """
 

@@ -71,7 +71,7 @@ def test_the_local_frame_is_off_by_the_documented_figures(tile):
     for a, b in (((0.0, lat_s), (0.0, lat_n)), ((0.0, lat_s + 0.5), (1.0, lat_s + 0.5))):
         assert abs(_frame_distance(grid, a, b)[0] / _geodesic(a, b)[0] - 1) < 1e-5
     # the error info prints is the same figure, from the scales alone
-    from terrainvis._georef import local_frame_error
+    from terrainvis.core._georef import local_frame_error
 
     south, north = local_frame_error(grid.attrs, grid.ys)
     assert south == pytest.approx(LOCAL_EDGE_ERRORS[lat_s][0], abs=3e-5)

@@ -67,7 +67,7 @@ def _cells_by_hand(T, S, counted):
 @settings(max_examples=50, deadline=None)
 @given(st.integers(1, 12), st.integers(1, 12), st.integers(0, 2**31))
 def test_viewshed_agreement_counts_every_counted_cell(rows, cols, seed):
-    from terrainvis.metrics import viewshed_agreement
+    from terrainvis.core.metrics import viewshed_agreement
 
     rng = np.random.default_rng(seed)
     T, S, counted = (rng.random((3, rows, cols)) < [[[0.5]], [[0.4]], [[0.7]]])
@@ -86,7 +86,7 @@ def test_viewshed_agreement_counts_every_counted_cell(rows, cols, seed):
 
 
 def test_viewshed_agreement_bad_input():
-    from terrainvis.metrics import viewshed_agreement
+    from terrainvis.core.metrics import viewshed_agreement
 
     with pytest.raises(ValueError, match="V_test must have the shape of V_true"):
         viewshed_agreement(np.zeros((2, 3), bool), np.zeros((3, 2), bool))

@@ -1,7 +1,7 @@
 """Options of compare declared once: the signature, the docstring, the CLI flags, the stored settings.
 
 The last tests add a toy option the way tests/test_toy_method.py adds a toy method: one
-entry in :data:`terrainvis.options.OPTIONS` (monkeypatched), no other file edited, and
+entry in :data:`terrainvis.experiment.options.OPTIONS` (monkeypatched), no other file edited, and
 the option is accepted and validated by ``compare``, offered by ``terrainvis compare``,
 stored in the run's settings and checked on resume.
 """
@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from terrainvis import compare, synthetic_terrain
-from terrainvis import experiment
+from terrainvis.experiment import comparison as experiment
 from terrainvis.cli import main
-from terrainvis.options import DEFAULTS, OPTIONS, Flag, Option, Settings, Switch, validate
-from terrainvis.results import settings_path
+from terrainvis.experiment.options import DEFAULTS, OPTIONS, Flag, Option, Settings, Switch, validate
+from terrainvis.experiment.results import settings_path
 
 RUN_CONTROLS = ["workers", "client", "out_csv", "resume", "save_dir", "progress"]
 
@@ -113,7 +113,7 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     with pytest.raises(Stop):
         main(["compare", "--quick", "--points", "9", "--out", str(tmp_path)])
     assert (seen["levels"], seen["n_points"], seen["n_sets"]) == ([1, 3], 9, 2)
-    from terrainvis.calibration import CORE_PARTNERS
+    from terrainvis.relocation.calibrated import CORE_PARTNERS
 
     assert seen["n_partners"] == CORE_PARTNERS  # quick: the core partners alone
 
@@ -145,7 +145,7 @@ def test_a_settings_file_without_a_newer_option_resumes_at_its_default(grid, tmp
 
 def test_relocations_and_methods_are_read_from_their_modules(monkeypatch, grid):
     """A relocation added to terrainvis.relocation (as "calibrated" was) is a valid name at once."""
-    from terrainvis import relocation
+    from terrainvis.relocation import registry as relocation
 
     monkeypatch.setattr(relocation, "RELOCATIONS", relocation.RELOCATIONS + ("toy",))
     s = validate({"g": grid}, {"relocations": ["toy", "full"]})
@@ -203,7 +203,8 @@ def test_a_toy_option_is_on_the_command_line(toy, tmp_path, capsys):
 def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, grid):
     """``los=True``: one entry, and the units pass it to visibility_matrix, viewshed and relocate (whose
     calibrated and oracle relocations compute visibility), as they pass the earth-curvature coefficient."""
-    from terrainvis import relocation, visibility
+    from terrainvis.relocation import registry as relocation
+    from terrainvis import visibility
 
     monkeypatch.setitem(OPTIONS, "toy_refraction", Option("toy_refraction", 0.0, lambda v, n: float(v),
                                                           "a toy refraction", "float", los=True))
@@ -231,43 +232,3 @@ def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, g
     df = compare({"g": grid}, toy_refraction=0.25, measure="viewshed", n_observers=1, **_small())
     assert (df["error"] == "").all()
     assert {(n, v) for n, _, v in seen} == {("viewshed", 0.25), ("relocate", 0.25)}
-
-
-# ---------------------------------------------------------------------- the split
-_SPLIT = ["options", "plan", "units", "collect", "experiment", "metrics", "results", "runner", "cli"]
-
-
-def _top_level_imports(module: str) -> set[str]:
-    path = Path(experiment.__file__).with_name(f"{module}.py")
-    tree = ast.parse(path.read_text())
-    out = set()
-    for node in tree.body:
-        if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
-            out.add(node.module.split(".")[0])
-    return out
-
-
-def test_the_experiment_modules_import_without_a_cycle():
-    graph = {m: _top_level_imports(m) & set(_SPLIT) for m in _SPLIT}
-    assert graph["options"] == set() and "experiment" not in set().union(*graph.values())
-    state = {}
-
-    def visit(m, path):
-        assert state.get(m) != "open", f"import cycle: {' -> '.join(path + [m])}"
-        if state.get(m) == "done":
-            return
-        state[m] = "open"
-        for n in graph[m]:
-            visit(n, path + [m])
-        state[m] = "done"
-
-    for m in _SPLIT:
-        visit(m, [])
-
-
-def test_the_experiment_module_keeps_its_names():
-    import terrainvis.experiment as e
-
-    for name in e.__all__ + ["UNIT_KEY", "TIMING_COLUMNS", "CASCADE_AUTO_MIN_SAMPLES", "cascades"]:
-        assert hasattr(e, name), name
-    assert np.isclose(e.DEFAULTS.offset, 0.0) and e.DEFAULTS.levels == (1, 2, 3)

@@ -21,7 +21,7 @@ import pandas as pd
 import pytest
 
 from terrainvis import bundled_terrain, save_dem
-from terrainvis._fileio import OutputBusyError, RunLock, protected_folders
+from terrainvis.core.fileio import OutputBusyError, RunLock, protected_folders
 from terrainvis.cli import main
 
 SMALL = ["--terrain", "hills", "--levels", "1", "--methods", "simple", "lls", "--points", "8", "--sets", "1",
@@ -85,7 +85,7 @@ def test_nothing_is_written_into_the_installed_package(tmp_path, capsys):
 # ---------------------------------------------------------------------- one run per output
 _HOLD = """
 import sys, time
-from terrainvis._fileio import RunLock
+from terrainvis.core.fileio import RunLock
 with RunLock(sys.argv[1], "--out 'x'", "terrainvis compare"):
     print("held", flush=True)
     time.sleep(60)
@@ -271,7 +271,7 @@ def test_a_local_file_named_like_a_bundled_terrain_wins_with_a_note(tmp_path, ca
 def test_a_local_asc_without_suffix_keeps_its_projection(tmp_path, monkeypatch):
     pytest.importorskip("rasterio", reason="the geo extra is not installed")
     from terrainvis import HeightGrid
-    from terrainvis.plan import resolve_terrains
+    from terrainvis.experiment.plan import resolve_terrains
 
     g = HeightGrid(np.arange(20.0).reshape(4, 5), dx=30.0, dy=30.0, origin=(500000.0, 4000000.0),
                    attrs={"crs": "EPSG:32617"})

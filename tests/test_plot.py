@@ -1,4 +1,4 @@
-"""The figures, and matplotlib kept inside terrainvis.plot."""
+"""The figures, and matplotlib kept inside terrainvis.experiment.plot."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ matplotlib.use("Agg")
 import pytest
 from matplotlib.figure import Figure
 
-from terrainvis import compare, plot, synthetic_terrain
+from terrainvis import compare, synthetic_terrain
+from terrainvis.experiment import plot
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +54,7 @@ def test_only_plot_imports_matplotlib():
     code = (
         "import sys\n"
         "import terrainvis as tv, simplifiers\n"
-        "from terrainvis import experiment, report, cli, relocation, metrics, io, visibility, deviation, runner\n"
+        "from terrainvis import experiment, report, cli, relocation, metrics, io, visibility, deviation\nfrom terrainvis.core import runner\n"
         "g = tv.sample_dem('jacksboro').crop(rows=(0, 40), cols=(0, 40))\n"
         "for m in simplifiers.available(): simplifiers.simplify(g, m, 1, **({'n_train': 20} if m == 'visopt' else {}))\n"
         "P = tv.sample_points(g, 5)\n"

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import terrainvis as tv
-from terrainvis._positions import PositionFrame
+from terrainvis.core._positions import PositionFrame
 from terrainvis.cli import main
 from terrainvis.visibility.profile import lowest_point
 
@@ -131,7 +131,7 @@ def test_projected_and_plain_grids_are_unchanged_bit_for_bit():
        cell=st.sampled_from([1.0 / 3600.0, 3.0 / 3600.0, 30.0 / 3600.0]))
 def test_round_trips_native_local(lat0, lon0, u, v, cell):
     """lon/lat -> local -> lon/lat and local -> lon/lat -> local, on grids read from lon/lat coordinates."""
-    from terrainvis._georef import lonlat_to_local
+    from terrainvis.core._georef import lonlat_to_local
 
     n = 50
     lon = lon0 + cell * np.arange(n)

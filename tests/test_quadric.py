@@ -22,10 +22,11 @@ import simplifiers
 from simplifiers import _quadric_repair, quadric
 from simplifiers.registry import check_height_field
 from terrainvis import TIN, HeightGrid
-from terrainvis._mesh import signed_area2
-from terrainvis.deviation import vertical_errors
+from terrainvis.core.mesh import signed_area2
+from terrainvis.core.deviation import vertical_errors
 from terrainvis.errors import NodataError, SimplificationError
-from terrainvis.synthetic import KINDS, bundled_terrain
+from terrainvis.core.synthetic import KINDS
+from terrainvis.io import bundled_terrain
 
 BACKENDS = quadric.BACKENDS
 LEVELS = (1, 2, 3)

@@ -99,7 +99,7 @@ def test_oracle_is_an_upper_bound_of_the_practical_relocations(method):
 
 def test_oracle_is_a_local_optimum_of_its_candidates():
     """No single point can improve the agreement by moving to another of its candidates."""
-    from terrainvis.relocation import _candidates
+    from terrainvis.relocation.registry import _candidates
 
     T, S, P, V = _oracle_case("simple", 2, seed=3)
     O = relocate(P, S, "oracle", reference=V, original=T)
@@ -116,7 +116,7 @@ def test_oracle_is_a_local_optimum_of_its_candidates():
 def test_oracle_is_an_exact_best_response_and_never_below_its_start(method):
     """From the calibrated heights, the oracle ends where no point gains by its exact best
     height against the others (the true verdicts, every pair counted), above its start."""
-    from terrainvis.calibration import best_responses
+    from terrainvis.relocation.calibrated import best_responses
 
     T, S, P, V = _oracle_case(method, seed=2)
     C = relocate(P, S, "calibrated", original=T, n_partners=64)

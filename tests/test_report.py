@@ -6,8 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from terrainvis import compare, report, synthetic_terrain
-from terrainvis.relocation import PAPER_RELOCATIONS
+from terrainvis import compare, synthetic_terrain
+from terrainvis.experiment import report
+from terrainvis.relocation.registry import PAPER_RELOCATIONS
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import simplifiers
 from simplifiers import reverse_faber as rf
 from terrainvis.errors import NodataError
-from terrainvis.terrain import HeightGrid
+from terrainvis.core.terrain import HeightGrid
 
 from conftest import DEM_NAMES, shared_dem_120
 

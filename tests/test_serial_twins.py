@@ -9,7 +9,7 @@ import pytest
 
 import simplifiers
 import terrainvis as tv
-from terrainvis.synthetic import bundled_terrain
+from terrainvis.io import bundled_terrain
 
 
 def _with_threads(n, fn):
@@ -45,7 +45,7 @@ def test_one_thread_and_two_give_the_same_bits():
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs two numba threads")
 def test_for_threads_picks_the_serial_twin_with_one_thread():
-    from terrainvis._interrupt import for_threads
+    from terrainvis.core.interrupt import for_threads
 
     assert _with_threads(1, lambda: for_threads("parallel", "serial")) == "serial"
     assert _with_threads(2, lambda: for_threads("parallel", "serial")) == "parallel"

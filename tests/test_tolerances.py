@@ -14,9 +14,9 @@ import pytest
 
 import terrainvis.tolerances as T
 from terrainvis import TIN, HeightGrid, relocate, sample_points, volume_error
-from terrainvis._georef import lonlat_to_local, metres_per_degree, uniform_step
-from terrainvis._mesh import footprint_matches
-from terrainvis.options import finite
+from terrainvis.core._georef import lonlat_to_local, metres_per_degree, uniform_step
+from terrainvis.core.mesh import footprint_matches
+from terrainvis.experiment.options import finite
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("terrainvis", "simplifiers")
@@ -109,7 +109,7 @@ def test_every_tolerance_is_exported_positive_and_documented():
 
 def test_clearance_band_is_the_predicates():
     """height_limit's default and the line-of-sight predicate must use the same band."""
-    from terrainvis._validate import height_limit
+    from terrainvis.core.validate import height_limit
     from terrainvis.visibility import TOL_REL, clearance_tolerance, terrain_scale
 
     assert T.CLEARANCE_REL == TOL_REL
@@ -121,7 +121,7 @@ def test_clearance_band_is_the_predicates():
 def test_kernel_modules_hold_the_constants():
     """numba freezes the kernel modules' globals: they must be the tolerance module's values."""
     import simplifiers._gc_kernels as gc
-    import terrainvis._kernels as tk
+    import terrainvis.core._kernels as tk
 
     assert tk.BUCKET_SLACK == T.BUCKET_SLACK and tk.RASTER_BOX_REL == T.RASTER_BOX_REL
     assert gc.ROW_SPAN_SNAP == T.ROW_SPAN_SNAP
@@ -206,7 +206,7 @@ def test_finite_scalar_accepts_numbers():
 @pytest.mark.parametrize("bad", ["1.5", b"1", True, np.bool_(False), None, object()])
 def test_real_number_parse_is_shared(bad):
     """as_positive_finite, as_nonnegative_finite and as_height refuse the same non-numbers alike."""
-    from terrainvis._validate import as_height, as_nonnegative_finite, as_positive_finite
+    from terrainvis.core.validate import as_height, as_nonnegative_finite, as_positive_finite
 
     for check in (lambda: as_positive_finite(bad, "v"), lambda: as_nonnegative_finite(bad, "v"),
                   lambda: as_height(bad, "v", scale=1000.0)):

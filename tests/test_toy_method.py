@@ -16,7 +16,9 @@ import pytest
 
 import simplifiers
 from simplifiers import METHODS, Method
-from terrainvis import bundled_terrain, compare, plot, report, save_dem, synthetic_terrain
+from terrainvis import bundled_terrain, compare, save_dem, synthetic_terrain
+from terrainvis.experiment import plot
+from terrainvis.experiment import report
 from terrainvis.cli import main
 from terrainvis.errors import SimplificationError
 

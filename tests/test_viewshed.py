@@ -19,13 +19,8 @@ from hypothesis import strategies as st
 from conftest import DEM_NAMES, shared_dem_120
 from terrainvis import HeightGrid, TIN
 from terrainvis.errors import OutsideFootprintError
-from terrainvis.synthetic import KINDS, synthetic_terrain
-from terrainvis.visibility import (
-    clearance_tolerance,
-    embree_tolerance,
-    line_of_sight,
-    min_clearance,
-)
+from terrainvis.core.synthetic import KINDS, synthetic_terrain
+from terrainvis.visibility import clearance_tolerance, embree_tolerance, line_of_sight, min_clearance
 from terrainvis.visibility.sweep import _surface_at, _viewshed, viewshed
 
 

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from conftest import DEM_NAMES, shared_dem_path
 from terrainvis import HeightGrid, TIN
 from terrainvis.errors import NodataError, OutsideFootprintError
-from terrainvis.sampling import sample_points
+from terrainvis.core.sampling import sample_points
 from terrainvis.visibility import (
     ENGINES,
     clearance_tolerance,
@@ -38,13 +38,13 @@ N_PAIRS = 1000
 
 # ----------------------------------------------------------------- terrains
 def _kinds():
-    from terrainvis.synthetic import KINDS
+    from terrainvis.core.synthetic import KINDS
 
     return KINDS
 
 
 def _synthetic(kind):
-    from terrainvis.synthetic import synthetic_terrain
+    from terrainvis.core.synthetic import synthetic_terrain
 
     return synthetic_terrain(kind)
 

@@ -15,7 +15,7 @@ import terrainvis as tv
 from simplifiers import _visopt_kernels as vk
 from simplifiers import visopt as vo
 from terrainvis import HeightGrid, synthetic_terrain
-from terrainvis.calibration import MARGIN_REL
+from terrainvis.relocation.calibrated import MARGIN_REL
 from terrainvis.errors import NodataError
 from terrainvis.visibility import clearance_tolerance, terrain_scale
 
@@ -218,7 +218,7 @@ def test_registered_regular_method_not_in_the_default_list():
     np.testing.assert_array_equal(S.z, vo.visopt(T, 2, n_train=40, seed=2).z)
     assert S.attrs["method"] == "visopt" and S.attrs["kind"] == "regular" and S.attrs["n_vertices"] == 81
     assert simplifiers.available()["visopt"] == "regular" and simplifiers.METHODS["visopt"].halo is None
-    from terrainvis.options import _DECLARED
+    from terrainvis.experiment.options import _DECLARED
 
     methods = next(o for o in _DECLARED if o.name == "methods")
     default = methods.check(None, "methods")

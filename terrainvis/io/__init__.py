@@ -79,7 +79,7 @@ are the CRS's own coordinates (e.g. UTM eastings and northings). On a geographic
 grid the spacing is converted to metres at the grid's centre latitude (WGS84 metres per
 degree) and the origin is put at (0, 0), because line of sight needs x, y and z in one
 unit. ``attrs`` keep the CRS and the map back to native coordinates (``crs``,
-``geographic``, ``xy_to_native``; see :mod:`terrainvis._georef`), so a grid written to
+``geographic``, ``xy_to_native``; see :mod:`terrainvis.core._georef`), so a grid written to
 GeoTIFF or ``.asc`` is in its native CRS again, with the transform derived from its own
 coordinates (:func:`native_coords`). A file without a CRS whose coordinates look like
 degrees gives a warning; ``load_dem(path, crs="EPSG:4326")`` converts it.
@@ -97,7 +97,7 @@ grid without NaN gets no nodata value at all. Readers turn the file's nodata val
 -9999) into NaN. Operations that cannot work with NaN raise
 :class:`~terrainvis.errors.NodataError`.
 
-Every file is written atomically (:func:`terrainvis._fileio.atomic_path`): a failure
+Every file is written atomically (:func:`terrainvis.core.fileio.atomic_path`): a failure
 never leaves a damaged file where a good one was.
 
 Float precision of meshes
@@ -120,19 +120,28 @@ from pathlib import Path
 
 import numpy as np
 
-from .._georef import metres_per_degree
-from .._validate import describe
+from ..core._georef import metres_per_degree
+from ..core.validate import describe
 from ..errors import NotEnoughMemoryError
-from ..terrain import TIN, HeightGrid, as_terrain
+from ..core.terrain import TIN, HeightGrid, as_terrain
 from ._asc import _read_asc, _write_asc
-from ._common import FORMAT, FORMAT_VERSION, _check_band, _check_crs_arg, _check_nodata, _check_path, _Corrupt, _UserError
+from ._common import (
+    FORMAT,
+    FORMAT_VERSION,
+    _check_band,
+    _check_crs_arg,
+    _check_nodata,
+    _check_path,
+    _Corrupt,
+    _UserError,
+)
 from ._geotiff import _read_tif, _write_tif, write_mask_geotiff
 from ._meshfile import _read_mesh, _write_mesh
 from ._metric import to_metric
 from ._npy import _read_npy, _write_npy
 from ._npz import _read_npz, _write_npz
 from ._raster import native_coords
-from ._sample import sample_dem
+from ._sample import bundled_terrain, sample_dem
 
 # One module per concern (all private; this module is the API and the dispatch by suffix):
 #   _common    FORMAT, FORMAT_VERSION, the error types, argument checks shared by every format
@@ -144,11 +153,11 @@ from ._sample import sample_dem
 #   _asc       ESRI ASCII grids and their .prj
 #   _geotiff   GeoTIFF through rasterio
 #   _meshfile  .ply, .obj, .stl, .glb
-#   _sample    sample_dem
+#   _sample    sample_dem, bundled_terrain
 #   _metric    to_metric: a lon/lat grid resampled onto a local transverse Mercator grid
 
 __all__ = [
-    "load_terrain", "write_mask_geotiff", "save_terrain", "load_dem", "save_dem", "sample_dem", "native_coords",
+    "load_terrain", "write_mask_geotiff", "save_terrain", "load_dem", "save_dem", "sample_dem", "bundled_terrain", "native_coords",
     "metres_per_degree", "to_metric",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",
 ]

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .._fileio import atomic_path
-from .._georef import parse_crs
-from ..terrain import HeightGrid
+from ..core.fileio import atomic_path
+from ..core._georef import parse_crs
+from ..core.terrain import HeightGrid
 from ._common import _check_read_memory, _Corrupt
 from ._raster import _georeference, _nodata_value, _uniform_layout
 

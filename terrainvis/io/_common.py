@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._georef import parse_crs
-from .._validate import describe
+from ..core._georef import parse_crs
+from ..core.validate import describe
 
 #: The ``format`` entry of a terrainvis ``.npz`` file.
 FORMAT = "terrainvis"
@@ -88,7 +88,7 @@ _READ_BYTES_PER_SAMPLE = 16
 
 def _check_read_memory(name: str, shape, itemsize: int, extra_per_sample: int = 0) -> None:
     """Refuse to read ``shape`` samples of ``itemsize`` bytes when they cannot fit in memory."""
-    from .._memory import check_memory
+    from ..core.memory import check_memory
 
     n = math.prod(int(v) for v in shape)
     need = n * (int(itemsize) + _READ_BYTES_PER_SAMPLE + extra_per_sample)

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .._fileio import atomic_path
-from .._georef import GEOREF_KEYS, parse_crs, rasterio_module
-from ..terrain import HeightGrid
+from ..core.fileio import atomic_path
+from ..core._georef import GEOREF_KEYS, parse_crs, rasterio_module
+from ..core.terrain import HeightGrid
 from ._attrs import _attrs_from_json, _attrs_to_json
 from ._common import _check_read_memory, _Corrupt, _UserError
 from ._raster import _georeference, _nodata_value, _uniform_layout
@@ -151,8 +151,8 @@ def _write_gtiff(path: Path, data: np.ndarray, profile: dict, tags: dict | None 
     were complete. So those lines are captured while GDAL writes, and the file is read
     back and compared with ``data`` before it is handed on: a damaged file raises
     :class:`OSError` with the first line GDAL printed, which
-    :func:`~terrainvis._fileio.atomic_path` turns into an
-    :class:`~terrainvis._fileio.OutputError` without renaming the file over the
+    :func:`~terrainvis.core.fileio.atomic_path` turns into an
+    :class:`~terrainvis.core.fileio.OutputError` without renaming the file over the
     destination. After a good write the captured lines (warnings) are printed as GDAL
     would have printed them.
     """

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._fileio import atomic_path
-from ..terrain import TIN, HeightGrid
+from ..core.fileio import atomic_path
+from ..core.terrain import TIN, HeightGrid
 from ..tolerances import DIVISOR_FLOOR, FLOAT32_ROUNDING_REL
 from ._attrs import _attrs_from_json, _attrs_to_json
 from ._common import FORMAT, FORMAT_VERSION, _TIN_ORIENTATION, _Corrupt

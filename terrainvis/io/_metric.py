@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from .._georef import GEOREF_KEYS, IDENTITY, native_axes, parse_crs, transform_xy, xy_to_native
-from .._validate import as_positive_finite, describe
-from ..terrain import HeightGrid
+from ..core._georef import GEOREF_KEYS, IDENTITY, native_axes, parse_crs, transform_xy, xy_to_native
+from ..core.validate import as_positive_finite, describe
+from ..core.terrain import HeightGrid
 from ..tolerances import METRIC_EDGE_MARGIN
 
 #: Target samples transformed per block (bounds the temporary arrays to a few tens of MB).
@@ -61,7 +61,7 @@ def to_metric(grid: HeightGrid, *, cell=None, footprint: str = "inside") -> Heig
     """A lon/lat grid resampled onto a metric grid, so that distances are right across it.
 
     A lon/lat DEM is read into local metres with the east-west scale of its centre
-    latitude for every row (:mod:`terrainvis._georef`): on a 1 x 1 degree tile at 45 N,
+    latitude for every row (:mod:`terrainvis.core._georef`): on a 1 x 1 degree tile at 45 N,
     east-west lengths along its northern and southern edges are then 0.88 % too long
     and 0.86 % too short, and sight lines follow rhumb lines instead of geodesics
     (docs/user-guide.md, Georeferencing). This resamples the grid onto a transverse Mercator

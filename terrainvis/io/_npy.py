@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .._fileio import atomic_path
-from .._validate import describe
-from ..terrain import HeightGrid
+from ..core.fileio import atomic_path
+from ..core.validate import describe
+from ..core.terrain import HeightGrid
 from ._common import _check_read_memory, _Corrupt, _npy_header
 from ._raster import _georeference
 

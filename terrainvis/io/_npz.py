@@ -9,13 +9,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .._fileio import atomic_path
-from .._georef import IDENTITY
-from ..terrain import TIN, HeightGrid
+from ..core.fileio import atomic_path
+from ..core._georef import IDENTITY
+from ..core.terrain import TIN, HeightGrid
 from ..tolerances import SPACING_MATCH_REL
 from ._attrs import _attrs_from_json, _attrs_to_json
-from .._memory import check_memory, format_bytes
-from ._common import _READ_BYTES_PER_SAMPLE, FORMAT, FORMAT_VERSION, _TIN_ORIENTATION, _Corrupt, _npy_header, _UserError
+from ..core.memory import check_memory, format_bytes
+from ._common import (
+    _READ_BYTES_PER_SAMPLE,
+    FORMAT,
+    FORMAT_VERSION,
+    _TIN_ORIENTATION,
+    _Corrupt,
+    _npy_header,
+    _UserError,
+)
 from ._raster import _georeference
 
 _GRID_ORIENTATIONS = ("y_increasing", "y_decreasing")

@@ -7,9 +7,9 @@ import warnings
 
 import numpy as np
 
-from .._georef import IDENTITY, crs_is_geographic, lonlat_to_local, native_axes, warn_if_degrees, xy_to_native
-from .._validate import describe
-from ..terrain import HeightGrid, _is_uniform
+from ..core._georef import IDENTITY, crs_is_geographic, lonlat_to_local, native_axes, warn_if_degrees, xy_to_native
+from ..core.validate import describe
+from ..core.terrain import HeightGrid, _is_uniform
 from ..tolerances import DIVISOR_FLOOR, RESAMPLE_SHIFT_REL
 from ._common import _UserError
 

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from .._georef import metres_per_degree
-from ..terrain import HeightGrid
+from ..core._georef import metres_per_degree
+from ..core.synthetic import BUNDLED
+from ..core.terrain import HeightGrid
+from ._npz import _read_npz
 
 _SAMPLES = {"jacksboro": "jacksboro_fault_dem.npz"}
 
@@ -72,3 +75,37 @@ def sample_dem(name: str = "jacksboro") -> HeightGrid:
         "xy_to_native": affine,
     }
     return HeightGrid(z[::-1], dx=dx_deg * m_lon, dy=dy_deg * m_lat, attrs=attrs)
+
+
+def _data_dir() -> Path:
+    # terrainvis/data/ holds the bundled terrains (the package terrainvis.data).
+    return Path(str(resources.files("terrainvis.data")))
+
+
+def bundled_terrain(name: str) -> HeightGrid:
+    """One of the project's five frozen 120x120 terrains (``terrainvis/data/<name>.npz``).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`BUNDLED`.
+
+    Returns
+    -------
+    HeightGrid
+        Read with the same reader as :func:`terrainvis.io.load_terrain` (the files are in
+        the terrainvis ``.npz`` format); ``attrs`` are ``name``, ``seed``, ``synthetic``
+        and ``bundled``.
+
+    Examples
+    --------
+    >>> g = bundled_terrain("hills")
+    >>> g.shape, g.dx, g.attrs["name"]
+    ((120, 120), 30.0, 'hills')
+    """
+    if not isinstance(name, str) or name not in BUNDLED:
+        raise ValueError(f"name must be one of the bundled terrains {list(BUNDLED)}, got {name!r}")
+    grid = _read_npz(_data_dir() / f"{name}.npz")
+    if not isinstance(grid, HeightGrid):
+        raise ValueError(f"terrainvis/data/{name}.npz must hold a grid, got a {type(grid).__name__}; reinstall terrainvis")
+    return grid

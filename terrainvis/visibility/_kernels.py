@@ -505,7 +505,7 @@ def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop
 
     ``g`` is a :data:`WalkGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
     ``kc`` the curvature coefficient over twice the earth's radius (0: flat). ``stop`` is
-    the stop flag of :mod:`terrainvis._interrupt`, read at the start of every iteration
+    the stop flag of :mod:`terrainvis.core.interrupt`, read at the start of every iteration
     (an iteration with it set does nothing; the partial result is then never used).
 
     * Segments, ``vis`` empty (shape (0, 0)): ``clear[index[k]]`` = clearance of the
@@ -703,7 +703,7 @@ def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out, stop):
     ``kc`` the curvature coefficient over twice the earth's radius (0: flat). The segment
     is tested over the interval of :func:`interval_start` (see :func:`_tin_segment_min`).
     Segments not started once the stop flag ``stop`` is set are skipped
-    (:mod:`terrainvis._interrupt`).
+    (:mod:`terrainvis.core.interrupt`).
     """
     m = a.shape[0]
     for i in nb.prange(m):

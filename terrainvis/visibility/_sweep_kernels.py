@@ -80,8 +80,14 @@ from numba.extending import intrinsic
 from numba.np.arrayobj import make_array
 
 from ..tolerances import (
-    DIAGONAL_SLACK, EDGE_CLIP_SLACK, PARALLEL_SINE_MIN, PSEUDO_ANGLE_SLACK, PSEUDO_ANGLE_SPAN_MIN, RING_BOUND_REL,
-    SLOPE_REL, WEDGE_BOUNDARY_SLACK,
+    DIAGONAL_SLACK,
+    EDGE_CLIP_SLACK,
+    PARALLEL_SINE_MIN,
+    PSEUDO_ANGLE_SLACK,
+    PSEUDO_ANGLE_SPAN_MIN,
+    RING_BOUND_REL,
+    SLOPE_REL,
+    WEDGE_BOUNDARY_SLACK,
 )
 
 from ._kernels import _canonical, _locate, curved_min, interval_start
@@ -1437,7 +1443,7 @@ def sweep(g, eye, rules, lay, tg, perm, stats, stop):
     targets decided by ``lb``, by the upper bound and the last rings' walk, by walking
     blocks of rings, left undecided, and by the upper bound and the last ring's bound
     (:func:`_last_ring_bound`, no walk). ``stop`` is the stop flag of
-    :mod:`terrainvis._interrupt`: every sector reads it once per ring and returns when it
+    :mod:`terrainvis.core.interrupt`: every sector reads it once per ring and returns when it
     is set (the codes are then incomplete and never used).
     """
     for it in nb.prange(lay.nsec):

@@ -7,7 +7,7 @@ one of them. Every count is exact because every viewshed is: the sum is of integ
 result does not depend on the order in which the viewsheds finish or on where they run.
 
 The observers are cut into chunks; each chunk is one unit of
-:func:`terrainvis.runner.run_units`, which runs the units in this process, on a local
+:func:`terrainvis.core.runner.run_units`, which runs the units in this process, on a local
 process pool or on a dask cluster, and stops them all on Ctrl-C. A unit returns the counts
 of its chunk and the caller adds them up as units finish, so memory stays at one count
 raster per running unit whatever K is.
@@ -28,9 +28,9 @@ import uuid
 
 import numpy as np
 
-from .._validate import as_float_array, as_nonnegative_finite, describe
+from ..core.validate import as_float_array, as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
-from ..terrain import TIN, HeightGrid, as_terrain
+from ..core.terrain import TIN, HeightGrid, as_terrain
 from .predicate import EARTH_RADIUS, _check_engine, curvature_coefficient
 from .sweep import _check_overlap, _surface_at, viewshed
 
@@ -114,13 +114,13 @@ def cumulative_viewshed(
         first such row of ``observers`` and how many there are).
     ValueError, TypeError
         On invalid arguments (the message names the argument).
-    terrainvis.runner.Interrupted
+    terrainvis.core.runner.Interrupted
         On Ctrl-C or SIGTERM (the workers are stopped first).
 
     Notes
     -----
     The observers are cut into chunks of about K / (32 workers) observers, each chunk one
-    unit of :func:`terrainvis.runner.run_units`; the counts of a chunk are added to the
+    unit of :func:`terrainvis.core.runner.run_units`; the counts of a chunk are added to the
     total as the unit finishes. The sum of integers does not depend on the order, so any
     ``workers`` or cluster gives the same raster, bit for bit.
 
@@ -137,7 +137,7 @@ def cumulative_viewshed(
            [1, 1, 2, 1, 1],
            [1, 1, 2, 1, 1]], dtype=uint16)
     """
-    from ..runner import check_client, check_workers, run_units
+    from ..core.runner import check_client, check_workers, run_units
 
     as_terrain(terrain)
     obs = _as_observers(observers)
@@ -292,7 +292,7 @@ def _progress_bar(k: int, show: bool):
     from tqdm.std import tqdm
 
     if show:
-        from .._progress import progress_bar_class  # the notebook's bar in Jupyter
+        from ..core._progress import progress_bar_class  # the notebook's bar in Jupyter
 
         tqdm = progress_bar_class()
     return tqdm(total=k, desc="cumulative viewshed", unit="observer", file=sys.stderr, disable=not show)

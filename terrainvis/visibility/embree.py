@@ -117,7 +117,7 @@ def embree_tolerance(terrain) -> float:
 
 
 def _tin_of(terrain):
-    from ..terrain import HeightGrid
+    from ..core.terrain import HeightGrid
 
     return terrain.to_tin() if isinstance(terrain, HeightGrid) else terrain
 

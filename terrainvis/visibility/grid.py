@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._interrupt import call
+from ..core.interrupt import call
 from ..tolerances import DIVISOR_FLOOR
 from . import _kernels
 

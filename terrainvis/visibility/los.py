@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_points
-from ..terrain import HeightGrid, as_terrain
+from ..core.validate import as_points
+from ..core.terrain import HeightGrid, as_terrain
 from . import embree as _embree
 from .grid import grid_clearance, grid_matrix
 from .predicate import (

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_nonnegative_finite, as_points, as_positive_finite, describe
+from ..core.validate import as_nonnegative_finite, as_points, as_positive_finite, describe
 from ..errors import OutsideFootprintError
-from ..terrain import HeightGrid, as_terrain
+from ..core.terrain import HeightGrid, as_terrain
 from ..tolerances import CLEARANCE_REL, EXTENT_INSIDE_REL
 
 __all__ = [

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validate import as_nonnegative_finite, as_points
-from ..terrain import HeightGrid, as_terrain
+from ..core.validate import as_nonnegative_finite, as_points
+from ..core.terrain import HeightGrid, as_terrain
 from .predicate import EARTH_RADIUS, curvature_coefficient, trim_length
 
 __all__ = ["lowest_point", "clearance_profile"]

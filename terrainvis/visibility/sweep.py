@@ -72,10 +72,10 @@ import numba
 import numpy as np
 
 from ..tolerances import EXTENT_INSIDE_REL, TRIM_MARGIN_REL
-from .._interrupt import call
-from .._validate import as_nonnegative_finite, describe
+from ..core.interrupt import call
+from ..core.validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
-from ..terrain import TIN, HeightGrid, as_terrain
+from ..core.terrain import TIN, HeightGrid, as_terrain
 from . import _sweep_kernels as _vk
 from .predicate import EARTH_RADIUS, ENGINES, _check_engine, clearance_tolerance, curvature_coefficient, trim_length
 

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .._interrupt import call, for_threads
+from ..core.interrupt import call, for_threads
 from ..tolerances import TIN_ON_EDGE_REL
 
 from . import _kernels

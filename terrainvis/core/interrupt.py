@@ -1,0 +1,184 @@
+"""Interrupting long numba kernels: Ctrl-C and SIGTERM stop them within about a second.
+
+numba's compiled code never runs Python's signal handlers, so a kernel that runs for a
+minute ignores Ctrl-C for a minute; worse, the handler then runs while numba turns the
+kernel's result into Python objects, and the interrupt surfaces as a ``SystemError``
+("returned a result with an exception set") or a segmentation fault. Module-level
+arrays are frozen into a kernel as constants, so a kernel cannot watch a global flag.
+This module is the one mechanism every long kernel uses instead:
+
+1. The kernel takes a *stop flag*, a ``(1,)`` int64 array, as its last argument, and at a
+   bounded interval (an outer loop iteration, a chunk of a ``prange``) checks
+   ``if stop[0] != 0`` and returns early. Its partial result is never used.
+2. The Python wrapper runs it with :func:`call` (``call(kernel, *args, work=n)``), which
+   appends a fresh flag. Above :data:`THREAD_MIN_WORK` units of work, and only in the
+   main thread (the only one that receives signals), :func:`call` runs the kernel in a
+   helper thread (the kernels are ``nogil``) while the main thread waits in short
+   joins, where Python runs its signal handlers. When the wait raises (the
+   ``KeyboardInterrupt`` of SIGINT, the :class:`terrainvis.core.runner.Interrupted` that the
+   CLI's SIGTERM handler raises, or anything else), :func:`call` sets the flag, waits
+   for the kernel to return and re-raises the same exception. The result is boxed in
+   the helper thread, where no signal handler runs, so an interrupt can no longer land
+   inside numba's boxing.
+3. Small calls run directly in the calling thread: starting a thread costs about
+   0.1 ms, far more than a kernel over a few thousand samples.
+
+Libraries in C++ (pymeshlab, fast-simplification) take no flag, and are interrupted
+between their passes, when the call returns. Leaving such a call running in an
+abandoned thread is not safe: a process that exits while pymeshlab still works in
+another thread was seen to wait for it and then abort on a corrupted heap.
+
+A kernel that calls other kernels passes its flag down to the ones that loop long. A
+``prange`` kernel checks the flag at the start of each chunk and skips the chunk's
+work when it is set (a ``prange`` cannot be left early), so chunks must be small enough
+to end in well under a second. The flag is read where the loop also writes memory, so
+the compiler cannot hoist the read out of the loop; the tests in
+``tests/test_interrupt_kernels.py`` interrupt every long kernel in a subprocess and
+check that it stops.
+
+Examples
+--------
+>>> import numba, numpy as np
+>>> @numba.njit(nogil=True)
+... def total(a, stop):
+...     s = 0.0
+...     for i in range(a.shape[0]):
+...         if i % 4096 == 0 and stop[0] != 0:
+...             return s
+...         s += a[i]
+...     return s
+>>> call(total, np.ones(10), work=10)
+10.0
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import signal
+import sys
+import threading
+
+import numpy as np
+
+__all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library"]
+
+#: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
+#: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
+THREAD_MIN_WORK = 1 << 18
+
+#: Seconds between two wakes of the waiting main thread (signals wake it at once anyway).
+_JOIN_STEP = 0.25
+
+
+def new_flag() -> np.ndarray:
+    """A fresh stop flag: a ``(1,)`` int64 array holding 0 (go on)."""
+    return np.zeros(1, dtype=np.int64)
+
+
+def for_threads(parallel, serial):
+    """``parallel`` (a ``prange`` kernel), or its serial twin ``serial`` when numba has one
+    thread, as in a worker of a :func:`terrainvis.compare` run: the twin computes the same,
+    and spares the parfor compilation (about 1-1.5 s of CPU) that gains nothing there
+    (``tests/test_serial_twins.py`` checks each pair)."""
+    import numba
+
+    return parallel if numba.get_num_threads() > 1 else serial
+
+
+def call(kernel, *args, work: int):
+    """``kernel(*args, stop)``, interruptible by SIGINT and SIGTERM (see the module docstring).
+
+    Parameters
+    ----------
+    kernel : numba dispatcher
+        A ``nogil`` kernel whose last parameter is the stop flag.
+    *args
+        Its other arguments.
+    work : int
+        The size of the call (samples, faces: any count proportional to its time).
+        Calls of at least :data:`THREAD_MIN_WORK` run in a helper thread.
+
+    Returns
+    -------
+    What the kernel returns.
+
+    Raises
+    ------
+    BaseException
+        Whatever interrupted the wait (``KeyboardInterrupt``,
+        :class:`terrainvis.core.runner.Interrupted`), after the kernel has returned; or the
+        kernel's own exception.
+    """
+    stop = new_flag()
+    if work < THREAD_MIN_WORK or threading.current_thread() is not threading.main_thread():
+        return kernel(*args, stop)
+    box = {}
+
+    def target():
+        try:
+            box["value"] = kernel(*args, stop)
+        except BaseException as exc:  # handed to the caller's thread below
+            box["error"] = exc
+
+    thread = threading.Thread(target=target, name="terrainvis-kernel", daemon=True)
+    try:
+        thread.start()
+        while thread.is_alive():
+            thread.join(_JOIN_STEP)
+    except BaseException:
+        stop[0] = 1
+        _join_after_stop(thread)
+        raise
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def _join_after_stop(thread: threading.Thread) -> None:
+    """Wait for a stopped kernel to return; a second interrupt meanwhile is not lost but ends the wait."""
+    if thread.ident is None:  # never started
+        return
+    while thread.is_alive():
+        thread.join(_JOIN_STEP)
+
+
+@contextlib.contextmanager
+def deferred_signals():
+    """Hold SIGINT and SIGTERM until the block ends, then deliver them to the handlers that were installed.
+
+    For code that turns an interrupt into something else: ``import pymeshlab`` interrupted
+    by Ctrl-C fails with "ImportError: initialization failed", which would be reported as
+    a broken install instead of the user's stop. Only the main thread can change signal
+    handlers; elsewhere the block runs as it is.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(ValueError, OSError, TypeError):
+            previous[sig] = signal.signal(sig, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            with contextlib.suppress(ValueError, OSError, TypeError):
+                signal.signal(sig, old)
+        for signum in caught[:1]:
+            old = previous.get(signum)
+            if callable(old):
+                old(signum, sys._getframe())
+            elif old == signal.SIG_DFL:
+                os.kill(os.getpid(), signum)  # the default action, now that it is back
+
+
+def import_library(name: str):
+    """``importlib.import_module(name)`` with interrupts held until the import ends (:func:`deferred_signals`)."""
+    module = sys.modules.get(name)
+    if module is not None:
+        return module
+    with deferred_signals():
+        return importlib.import_module(name)

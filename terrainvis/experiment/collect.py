@@ -1,0 +1,61 @@
+"""Collecting the rows of a :func:`terrainvis.compare` run into its table.
+
+The columns (:data:`COLUMNS`), which of them identify a unit (:data:`UNIT_KEY`) or hold
+times (:data:`TIMING_COLUMNS`), how many rows a complete unit has
+(:func:`rows_per_unit`), and the order of the final table (:func:`order`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from .options import Settings
+
+__all__ = ["COLUMNS", "UNIT_KEY", "TIMING_COLUMNS", "rows_per_unit", "table", "order"]
+
+#: Columns of the result table, in order.
+COLUMNS = (
+    "terrain", "set", "method", "kind", "level", "relocation", "measure", "predicate",
+    "accuracy", "visible_kept", "blocked_kept", "accuracy_paper", "visible_area_ratio",
+    "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
+    "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
+    "max_error", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
+    "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
+    "seed", "max_distance", "distance_unit", "offset", "error",
+)
+#: Columns that identify a unit.
+UNIT_KEY = ("terrain", "method", "level")
+#: Columns holding times (they differ between runs; everything else is deterministic).
+TIMING_COLUMNS = ("simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds")
+
+
+def rows_per_unit(settings: Settings) -> int:
+    """The rows of a complete unit: sets (or observers) x relocations x distances."""
+    sets = settings.n_observers if settings.measure == "viewshed" else settings.n_sets
+    return sets * len(settings.relocations) * len(settings.max_distance)
+
+
+def table(rows: list[dict]) -> pd.DataFrame:
+    """Rows (dicts) as the frame a results CSV reads back as (see :func:`terrainvis.experiment.results.as_table`)."""
+    from .results import as_table
+
+    return as_table(rows, COLUMNS)
+
+
+def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
+    """The table sorted: terrains as given, then set, methods in the registry's (the paper's) order,
+    level, relocation (identity, full, half, then the others), distance (unlimited last)."""
+    from simplifiers import METHODS
+
+    from ..relocation import registry as relocation
+
+    rank_t = {t: i for i, t in enumerate(grids)}
+    rank_m = {m: i for i, m in enumerate(METHODS)}
+    rank_r = {r: i for i, r in enumerate(relocation.RELOCATIONS + (relocation.ORACLE,))}
+    df = df[list(COLUMNS)]
+    df = df.assign(
+        _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r),
+        _d=df["max_distance"].fillna(np.inf),
+    ).sort_values(["_t", "set", "_m", "level", "_r", "_d"], kind="stable")
+    return df.drop(columns=["_t", "_m", "_r", "_d"]).reset_index(drop=True)

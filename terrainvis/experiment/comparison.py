@@ -1,0 +1,296 @@
+"""The paper's experiment as one call: :func:`compare`.
+
+For every terrain T, method, level and point set P, :func:`compare` simplifies T into
+S(T), computes the visibility matrix of P on T, relocates P onto S(T) in each of the
+three ways, computes the visibility matrix there, and counts how many verdicts agree.
+It also measures what the paper claimed but never measured: the time and memory that
+S(T) saves, and how far its shape is from T.
+
+The run goes in four stages, each in a module of its own:
+
+1. **plan** (:mod:`terrainvis.experiment.plan`): every option is validated up front
+   (:mod:`terrainvis.experiment.options` declares them: methods, levels against each terrain's size,
+   relocations, engine, predicate, ...) and the work is split into tasks of one unit (one
+   terrain x method x level) or, with ``cascade``, of every level of a method that
+   continues from its finer result, the most expensive first;
+2. **resume**: with ``out_csv`` the results go to a :class:`~terrainvis.experiment.results.ResultStore`,
+   which keeps the complete units of an earlier run with the same settings and refuses
+   a resume with other settings;
+3. **execute**: :func:`terrainvis.core.runner.run_units` runs the tasks (:mod:`terrainvis.experiment.units`
+   says what one computes) in this process, on a local process pool or on a dask
+   cluster; each finished unit is written at once, atomically, so an interrupt (Ctrl-C,
+   SIGTERM) loses no finished unit;
+4. **collect** (:mod:`terrainvis.experiment.collect`): the rows, sorted (terrains as given, methods
+   in the paper's order).
+
+This module keeps every name it had before the split (users' code imports them from here).
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+import sys
+
+import pandas as pd
+
+from ..core._progress import progress_bar_class
+from .collect import COLUMNS, TIMING_COLUMNS, UNIT_KEY, order, rows_per_unit, table  # noqa: F401
+from .options import (
+    CASCADE_AUTO_MIN_SAMPLES,
+    DEFAULTS,
+    DISTANCE_UNITS,
+    MEASURES,
+    OPTIONS,
+    PREDICATES,
+    Settings,
+    docstring_section,
+    signature_parameters,
+)
+from .plan import DEFAULT_TERRAINS, JACKSBORO_WINDOW, cascades, fingerprint, resolve_terrains, run_record  # noqa: F401
+from .plan import kernels_cached as _kernels_cached
+from .plan import resolve_one as _resolve_one  # noqa: F401
+from .plan import check_memory, settings_for
+from .plan import tasks as _plan_tasks
+from .plan import warm_up_parts as _warm_up_parts
+from .units import call as _call
+from .units import end_radius_for, point_sets, simplified_path  # noqa: F401
+from .units import observers as _observers  # noqa: F401
+from .units import run_unit as _run_unit
+from .units import warm_up as _warm_up
+from .units import warm_up_part as _warm_up_part  # noqa: F401
+
+__all__ = [
+    "compare", "Settings", "DEFAULTS", "resolve_terrains", "point_sets", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW",
+    "COLUMNS", "PREDICATES", "DISTANCE_UNITS", "MEASURES", "simplified_path", "end_radius_for",
+]
+
+# Names kept for code written against the module before it was split.
+_fingerprint = fingerprint
+_order = order
+
+
+def _settings(grids: dict, **options) -> Settings:
+    """Validate the options of :func:`compare` (before any unit runs) into :class:`Settings`."""
+    return settings_for(grids, options)
+
+
+def _tasks(grids: dict, settings: Settings, done=frozenset()) -> list[tuple]:
+    """The tasks of a run (:func:`terrainvis.experiment.plan.tasks`), cascading above :data:`CASCADE_AUTO_MIN_SAMPLES`
+    as this module holds it when called."""
+    return _plan_tasks(grids, settings, done, auto_min_samples=CASCADE_AUTO_MIN_SAMPLES)
+
+
+# ---------------------------------------------------------------------- compare
+def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=None, out_csv=None,
+            resume: bool = False, save_dir=None, progress: bool = False, **options) -> pd.DataFrame:
+    """Run the paper's experiment: how many LOS verdicts survive each simplification.
+
+    Parameters
+    ----------
+    terrains : terrain or list or dict
+        See :func:`resolve_terrains`. Default: the five bundled 120x120 terrains and the
+        central 120x120 window of the Jacksboro DEM.
+    <options>
+    workers : int, optional
+        Processes of the local pool (default: the number of CPUs; 1 runs in this process).
+        Workers are started with ``spawn``, which imports the caller's ``__main__``
+        module again: in a script, call :func:`compare` under
+        ``if __name__ == "__main__":`` (notebooks and the CLI need nothing).
+    client : dask.distributed.Client, optional
+        Run the units on this cluster instead (needs the ``dask`` extra).
+    out_csv : str or Path, optional
+        Write each finished unit's rows to this CSV at once (atomically; the settings go
+        beside it, see :class:`~terrainvis.experiment.results.ResultStore`).
+    resume : bool
+        With ``out_csv``: keep the units already completed there (with the same
+        settings) and run only the rest.
+    save_dir : str or Path, optional
+        Save every simplified terrain there (:func:`simplified_path`,
+        :func:`terrainvis.load_terrain`).
+    progress : bool
+        Show a progress bar on stderr (a widget in Jupyter with ipywidgets); on a cold
+        numba cache, first what is being compiled, with an estimate of how long.
+
+    The options (between ``terrains`` and ``workers``) are declared in
+    :data:`terrainvis.experiment.options.OPTIONS`; their defaults are :data:`DEFAULTS`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per terrain x point set x method x level x relocation (x distance), with the columns
+        :data:`COLUMNS`, sorted (terrains as given, methods in the paper's order,
+        relocations identity, full, half). A unit whose simplification failed keeps its
+        rows, with the message in ``error`` and NaN measurements.
+
+    Raises
+    ------
+    terrainvis.core.runner.Interrupted
+        On Ctrl-C or SIGTERM; the units finished before are in ``out_csv``.
+    terrainvis.core.fileio.OutputBusyError
+        Another process is writing ``out_csv`` (a ValueError naming its pid and start time).
+    MemoryError
+        Before anything runs, when the units could not fit in the available memory
+        (:func:`terrainvis.experiment.plan.check_memory`).
+
+    Examples
+    --------
+    >>> df = compare(["hills"], methods=["lls"], levels=[1], n_points=10, n_sets=1, workers=1)
+    >>> len(df), list(df["relocation"])
+    (4, ['identity', 'full', 'half', 'calibrated'])
+    """
+    from ..core.runner import check_client, check_workers
+
+    if terrains is None:
+        raise TypeError("terrains must be a terrain, a list of terrains or a dict of them, got None")
+    grids = resolve_terrains(terrains)
+    settings = _settings(grids, **options)
+    workers = check_workers(workers)
+    client = check_client(client)
+    check_memory(settings, grids, _at_once(settings, grids, workers, client))
+
+    with _lock(out_csv):
+        store, done = _store(out_csv, settings, grids, resume)
+        tasks = _tasks(grids, settings, done)
+        if save_dir is not None:
+            from ..core.fileio import check_writable_dir
+
+            save_dir = str(check_writable_dir(save_dir, "save_dir"))
+        new_rows = _execute(tasks, grids, settings, done, store, save_dir=save_dir, workers=workers, client=client,
+                            progress=progress)
+        rows = store.rows() if store is not None else table(new_rows)
+        df = order(rows, grids)
+        if store is not None:
+            store.finish(df)
+    return df
+
+
+def _lock(out_csv):
+    """The run's hold on ``out_csv`` (``results.lock`` beside it): a second run writing it is refused."""
+    import contextlib
+    from pathlib import Path
+
+    if out_csv is None:
+        return contextlib.nullcontext()
+    from ..core.fileio import RunLock
+    from .results import lock_path
+
+    path = Path(out_csv)
+    if not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    return RunLock(lock_path(path), f"out_csv {str(path)!r}", "compare()")
+
+
+def _at_once(settings: Settings, grids: dict, workers, client) -> int:
+    """How many units may run side by side on this machine (a dask cluster's workers have their own memory)."""
+    if client is not None:
+        return 1
+    n_local = (os.cpu_count() or 1) if workers is None else workers
+    return max(1, min(n_local, len(grids) * len(settings.methods) * len(settings.levels)))
+
+
+def _store(out_csv, settings: Settings, grids: dict, resume: bool):
+    """The results file of a run with ``out_csv`` (None without), and the units it holds already."""
+    if out_csv is None:
+        return None, frozenset()
+    from .results import ResultStore
+
+    per_unit = rows_per_unit(settings)
+    # a settings file written before an option existed ran it at its default
+    absent = {name: option.check(option.default, name) for name, option in OPTIONS.items()}
+    store = ResultStore(out_csv, run_record(settings, grids), COLUMNS, UNIT_KEY, lambda key: per_unit, resume=resume,
+                        absent=absent)
+    return store, frozenset(store.done)
+
+
+def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, progress) -> list[dict]:
+    """Run the tasks (after the warm-up parts of a cold numba cache); every finished unit goes to ``store``."""
+    from ..core.runner import run_units
+
+    from .plan import work_order
+
+    todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
+    n_local = (os.cpu_count() or 1) if workers is None else workers
+    cold = bool(tasks) and client is None and _kernels_cached() is False
+    parts = _warm_up_parts(tasks, grids, settings) if cold and ((n_local > 1 and len(tasks) > 1) or progress) else []
+    # the parts and the units interleaved so that no two workers compile the same kernels
+    work = [(("warm-up", x), (_warm_up, x, settings)) if kind == "part" else
+            (x, (_run_unit, grids[x[0]], x[0], x[1], x[2], settings, save_dir))
+            for kind, x in work_order(parts, tasks, min(n_local, len(parts) + len(tasks)))]
+    bars = _Progress(progress and bool(tasks), parts, todo, min(n_local, len(work)))
+    new_rows: list[dict] = []
+
+    def collect(key, rows):
+        if key[0] == "warm-up":
+            bars.compiled(key[1])
+            return
+        rows = [r for r in rows if (r["terrain"], r["method"], r["level"]) not in done]
+        new_rows.extend(rows)
+        if store is not None:
+            store.add(rows)
+        bars.finished(len({r["level"] for r in rows}))
+
+    try:
+        run_units(work, _call, on_result=collect, workers=workers, client=client)
+    finally:
+        bars.close()
+    return new_rows
+
+
+class _Progress:
+    """The progress shown on stderr: the kernels being compiled (a cold cache), then the units.
+
+    The compile bar names each part as it finishes. Its first estimate comes from the
+    compile times measured on this project's machine (:func:`terrainvis.experiment.plan.compile_seconds`);
+    as parts finish, the time left is rescaled by how fast this machine compiles them.
+    """
+
+    def __init__(self, show: bool, parts: list, units: int, at_once: int):
+        import time
+
+        from .plan import compile_seconds, compile_weight
+
+        tqdm = progress_bar_class()
+        self.compile = None
+        self.weight = compile_weight
+        self.left = sum(map(compile_weight, parts))
+        self.done = 0.0
+        self.start = time.perf_counter()
+        if show and parts:
+            estimate = compile_seconds(parts, at_once)
+            tqdm.write(f"terrainvis: first run: compiling the numba kernels this run needs ({len(parts)} parts, "
+                       f"about {estimate:.0f} s on this project's shared 2-core machine; later runs load them "
+                       "from numba's cache)", file=sys.stderr)
+            self.compile = tqdm(total=len(parts), desc="compiling", unit="part", file=sys.stderr)
+        self.units = tqdm(total=units, desc="compare", unit="unit", file=sys.stderr, disable=not show)
+
+    def compiled(self, part: tuple) -> None:
+        import time
+
+        if self.compile is None:
+            return
+        w = self.weight(part)
+        self.done, self.left = self.done + w, max(0.0, self.left - w)
+        rate = (time.perf_counter() - self.start) / self.done if self.done else 0.0
+        note = f"{part[1]} done" + (f", about {self.left * rate:.0f} s left" if self.left else "")
+        self.compile.set_postfix_str(note, refresh=False)
+        self.compile.update(1)
+
+    def finished(self, n: int) -> None:
+        self.units.update(n)
+
+    def close(self) -> None:
+        for bar in (self.compile, self.units):
+            if bar is not None:
+                bar.close()
+
+
+def _signature() -> inspect.Signature:
+    """:func:`compare`'s signature with every declared option as a keyword-only parameter."""
+    own = inspect.signature(compare, follow_wrapped=False)
+    params = [p for p in own.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+    return own.replace(parameters=params[:1] + signature_parameters() + params[1:])
+
+
+compare.__doc__ = compare.__doc__.replace("    <options>", docstring_section())
+compare.__signature__ = _signature()

@@ -1,0 +1,647 @@
+"""The options of :func:`terrainvis.compare`, each declared once.
+
+An option is everything that determines the rows of a run (methods, levels, point sets,
+predicate, ...). Each one is one :class:`Option` in :data:`OPTIONS`: its name, default,
+validation, help text, command-line flag, the measures it applies to, and whether it is
+passed on to every visibility computation of the run. From that one entry:
+
+* :func:`terrainvis.compare` accepts it as a keyword-only argument, shows it in its
+  signature and docstring (``help(compare)``), and validates it before any unit runs
+  (:func:`validate`);
+* ``terrainvis compare`` gets its flag, with the help text and the default
+  (:func:`add_flags`, :func:`given`);
+* the run's stored settings (``results.settings.json``) record it, and a resume with
+  another value is refused naming it (:meth:`Settings.as_dict`);
+* with ``los=True``, the units pass it, under its name, to every visibility computation
+  (:func:`los_keywords`).
+
+Checks that involve several options (or the terrains) are the :data:`RULES`.
+``docs/architecture-options.md`` shows how to add an option.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..core.validate import as_bool, as_finite_scalar, as_float_array, as_int, choice, describe
+from ..relocation.calibrated import N_PARTNERS
+from ..relocation.registry import ORACLE, RELOCATIONS
+from ..visibility import EARTH_RADIUS
+
+__all__ = [
+    "Option", "Flag", "Switch", "OPTIONS", "RULES", "Settings", "DEFAULTS", "validate", "los_keywords",
+    "add_flags", "given", "MEASURES", "PREDICATES", "DISTANCE_UNITS", "CASCADE_AUTO_MIN_SAMPLES",
+]
+
+#: What a run measures: ``"pairs"`` (the paper's visibility matrices of point sets) or
+#: ``"viewshed"`` (each observer's viewshed of every sample of T).
+MEASURES = ("pairs", "viewshed")
+
+#: Line-of-sight predicates for the verdicts on S(T) (verdicts on T are always exact):
+#: ``"exact"`` tests the whole segment; ``"paper"`` ignores the surface within one cell
+#: of S(T) around each end (see :func:`terrainvis.experiment.units.end_radius_for`).
+PREDICATES = ("exact", "paper")
+
+#: Units of ``max_distance``: world units (metres), or cells of the original terrain
+#: (its larger cell side), so one sweep means the same on terrains of different resolution.
+DISTANCE_UNITS = ("world", "cells")
+
+#: ``cascade="auto"`` cascades on grids of more than this many samples (above about
+#: 724²; at 1024² three independent QEC decimations take minutes and, two at once on two
+#: workers, 2.9 GB; the paper's 120² terrains stay independent). :func:`terrainvis.compare`
+#: reads it as ``terrainvis.experiment.CASCADE_AUTO_MIN_SAMPLES`` when it plans a run.
+CASCADE_AUTO_MIN_SAMPLES = 1 << 19
+
+
+# ---------------------------------------------------------------------- declarations
+@dataclass(frozen=True)
+class Flag:
+    """A command-line flag that takes a value (``--points 20``) or several (``--levels 1 3``).
+
+    ``spelling`` defaults to ``--`` and the option's name with dashes; ``type`` converts
+    one word; ``choices`` (called when the parser is built) lists the valid words.
+    """
+
+    spelling: str | None = None
+    type: Callable[[str], Any] = str
+    many: bool = False
+    metavar: str | None = None
+    choices: Callable[[], Sequence[str]] | None = None
+
+
+@dataclass(frozen=True)
+class Switch:
+    """Command-line flags without a value: ``on`` sets True, ``off`` sets False (either may be absent)."""
+
+    on: str | None = None
+    off: str | None = None
+    on_help: str | None = None
+    off_help: str | None = None
+
+
+@dataclass(frozen=True)
+class Option:
+    """One option of :func:`terrainvis.compare`.
+
+    Parameters
+    ----------
+    name : str
+        The keyword of :func:`~terrainvis.compare`, the attribute of :class:`Settings`
+        and the key in the stored settings.
+    default
+        The value when the option is not given (also the command line's default).
+    check : callable
+        ``check(value, name) -> value``: the value validated and normalised (tuples for
+        sequences), or a TypeError / ValueError naming ``name``, what was expected and
+        what was received.
+    help : str
+        One line for ``--help`` and the first line of the option in ``help(compare)``.
+    type : str
+        The type as the docstring shows it (``"int"``, ``"sequence of str"``, ...).
+    doc : str
+        More for the docstring (optional).
+    measures : tuple of str
+        The measures (:data:`MEASURES`) the option applies to; the help says so when it
+        is not every measure.
+    cli : Flag, Switch or None
+        How ``terrainvis compare`` spells it (None: the API only).
+    los : bool
+        Passed, under its name, to every visibility computation of a run
+        (``visibility_matrix``, ``viewshed`` and ``relocate``, whose calibrated and oracle
+        relocations compute visibility): an option such as the earth-curvature
+        coefficient is then one entry here and nothing else.
+    default_text : str, optional
+        How help texts show the default (when ``repr`` of it would not say it well).
+    """
+
+    name: str
+    default: Any
+    check: Callable[[Any, str], Any]
+    help: str
+    type: str
+    doc: str = ""
+    measures: tuple = MEASURES
+    cli: Flag | Switch | None = Flag()
+    los: bool = False
+    default_text: str | None = None
+
+    @property
+    def flag(self) -> str | None:
+        """The option's command-line flag (a value flag's spelling, or a switch's first flag)."""
+        if isinstance(self.cli, Switch):
+            return self.cli.on or self.cli.off
+        if isinstance(self.cli, Flag):
+            return self.cli.spelling or "--" + self.name.replace("_", "-")
+        return None
+
+    def shown_default(self) -> str:
+        """The default as the command line's help shows it."""
+        if self.default_text is not None:
+            return self.default_text
+        value = self.default
+        if isinstance(value, (tuple, list)):
+            return " ".join(map(str, value))
+        return f"{value:g}" if isinstance(value, float) else str(value)
+
+    def documented_default(self) -> str:
+        """The default as :func:`~terrainvis.compare`'s docstring shows it."""
+        return f"{self.default!r}" + (f" ({self.default_text})" if self.default_text is not None else "")
+
+    def scope(self) -> str:
+        """``" (pairs only)"`` for an option of some measures only, else ``""``."""
+        if set(MEASURES) <= set(self.measures):
+            return ""
+        return f" ({', '.join(self.measures)} only)"
+
+
+# ---------------------------------------------------------------------- checks
+def integer(minimum: int | None = None):
+    """A check: an integer, at least ``minimum``."""
+    return lambda value, name: as_int(value, name, minimum=minimum)
+
+
+def finite(value, name: str) -> float:
+    """A check: a finite real number (:func:`terrainvis.core.validate.as_finite_scalar`)."""
+    return as_finite_scalar(value, name)
+
+
+def _nonnegative(value, name: str) -> float:
+    """A check: a finite real number >= 0."""
+    out = finite(value, name)
+    if out < 0:
+        raise ValueError(f"{name} must be >= 0, got {out!r}")
+    return out
+
+
+def _positive(value, name: str) -> float:
+    """A check: a finite real number > 0."""
+    out = finite(value, name)
+    if out <= 0:
+        raise ValueError(f"{name} must be > 0, got {out!r}")
+    return out
+
+
+def height(value, name: str) -> float:
+    """A check: a height above the surface, finite and >= 0 (a negative one would stand underground)."""
+    out = finite(value, name)
+    if out < 0:
+        raise ValueError(f"{name} must be >= 0 (a height above the surface), got {out!r}")
+    return out
+
+
+def one_of(valid: Callable[[], Sequence[str]]):
+    """A check: one of the names ``valid()`` lists (read when the check runs)."""
+    return lambda value, name: choice(value, name, valid())
+
+
+def boolean(value, name: str) -> bool:
+    """A check: True or False (numpy's bool too)."""
+    return as_bool(value, name)
+
+
+def names(valid: Callable[[], Sequence[str]], default: Callable[[], Sequence[str]]):
+    """A check: distinct names drawn from ``valid()`` (a str is one name; None is ``default()``)."""
+
+    def check(value, name: str) -> tuple:
+        if value is None:
+            return tuple(default())
+        if isinstance(value, str):
+            value = [value]
+        if not isinstance(value, (list, tuple)):
+            raise TypeError(f"{name} must be a list of names, got {describe(value)}")
+        allowed = list(valid())
+        out = []
+        for v in value:
+            if not isinstance(v, str) or v not in allowed:
+                raise ValueError(f"{name} must be drawn from {allowed}, got {v!r}")
+            if v in out:
+                raise ValueError(f"{name} must not repeat a name, got {v!r} twice")
+            out.append(v)
+        if not out:
+            raise ValueError(f"{name} must name at least one of {allowed}, got an empty list")
+        return tuple(out)
+
+    return check
+
+
+def _levels(value, name: str) -> tuple:
+    """Distinct levels >= 1 (whether each terrain has them is the rule :func:`_levels_fit`)."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        value = [value]
+    if not isinstance(value, (list, tuple)):
+        raise TypeError(f"{name} must be an integer or a list of integers, got {describe(value)}")
+    levels = []
+    for v in value:
+        lv = as_int(v, name, minimum=1)
+        if lv in levels:
+            raise ValueError(f"{name} must not repeat a level, got {lv} twice")
+        levels.append(lv)
+    if not levels:
+        raise ValueError(f"{name} must hold at least one level, got an empty list")
+    return tuple(levels)
+
+
+def _distances(value, name: str) -> tuple:
+    """Distinct distances > 0 (None: unlimited) as a tuple."""
+    values = list(value) if isinstance(value, (list, tuple)) else [value]
+    out = []
+    for v in values:
+        if v is not None:
+            d = as_float_array(v, name)
+            if d.ndim != 0:
+                raise TypeError(f"{name} must hold numbers or None, got {describe(v)}")
+            v = float(d)
+            if v == np.inf:
+                v = None
+            elif not np.isfinite(v) or v <= 0:
+                raise ValueError(f"{name} must be > 0 (or None / inf for every pair), got {v!r}")
+        if v in out:
+            raise ValueError(f"{name} must not repeat a distance, got {v!r} twice")
+        out.append(v)
+    if not out:
+        raise ValueError(f"{name} must hold at least one distance (None: every pair), got an empty list")
+    return tuple(out)
+
+
+def _cascade(value, name: str):
+    if isinstance(value, str) and value == "auto":
+        return value
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True, False or 'auto', got {describe(value)}")
+    return bool(value)
+
+
+def _distance_word(text: str):
+    """``--max-distance`` words: a number, or ``all`` (also ``inf``, ``none``) for every pair."""
+    if text.lower() in ("all", "inf", "none"):
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a distance or 'all', got {text!r}") from None
+
+
+def _method_names():
+    from simplifiers import METHODS
+
+    return list(METHODS)
+
+
+def _default_method_names():
+    from simplifiers import default_methods
+
+    return default_methods()
+
+
+def _relocation_names():
+    from ..relocation import registry as relocation
+
+    return relocation.RELOCATIONS + (relocation.ORACLE,)
+
+
+def _default_relocations():
+    from ..relocation import registry as relocation
+
+    return relocation.RELOCATIONS
+
+
+def _engines():
+    from ..visibility import ENGINES
+
+    return ENGINES
+
+
+# ---------------------------------------------------------------------- the options
+_DECLARED = [
+    Option(
+        "methods", None, names(_method_names, _default_method_names),
+        "simplification methods", "sequence of str", default_text="all registered methods but visopt",
+        doc=("The registry :data:`simplifiers.METHODS` lists them, in the paper's order; the default is "
+             "every method whose entry has ``default=True`` (all but ``visopt``)."),
+        cli=Flag(many=True, metavar="M"),
+    ),
+    Option(
+        "levels", (1, 2, 3), _levels, "simplification levels", "int or sequence of int",
+        doc="For 120x120 grids 1, 2, 3 are the paper's 25 %, 6 % and 1.5 %.",
+        cli=Flag(type=int, many=True),
+    ),
+    Option(
+        "relocations", RELOCATIONS, names(_relocation_names, _default_relocations),
+        "relocations of the points onto S(T) (add 'oracle' for the upper bound)", "sequence of str",
+        doc=("Any of the paper's ``\"identity\"``, ``\"full\"``, ``\"half\"``, the ``\"calibrated\"`` "
+             "relocation (:func:`terrainvis.relocate`; :mod:`terrainvis.relocation.calibrated`), and ``\"oracle\"``, "
+             "the upper bound that needs T's verdicts (not a practical relocation; it costs many visibility "
+             "queries per point set)."),
+        cli=Flag(many=True, metavar="R"),
+    ),
+    Option(
+        "n_partners", N_PARTNERS, integer(minimum=1), "partners of the calibrated relocation", "int",
+        doc=("The calibrated relocation places each point against about this many partners spread over the "
+             "terrain (:func:`terrainvis.relocation.calibrated.partners`: a core of up to ``CORE_PARTNERS`` = 512 "
+             "calibrated jointly, the others placed against the core); their positions come from ``seed``."),
+        cli=Flag("--partners", int),
+    ),
+    Option(
+        "neighbours", True, boolean, "calibrated relocation: count each point's neighbours (short sight lines)",
+        "bool",
+        doc=("The calibrated relocation weighs each point's agreement with 48 neighbours 1.5 to 8 cells of T "
+             "around it beside its partners (:func:`terrainvis.relocate`); False: the partners alone, a little "
+             "better over all pairs, worse among pairs a few cells apart."),
+        cli=Switch(off="--no-neighbours", off_help="calibrated relocation: the partners alone, no neighbours"),
+    ),
+    Option(
+        "n_points", 50, integer(minimum=2), "points per set", "int", measures=("pairs",),
+        doc="Each terrain gets ``n_sets`` sets of ``n_points`` uniform random points; every method sees the same sets.",
+        cli=Flag("--points", int),
+    ),
+    Option("n_sets", 6, integer(minimum=1), "point sets per terrain", "int", measures=("pairs",),
+           cli=Flag("--sets", int)),
+    Option(
+        "seed", 0, integer(minimum=0), "seed of the point sets (and of the viewshed measure's observers)", "int",
+        doc="The point sets depend only on ``seed`` and the terrain's name.",
+        cli=Flag(type=int),
+    ),
+    Option(
+        "max_distance", None, _distances,
+        "count only pairs within this horizontal distance; several give a sweep from the same verdicts "
+        "('all' for every pair)", "float or None or sequence of them", default_text="every pair",
+        doc=("Localized visibility tests; None or inf: every pair. A sweep costs little more than one "
+             "distance: each distance gets its rows from the same verdicts."),
+        cli=Flag(type=_distance_word, many=True, metavar="D"),
+    ),
+    Option(
+        "distance_unit", "world", one_of(lambda: DISTANCE_UNITS),
+        "unit of max_distance: world units or cells of the terrain (its larger cell side)", "{'world', 'cells'}",
+        cli=Flag(choices=lambda: DISTANCE_UNITS),
+    ),
+    Option(
+        "offset", 0.0, height, "observer height above the original surface, >= 0", "float",
+        doc="See :mod:`terrainvis.relocation`.", cli=Flag(type=float),
+    ),
+    Option(
+        "engine", "auto", one_of(_engines), "visibility engine", "{'auto', 'grid', 'embree'}",
+        doc="See :func:`terrainvis.visibility_matrix`.", cli=Flag(choices=_engines), los=True,
+    ),
+    Option(
+        "curvature", 0.0, _nonnegative, "earth curvature coefficient: 0 a flat earth (the paper's), 1 geometric, "
+        "0.85714 with standard refraction (GDAL's -cc)", "float",
+        doc=("Every line of sight, on T and on S(T), clears the surface raised by ``curvature * d1 * d2 / "
+             "(2 * earth_radius)`` (:func:`terrainvis.line_of_sight`)."),
+        cli=Flag(type=float), los=True,
+    ),
+    Option(
+        "earth_radius", EARTH_RADIUS, _positive, "earth radius in the terrain's x/y units (metres)", "float",
+        default_text=f"{EARTH_RADIUS:,.0f} (WGS84's semi-major axis)", cli=Flag(type=float), los=True,
+    ),
+    Option(
+        "predicate", "exact", one_of(lambda: PREDICATES),
+        "line-of-sight predicate on S(T): exact, or paper (ignore one cell of S(T) around each end)",
+        "{'exact', 'paper'}", doc="The verdicts on T are always exact (:data:`PREDICATES`).",
+        cli=Flag(choices=lambda: PREDICATES),
+    ),
+    Option(
+        "volume", True, boolean, "compute the volume between T and S(T)", "bool",
+        doc="See :func:`terrainvis.volume_error`.",
+        cli=Switch(off="--no-volume", off_help="skip the volume between T and S(T)"),
+    ),
+    Option(
+        "repeats", 3, integer(minimum=1), "timings per visibility matrix (the fastest is kept)", "int",
+        cli=Flag(type=int),
+    ),
+    Option(
+        "cascade", "auto", _cascade,
+        "simplify each QEC level from the previous level's result (one decimation instead of three; changes "
+        "QEC's results slightly, see the README)", "bool or 'auto'",
+        default_text=f"only on grids of more than {CASCADE_AUTO_MIN_SAMPLES:,} samples",
+        doc=("Applies to the methods that can continue from a finer result (QEC). On 1024², RMS errors are "
+             "6-8 % lower and accuracies within 0.1 points. False simplifies every level from T as the paper "
+             "does; ``\"auto\"`` cascades on grids of more than :data:`CASCADE_AUTO_MIN_SAMPLES` samples only. "
+             "The ``cascaded`` column records which levels started from a finer result."),
+        cli=Switch(on="--cascade", off="--no-cascade",
+                   off_help="simplify every level from the terrain itself, as the paper does, whatever its size"),
+    ),
+    Option(
+        "measure", "pairs", one_of(lambda: MEASURES),
+        "pairs: the paper's visibility matrices; viewshed: each observer's viewshed of every sample",
+        "{'pairs', 'viewshed'}",
+        doc=("With ``\"viewshed\"``, for ``n_observers`` random observers per terrain (``offset`` above T, "
+             "relocated onto S(T) like the points), the viewshed of every sample of T on T and on S(T) "
+             "(targets ``target_height`` above the surface under test); each row is one observer and "
+             "counts cells as pairs (observer, cell), with the share of cells whose verdict survives in "
+             "``accuracy`` and the visible-area ratio S(T) / T in ``visible_area_ratio``."),
+        cli=Flag(choices=lambda: MEASURES),
+    ),
+    Option("n_observers", 20, integer(minimum=1), "observers per terrain", "int", measures=("viewshed",),
+           cli=Flag("--observers", int)),
+    Option(
+        "target_height", 0.0, height, "the viewshed targets' height above the surface under test, >= 0", "float",
+        measures=("viewshed",), cli=Flag(type=float),
+    ),
+]
+
+#: Every option of :func:`terrainvis.compare`, by name, in the order of its signature.
+#: Adding an option is one entry here (plus the code that uses it).
+OPTIONS: dict[str, Option] = {o.name: o for o in _DECLARED}
+
+
+# ---------------------------------------------------------------------- rules
+def _levels_fit(settings: Settings, grids: dict) -> None:
+    from simplifiers import max_level
+
+    for name, grid in grids.items():
+        top = max_level(grid.shape)
+        if max(settings.levels) > top:
+            raise ValueError(
+                f"levels must be at most {top} for terrain {name!r} ({grid.shape[0]}x{grid.shape[1]}: each "
+                f"level needs at least 3 samples per axis), got {max(settings.levels)}"
+            )
+
+
+def _grid_engine_needs_grids(settings: Settings, grids: dict) -> None:
+    from simplifiers import METHODS
+
+    if settings.engine == "grid":
+        tins = [m for m in settings.methods if not METHODS[m].regular]
+        if tins:
+            raise ValueError(
+                f"engine 'grid' works on grids only, but methods {tins} produce TINs; use engine='auto' "
+                "(the grid engine on grids, Embree on TINs) or leave those methods out"
+            )
+
+
+def _viewshed_limits(settings: Settings, grids: dict) -> None:
+    if settings.measure != "viewshed":
+        return
+    if settings.predicate != "exact":
+        raise ValueError(f"measure 'viewshed' supports predicate 'exact' only, got {settings.predicate!r}")
+    if ORACLE in settings.relocations:
+        raise ValueError("measure 'viewshed' does not support the 'oracle' relocation (it bounds pair verdicts)")
+
+
+#: Checks across options (and the terrains), run after every option's own check:
+#: ``rule(settings, grids)`` raises a ValueError naming the options involved.
+RULES: list[Callable] = [_grid_engine_needs_grids, _viewshed_limits, _levels_fit]
+
+
+# ---------------------------------------------------------------------- settings
+class Settings:
+    """Everything that determines the rows of a :func:`~terrainvis.compare` run: a value per option.
+
+    ``Settings(n_points=20)`` holds the given values; an option not given reads as its
+    default (:data:`OPTIONS`), so :data:`DEFAULTS` (``Settings()``) is the defaults of
+    :func:`~terrainvis.compare` and of ``terrainvis compare``. Immutable: :meth:`replace`
+    returns a changed copy. Values are kept as given; :func:`validate` makes validated ones.
+
+    Examples
+    --------
+    >>> s = Settings(n_points=20)
+    >>> s.n_points, s.n_sets, s.replace(n_sets=2).n_sets
+    (20, 6, 2)
+    """
+
+    __slots__ = ("_values",)
+
+    def __init__(self, **values):
+        unknown = [k for k in values if k not in OPTIONS]
+        if unknown:
+            raise TypeError(f"Settings got unknown option(s) {unknown}; the options are {list(OPTIONS)}")
+        object.__setattr__(self, "_values", dict(values))
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        values = object.__getattribute__(self, "_values")
+        if name in values:
+            return values[name]
+        if name in OPTIONS:
+            return OPTIONS[name].default
+        raise AttributeError(f"Settings has no option {name!r}; the options are {list(OPTIONS)}")
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"Settings are immutable; use .replace({name}=...)")
+
+    def __reduce__(self):  # pickled to workers as its values, whatever options they declare
+        return (_restore, (dict(self._values),))
+
+    def replace(self, **changes) -> Settings:
+        """A copy with ``changes``."""
+        return Settings(**{**self._values, **changes})
+
+    def as_dict(self) -> dict:
+        """Every option's value (given or default), in :data:`OPTIONS` order."""
+        return {name: getattr(self, name) for name in OPTIONS}
+
+    def __eq__(self, other):
+        return isinstance(other, Settings) and self.as_dict() == other.as_dict()
+
+    def __hash__(self):
+        return hash(tuple(sorted((k, repr(v)) for k, v in self.as_dict().items())))
+
+    def __repr__(self):
+        return "Settings(" + ", ".join(f"{k}={v!r}" for k, v in self.as_dict().items()) + ")"
+
+
+def _restore(values: dict) -> Settings:
+    s = Settings.__new__(Settings)
+    object.__setattr__(s, "_values", values)
+    return s
+
+
+#: The defaults of :func:`terrainvis.compare` and ``terrainvis compare``.
+DEFAULTS = Settings()
+
+
+def validate(grids: dict, values: dict, *, caller: str = "compare()") -> Settings:
+    """``values`` (option name -> value; missing ones take their defaults) checked into :class:`Settings`.
+
+    Every option's own check runs first, in :data:`OPTIONS` order, then the :data:`RULES`.
+
+    Raises
+    ------
+    TypeError
+        An unknown option (the message lists the known ones), or a value of the wrong type.
+    ValueError
+        A value out of range, or options that do not go together.
+    """
+    unknown = [k for k in values if k not in OPTIONS]
+    if unknown:
+        raise TypeError(f"{caller} got unexpected option(s) {unknown}; the options are {list(OPTIONS)}")
+    checked = {}
+    for name, option in OPTIONS.items():
+        checked[name] = option.check(values.get(name, option.default), name)
+    settings = Settings(**checked)
+    for rule in RULES:
+        rule(settings, grids)
+    return settings
+
+
+def los_keywords(settings: Settings) -> dict:
+    """The options passed, under their names, to every visibility computation (``los=True``)."""
+    return {name: getattr(settings, name) for name, option in OPTIONS.items() if option.los}
+
+
+# ---------------------------------------------------------------------- the signature and docstring
+def signature_parameters() -> list[inspect.Parameter]:
+    """The options as keyword-only parameters, with their defaults (for ``compare.__signature__``)."""
+    return [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=o.default)
+            for name, o in OPTIONS.items()]
+
+
+def docstring_section(indent: str = "    ") -> str:
+    """The options as a numpydoc "Parameters" block (for ``compare.__doc__``)."""
+    import textwrap
+
+    lines = []
+    for name, o in OPTIONS.items():
+        lines.append(f"{indent}{name} : {o.type}, default {o.documented_default()}")
+        text = o.help[0].upper() + o.help[1:] + o.scope() + "."
+        if o.doc:
+            text += " " + o.doc
+        lines += textwrap.wrap(text, width=88, initial_indent=indent * 2, subsequent_indent=indent * 2)
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------- the command line
+def add_flags(parser: argparse.ArgumentParser) -> None:
+    """Add every option's flag to ``terrainvis compare``'s parser.
+
+    A flag not given leaves no attribute on the parsed namespace (``argparse.SUPPRESS``),
+    so :func:`given` returns only what the user typed, and everything else takes the
+    option's default in :func:`validate`.
+    """
+    for option in OPTIONS.values():
+        cli = option.cli
+        if isinstance(cli, Switch):
+            _add_switch(parser, option, cli)
+        elif isinstance(cli, Flag):
+            kw = {"dest": option.name, "default": argparse.SUPPRESS, "type": cli.type,
+                  "help": f"{option.help}{option.scope()} (default: {option.shown_default()})"}
+            if cli.many:
+                kw["nargs"] = "+"
+            if cli.choices is not None:
+                kw["choices"] = list(cli.choices())
+            else:  # named after the flag, not the option (--points N, not N_POINTS)
+                kw["metavar"] = cli.metavar or option.flag.lstrip("-").upper().replace("-", "_")
+            parser.add_argument(option.flag, **kw)
+
+
+def _add_switch(parser, option: Option, cli: Switch) -> None:
+    target = parser.add_mutually_exclusive_group() if cli.on and cli.off else parser
+    default = f" (default: {option.shown_default()})"
+    if cli.on:
+        target.add_argument(cli.on, dest=option.name, action="store_const", const=True, default=argparse.SUPPRESS,
+                            help=(cli.on_help or option.help) + option.scope() + default)
+    if cli.off:
+        target.add_argument(cli.off, dest=option.name, action="store_const", const=False, default=argparse.SUPPRESS,
+                            help=(cli.off_help or f"not: {option.help}") + option.scope())
+
+
+def given(args: argparse.Namespace) -> dict:
+    """The options the user gave on the command line (name -> value)."""
+    return {name: getattr(args, name) for name in OPTIONS if hasattr(args, name)}

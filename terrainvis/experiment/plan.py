@@ -1,0 +1,387 @@
+"""Planning a :func:`terrainvis.compare` run: the terrains, the settings, the tasks.
+
+Everything here happens before any unit runs, so a mistake is reported at once:
+
+* :func:`resolve_terrains` turns the ``terrains`` argument into named grids;
+* :func:`settings_for` validates the options (:func:`terrainvis.experiment.options.validate`), and
+  :func:`check_memory` refuses a run whose units could not fit in memory;
+* :func:`tasks` splits the run into tasks, most expensive first; :func:`run_record` is what
+  the results file stores about the run (settings and the terrains' fingerprints);
+* :func:`warm_up_parts` says what a cold run must compile, in parts two workers can share.
+
+What one unit computes is :mod:`terrainvis.experiment.units`; ordering the rows is
+:mod:`terrainvis.experiment.collect`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..core.validate import describe
+from .options import CASCADE_AUTO_MIN_SAMPLES, Settings, validate
+from ..core.terrain import HeightGrid
+
+__all__ = [
+    "DEFAULT_TERRAINS", "JACKSBORO_WINDOW", "resolve_terrains", "settings_for", "check_memory", "unit_bytes",
+    "tasks", "cascades", "run_record", "fingerprint", "warm_up_parts", "work_order", "compile_seconds",
+    "kernels_cached",
+]
+
+#: The default terrains: the five bundled 120x120 terrains and a 120x120 window of the real Jacksboro DEM.
+DEFAULT_TERRAINS = ("hills", "mesas", "rough", "mountains", "ridges", "jacksboro")
+
+#: Rows and columns of the 344x403 Jacksboro DEM used as the "jacksboro" terrain: its
+#: central 120x120 window at the native 74.57 m x 92.47 m cells (8.9 km x 11.0 km). A
+#: window keeps the real sampling; resampling the whole DEM to 120x120 would smooth it.
+JACKSBORO_WINDOW = ((112, 232), (141, 261))
+
+
+# ---------------------------------------------------------------------- terrains
+def resolve_one(name, t, i):
+    """``(name, HeightGrid)`` for one entry of the ``terrains`` argument (``name`` None: derived).
+
+    A path that names an existing file is read, even when it is also a bundled name (a
+    local ``hills`` wins over the bundled terrain, with a warning saying so); a file
+    without a suffix is read by its content (``.npz``, ``.npy``, ``.tif`` or ``.asc``).
+    """
+    from ..core.synthetic import BUNDLED
+    from ..io import bundled_terrain
+
+    if isinstance(t, HeightGrid):
+        return name or t.attrs.get("name") or f"terrain{i}", t
+    if not isinstance(t, (str, Path)):
+        raise TypeError(f"terrains must hold HeightGrids, names or paths, got {describe(t)}")
+    text = str(t)
+    known = list(BUNDLED) + ["jacksboro"]
+    path = Path(text)
+    if path.is_file():
+        shadows = text in known
+        try:
+            grid = _load_local(path)
+        except ValueError as exc:
+            if not shadows:
+                raise
+            raise ValueError(f"{exc} (a local file wins over the bundled terrain {text!r}: rename or move it to "
+                             "use the bundled one)") from None
+        if shadows:
+            warnings.warn(
+                f"terrain {text!r}: read the local file {str(path.resolve())!r}, not the bundled terrain of that "
+                "name (a local file always wins; rename or move it to use the bundled one)",
+                UserWarning, stacklevel=3,
+            )
+        return name or (path.stem if path.suffix else path.name), grid
+    if text in BUNDLED:
+        return name or text, bundled_terrain(text)
+    if text == "jacksboro":
+        return name or text, _jacksboro()
+    if path.suffix:
+        raise ValueError(f"terrain {text!r} is neither a bundled terrain {known} nor an existing file")
+    raise ValueError(f"terrain must be a bundled terrain {known}, a DEM file or a HeightGrid, got {text!r}")
+
+
+#: How a DEM file without a suffix is recognised: its first bytes.
+_MAGIC = ((b"PK\x03\x04", ".npz"), (b"\x93NUMPY", ".npy"), (b"II*\x00", ".tif"), (b"MM\x00*", ".tif"),
+          (b"II+\x00", ".tif"), (b"MM\x00+", ".tif"))
+
+
+def _load_local(path: Path) -> HeightGrid:
+    """A DEM file; one without a suffix is read by its content, through a link that has the suffix."""
+    import os
+    import shutil
+    import tempfile
+
+    from ..io import load_dem
+
+    if path.suffix:
+        return load_dem(path)
+    with open(path, "rb") as fh:
+        head = fh.read(512)
+    suffix = next((s for magic, s in _MAGIC if head.startswith(magic)), None)
+    if suffix is None and head.lstrip().lower().startswith((b"ncols", b"nrows", b"xllc", b"yllc")):
+        suffix = ".asc"
+    if suffix is None:
+        raise ValueError(
+            f"terrain {str(path)!r} is a file without a suffix whose content is not a DEM terrainvis reads "
+            "(.npz, .npy, .tif, .asc); give it its suffix"
+        )
+    with tempfile.TemporaryDirectory(prefix="terrainvis-") as tmp:
+        link = Path(tmp) / (path.name + suffix)
+        companions = [(path.with_name(path.name + ".prj"), link.with_suffix(".prj"))] if suffix == ".asc" else []
+        for src, dst in [(path, link)] + [c for c in companions if c[0].exists()]:
+            try:
+                os.symlink(src.resolve(), dst)
+            except OSError:  # no symlinks here (Windows without the privilege): a copy
+                shutil.copyfile(src, dst)
+        try:
+            grid = load_dem(link)
+        except ValueError as exc:
+            raise ValueError(f"terrain {str(path)!r} (read as {suffix} by its content): {exc}") from None
+    grid.attrs["path"] = str(path)
+    return grid
+
+
+def _jacksboro() -> HeightGrid:
+    from ..io import sample_dem
+
+    (r0, r1), (c0, c1) = JACKSBORO_WINDOW
+    grid = sample_dem("jacksboro").crop(rows=(r0, r1), cols=(c0, c1))
+    grid.attrs["name"] = "jacksboro"
+    return grid
+
+
+def resolve_terrains(terrains) -> dict[str, HeightGrid]:
+    """Turn the ``terrains`` argument of :func:`~terrainvis.compare` into ``{name: HeightGrid}``.
+
+    Accepted: a HeightGrid; a bundled name (:data:`terrainvis.core.synthetic.BUNDLED`);
+    ``"jacksboro"`` (see :data:`JACKSBORO_WINDOW`); a path to a DEM file (any format of
+    :func:`terrainvis.load_dem`; named by its stem); a list of these; or a dict
+    ``{name: HeightGrid or str}``. Every terrain must be free of nodata.
+    """
+    if isinstance(terrains, (HeightGrid, str, Path)):
+        terrains = [terrains]
+    if isinstance(terrains, dict):
+        items = list(terrains.items())
+    elif isinstance(terrains, (list, tuple)):
+        items = [(None, t) for t in terrains]
+    else:
+        raise TypeError(
+            "terrains must be a terrain (HeightGrid, bundled name or DEM path), a list of them or a dict "
+            f"{{name: terrain}}, got {describe(terrains)}"
+        )
+    if not items:
+        raise ValueError("terrains must name at least one terrain, got an empty collection")
+    out: dict[str, HeightGrid] = {}
+    for i, (name, t) in enumerate(items):
+        name, grid = resolve_one(name, t, i)
+        name = str(name)
+        if name in out:
+            raise ValueError(f"terrain names must be unique, got {name!r} twice")
+        grid.require_finite(f"compare (terrain {name!r})")
+        out[name] = grid
+    return out
+
+
+# ---------------------------------------------------------------------- settings
+def settings_for(grids: dict, values: dict) -> Settings:
+    """The options of a run (name -> value) validated into :class:`~terrainvis.experiment.options.Settings`."""
+    return validate(grids, values)
+
+
+def unit_bytes(settings: Settings, grids: dict) -> int:
+    """A lower bound of the memory one unit allocates, in bytes (on the largest terrain).
+
+    Pairs: the visibility matrices on T and on S(T) (a byte per ordered pair each),
+    :func:`terrainvis.agreement`'s indices of the upper triangle (16 bytes per pair), and
+    with ``max_distance`` a distance and a mask per distance (8 + 1 bytes per pair).
+    Viewsheds: six arrays of 8 bytes per sample of the terrain (coordinates, distances,
+    the two viewsheds, a mask). The terrains and S(T) themselves are not counted.
+    """
+    if settings.measure == "viewshed":
+        return 8 * 6 * max(g.size for g in grids.values())
+    n = settings.n_points
+    per_pair = 2 + 16 + (0 if settings.max_distance == (None,) else 8 + len(settings.max_distance))
+    return per_pair * n * n
+
+
+def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
+    """Refuse, before anything is allocated, a run whose units could not fit in the available memory.
+
+    ``at_once`` units run side by side (the local pool's workers).
+
+    Raises
+    ------
+    terrainvis.errors.NotEnoughMemoryError
+        One line: what the units would need, and what the machine has available.
+    """
+    from ..core.memory import available_memory, format_bytes
+    from ..errors import NotEnoughMemoryError
+
+    need = unit_bytes(settings, grids) * max(1, at_once)
+    have = available_memory()
+    if have is None or need <= have:
+        return
+    if settings.measure == "pairs":
+        what = f"n_points={settings.n_points:,} (visibility matrices of {settings.n_points:,}² pairs)"
+    else:
+        what = f"the viewshed measure on {max(g.size for g in grids.values()):,} samples"
+    side_by_side = f" with {at_once} units at once" if at_once > 1 else ""
+    raise NotEnoughMemoryError(
+        f"{what} needs at least {format_bytes(need)} of memory{side_by_side}, but this machine has "
+        f"{format_bytes(have)} available; use fewer points" + (" or fewer workers" if at_once > 1 else "")
+    )
+
+
+def fingerprint(grid: HeightGrid) -> str:
+    """A content hash of a terrain (z, xs, ys), so a resume notices a changed input."""
+    h = hashlib.sha256()
+    for a in (grid.z, grid.xs, grid.ys):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+def run_record(settings: Settings, grids: dict) -> dict:
+    """What the results file stores about a run: every option's value and the terrains' fingerprints."""
+    record = settings.as_dict()
+    record["terrains"] = {name: fingerprint(g) for name, g in grids.items()}
+    return record
+
+
+# ---------------------------------------------------------------------- tasks
+def cascades(settings: Settings, grid: HeightGrid, method: str, *,
+             auto_min_samples: int = CASCADE_AUTO_MIN_SAMPLES) -> bool:
+    """Whether ``method``'s levels on ``grid`` run as a cascade (each from the previous level's result)."""
+    from simplifiers import METHODS
+
+    if not METHODS[method].cascades or len(settings.levels) < 2:
+        return False
+    if settings.cascade == "auto":
+        return grid.size > auto_min_samples
+    return bool(settings.cascade)
+
+
+def tasks(grids: dict, settings: Settings, done=frozenset(), *,
+          auto_min_samples: int = CASCADE_AUTO_MIN_SAMPLES) -> list[tuple]:
+    """The tasks as (terrain, method, levels), the most expensive first so the pool stays busy to the end.
+
+    A task is one level, or all the levels of a method that cascades (``settings.cascade``;
+    a task of several levels is a cascade). Tasks whose every unit is ``done`` are left
+    out; a cascade with some levels done runs them all again (each level starts from the
+    previous one), and their rows are dropped.
+    """
+    from simplifiers import METHODS
+
+    out = []
+    for t in grids:
+        for m in settings.methods:
+            if cascades(settings, grids[t], m, auto_min_samples=auto_min_samples):
+                groups = [tuple(sorted(settings.levels))]
+            else:
+                groups = [(lv,) for lv in settings.levels]
+            out += [(t, m, g) for g in groups if any((t, m, lv) not in done for lv in g)]
+    return sorted(out, key=lambda u: (-grids[u[0]].size, METHODS[u[1]].cost_rank, u[2]))
+
+
+# ---------------------------------------------------------------------- compiling
+def warm_up_parts(planned, grids: dict, settings: Settings | None = None) -> list[tuple]:
+    """What a run must compile, as parts that two workers can compile side by side.
+
+    With a cold numba cache every worker would compile every kernel it meets (about 80 s
+    of compilation each for a full run). Compiled once by whichever worker takes the part,
+    a kernel is loaded from the on-disk cache by the others. The parts: each method's
+    kernels; the measurements on a grid S(T) (which hold the grid line-of-sight engine
+    that every unit uses on T), on a TIN S(T) (the rest: TIN walks and relocation) and
+    the volume between T and S(T) (unless ``settings.volume`` is off). No two parts
+    compile the same kernel when :func:`work_order` runs them: the TIN measure follows
+    the grid one (:func:`part_needs`). They go longest first (:data:`COMPILE_SECONDS`,
+    measured).
+    """
+    from simplifiers import METHODS
+
+    methods = sorted({m for _, m, _ in planned}, key=lambda m: METHODS[m].cost_rank)
+    kinds = sorted({"grid" if METHODS[m].regular else "tin" for m in methods})
+    # Regular methods switch to parallel kernels above a size: warm them on a grid as
+    # large as the run's largest (capped; they take milliseconds), the rest on a small one.
+    largest = max(g.size for g in grids.values())
+    side = min(1024, max(33, int(np.ceil(np.sqrt(largest)))))
+    parts = [("method", m, side if METHODS[m].regular else 33) for m in methods]
+    parts += [("measure", k, 33) for k in kinds]
+    if methods and (settings is None or settings.volume):
+        parts.append(("measure", "volume", 33))
+    return sorted(parts, key=compile_weight, reverse=True)  # stable: equal weights keep this order
+
+
+#: CPU seconds to compile each warm-up part's kernels with an empty numba cache, in one
+#: process with one numba thread as a worker has, measured on this project's 2-core
+#: machine (``python benchmarks/bench_cold_start.py``; "tin" after "grid", whose kernels
+#: it then loads). Parts not listed count as the median. The weights of an estimate and
+#: of the order of the work (:func:`work_order`); the progress bar rescales them as parts
+#: finish.
+COMPILE_SECONDS = {
+    "grid": 16.2, "greedy-cuts": 9.0, "tin": 4.8, "volume": 3.7, "greedy-insertion": 3.5, "feature": 1.9,
+    "gls": 1.9, "lls": 1.2, "qec": 1.1, "simple": 0.8,
+}
+
+#: A unit's weight in :func:`work_order` (only orders the units that can start before
+#: the last parts are compiled; a quick run's units take about a second each).
+UNIT_SECONDS = 1.0
+
+
+def compile_weight(part: tuple) -> float:
+    """The measured compile time of a warm-up part (:data:`COMPILE_SECONDS`; the median when unknown)."""
+    known = sorted(COMPILE_SECONDS.values())
+    return COMPILE_SECONDS.get(part[1], known[len(known) // 2])
+
+
+def part_needs(part: tuple, parts) -> list[tuple]:
+    """The parts of ``parts`` whose kernels ``part`` also runs: the TIN measure needs the grid
+    measure (line of sight on T, the best heights), which it would otherwise compile again."""
+    if part[:2] == ("measure", "tin"):
+        return [p for p in parts if p[:2] == ("measure", "grid")]
+    return []
+
+
+def unit_needs(task: tuple, parts) -> list[tuple]:
+    """The parts a unit of ``task`` = (terrain, method, levels) runs: its method's, the measure on
+    its kind of surface (and what that needs) and the volume."""
+    from simplifiers import METHODS
+
+    kind = "grid" if METHODS[task[1]].regular else "tin"
+    own = [p for p in parts if p[:2] in (("method", task[1]), ("measure", kind), ("measure", "volume"))]
+    return own + [q for p in own for q in part_needs(p, parts)]
+
+
+def work_order(parts, tasks, at_once: int) -> list[tuple]:
+    """The warm-up parts and the tasks as one list, in the order a pool of ``at_once`` workers should take them.
+
+    Each item is ``("part", part)`` or ``("task", task)``. A pool hands out work first in,
+    first out; :func:`_simulate` plays it with the estimated durations: a worker that
+    comes free takes the first item, parts longest first and then the tasks in their
+    order, whose parts (:func:`part_needs`, :func:`unit_needs`) are finished by then. So
+    no worker compiles a kernel that another is still compiling, and the units of the
+    methods compiled first start while the others compile.
+    """
+    return [item for item, _ in _simulate(parts, tasks, at_once)]
+
+
+def _simulate(parts, tasks, at_once: int) -> list[tuple]:
+    """``(item, finish)`` in the order of :func:`work_order`, with the estimated finish times
+    (:data:`COMPILE_SECONDS`, :data:`UNIT_SECONDS`). An item that nothing lets start (its
+    parts still compiling on every other worker) is counted from when they are done."""
+    items = [("part", p) for p in sorted(parts, key=compile_weight, reverse=True)] + [("task", t) for t in tasks]
+    needs = {it: part_needs(it[1], parts) if it[0] == "part" else unit_needs(it[1], parts) for it in items}
+    seconds = {it: compile_weight(it[1]) if it[0] == "part" else UNIT_SECONDS for it in items}
+    free = [0.0] * max(1, at_once)
+    finish: dict = {}
+    out = []
+    while items:
+        w = free.index(min(free))
+        ready = [it for it in items if all(finish.get(d, np.inf) <= free[w] for d in needs[it])]
+        it = ready[0] if ready else min(items, key=lambda i: max([finish.get(d, np.inf) for d in needs[i]]))
+        start = max([free[w]] + [finish.get(d, np.inf) for d in needs[it]])
+        finish[it[1] if it[0] == "part" else it] = free[w] = start + seconds[it]
+        items.remove(it)
+        out.append((it, free[w]))
+    return out
+
+
+def compile_seconds(parts, at_once: int) -> float:
+    """An estimate of the wall time ``parts`` take to compile on ``at_once`` workers (:data:`COMPILE_SECONDS`,
+    in the order of :func:`work_order`)."""
+    return max([finish for _, finish in _simulate(parts, [], at_once)], default=0.0)
+
+
+def kernels_cached() -> bool | None:
+    """Whether numba's on-disk cache already holds the LOS kernels (None when it cannot tell)."""
+    try:
+        import os
+
+        from ..visibility import _kernels
+
+        return os.path.exists(_kernels.grid_walks._cache._cache_file._index_path)
+    except Exception:  # numba internals: a best-effort hint only
+        return None
+

@@ -1,0 +1,413 @@
+"""Figures: hillshades, LOS pairs, accuracy against size, and the speed/accuracy trade-off.
+
+This is the only module of terrainvis that imports matplotlib. Every function returns a
+:class:`matplotlib.figure.Figure` and never calls ``show()``; in a notebook the figure
+displays itself, and the CLI saves it as a PNG.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from matplotlib.colors import LightSource
+from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
+
+from ..core.validate import as_points, describe
+from ..core.terrain import TIN, HeightGrid, as_terrain
+
+__all__ = [
+    "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance", "viewshed",
+    "cumulative_viewshed",
+]
+
+
+def _style(method: str) -> tuple[str, str]:
+    """Colour and marker of a method (from the registry; black dots for unknown names)."""
+    from simplifiers import METHODS
+
+    info = METHODS.get(method)
+    return info.style if info is not None else ("k", "o")
+
+
+def _shade_image(terrain, resolution: int | None = None):
+    """An RGB hillshade image of a terrain and its extent (TINs are rasterised)."""
+    if isinstance(terrain, HeightGrid) and terrain.is_uniform:
+        z, (xmin, xmax, ymin, ymax) = terrain.z, terrain.extent
+        dx, dy = terrain.dx, terrain.dy
+    else:
+        xmin, xmax, ymin, ymax = terrain.extent
+        n = resolution or 400
+        xs = np.linspace(xmin, xmax, n)
+        ys = np.linspace(ymin, ymax, max(2, int(round(n * (ymax - ymin) / (xmax - xmin)))))
+        z = terrain.height_on_grid(xs, ys)
+        dx, dy = xs[1] - xs[0], ys[1] - ys[0]
+    zf = np.where(np.isnan(z), np.nanmin(z), z)
+    import matplotlib as mpl
+
+    ls = LightSource(azdeg=315, altdeg=45)
+    # imshow with origin="lower" puts row 0 at the bottom, i.e. y grows upwards (north).
+    # LightSource assumes row 0 at the top, so shade the flipped array and flip back.
+    rgb = ls.shade(zf[::-1], cmap=mpl.colormaps["terrain"], vert_exag=1.0, dx=dx, dy=dy, blend_mode="soft")[::-1]
+    rgb[np.isnan(z)] = (1.0, 1.0, 1.0, 1.0)
+    return rgb, (xmin, xmax, ymin, ymax)
+
+
+def _draw_terrain(ax, terrain, *, wireframe: bool = True, title: str | None = None, axes: bool = True):
+    rgb, extent = _shade_image(terrain)
+    ax.imshow(rgb, origin="lower", extent=extent, interpolation="nearest")
+    if isinstance(terrain, TIN) and wireframe:
+        v = terrain.vertices
+        ax.triplot(v[:, 0], v[:, 1], terrain.faces, color="k", lw=0.25, alpha=0.5)
+    ax.set_aspect("equal")
+    if axes:
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+    else:  # a panel of many: the picture alone (ticks cost most of the drawing time)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if title:
+        ax.set_title(title, fontsize=9)
+
+
+def hillshade(terrain, *, wireframe: bool = True, title: str | None = None, figsize=(6, 5)) -> Figure:
+    """A hillshade of a HeightGrid, or of a TIN with its wireframe.
+
+    Parameters
+    ----------
+    terrain : HeightGrid or TIN
+    wireframe : bool
+        Draw a TIN's edges.
+    title : str, optional
+    """
+    as_terrain(terrain)
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=wireframe, title=title or repr(terrain))
+    return fig
+
+
+def terrain_views(original: HeightGrid, simplified: dict, *, ncols: int = 4, panel_size: float = 3.2) -> Figure:
+    """The original terrain and its simplifications side by side.
+
+    Parameters
+    ----------
+    original : HeightGrid
+    simplified : dict of str to HeightGrid or TIN
+        Panel title -> simplified terrain.
+    """
+    as_terrain(original, "original")
+    if not isinstance(simplified, dict):
+        raise TypeError(f"simplified must be a dict of title -> terrain, got {describe(simplified)}")
+    panels = [("original", original)] + list(simplified.items())
+    nrows = int(np.ceil(len(panels) / ncols))
+    fig = Figure(figsize=(panel_size * ncols, panel_size * nrows))
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.93, wspace=0.04, hspace=0.12)
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    xmin, xmax, ymin, ymax = original.extent
+    for ax, (title, t) in zip(axes, panels):
+        as_terrain(t, f"simplified[{title!r}]")
+        n = t.size if isinstance(t, HeightGrid) else t.n_vertices
+        _draw_terrain(ax, t, title=f"{title} ({n} vertices)", axes=False)
+    axes[0].set_xlabel(f"{xmax - xmin:.4g} m x {ymax - ymin:.4g} m", fontsize=8)
+    for ax in axes[len(panels):]:
+        ax.set_axis_off()
+    return fig
+
+
+def los_pairs(terrain, points, V_true, V_test, *, only_changed: bool = False, title: str | None = None,
+              figsize=(7, 6)) -> Figure:
+    """Line-of-sight pairs over a terrain, coloured by whether their verdict survived.
+
+    Colours: grey, the same verdict on both terrains; red, *false blocked* (visible on
+    the original, blocked on the simplification); blue, *false visible*.
+
+    Parameters
+    ----------
+    terrain : HeightGrid or TIN
+        Drawn as the background.
+    points : (n, 3) array_like
+    V_true, V_test : (n, n) bool
+        Visibility on the original and on the simplified terrain.
+    only_changed : bool
+        Draw only the pairs whose verdict changed.
+    """
+    as_terrain(terrain)
+    pts = as_points(points, "points", 3)
+    t = np.asarray(V_true, dtype=bool)
+    s = np.asarray(V_test, dtype=bool)
+    n = pts.shape[0]
+    if t.shape != (n, n) or s.shape != (n, n):
+        raise ValueError(f"V_true and V_test must have shape ({n}, {n}), got {t.shape} and {s.shape}")
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title)
+    i, j = np.triu_indices(n, k=1)
+    segs = np.stack([pts[i, :2], pts[j, :2]], axis=1)
+    same = t[i, j] == s[i, j]
+    false_blocked = t[i, j] & ~s[i, j]
+    false_visible = ~t[i, j] & s[i, j]
+    if not only_changed:
+        ax.add_collection(LineCollection(segs[same], colors="0.3", linewidths=0.3, alpha=0.35))
+    ax.add_collection(LineCollection(segs[false_blocked], colors="tab:red", linewidths=1.0))
+    ax.add_collection(LineCollection(segs[false_visible], colors="tab:blue", linewidths=1.0))
+    ax.plot(pts[:, 0], pts[:, 1], "k.", ms=4)
+    handles = [
+        Line2D([], [], color="0.3", lw=1, label=f"same verdict ({int(same.sum())})"),
+        Line2D([], [], color="tab:red", lw=1.5, label=f"false blocked ({int(false_blocked.sum())})"),
+        Line2D([], [], color="tab:blue", lw=1.5, label=f"false visible ({int(false_visible.sum())})"),
+    ]
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+
+
+def _panels(n: int, width: float, height: float, figsize=None, sharey: bool = True):
+    """A figure of ``n`` panels in a row with fixed margins.
+
+    A layout engine measures every tick label and costs more than the drawing itself;
+    these figures have a known shape, so fixed margins serve as well.
+    """
+    fig = Figure(figsize=figsize or (width * n, height))
+    w, h = fig.get_size_inches()
+    fig.subplots_adjust(left=0.95 / w, right=1 - 0.15 / w, bottom=0.55 / h, top=1 - 0.35 / h,
+                        wspace=0.3 if not sharey else 0.08)
+    return fig, fig.subplots(1, n, squeeze=False, sharey=sharey).ravel()
+
+
+def _check_df(df, needed, *, sweep: bool = False):
+    """The error-free rows of a compare result; of a distance sweep, the all-pairs rows unless ``sweep``."""
+    if not isinstance(df, pd.DataFrame):
+        raise TypeError(f"df must be a pandas DataFrame from terrainvis.compare, got {describe(df)}")
+    missing = set(needed) - set(df.columns)
+    if missing:
+        raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
+    if "error" in df.columns:
+        df = df[df["error"].fillna("").astype(str) == ""]
+    if not sweep and "max_distance" in df.columns and df["max_distance"].nunique(dropna=False) > 1:
+        df = df[df["max_distance"].isna()]
+    return df
+
+
+def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
+    """Accuracy against terrain size (% of the original samples), per method and relocation.
+
+    One panel per relocation; each method is a line through its levels, with the
+    standard deviation over terrains x point sets as a band.
+    """
+    from simplifiers import METHODS
+
+    from ..relocation.registry import RELOCATIONS
+
+    data = _check_df(df, {"method", "relocation", "size_fraction", "accuracy", "level"})
+    rels = [r for r in RELOCATIONS if r in set(data["relocation"])]
+    fig, axes = _panels(max(1, len(rels)), 4.2, 3.8, figsize)
+    for ax, rel in zip(axes, rels):
+        sub = data[data["relocation"] == rel]
+        for m in [m for m in METHODS if m in set(sub["method"])]:
+            g = sub[sub["method"] == m].groupby("level").agg(
+                size=("size_fraction", "median"), mu=("accuracy", "mean"), sd=("accuracy", "std")
+            ).sort_values("size")
+            color, marker = _style(m)
+            x = 100 * g["size"].to_numpy()
+            mu = 100 * g["mu"].to_numpy()
+            sd = 100 * g["sd"].fillna(0).to_numpy()
+            ax.plot(x, mu, marker=marker, color=color, label=m)
+            ax.fill_between(x, mu - sd, mu + sd, color=color, alpha=0.08)
+        ax.set_xscale("log")
+        sizes = sorted({round(100 * v, 2) for v in sub.groupby("level")["size_fraction"].median()})
+        ax.set_xticks(sizes, [f"{v:g}%" for v in sizes])
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_title(f"relocation: {rel}", fontsize=10)
+        ax.set_xlabel("size of S(T) (% of samples of T)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("accuracy (% of pairs agreeing)")
+    axes[-1].legend(fontsize=8, loc="lower right")
+    return fig
+
+
+def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Figure:
+    """What simplification buys against what it costs.
+
+    Left: LOS speedup (time on T / time on S(T)) against accuracy lost; right: memory
+    (bytes of S(T) / bytes of T) against accuracy lost. One point per method and level
+    (medians over terrains and point sets), for one relocation.
+    """
+    data = _check_df(df, {"method", "level", "relocation", "accuracy", "los_seconds", "los_seconds_original",
+                          "nbytes", "nbytes_original"})
+    data = data[data["relocation"] == relocation]
+    if data.empty:
+        raise ValueError(f"relocation {relocation!r} has no rows in df")
+    data = data.assign(
+        lost=100 * (1 - data["accuracy"]),
+        speedup=data["los_seconds_original"] / data["los_seconds"],
+        memory=data["nbytes"] / data["nbytes_original"],
+    )
+    g = data.groupby(["method", "level"]).agg(lost=("lost", "mean"), speedup=("speedup", "median"), memory=("memory", "median"))
+    fig, (ax1, ax2) = _panels(2, 5.0, 4.0, figsize, sharey=False)
+    from simplifiers import METHODS
+
+    for m in [m for m in METHODS if m in g.index.get_level_values(0)]:
+        color, marker = _style(m)
+        for k, (lv, row) in enumerate(g.loc[m].iterrows()):
+            for ax, col in ((ax1, "speedup"), (ax2, "memory")):
+                ax.scatter(row["lost"], row[col], color=color, marker=marker, label=m if k == 0 else None)
+                ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax1.set_yscale("log")
+    ax2.set_yscale("log")
+    ax1.axhline(1.0, color="k", lw=0.5)
+    ax2.axhline(1.0, color="k", lw=0.5)
+    ax1.set_xlabel("accuracy lost (percentage points)")
+    ax2.set_xlabel("accuracy lost (percentage points)")
+    ax1.set_ylabel("LOS speedup on S(T) (×)")
+    ax2.set_ylabel("memory of S(T) / memory of T")
+    ax1.set_title(f"speed gained ({relocation}; labels: level)", fontsize=10)
+    ax2.set_title("memory kept", fontsize=10)
+    ax2.legend(fontsize=8)
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+    return fig
+
+
+_RELOCATION_STYLE = {"identity": ("tab:red", "o"), "full": ("tab:blue", "s"), "half": ("tab:green", "^"),
+                     "calibrated": ("tab:purple", "D"), "oracle": ("k", "*")}
+
+
+def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
+    """Accuracy of localized tests against the pair distance, per relocation (a distance sweep).
+
+    One panel per level; each relocation is a line through the distances of the run
+    (mean over terrains, methods and point sets); the pairs at every distance ("all")
+    are drawn at the right end.
+    """
+    from ..relocation.registry import ORACLE, RELOCATIONS
+
+    data = _check_df(df, {"relocation", "accuracy", "level", "max_distance"}, sweep=True)
+    if data["max_distance"].nunique(dropna=True) < 1:
+        raise ValueError("df holds no distance sweep (max_distance is unlimited in every row)")
+    levels = sorted(data["level"].unique())
+    finite = sorted(data["max_distance"].dropna().unique())
+    x_all = finite[-1] * 2.0
+    unit = data["distance_unit"].iloc[0] if "distance_unit" in data.columns else "world"
+    fig, axes = _panels(len(levels), 4.2, 3.8, figsize)
+    for ax, level in zip(axes, levels):
+        sub = data[data["level"] == level]
+        for rel in [r for r in RELOCATIONS + (ORACLE,) if r in set(sub["relocation"])]:
+            g = sub[sub["relocation"] == rel].assign(_d=lambda t: t["max_distance"].fillna(x_all))
+            mu = 100 * g.groupby("_d")["accuracy"].mean()
+            color, marker = _RELOCATION_STYLE.get(rel, ("k", "o"))
+            ax.plot(mu.index, mu.to_numpy(), marker=marker, color=color, label=rel,
+                    linestyle="--" if rel == ORACLE else "-")
+        ax.set_xscale("log")
+        ticks = finite + [x_all]
+        ax.set_xticks(ticks, [f"{v:g}" for v in finite] + ["all"])
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_title(f"level {level}", fontsize=10)
+        ax.set_xlabel(f"pairs within this distance ({'cells' if unit == 'cells' else 'm'})")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("accuracy (% of pairs agreeing)")
+    axes[-1].legend(fontsize=8, loc="lower left")
+    return fig
+
+
+def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None = None, figsize=(6, 5)) -> Figure:
+    """A viewshed drawn over the terrain's hillshade.
+
+    Parameters
+    ----------
+    terrain : HeightGrid
+        The grid whose samples ``visible`` refers to (normally the terrain the viewshed
+        was computed for, or the ``at`` grid of a viewshed on a simplification).
+    visible : (rows, cols) bool
+        :func:`terrainvis.viewshed`'s result.
+    observer : (x, y), optional
+        Marked with a star.
+    title : str, optional
+    """
+    as_terrain(terrain)
+    if not isinstance(terrain, HeightGrid):
+        raise TypeError(f"terrain must be the HeightGrid of the viewshed's samples, got {describe(terrain)}")
+    vis = np.asarray(visible, dtype=bool)
+    if vis.shape != terrain.shape:
+        raise ValueError(f"visible must have the terrain's shape {terrain.shape}, got {vis.shape}")
+    from matplotlib.patches import Patch
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title or "viewshed")
+    xmin, xmax, ymin, ymax = terrain.extent
+    valid = np.isfinite(terrain.z)
+    rgba = np.zeros(terrain.shape + (4,))
+    rgba[valid & vis] = (1.0, 0.83, 0.0, 0.55)  # visible: yellow
+    rgba[valid & ~vis] = (0.05, 0.05, 0.15, 0.55)  # hidden: dark
+    ax.imshow(rgba, origin="lower", extent=(xmin, xmax, ymin, ymax), interpolation="nearest")
+    handles = [Patch(color=(1.0, 0.83, 0.0, 0.8), label=f"visible ({100 * vis[valid].mean():.1f} %)"),
+               Patch(color=(0.05, 0.05, 0.15, 0.8), label="hidden")]
+    if observer is not None:
+        ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+
+
+def cumulative_viewshed(terrain: HeightGrid, counts, *, observers=None, title: str | None = None,
+                        figsize=(6.5, 5)) -> Figure:
+    """A cumulative viewshed drawn over the terrain's hillshade: how many observers see each sample.
+
+    Parameters
+    ----------
+    terrain : HeightGrid
+        The grid whose samples ``counts`` refers to.
+    counts : (rows, cols) array_like of int
+        :func:`terrainvis.cumulative_viewshed`'s result (counts >= 0).
+    observers : (K, 2) array_like, optional
+        The observers' (x, y), marked with dots.
+    title : str, optional
+
+    Samples seen by at least one observer are coloured by their count (colour bar); those
+    seen by none are darkened; nodata is left white.
+    """
+    as_terrain(terrain)
+    if not isinstance(terrain, HeightGrid):
+        raise TypeError(f"terrain must be the HeightGrid of the counts' samples, got {describe(terrain)}")
+    c = np.asarray(counts)
+    if c.shape != terrain.shape:
+        raise ValueError(f"counts must have the terrain's shape {terrain.shape}, got {c.shape}")
+    if not (np.issubdtype(c.dtype, np.integer) or np.issubdtype(c.dtype, np.bool_)) or (c.size and c.min() < 0):
+        raise ValueError(f"counts must be integers >= 0 (cumulative_viewshed's result), got {describe(c)}")
+    from matplotlib.patches import Patch
+    from matplotlib.ticker import MaxNLocator
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title or "cumulative viewshed")
+    extent = terrain.extent
+    valid = np.isfinite(terrain.z)
+    seen = valid & (c > 0)
+    dark = np.zeros(terrain.shape + (4,))
+    dark[valid & ~seen] = (0.05, 0.05, 0.15, 0.65)
+    ax.imshow(dark, origin="lower", extent=extent, interpolation="nearest")
+    top = int(c[valid].max()) if valid.any() else 0
+    image = ax.imshow(np.ma.masked_where(~seen, c.astype(np.float64)), origin="lower", extent=extent,
+                      interpolation="nearest", cmap="YlOrRd", vmin=1, vmax=max(top, 2), alpha=0.8)
+    bar = fig.colorbar(image, ax=ax, shrink=0.85, label="observers that see the sample")
+    bar.locator = MaxNLocator(integer=True)
+    bar.update_ticks()
+    n_valid = max(int(valid.sum()), 1)
+    none = 100 * (valid & ~seen).sum() / n_valid
+    handles = [Patch(color=(0.05, 0.05, 0.15, 0.8), label=f"seen by none ({none:.1f} %)"),
+               Patch(color=image.cmap(0.5), label=f"seen by any ({100 * seen.sum() / n_valid:.1f} %)")]
+    if observers is not None:
+        obs = np.asarray(observers, dtype=np.float64)
+        if obs.ndim != 2 or obs.shape[1] not in (2, 3):
+            raise ValueError(f"observers must have shape (K, 2) (x, y) or (K, 3) (eyes), got shape {obs.shape}")
+        ax.plot(obs[:, 0], obs[:, 1], linestyle="none", marker="o", markersize=4, color="cyan",
+                markeredgecolor="k", markeredgewidth=0.4)
+        from matplotlib.lines import Line2D
+
+        handles.append(Line2D([], [], linestyle="none", marker="o", markersize=4, color="cyan", markeredgecolor="k",
+                              label=f"{len(obs):,} observer{'s' if len(obs) != 1 else ''}"))
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+

@@ -1,0 +1,732 @@
+"""Numba loops of the calibrated relocation (:mod:`terrainvis.relocation.calibrated`).
+
+Kernels loop and never validate; :mod:`terrainvis.relocation.calibrated` checks the input, moves
+coordinates to the terrain's local origin and passes plain arrays.
+
+Thresholds
+----------
+A point p standing at height z sees a target q (fixed, at height ``qz``) on a surface s
+exactly when the segment between them clears s (within ``-tol``) over its tested
+interval. Measured from q, the segment's height at parameter u is ``qz + u (z - qz)``,
+so the segment clears the surface at u exactly when
+
+    z >= qz + (s(u) - tol - qz) / u,
+
+and p sees q exactly when z is at least the *threshold*
+``qz + max_u (s(u) - tol - qz) / u`` over the tested interval ``[u0, u1]``. Inside one
+triangle s is linear in u, so ``(s(u) - tol - qz) / u`` is monotone there and the
+maximum is reached at a breakpoint of the ground track (a crossing of a grid line, a
+cell diagonal or a TIN edge) or at an end of the interval: the thresholds below visit
+exactly the breakpoints the exact LOS engines visit.
+
+Under earth curvature (``kc = curvature / (2 R)``, :func:`terrainvis.visibility.curvature_coefficient`)
+the segment must clear the surface raised by ``kc d1 d2 = B u (1 - u)`` with
+``B = kc L**2`` (L the horizontal length), so the threshold is
+``qz + max_u [(s(u) - tol - qz) / u + B (1 - u)]``. On a piece where s is linear,
+``A / u + beta + B (1 - u)`` with ``A < 0`` is concave and can peak inside the piece,
+at ``u* = sqrt(-A / B)``: :func:`_piece_max` checks it.
+
+* :func:`grid_max_slope` walks a HeightGrid with the visibility engine's min/max
+  pyramid: a node whose maximum height ``H`` gives
+  ``(H - tol - qz) / u <= best`` over its parameter range cannot raise the threshold
+  and is skipped.
+* :func:`tin_max_slope` walks the TIN from face to face across the edges the track
+  crosses (the faces' neighbours), from the face under the interval's start.
+
+Compile time
+------------
+A ``prange`` loop costs about 1.5 s of CPU to compile however small its body (numba's
+parfor lowering), and gains nothing with one thread, as in the workers of a
+:func:`terrainvis.compare` run. :func:`grid_heights` and :func:`tin_heights` have serial
+twins (:func:`grid_heights_serial`, :func:`tin_heights_serial`: the same heights) that
+:mod:`terrainvis.relocation.calibrated` calls when numba has one thread.
+
+Best heights
+------------
+Given the thresholds ``thr[k]`` of one point against K partners and the partners'
+verdicts ``vis[k]`` on the original terrain, the agreement of the point's verdicts at
+height z is ``#{k: vis[k] and z >= thr[k]} + #{k: not vis[k] and z < thr[k]}``, a step
+function of z that changes only at the thresholds. :func:`best_height` sorts them and
+returns the height in an optimal interval closest to a reference height, kept a margin
+away from the interval's ends so that the verdicts it counted are the verdicts a LOS
+engine will give there.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numba as nb
+import numpy as np
+
+from ..tolerances import TRACK_EDGE_SLACK, TRACK_FACE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
+from ..visibility._kernels import WalkGrid, WalkStack, _cell_height, _locate, new_stack
+from ..visibility._sweep_kernels import _borrow
+
+_INF = np.inf
+#: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
+#: would compile the row loop once more for the literal).
+_NO_SKIP = np.int64(-1)
+
+
+# --------------------------------------------------------------------------- grid
+@nb.njit(cache=True, nogil=True, inline="always")
+def _value(h, u, qz, tol, bulge):
+    """``(h - tol - qz) / u + bulge (1 - u)``: the height a point needs to clear the surface height h at u."""
+    return (h - tol - qz) / u + bulge * (1.0 - u)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _piece_max(ua, ha, ub, hb, qz, tol, bulge):
+    """Max of :func:`_value` inside (ua, ub) where the surface is linear (its ends are
+    evaluated by the caller): ``-inf`` unless the concave case peaks inside."""
+    if bulge <= 0.0 or ub <= ua:
+        return -_INF
+    beta = (hb - ha) / (ub - ua)
+    a = ha - tol - qz - beta * ua
+    if a >= 0.0:
+        return -_INF
+    us = np.sqrt(-a / bulge)
+    if us <= ua or us >= ub:
+        return -_INF
+    return beta + bulge - 2.0 * np.sqrt(-a * bulge)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
+    """Max of :func:`_value` over cell (r, c)'s part [a0, a1] of the track: at its
+    breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under curvature,
+    inside its pieces."""
+    z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
+    h1 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy)
+    best = _value(h1, a1, qz, tol, bulge)
+    if with_a0 or bulge > 0.0:
+        h0 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a0 * dx, qy + a0 * dy)
+        if with_a0:
+            v = _value(h0, a0, qz, tol, bulge)
+            if v > best:
+                best = v
+    td = -1.0
+    den = dx * ixw[c] - dy * iyw[r]
+    if den != 0.0:
+        t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
+        if t > a0 and t < a1:
+            td = t
+            hd = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+            v = _value(hd, td, qz, tol, bulge)
+            if v > best:
+                best = v
+    if bulge > 0.0:
+        if td > 0.0:
+            v = max(_piece_max(a0, h0, td, hd, qz, tol, bulge), _piece_max(td, hd, a1, h1, qz, tol, bulge))
+        else:
+            v = _piece_max(a0, h0, a1, h1, qz, tol, bulge)
+        if v > best:
+            best = v
+    return best
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
+    """Max of :func:`_value` over the track q + u d, u in [u0, u1] (u0 > 0): the threshold less qz.
+
+    ``g`` is the grid engine's :data:`~terrainvis.visibility._kernels.WalkGrid` (local
+    coordinates), ``st`` a scratch stack (:func:`~terrainvis.visibility._kernels.new_stack`).
+    The descent visits children nearest to q first, so that the large values near q
+    are found before the far nodes they prune.
+    """
+    z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
+    pyr, off, nxl, uniform, ltop = g.pyr, g.off, g.nxl, g.uniform, g.ltop
+    sL, sR, sC, sT = st.level, st.row, st.col, st.t
+    ncx = xs.shape[0] - 1
+    ncy = ys.shape[0] - 1
+    best = -_INF
+    sL[0] = ltop
+    sR[0] = 0
+    sC[0] = 0
+    sT[0] = u0
+    sT[1] = u1
+    sp = 1
+    last = -_INF
+    while sp > 0:
+        sp -= 1
+        L = sL[sp]
+        R = sR[sp]
+        C = sC[sp]
+        a0 = sT[2 * sp]
+        a1 = sT[2 * sp + 1]
+        if L == 0:
+            v = _leaf(g, R, C, qx, qy, qz, dx, dy, a0, a1, a0 != last, tol, bulge)
+            last = a1
+            if v > best:
+                best = v
+            continue
+        k = off[L] + 2 * (R * nxl[L] + C)
+        num = np.float64(pyr[k + 1]) - tol - qz
+        bound = (num / a0 if num > 0.0 else num / a1) + bulge * (1.0 - a0)
+        if bound <= best:
+            continue
+        half = 1 << (L - 1)
+        cm = (C << L) + half
+        rm = (R << L) + half
+        splitx = cm < ncx
+        splity = rm < ncy
+        s1 = _INF
+        s2 = _INF
+        if splitx and dx != 0.0:
+            tx = (xs[cm] - qx) / dx
+            if tx > a0 and tx < a1:
+                s1 = tx
+                if L >= 2:  # probe the surface where the track crosses the mid line
+                    yy = qy + tx * dy
+                    r = _locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
+                    v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
+                    e = _value(z[r, cm] + v * (z[r + 1, cm] - z[r, cm]), tx, qz, tol, bulge)
+                    if e > best:
+                        best = e
+        if splity and dy != 0.0:
+            ty = (ys[rm] - qy) / dy
+            if ty > a0 and ty < a1:
+                if L >= 2:
+                    xx = qx + ty * dx
+                    c = _locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
+                    u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
+                    e = _value(z[rm, c] + u * (z[rm, c + 1] - z[rm, c]), ty, qz, tol, bulge)
+                    if e > best:
+                        best = e
+                if ty < s1:
+                    s2 = s1
+                    s1 = ty
+                else:
+                    s2 = ty
+        nb_ = 1
+        if s1 < _INF:
+            nb_ = 2
+            if s2 < _INF:
+                nb_ = 3
+        for j in range(nb_ - 1, -1, -1):  # far pieces first on the stack: near ones pop first
+            if j == 0:
+                b0 = a0
+            elif j == 1:
+                b0 = s1
+            else:
+                b0 = s2
+            if j == nb_ - 1:
+                b1 = a1
+            elif j == 0:
+                b1 = s1
+            else:
+                b1 = s2
+            tm = 0.5 * (b0 + b1)
+            cc = 2 * C
+            rr = 2 * R
+            if splitx and qx + tm * dx >= xs[cm]:
+                cc += 1
+            if splity and qy + tm * dy >= ys[rm]:
+                rr += 1
+            sL[sp] = L - 1
+            sR[sp] = rr
+            sC[sp] = cc
+            sT[2 * sp] = b0
+            sT[2 * sp + 1] = b1
+            sp += 1
+    return best
+
+
+#: Grids with a pyramid of at most this many levels (up to 128 cells a side) are walked
+#: cell by cell: there the pyramid's bookkeeping costs more than the cells it skips
+#: (docs/relocation.md, "The best height, exactly").
+DDA_MAX_LEVELS = 7
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_dda_max_slope(z, xs, ys, ixw, iyw, uniform, qx, qy, qz, dx, dy, u0, u1, tol, bulge):
+    """:func:`grid_max_slope` by visiting every cell the track crosses (small grids).
+
+    Each cell's part of the track is evaluated as :func:`_leaf` does, written out here:
+    calling the inlined :func:`_leaf` (or a function taking the grid's arrays) at every
+    cell made this walk 3 times slower on the default experiment's grids, for the same
+    thresholds bit for bit (docs/relocation.md, "Cost")."""
+    ncx = xs.shape[0] - 1
+    ncy = ys.shape[0] - 1
+    c = _locate(xs, ixw, 0, ncx, uniform, qx + u0 * dx)
+    r = _locate(ys, iyw, 0, ncy, uniform, qy + u0 * dy)
+    # on a grid line while moving backwards, the cell ahead is the one behind the line
+    if dx < 0.0 and qx + u0 * dx <= xs[c] and c > 0:
+        c -= 1
+    if dy < 0.0 and qy + u0 * dy <= ys[r] and r > 0:
+        r -= 1
+    curved = bulge > 0.0
+    best = -_INF
+    a = u0
+    first = True
+    while True:
+        ux = _INF
+        if dx > 0.0:
+            ux = (xs[c + 1] - qx) / dx
+        elif dx < 0.0:
+            ux = (xs[c] - qx) / dx
+        uy = _INF
+        if dy > 0.0:
+            uy = (ys[r + 1] - qy) / dy
+        elif dy < 0.0:
+            uy = (ys[r] - qy) / dy
+        b = min(ux, uy, u1)
+        if b < a:
+            b = a
+        # the cell's part [a, b] of the track: its breakpoints a (first cell only), the diagonal, b
+        h1 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + b * dx, qy + b * dy)
+        v = _value(h1, b, qz, tol, bulge)
+        h0 = 0.0
+        if first or curved:
+            h0 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a * dx, qy + a * dy)
+            if first:
+                v0 = _value(h0, a, qz, tol, bulge)
+                if v0 > v:
+                    v = v0
+        td = -1.0
+        hd = 0.0
+        den = dx * ixw[c] - dy * iyw[r]
+        if den != 0.0:
+            t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
+            if t > a and t < b:
+                td = t
+                hd = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+                vd = _value(hd, td, qz, tol, bulge)
+                if vd > v:
+                    v = vd
+        if curved:
+            if td > 0.0:
+                vp = max(_piece_max(a, h0, td, hd, qz, tol, bulge), _piece_max(td, hd, b, h1, qz, tol, bulge))
+            else:
+                vp = _piece_max(a, h0, b, h1, qz, tol, bulge)
+            if vp > v:
+                v = vp
+        first = False
+        if v > best:
+            best = v
+        if b >= u1:
+            break
+        a = b
+        if ux <= b:
+            c += 1 if dx > 0.0 else -1
+        if uy <= b:
+            r += 1 if dy > 0.0 else -1
+        if c < 0 or c >= ncx or r < 0 or r >= ncy:
+            break
+    return best
+
+
+@nb.njit(cache=True, nogil=True)
+def interval(px, py, pz, qx, qy, qz, delta, end_radius):
+    """The tested interval ``(u0, u1)`` of the segment p-q (the LOS engines' trim and end
+    radius), or ``(-1, -1)`` when nothing of it is tested (it is then visible)."""
+    dx = px - qx
+    dy = py - qy
+    dz = pz - qz
+    lh = np.sqrt(dx * dx + dy * dy)
+    length = np.sqrt(lh * lh + dz * dz)
+    if length <= 2.0 * delta:
+        return -1.0, -1.0
+    u0 = delta / length
+    if end_radius > 0.0:
+        if lh <= 2.0 * end_radius:
+            return -1.0, -1.0
+        if end_radius / lh > u0:
+            u0 = end_radius / lh
+    return u0, 1.0 - u0
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_threshold(g, st, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
+    """The threshold height of p at (px, py) for the target (qx, qy, qz); ``pz`` (a height
+    near the answer) only sets the trim; ``kc`` the curvature coefficient (0: flat).
+    ``-inf`` when the segment is not tested."""
+    u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
+    if u0 < 0.0:
+        return -_INF
+    dx = px - qx
+    dy = py - qy
+    bulge = kc * (dx * dx + dy * dy)
+    if g.ltop <= DDA_MAX_LEVELS:
+        return qz + grid_dda_max_slope(g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform, qx, qy, qz, dx, dy, u0, u1, tol,
+                                       bulge)
+    return qz + grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st)
+
+
+# --------------------------------------------------------------------------- TIN
+#: A TIN as the threshold walk reads it, in local coordinates: vertices ``vx``, ``vy``,
+#: ``vz`` (n,) float64; ``faces`` (m, 3) int64, counter-clockwise; ``nbr`` (m, 3) int64, the
+#: face across edge (faces[f, e], faces[f, (e + 1) % 3]) or -1 on the boundary; the face
+#: buckets ``starts``, ``items`` (``TIN._buckets``) of ``nbx`` x ``nby`` buckets of ``bw`` x ``bh``.
+TinWalk = namedtuple("TinWalk", ["vx", "vy", "vz", "faces", "nbr", "starts", "items", "bw", "bh", "nbx", "nby"])
+
+
+@nb.njit(cache=True, nogil=True)
+def _face_at(w, x, y):
+    """A face of the TIN containing (x, y) (with a tiny tolerance), or -1."""
+    c = min(max(int(np.floor(x / w.bw)), 0), w.nbx - 1)
+    r = min(max(int(np.floor(y / w.bh)), 0), w.nby - 1)
+    b = r * w.nbx + c
+    best = -1
+    best_l = -_INF
+    for k in range(w.starts[b], w.starts[b + 1]):
+        f = w.items[k]
+        i0 = w.faces[f, 0]
+        i1 = w.faces[f, 1]
+        i2 = w.faces[f, 2]
+        x0 = w.vx[i0]
+        y0 = w.vy[i0]
+        det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
+        if det == 0.0:
+            continue
+        l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
+        l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
+        low = min(1.0 - l1 - l2, l1, l2)
+        if low > best_l:  # the face the point is deepest inside (robust on shared edges)
+            best_l = low
+            best = f
+    if best_l < -TRACK_FACE_SLACK:
+        return -1
+    return best
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _plane(w, f, x, y):
+    """The height of face f's plane at (x, y)."""
+    i0 = w.faces[f, 0]
+    i1 = w.faces[f, 1]
+    i2 = w.faces[f, 2]
+    x0 = w.vx[i0]
+    y0 = w.vy[i0]
+    det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
+    l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
+    l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
+    return (1.0 - l1 - l2) * w.vz[i0] + l1 * w.vz[i1] + l2 * w.vz[i2]
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _exit(w, f, qx, qy, dx, dy, u):
+    """Where the track q + u' d leaves face f after ``u``: (u', edge, height there), or (inf, -1, 0).
+
+    Inlined in :func:`tin_max_slope`'s loop: called there at every face, it made the walk
+    1.3-1.5 times slower (same thresholds, bit for bit)."""
+    best_u = _INF
+    best_e = -1
+    best_s = 0.0
+    for e in range(3):
+        a = w.faces[f, e]
+        b = w.faces[f, (e + 1) % 3]
+        ex = w.vx[b] - w.vx[a]
+        ey = w.vy[b] - w.vy[a]
+        den = dx * ey - dy * ex
+        if den == 0.0:
+            continue
+        rx = w.vx[a] - qx
+        ry = w.vy[a] - qy
+        ue = (rx * ey - ry * ex) / den
+        we = (rx * dy - ry * dx) / den
+        if we < -TRACK_EDGE_SLACK or we > 1.0 + TRACK_EDGE_SLACK or ue <= u + TRACK_STEP_MIN or ue >= best_u:
+            continue
+        we = min(max(we, 0.0), 1.0)
+        best_u = ue
+        best_e = e
+        best_s = w.vz[a] + we * (w.vz[b] - w.vz[a])
+    return best_u, best_e, best_s
+
+
+@nb.njit(cache=True, nogil=True)
+def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
+    """A face other than f that holds the track a little after u (steps growing tenfold), and
+    that position of the track: (face, u'), or (-1, u1)."""
+    step = TRACK_PROBE_REL * (u1 - u) + TRACK_STEP_MIN
+    while u + step < u1:
+        g = _face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
+        if g >= 0 and g != f:
+            return g, u + step
+        step *= 10.0
+    return -1, u1
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
+    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN (:data:`TinWalk`).
+
+    Walks from face to face across the edges the track crosses, so the breakpoints come
+    in order (the pieces between them are where the value can peak under curvature).
+    Where the walk cannot go on (through a vertex into the wrong face, across a hole), it
+    locates the next face a step further along the track.
+    """
+    dx = px - qx
+    dy = py - qy
+    u = u0
+    f = _face_at(w, qx + u * dx, qy + u * dy)
+    if f < 0:
+        return _INF  # the start is outside the TIN: not a valid query
+    su = _plane(w, f, qx + u * dx, qy + u * dy)
+    best = _value(su, u, qz, tol, bulge)
+    if dx == 0.0 and dy == 0.0:  # a vertical segment: one ground point
+        return max(best, _value(su, u1, qz, tol, bulge))
+    nf = w.faces.shape[0]
+    for _ in range(4 * nf + 16):
+        ue, e, se = _exit(w, f, qx, qy, dx, dy, u)
+        if e < 0:  # stuck (through a vertex into a face the track does not enter): step ahead
+            g, ug = _face_ahead(w, f, qx, qy, dx, dy, u, u1)
+            if g < 0:
+                return best
+            # go on from the probe on g, so that u grows at every step (faces around a vertex
+            # could otherwise hand the walk back and forth); the piece skipped is ~1e-9 long
+            f = g
+            u = ug
+            su = _plane(w, f, qx + u * dx, qy + u * dy)
+            v = _value(su, u, qz, tol, bulge)
+            if v > best:
+                best = v
+            continue
+        if ue >= u1:
+            s1 = _plane(w, f, qx + u1 * dx, qy + u1 * dy)
+            v = max(_value(s1, u1, qz, tol, bulge), _piece_max(u, su, u1, s1, qz, tol, bulge))
+            return max(best, v)
+        v = max(_value(se, ue, qz, tol, bulge), _piece_max(u, su, ue, se, qz, tol, bulge))
+        if v > best:
+            best = v
+        u = ue
+        su = se
+        g = w.nbr[f, e]
+        if g < 0:
+            g = _face_at(w, qx + (u + TRACK_PROBE_REL) * dx, qy + (u + TRACK_PROBE_REL) * dy)
+            if g < 0:
+                return best
+        f = g
+    return best
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_threshold(w, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
+    """The threshold height of p at (px, py) for the target (qx, qy, qz) on a TIN; see
+    :func:`grid_threshold`."""
+    u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
+    if u0 < 0.0:
+        return -_INF
+    bulge = kc * ((px - qx) ** 2 + (py - qy) ** 2)
+    return qz + tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge)
+
+
+# --------------------------------------------------------------------------- best heights
+@nb.njit(cache=True, nogil=True)
+def best_height(thr, vis, zref, margin, min_gain):
+    """The height z maximising the agreement of a point's verdicts with ``vis`` (see the
+    module docstring), and that agreement.
+
+    The point stays at ``zref`` when the best agreement exceeds the agreement there by
+    less than ``min_gain`` (>= 1; 1 is the plain maximum): a few partners' verdicts are
+    not evidence enough to move it.
+
+    Among the optimal intervals of z, the one nearest ``zref`` is taken, and in it the
+    point nearest ``zref`` that keeps ``margin`` (> 0: an interval holds its lower end,
+    not its upper one) from the interval's ends (its middle when it is narrower than
+    twice the margin). ``thr`` = -inf marks partners seen at any height. This is
+    :func:`best_height_kept` without neighbours.
+    """
+    return best_height_kept(thr, vis, np.empty(0), np.empty(0, dtype=np.int8), 0.0, zref, margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def best_height_kept(thr, vis, lthr, lvis, weight, zref, margin, min_gain):
+    """:func:`best_height` with the point's *neighbours* counted too.
+
+    ``lthr``, ``lvis`` are the thresholds and T's verdicts (1 seen, 0 not, -1 no
+    neighbour there) of the neighbours, probes close to the point: the partners spread
+    over the terrain say little about short sight lines. The height maximises the
+    partners' agreement plus ``weight`` times the neighbours' agreement (both step
+    functions of z); ``weight`` = inf keeps the neighbours' agreement at least as high as
+    at ``zref`` and maximises the partners' among those heights. The returned score is
+    the partners' agreement; ``min_gain`` applies to the combined one. With no
+    neighbours this is :func:`best_height`.
+    """
+    K = thr.shape[0]
+    L = lthr.shape[0]
+    hard = weight == _INF
+    keep = 0  # the neighbours' agreement at zref
+    for k in range(L):
+        if lvis[k] >= 0 and (zref >= lthr[k]) == (lvis[k] == 1):
+            keep += 1
+    t = np.empty(K + L)
+    dg = np.zeros(K + L, dtype=np.int64)  # the change of the partners' agreement on crossing t
+    dl = np.zeros(K + L, dtype=np.int64)  # ... and of the neighbours'
+    g = 0  # agreements below every threshold: only thresholds of -inf are seen
+    loc = 0
+    for k in range(K):
+        t[k] = thr[k]
+        if thr[k] == -_INF:
+            g += 1 if vis[k] else 0
+        else:
+            g += 0 if vis[k] else 1
+            dg[k] = 1 if vis[k] else -1
+    for k in range(L):
+        t[K + k] = lthr[k]
+        if lvis[k] < 0:
+            continue
+        if lthr[k] == -_INF:
+            loc += 1 if lvis[k] == 1 else 0
+        else:
+            loc += 0 if lvis[k] == 1 else 1
+            dl[K + k] = 1 if lvis[k] == 1 else -1
+    w = 0.0 if hard else weight
+    order = np.argsort(t)
+    n = K + L
+    best = -_INF
+    best_g = -1
+    best_z = zref
+    best_d = _INF
+    at_ref = -_INF
+    at_ref_g = -1
+    lo = -_INF
+    j = 0
+    while j <= n:
+        # z in [lo, hi) sees exactly the partners and neighbours with a threshold <= lo
+        hi = _INF if j == n else t[order[j]]
+        sc = g + w * loc
+        if lo <= zref < hi:
+            at_ref = sc
+            at_ref_g = g
+        if hi > lo and (not hard or loc >= keep) and sc >= best:
+            if sc > best:
+                best = sc
+                best_g = g
+                best_d = _INF
+            m = margin
+            if hi - lo < 2.0 * m:
+                m = 0.5 * (hi - lo)
+            zc = zref
+            if zc < lo + m:
+                zc = lo + m
+            if zc > hi - m:
+                zc = hi - m
+            d = abs(zc - zref)
+            if d < best_d:
+                best_d = d
+                best_z = zc
+                best_g = g
+        if j == n:
+            break
+        while j < n and t[order[j]] == hi:
+            k = order[j]
+            if t[k] > -_INF:
+                g += dg[k]
+                loc += dl[k]
+            j += 1
+        lo = hi
+    if best - at_ref < min_gain:
+        return zref, at_ref_g
+    return best_z, best_g
+
+
+# --------------------------------------------------------------------------- loops
+@nb.njit(cache=True, nogil=True)
+def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
+    # views without reference counts (the caller keeps the arrays alive): every walk
+    # would otherwise count references to each array of g and st (5-19 % of the row)
+    g = WalkGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), _borrow(g.pyr),
+                 _borrow(g.off), _borrow(g.nxl), g.uniform, g.ltop)
+    st = WalkStack(_borrow(st.level), _borrow(st.row), _borrow(st.col), _borrow(st.t))
+    for k in range(q.shape[0]):
+        if k == skip:
+            out[k] = -_INF
+        else:
+            out[k] = grid_threshold(g, st, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
+
+
+@nb.njit(cache=True, nogil=True)
+def _tin_row(tin, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
+    # as in _grid_row (6-20 % of the row)
+    tin = TinWalk(_borrow(tin.vx), _borrow(tin.vy), _borrow(tin.vz), _borrow(tin.faces), _borrow(tin.nbr),
+                  _borrow(tin.starts), _borrow(tin.items), tin.bw, tin.bh, tin.nbx, tin.nby)
+    for k in range(q.shape[0]):
+        if k == skip:
+            out[k] = -_INF
+        else:
+            out[k] = tin_threshold(tin, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def grid_heights(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+    """Best height of each point p[i] = (x, y, reference height) against the partners q
+    (x, y, height on the surface), whose verdicts on T are ``vis[i]``, keeping its
+    agreement with its neighbours (thresholds ``lthr[i]``, verdicts ``lvis[i]``:
+    :func:`best_height_kept`; parallel over points)."""
+    n = p.shape[0]
+    for i in nb.prange(n):
+        if stop[0] != 0:
+            continue
+        st = new_stack(g.ltop)
+        thr = np.empty(q.shape[0])
+        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def tin_heights(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+    """:func:`grid_heights` on a TIN (a :data:`TinWalk`)."""
+    n = p.shape[0]
+    for i in nb.prange(n):
+        if stop[0] != 0:
+            continue
+        thr = np.empty(q.shape[0])
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_heights_serial(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
+                        stop):
+    """:func:`grid_heights` in the calling thread (the same heights): with one thread a
+    ``prange`` loop gains nothing and costs a parfor compilation (see "Compile time")."""
+    st = new_stack(g.ltop)
+    thr = np.empty(q.shape[0])
+    for i in range(p.shape[0]):
+        if stop[0] != 0:
+            return
+        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_heights_serial(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
+                       stop):
+    """:func:`tin_heights` in the calling thread (see :func:`grid_heights_serial`)."""
+    thr = np.empty(q.shape[0])
+    for i in range(p.shape[0]):
+        if stop[0] != 0:
+            return
+        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
+    """One Gauss-Seidel sweep: each partner q[order[j]] in turn takes its best height
+    (column 2 of ``q``, updated in place) against the others at their current heights.
+
+    Serial: each step depends on the previous one (a compare runs units side by side).
+    """
+    thr = np.empty(q.shape[0])
+    st = new_stack(g.ltop)
+    for j in range(order.shape[0]):
+        if stop[0] != 0:
+            return
+        i = order[j]
+        _grid_row(g, st, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_sweep(tin, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
+    """:func:`grid_sweep` on a TIN (a :data:`TinWalk`)."""
+    thr = np.empty(q.shape[0])
+    for j in range(order.shape[0]):
+        if stop[0] != 0:
+            return
+        i = order[j]
+        _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)

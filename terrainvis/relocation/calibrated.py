@@ -1,0 +1,538 @@
+"""The calibrated relocation: a point's height on S(T) chosen so that it sees what it saw on T.
+
+Moving a point of the original terrain T vertically onto its simplification S(T) (the
+paper's full projection) keeps its position but not its view: S(T) smooths ridges and
+fills valleys, so the point sees over crests it was hidden by, or loses sight of what it
+saw. The calibrated relocation instead picks, for each point, the height on S(T) whose
+verdicts agree best with the point's verdicts on T, against *partners* that stand for
+the points it will be tested with.
+
+Partners
+--------
+About ``n_partners`` positions spread uniformly over the terrain (stratified: one at a
+random place in each cell of a square lattice over T's extent, from ``seed``), standing
+``height`` above the surface: on T at ``T(x, y) + height``, on S(T) where the point's
+real partners will stand. Two settings:
+
+* **points** (``target_height=None``, the pair experiment): the partners are points like
+  the one relocated, carrying the same ``offset`` and relocated the same way. A *core* of
+  :data:`CORE_PARTNERS` of them is calibrated first, jointly: Gauss-Seidel sweeps in which
+  each core partner in turn takes its best height against the others at their current
+  heights (each step keeps or raises their total agreement), starting from the full
+  projection, ``sweeps`` times. The other partners (a second stratified sample) are then
+  placed against the core one by one, exactly as the points are (with their neighbours).
+  More partners make each point's agreement a finer estimate of what it will meet; the
+  core keeps the joint calibration, whose cost grows with its square, at the size where
+  it pays.
+* **targets** (``target_height=h``, the viewshed experiment): the partners are targets
+  standing ``h`` above each surface, as a viewshed's cells do; they do not move.
+
+The partners depend on T, S(T), the setting and the seed, never on the points being
+relocated: a point's new height does not change when the other points change. They are
+computed once per (T, S(T), setting) and cached on S(T).
+
+The best height
+---------------
+Seeing a partner is monotone in the point's height: for each partner there is an exact
+*threshold* above which the point sees it on S(T) (:mod:`terrainvis.relocation._threshold_kernels`
+computes it at the breakpoints the LOS engines test, with their trim, tolerance and end
+radius). The agreement with T's verdicts is then a step function of the height, and its
+maximum is found exactly by sorting the thresholds. Among the optimal heights the one
+nearest the full projection is taken, a small margin away from any threshold.
+
+Short sight lines
+-----------------
+Partners spread over the whole terrain stand, on average, tens of cells from a point, so
+they say little about its short sight lines: chasing one more far partner, a point could
+sink a little into S(T) and lose sight of what is around it (docs/relocation.md measures
+what that cost on the shared DEMs).
+So each point also has *neighbours* (``neighbours=True``, the default): L = 48 probes on
+rings 1.5, 3, 5 and 8 cells of T around it (:data:`NEIGHBOUR_RINGS`), standing like the
+point (``offset`` or ``target_height`` above T), with the point's verdicts to them on T.
+On S(T) a neighbour *moves with the point*: it stands at its full projection raised by
+as much as the point moved off its own, as the point's real neighbours, relocated the
+same way over nearly the same error of S(T), would. The whole segment then rises with
+the point, so the point sees the neighbour exactly when its height is at least its
+reference height minus the segment's least clearance there (and the tolerance): a
+threshold again (:func:`_neighbour_thresholds`, from the exact
+:func:`terrainvis.min_clearance`). The best height maximises the partners' agreement plus
+a weight times the neighbours' (:func:`terrainvis.relocation._threshold_kernels.best_height_kept`):
+:data:`NEIGHBOUR_WEIGHT` (0.5) against 512 partners, scaled with the number of partners
+(2 against the default 2,048) so that the neighbours keep their share of the agreement
+(:func:`neighbour_weight`). The neighbours depend on the point alone.
+
+Cost
+----
+Per point, K + L LOS queries on T and K + L threshold walks on S(T) (K = ``n_partners``,
+L = 48 neighbours or none); per (T, S(T), setting), once, C² / 2 LOS queries on T and
+``sweeps`` x C² walks on S(T) for the core (C = :data:`CORE_PARTNERS`), and (K - C) x
+(C + L) of each for the other partners.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _threshold_kernels as _ck
+from ..core.validate import as_int, describe
+from ..errors import OutsideFootprintError
+from ..core.terrain import TIN, HeightGrid
+from ..tolerances import THRESHOLD_MARGIN_REL
+from ..visibility import EARTH_RADIUS, curvature_coefficient
+from ..visibility._kernels import new_stack
+
+__all__ = ["calibrated_heights", "best_responses", "neighbour_weight", "Partners", "partners", "N_PARTNERS",
+           "CORE_PARTNERS", "SWEEPS", "MIN_GAIN"]
+
+#: Default number of partners (K), the core and the others (see "Partners" in the module
+#: docstring); chosen on the tuning terrains (docs/relocation.md gives the figures).
+N_PARTNERS = 2048
+#: Partners calibrated jointly by Gauss-Seidel sweeps (the core, C of them: C² / 2 LOS
+#: queries and ``sweeps`` x C² threshold walks); the other partners are placed against it.
+CORE_PARTNERS = 512
+#: Default Gauss-Seidel sweeps over the partners of the points setting (the first does most).
+SWEEPS = 2
+#: Default least gain (partners' verdicts) that moves a point off the full projection.
+MIN_GAIN = 1
+#: Points per chunk of the T-side verdicts (bounds the temporary (chunk x K) segment arrays).
+_CHUNK_PAIRS = 1 << 20
+#: Height margin kept from thresholds, as a fraction of the terrain's scale (about 5 mm on a 5 km grid).
+MARGIN_REL = THRESHOLD_MARGIN_REL
+#: The neighbours of a point (see "Short sight lines" in the module docstring): rings at
+#: these distances, in cells of T, ...
+NEIGHBOUR_RINGS = (1.5, 3.0, 5.0, 8.0)
+#: ... with this many neighbours on each ring (alternate rings turned by half a step).
+NEIGHBOUR_DIRECTIONS = 12
+#: A neighbour's weight against a partner's when there are 512 partners (inf: never lose a
+#: neighbour); chosen on the tuning terrains (docs/relocation.md). With K partners each
+#: neighbour weighs K / 512 times this (:func:`neighbour_weight`), so that the neighbours
+#: together keep their share of the agreement (24 of 536 votes) whatever K is.
+NEIGHBOUR_WEIGHT = 0.5
+#: The number of partners at which :data:`NEIGHBOUR_WEIGHT` holds as given.
+NEIGHBOUR_WEIGHT_PARTNERS = 512
+
+
+def neighbour_weight(k: int) -> float:
+    """The weight of one neighbour against a partner when a point has ``k`` partners."""
+    if NEIGHBOUR_WEIGHT == np.inf:
+        return np.inf
+    return NEIGHBOUR_WEIGHT * k / NEIGHBOUR_WEIGHT_PARTNERS
+
+
+@dataclass(frozen=True)
+class Partners:
+    """The partners of a calibrated relocation (see the module docstring).
+
+    Attributes
+    ----------
+    xy : (K, 2) float64
+        Positions.
+    z_original : (K,) float64
+        Heights on the original terrain T (its surface plus ``height``).
+    z_simplified : (K,) float64
+        Heights on S(T): calibrated (points setting) or its surface plus ``height`` (targets).
+    ground_simplified : (K,) float64
+        The surface of S(T) under each partner.
+    visible : (C, C) bool or None
+        The verdicts on T of the core (the first C partners) among themselves (points
+        setting only).
+    """
+
+    xy: np.ndarray
+    z_original: np.ndarray
+    z_simplified: np.ndarray
+    ground_simplified: np.ndarray
+    visible: np.ndarray | None
+
+
+def _fingerprint(grid: HeightGrid) -> str:
+    fp = grid._cache.get("fingerprint")
+    if fp is None:
+        h = hashlib.sha256()
+        for a in (grid.z, grid.xs, grid.ys):
+            h.update(np.ascontiguousarray(a).tobytes())
+        fp = grid._cache["fingerprint"] = h.hexdigest()[:16]
+    return fp
+
+
+# ----------------------------------------------------------------------- the surface
+class _Surface:
+    """S(T) as the threshold kernels read it (grid walk or TIN edge buckets), local coordinates."""
+
+    def __init__(self, terrain):
+        from ..visibility import clearance_tolerance, terrain_scale, trim_length
+
+        self.terrain = terrain
+        self.grid = isinstance(terrain, HeightGrid)
+        self.delta = float(trim_length(terrain))
+        self.tol = float(clearance_tolerance(terrain))
+        self.margin = MARGIN_REL * float(terrain_scale(terrain))
+        if self.grid:
+            from ..visibility.grid import _walk_grid, grid_accel
+
+            acc = grid_accel(terrain)
+            self.x0, self.y0 = acc.x0, acc.y0
+            self.data = _walk_grid(terrain, acc)
+            self.ltop = acc.ltop
+        else:
+            self.x0, self.y0, self.data = _tin_walk(terrain)
+            self.ltop = 0
+
+    def local(self, xy: np.ndarray) -> np.ndarray:
+        out = np.array(xy, dtype=np.float64, copy=True)
+        out[:, 0] -= self.x0
+        out[:, 1] -= self.y0
+        return out
+
+
+def _tin_walk(tin: TIN):
+    """The TIN as the threshold walk reads it (:data:`~terrainvis.relocation._threshold_kernels.TinWalk`,
+    local coordinates) and its origin (cached on the TIN)."""
+    cached = tin._cache.get("calibration_walk")
+    if cached is not None:
+        return cached
+    from ..core.mesh import edge_keys, half_edges
+
+    bk = tin._buckets()
+    faces = np.ascontiguousarray(tin.faces, dtype=np.int64)
+    he = half_edges(faces)  # (3m, 2): edge e of face f is row 3 f + e
+    key = edge_keys(he, tin.n_vertices, directed=True)
+    twin = edge_keys(he[:, ::-1], tin.n_vertices, directed=True)
+    order = np.argsort(key)
+    pos = np.searchsorted(key[order], twin)
+    pos = np.minimum(pos, key.size - 1)
+    found = key[order][pos] == twin
+    nbr = np.where(found, order[pos] // 3, -1).reshape(-1, 3).astype(np.int64)
+    v = tin.vertices
+    walk = _ck.TinWalk(
+        np.ascontiguousarray(v[:, 0] - bk.x0), np.ascontiguousarray(v[:, 1] - bk.y0), np.ascontiguousarray(v[:, 2]),
+        faces, nbr, bk.starts, bk.items, float(bk.bw), float(bk.bh), int(bk.nbx), int(bk.nby),
+    )
+    out = (float(bk.x0), float(bk.y0), walk)
+    tin._cache["calibration_walk"] = out
+    return out
+
+
+# ----------------------------------------------------------------------- partners
+def _positions(original: HeightGrid, simplified, k: int, seed: int, stream: int = 0) -> np.ndarray:
+    """About ``k`` stratified random positions over T's extent where both surfaces exist
+    (``stream`` 0: the core partners, 1: the others, drawn apart)."""
+    words = [int(seed), 0x7E11] + ([int(stream)] if stream else [])
+    rng = np.random.default_rng(np.random.SeedSequence(words))
+    xmin, xmax, ymin, ymax = original.extent
+    n = max(1, int(round(np.sqrt(k))))
+    u = (np.arange(n)[None, :] + rng.random((n, n))) / n
+    v = (np.arange(n)[:, None] + rng.random((n, n))) / n
+    xy = np.column_stack([xmin + u.ravel() * (xmax - xmin), ymin + v.ravel() * (ymax - ymin)])
+    ok = np.isfinite(original.height_at(xy)) & np.isfinite(simplified.height_at(xy))
+    return xy[ok]
+
+
+#: Verdicts on T, kept across calls by content (T's fingerprint and the points' bytes): the
+#: units of a comparison simplify one terrain many ways and relocate the same point sets
+#: onto each, in processes that receive T anew each time, so a cache on T would not last.
+_ON_ORIGINAL: OrderedDict = OrderedDict()
+_ON_ORIGINAL_SIZE = 64
+
+
+def _cached(key, compute):
+    out = _ON_ORIGINAL.get(key)
+    if out is None:
+        out = compute()
+        _ON_ORIGINAL[key] = out
+        while len(_ON_ORIGINAL) > _ON_ORIGINAL_SIZE:
+            _ON_ORIGINAL.popitem(last=False)
+    else:
+        _ON_ORIGINAL.move_to_end(key)
+    return out
+
+
+def _key(original, curve, *arrays):
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return (_fingerprint(original), curvature_coefficient(**curve), h.hexdigest())
+
+
+def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+    """(n, K) verdicts on T between the points ``a`` (n, 3) and the partners ``b`` (K, 3), in chunks (cached)."""
+    return _cached(("pairs",) + _key(original, curve, a, b), lambda: _line_of_sight_rows(original, a, b, curve))
+
+
+def _line_of_sight_rows(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+    from ..visibility import line_of_sight
+
+    n, k = a.shape[0], b.shape[0]
+    out = np.empty((n, k), dtype=bool)
+    step = max(1, _CHUNK_PAIRS // max(k, 1))
+    for i in range(0, n, step):
+        j = min(n, i + step)
+        aa = np.repeat(a[i:j], k, axis=0)
+        bb = np.tile(b, (j - i, 1))
+        out[i:j] = line_of_sight(original, aa, bb, engine="grid", **curve).reshape(j - i, k)
+    return out
+
+
+def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_partners: int = N_PARTNERS,
+             sweeps: int = SWEEPS, seed: int = 0, end_radius: float = 0.0, curvature: float = 0.0,
+             earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN, neighbours: bool = True,
+             core: int | None = None) -> Partners:
+    """The partners of a calibrated relocation onto ``simplified`` (cached on it).
+
+    ``move`` True: the points setting (the core of ``min(n_partners, core)`` partners
+    calibrated by Gauss-Seidel sweeps, the others placed against the core as the points
+    are, with their ``neighbours`` or without; ``core`` :data:`CORE_PARTNERS` by default);
+    False: the targets setting (partners fixed ``height`` above each surface). See the
+    module docstring. Inputs are validated by :func:`calibrated_heights`; ``curvature``
+    and ``earth_radius`` as in :func:`terrainvis.line_of_sight`, on both surfaces.
+    """
+    kc = curvature_coefficient(curvature, earth_radius)
+    core = CORE_PARTNERS if core is None else core
+    key = ("calibration", _fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
+           int(seed), float(end_radius), kc, int(min_gain), bool(neighbours), int(core))
+    cached = simplified._cache.get(key)
+    if cached is not None:
+        return cached
+    curve = {"curvature": curvature, "earth_radius": earth_radius}
+    n_core = min(int(n_partners), int(core))
+    core_key = key[:4] + key[5:10] + ("core", n_core)  # the core does not depend on the neighbours
+    inner = simplified._cache.get(core_key)
+    if inner is None:
+        inner = _core(original, simplified, height, move, n_core, sweeps, seed, end_radius, curve, min_gain)
+        simplified._cache[core_key] = inner
+    out = inner
+    if n_partners > n_core:
+        xy = _positions(original, simplified, int(n_partners) - n_core, seed, stream=1)
+        z_t = original.height_at(xy) + height
+        ground = simplified.height_at(xy)
+        z_s = ground + height
+        if move and xy.shape[0] and inner.xy.shape[0]:
+            z_s = _place(np.column_stack([xy, z_t]), simplified, original, inner, height, neighbours, end_radius,
+                         curve, min_gain)
+        out = Partners(np.concatenate([inner.xy, xy]), np.concatenate([inner.z_original, z_t]),
+                       np.concatenate([inner.z_simplified, z_s]), np.concatenate([inner.ground_simplified, ground]),
+                       inner.visible)
+    simplified._cache[key] = out
+    return out
+
+
+def _core(original: HeightGrid, simplified, height: float, move: bool, k: int, sweeps: int, seed: int,
+          end_radius: float, curve: dict, min_gain: int) -> Partners:
+    """The core partners: ``k`` stratified positions, calibrated jointly by Gauss-Seidel sweeps (``move``)."""
+    from ..core.interrupt import call
+
+    kc = curvature_coefficient(**curve)
+    xy = _positions(original, simplified, k, seed)
+    z_t = original.height_at(xy) + height
+    ground = simplified.height_at(xy)
+    z_s = ground + height
+    visible = None
+    if move and xy.shape[0] > 1:
+        from ..visibility import visibility_matrix
+
+        at = np.column_stack([xy, z_t])
+        visible = _cached(("matrix",) + _key(original, curve, at),
+                          lambda: visibility_matrix(original, at, engine="grid", **curve))
+        surf = _Surface(simplified)
+        q = surf.local(np.column_stack([xy, z_s]))
+        order_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
+        n = xy.shape[0]
+        for _ in range(sweeps):
+            order = order_rng.permutation(n).astype(np.int64)
+            if surf.grid:
+                call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc,
+                     surf.margin, min_gain, work=n * n)
+            else:
+                call(_ck.tin_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc, surf.margin,
+                     min_gain, work=n * n)
+        z_s = q[:, 2].copy()
+    return Partners(xy, z_t, z_s, ground, visible)
+
+
+# ----------------------------------------------------------------------- relocation
+def calibrated_heights(points, simplified, original, *, offset: float = 0.0, target_height=None,
+                       n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
+                       end_radius: float = 0.0, curvature: float = 0.0,
+                       earth_radius: float = EARTH_RADIUS, min_gain: int = MIN_GAIN,
+                       neighbours: bool = True) -> np.ndarray:
+    """The calibrated height on ``simplified`` of each point of ``original`` (see the module docstring).
+
+    Parameters
+    ----------
+    points : (n, 3) float64
+        Validated points on (``offset`` above) the original terrain, inside both footprints.
+    simplified : HeightGrid or TIN
+        S(T); a HeightGrid must be free of nodata.
+    original : HeightGrid
+        T, free of nodata.
+    offset : float
+        The points' height above T (their verdicts on T are taken from there); the
+        reference height on S(T) is its surface plus ``offset``.
+    target_height : float or None
+        None: the points setting; a number: the targets setting (partners that high
+        above each surface).
+    n_partners, sweeps, seed : int
+        The partners (about ``n_partners`` of them), the Gauss-Seidel sweeps of the
+        points setting and the seed of their positions and sweep order.
+    min_gain : int
+        A point (and a partner in a sweep) leaves its reference height only for a
+        height that agrees with at least this many more partners (1: any gain).
+    end_radius : float
+        End radius of the verdicts on S(T) (:func:`terrainvis.line_of_sight`); the
+        verdicts on T are exact.
+    curvature, earth_radius : float
+        Earth curvature and refraction of the verdicts on both surfaces
+        (:func:`terrainvis.line_of_sight`).
+    neighbours : bool
+        Count each point's neighbours too (short sight lines; see the module docstring).
+
+    Returns
+    -------
+    (n,) float64
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    move = target_height is None
+    height = float(offset if move else target_height)
+    curve = {"curvature": curvature, "earth_radius": earth_radius}
+    part = partners(original, simplified, height=height, move=move, n_partners=n_partners, sweeps=sweeps,
+                    seed=seed, end_radius=end_radius, min_gain=min_gain, neighbours=neighbours, **curve)
+    if pts.shape[0] == 0 or part.xy.shape[0] == 0:
+        return simplified.height_at(pts[:, :2]) + offset
+    return _place(pts, simplified, original, part, offset, neighbours, end_radius, curve, min_gain, height=height)
+
+
+def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, offset: float, neighbours: bool,
+           end_radius: float, curve: dict, min_gain: int, height: float | None = None) -> np.ndarray:
+    """The best height on S(T) of each point ``pts`` (n, 3; ``offset`` above T) against the
+    partners ``part``, counting its neighbours (standing ``height`` above the surfaces,
+    ``offset`` by default) when ``neighbours``."""
+    from ..core.interrupt import call, for_threads
+
+    height = float(offset if height is None else height)
+    kc = curvature_coefficient(**curve)
+    n = pts.shape[0]
+    vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]), curve)
+    surf = _Surface(simplified)
+    ground = simplified.height_at(pts[:, :2])
+    p = surf.local(np.column_stack([pts[:, :2], ground + offset]))
+    q = surf.local(np.column_stack([part.xy, part.z_simplified]))
+    if neighbours:
+        near, near_vis = _neighbours(original, simplified, pts, height, curve)
+        lthr = _neighbour_thresholds(simplified, np.column_stack([pts[:, :2], ground + offset]), near, near_vis,
+                                     surf.tol, end_radius, curve)
+    else:
+        lthr, near_vis = np.zeros((n, 0)), np.zeros((n, 0), dtype=np.int8)
+    out = np.empty(n)
+    score = np.empty(n, dtype=np.int64)
+    work = n * part.xy.shape[0]
+    if surf.grid:
+        kernel = for_threads(_ck.grid_heights, _ck.grid_heights_serial)
+    else:
+        kernel = for_threads(_ck.tin_heights, _ck.tin_heights_serial)
+    weight = float(neighbour_weight(q.shape[0]))
+    call(kernel, surf.data, p, q, vis, lthr, near_vis, weight, surf.delta, end_radius, surf.tol, kc, surf.margin,
+         min_gain, out, score, work=work)
+    return out
+
+
+def best_responses(points: np.ndarray, simplified, verdicts: np.ndarray, counted: np.ndarray, *,
+                   end_radius: float = 0.0, curvature: float = 0.0,
+                   earth_radius: float = EARTH_RADIUS) -> tuple[np.ndarray, bool]:
+    """One Gauss-Seidel sweep of exact best responses among ``points`` (the oracle bound's step).
+
+    Each point in turn (in order) takes the height on ``simplified`` that maximises the
+    number of its ``counted`` pairs whose verdict there agrees with ``verdicts`` (n, n),
+    the others standing at their current heights: the thresholds of the calibrated
+    relocation, sorted (:func:`terrainvis.relocation._threshold_kernels.best_height`; the height
+    nearest its current one, moved only for a gain). So no step lowers the agreement of
+    the counted pairs. Returns the new (n,) heights and whether any moved.
+    """
+    kc = curvature_coefficient(curvature, earth_radius)
+    surf = _Surface(simplified)
+    q = surf.local(np.asarray(points, dtype=np.float64))
+    n = q.shape[0]
+    thr = np.empty(n)
+    moved = False
+    st = new_stack(surf.ltop) if surf.grid else None
+    for i in range(n):
+        if surf.grid:
+            _ck._grid_row(surf.data, st, q[i, 0], q[i, 1], q[i, 2], q, surf.delta, end_radius, surf.tol, kc, i, thr)
+        else:
+            _ck._tin_row(surf.data, q[i, 0], q[i, 1], q[i, 2], q, surf.delta, end_radius, surf.tol, kc, i, thr)
+        ignore = ~counted[i]
+        row = np.where(ignore, -np.inf, thr)  # a pair that does not count is seen, and agrees, at any height
+        z, _ = _ck.best_height(row, verdicts[i] | ignore, q[i, 2], surf.margin, 1)
+        if z != q[i, 2]:
+            q[i, 2] = z
+            moved = True
+    return q[:, 2].copy(), moved
+
+
+def _neighbour_thresholds(simplified, ref, near, near_vis, tol, end_radius, curve) -> np.ndarray:
+    """(n, L) thresholds of the points at ``ref`` (n, 3: their reference heights on S(T)) for
+    neighbours that move with them: a neighbour stands at ``near`` (its reference height)
+    raised by the same amount as the point, so the segment rises as a whole and its least
+    clearance by that amount; the point at z sees it exactly when
+    ``z >= z_ref - tol - clearance at the reference heights``. ``-inf`` where the segment is
+    not tested (too short) or there is no neighbour (``near_vis`` -1)."""
+    from ..visibility import min_clearance
+
+    n, L = near_vis.shape
+    lthr = np.full((n, L), -np.inf)
+    ok = near_vis >= 0
+    if ok.any():
+        rows = np.nonzero(ok)[0]
+        mc = min_clearance(simplified, ref[rows], near[ok], end_radius=end_radius, **curve)
+        tested = np.isfinite(mc)
+        vals = np.full(rows.size, -np.inf)
+        vals[tested] = ref[rows[tested], 2] - tol - mc[tested]
+        lthr[ok] = vals
+    return lthr
+
+
+def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float, curve: dict):
+    """Each point's neighbours: positions on :data:`NEIGHBOUR_RINGS` around it, standing
+    ``height`` above S(T), (n, L, 3), and the point's verdicts to them on T (standing
+    ``height`` above T), (n, L) int8: 1 seen, 0 not, -1 no neighbour (off either surface).
+
+    They depend on the point alone, so a point's height still does not depend on the
+    other points.
+    """
+    n = pts.shape[0]
+    step = max(abs(original.dx), abs(original.dy))
+    d = NEIGHBOUR_DIRECTIONS
+    offsets = []
+    for j, r in enumerate(NEIGHBOUR_RINGS):
+        a = 2.0 * np.pi * (np.arange(d) + 0.5 * (j % 2)) / d
+        offsets.append(r * step * np.column_stack([np.cos(a), np.sin(a)]))
+    offsets = np.concatenate(offsets)
+    xy = pts[:, None, :2] + offsets[None, :, :]
+    flat = xy.reshape(-1, 2)
+    z_t = original.height_at(flat)
+    z_s = simplified.height_at(flat)
+    ok = np.isfinite(z_t) & np.isfinite(z_s)
+    vis = np.full(flat.shape[0], -1, dtype=np.int8)
+    if ok.any():
+        src = np.repeat(pts, offsets.shape[0], axis=0)[ok]
+        dst = np.column_stack([flat[ok], z_t[ok] + height])
+        key = ("neighbours",) + _key(original, curve, src, dst)
+        seen = _cached(key, lambda: _pairs_on_original(original, src, dst, curve))
+        vis[ok] = seen
+    # a missing neighbour stands on the point itself: its threshold is never tested
+    near = np.column_stack([np.where(ok[:, None], flat, np.repeat(pts[:, :2], offsets.shape[0], axis=0)),
+                            np.where(ok, z_s + height, np.repeat(pts[:, 2], offsets.shape[0]))])
+    return near.reshape(n, offsets.shape[0], 3), vis.reshape(n, offsets.shape[0])
+
+
+def _pairs_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+    from ..visibility import line_of_sight
+
+    out = np.empty(a.shape[0], dtype=bool)
+    for i in range(0, a.shape[0], _CHUNK_PAIRS):
+        out[i:i + _CHUNK_PAIRS] = line_of_sight(original, a[i:i + _CHUNK_PAIRS], b[i:i + _CHUNK_PAIRS],
+                                                engine="grid", **curve)
+    return out
