@@ -900,3 +900,51 @@ def test_asc_prj_is_written_and_a_stale_one_is_reported(tmp_path):
     assert load_dem(tmp_path / "a.asc").attrs["crs"] == "EPSG:32610"
     p = save_dem(HeightGrid(np.arange(4.0).reshape(2, 2)), tmp_path / "u.npy")
     assert load_dem(p, crs="EPSG:32633").attrs["crs"] == "EPSG:32633"
+
+
+# ---------------------------------------------------------------------- rasters, figures and tables over a DEM
+def test_write_geotiff_overlays_the_dem(tmp_path):
+    rasterio = pytest.importorskip("rasterio")
+    from terrainvis.io import write_geotiff
+
+    g = HeightGrid(np.arange(12.0).reshape(3, 4), dx=30.0, dy=20.0, origin=(500000.0, 4000000.0),
+                   attrs={"crs": "EPSG:32617"})
+    save_dem(g, tmp_path / "dem.tif")
+    counts = np.arange(12, dtype=np.uint16).reshape(3, 4)
+    write_geotiff(g, counts, tmp_path / "c.tif", nodata=65535, tags={"NOTE": "three rows"})
+    with rasterio.open(tmp_path / "dem.tif") as dem, rasterio.open(tmp_path / "c.tif") as c:
+        assert c.transform == dem.transform and c.crs == dem.crs
+        assert c.dtypes[0] == "uint16" and c.nodata == 65535 and c.tags()["NOTE"] == "three rows"
+        np.testing.assert_array_equal(c.read(1), counts[::-1])  # north up: the last row of z first
+    with pytest.raises(ValueError, match=r"data must have the grid's shape \(3, 4\), got \(4, 3\)"):
+        write_geotiff(g, counts.T, tmp_path / "x.tif")
+    with pytest.raises(ValueError, match="path must end in .tif or .tiff, got 'x.png'"):
+        write_geotiff(g, counts, tmp_path / "x.png")
+    assert not (tmp_path / "x.tif").exists()
+
+
+def test_save_figure_marks_the_png_and_write_csv_writes_atomically(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from terrainvis.experiment._outdir import written_by_terrainvis
+    from terrainvis.io import FIGURE_SOFTWARE, save_figure, write_csv
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    out = save_figure(fig, tmp_path / "accuracy_vs_size.png")
+    plt.close(fig)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and written_by_terrainvis(out)
+    assert FIGURE_SOFTWARE.encode() in out.read_bytes()[:400]
+    fig, _ = plt.subplots()
+    fig.savefig(tmp_path / "accuracy_vs_distance.png")  # the same kind of file, not terrainvis's
+    plt.close(fig)
+    assert not written_by_terrainvis(tmp_path / "accuracy_vs_distance.png")
+    with pytest.raises(ValueError, match="path must end in .png"):
+        save_figure(fig, tmp_path / "f.jpg")
+    write_csv(pd.DataFrame({"x": [0.5, 1.25], "name": ["a", "b"]}), tmp_path / "t.csv", float_format="%.3f")
+    assert (tmp_path / "t.csv").read_text() == "x,name\n0.500,a\n1.250,b\n"
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []

@@ -192,11 +192,11 @@ def test_sigterm_message_ends_cleanly(capsys, monkeypatch):
     def stopped(args):
         raise Interrupted(signal.SIGTERM)
 
-    monkeypatch.setitem(cli._COMMANDS, "info", stopped)
+    monkeypatch.setattr(cli.COMMANDS["info"], "run", stopped)
     capsys.readouterr()
     assert main(["info", "hills"]) == 143
     assert capsys.readouterr().err.strip() == "terrainvis info: interrupted (interrupted by SIGTERM)"
-    monkeypatch.setitem(cli._COMMANDS, "compare", stopped)
+    monkeypatch.setattr(cli.COMMANDS["compare"], "run", stopped)
     assert main(["compare"]) == 143
     assert capsys.readouterr().err.strip().endswith("(interrupted by SIGTERM); finished units are in results.csv "
                                                     "(use --resume)")
@@ -247,7 +247,7 @@ def test_the_cli_turns_a_memory_error_into_one_line(capsys, monkeypatch):
     def hungry(args):
         raise MemoryError("Unable to allocate 7.28 TiB for an array with shape (1000000, 1000000)")
 
-    monkeypatch.setitem(cli._COMMANDS, "info", hungry)
+    monkeypatch.setattr(cli.COMMANDS["info"], "run", hungry)
     err = _err(capsys, 1, ["info", "hills"])
     assert err == "terrainvis info: error: out of memory: Unable to allocate 7.28 TiB for an array with shape " \
                   "(1000000, 1000000)"

@@ -6,7 +6,7 @@ A run writes ``results.csv`` and ``results.settings.json`` (:class:`~terrainvis.
 run's only when it can be recognised as written by terrainvis: the settings file by its
 settings, ``results.csv`` by its columns beside such a settings file, ``tables.md`` by its
 first line, the figures by the mark terrainvis puts in their PNG text
-(:data:`FIGURE_SOFTWARE`), the simplified terrains by the terrainvis ``.npz`` format.
+(:data:`terrainvis.io.FIGURE_SOFTWARE`), the simplified terrains by the terrainvis ``.npz`` format.
 :func:`earlier_run` lists those, so ``--overwrite`` removes exactly them;
 :func:`foreign_files` lists the files at the names a run writes that terrainvis did not
 write, which a run refuses to replace.
@@ -20,8 +20,10 @@ import re
 import struct
 from pathlib import Path
 
-__all__ = ["RESULTS", "TABLES", "SIMPLIFIED", "LOCK", "FIGURE_SOFTWARE", "figure_names", "figure_metadata",
-           "earlier_run", "foreign_files", "written_by_terrainvis", "describe", "remove"]
+from ..io import FIGURE_SOFTWARE
+
+__all__ = ["RESULTS", "TABLES", "SIMPLIFIED", "LOCK", "figure_names", "earlier_run", "foreign_files",
+           "written_by_terrainvis", "describe", "remove"]
 
 RESULTS = "results.csv"
 TABLES = "tables.md"
@@ -29,8 +31,6 @@ SIMPLIFIED = "simplified"
 LOCK = "results.lock"
 #: Figures every run may write, whatever its terrains and relocations.
 FIXED_FIGURES = ("accuracy_vs_size.png", "accuracy_vs_distance.png")
-#: The PNG ``Software`` text of every figure terrainvis draws: how a figure is recognised as its own.
-FIGURE_SOFTWARE = "terrainvis"
 #: The first line of every ``tables.md`` a run writes.
 TABLES_TITLE = "# terrainvis compare"
 #: Settings every stored settings file of ``compare`` holds, whatever its version.
@@ -42,15 +42,6 @@ _RESULT_COLUMNS = ("terrain", "set", "method")
 def figure_names(terrains, relocations) -> list[str]:
     """The figures a run on ``terrains`` with ``relocations`` may write."""
     return list(FIXED_FIGURES) + [f"tradeoff_{r}.png" for r in relocations] + [f"views_{t}.png" for t in terrains]
-
-
-def figure_metadata() -> dict:
-    """The PNG text (``savefig(..., metadata=...)``) that marks a figure as drawn by terrainvis."""
-    import matplotlib
-
-    from .. import __version__
-
-    return {"Software": f"{FIGURE_SOFTWARE} {__version__} (matplotlib {matplotlib.__version__})"}
 
 
 # ---------------------------------------------------------------------- recognising our files

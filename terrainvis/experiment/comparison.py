@@ -22,8 +22,6 @@ The run goes in four stages, each in a module of its own:
    SIGTERM) loses no finished unit;
 4. **collect** (:mod:`terrainvis.experiment.collect`): the rows, sorted (terrains as given, methods
    in the paper's order).
-
-This module keeps every name it had before the split (users' code imports them from here).
 """
 
 from __future__ import annotations
@@ -35,7 +33,7 @@ import sys
 import pandas as pd
 
 from ..core._progress import progress_bar_class
-from .collect import COLUMNS, TIMING_COLUMNS, UNIT_KEY, order, rows_per_unit, table  # noqa: F401
+from .collect import COLUMNS, UNIT_KEY, order, rows_per_unit, table
 from .options import (
     CASCADE_AUTO_MIN_SAMPLES,
     DEFAULTS,
@@ -47,28 +45,20 @@ from .options import (
     docstring_section,
     signature_parameters,
 )
-from .plan import DEFAULT_TERRAINS, JACKSBORO_WINDOW, cascades, fingerprint, resolve_terrains, run_record  # noqa: F401
+from .plan import DEFAULT_TERRAINS, JACKSBORO_WINDOW, resolve_terrains, run_record
 from .plan import kernels_cached as _kernels_cached
-from .plan import resolve_one as _resolve_one  # noqa: F401
 from .plan import check_memory, settings_for
 from .plan import tasks as _plan_tasks
 from .plan import warm_up_parts as _warm_up_parts
 from .units import call as _call
-from .units import end_radius_for, point_sets, simplified_path  # noqa: F401
-from .units import observers as _observers  # noqa: F401
+from .units import end_radius_for, point_sets, simplified_path
 from .units import run_unit as _run_unit
 from .units import warm_up as _warm_up
-from .units import warm_up_part as _warm_up_part  # noqa: F401
 
 __all__ = [
     "compare", "Settings", "DEFAULTS", "resolve_terrains", "point_sets", "DEFAULT_TERRAINS", "JACKSBORO_WINDOW",
     "COLUMNS", "PREDICATES", "DISTANCE_UNITS", "MEASURES", "simplified_path", "end_radius_for",
 ]
-
-# Names kept for code written against the module before it was split.
-_fingerprint = fingerprint
-_order = order
-
 
 def _settings(grids: dict, **options) -> Settings:
     """Validate the options of :func:`compare` (before any unit runs) into :class:`Settings`."""

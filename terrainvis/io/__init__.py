@@ -135,7 +135,8 @@ from ._common import (
     _Corrupt,
     _UserError,
 )
-from ._geotiff import _read_tif, _write_tif, write_mask_geotiff
+from ._geotiff import _read_tif, _write_tif, write_geotiff, write_mask_geotiff
+from ._outputs import FIGURE_SOFTWARE, figure_metadata, save_figure, write_csv
 from ._meshfile import _read_mesh, _write_mesh
 from ._metric import to_metric
 from ._npy import _read_npy, _write_npy
@@ -153,11 +154,13 @@ from ._sample import bundled_terrain, sample_dem
 #   _asc       ESRI ASCII grids and their .prj
 #   _geotiff   GeoTIFF through rasterio
 #   _meshfile  .ply, .obj, .stl, .glb
+#   _outputs   figures (.png, marked as terrainvis's) and CSV tables, written atomically
 #   _sample    sample_dem, bundled_terrain
 #   _metric    to_metric: a lon/lat grid resampled onto a local transverse Mercator grid
 
 __all__ = [
-    "load_terrain", "write_mask_geotiff", "save_terrain", "load_dem", "save_dem", "sample_dem", "bundled_terrain", "native_coords",
+    "load_terrain", "write_geotiff", "write_mask_geotiff", "save_figure", "write_csv", "figure_metadata",
+    "FIGURE_SOFTWARE", "save_terrain", "load_dem", "save_dem", "sample_dem", "bundled_terrain", "native_coords",
     "metres_per_degree", "to_metric",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",
 ]

@@ -230,13 +230,61 @@ def _north_up_transform(nx: np.ndarray, ny: np.ndarray):
     return Affine(dx, 0.0, float(nx[0]) - 0.5 * dx, 0.0, -dy, float(ny[-1]) + 0.5 * dy)
 
 
+def write_geotiff(grid: HeightGrid, data: np.ndarray, path, *, nodata=None, tags: dict | None = None) -> Path:
+    """Write one value per sample of ``grid`` as a single-band GeoTIFF aligned with it.
+
+    The grid's CRS and the transform of its own coordinates, as :func:`~terrainvis.save_dem`
+    writes them, so the file overlays the grid's GeoTIFF in a GIS; compressed and tiled as
+    GDAL writes a DEM. The file is written atomically and read back before it replaces
+    an existing one (a full disk raises :class:`~terrainvis.errors.OutputError` and leaves
+    the old file). Viewsheds, observer counts and other rasters over a DEM are the
+    intended use.
+
+    Parameters
+    ----------
+    grid : HeightGrid
+        A uniform grid (a rectilinear one cannot be one raster; save an ``.npz`` then).
+    data : (rows, cols) array
+        The values, row 0 at the grid's smallest y (the grid's own order); written with
+        their dtype (bool as uint8).
+    path : str or Path
+        A ``.tif`` or ``.tiff`` file.
+    nodata : number, optional
+        The value that marks samples without data (recorded in the file).
+    tags : dict, optional
+        GDAL metadata items (text) stored in the file.
+
+    Returns
+    -------
+    Path
+    """
+    p = Path(path)
+    if not isinstance(grid, HeightGrid):
+        raise TypeError(f"grid must be a terrainvis.HeightGrid, got {type(grid).__name__}")
+    values = np.asarray(data)
+    if values.dtype == bool:
+        values = values.astype(np.uint8)
+    if values.shape != grid.shape:
+        raise ValueError(f"data must have the grid's shape {grid.shape}, got {values.shape}")
+    if p.suffix.lower() not in (".tif", ".tiff"):
+        raise ValueError(f"path must end in .tif or .tiff, got {p.name!r}")
+    if not grid.is_uniform:
+        raise ValueError("a GeoTIFF needs a uniform grid, and this one is rectilinear: write the raster as .npz")
+    _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix)
+    crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
+    rows, cols = values.shape
+    profile = dict(height=rows, width=cols, count=1, dtype=values.dtype.name, transform=_north_up_transform(nx, ny),
+                   crs=crs, nodata=nodata)
+    with atomic_path(p) as tmp:
+        _write_gtiff(tmp, np.ascontiguousarray(values[::-1]), profile, tags)
+    return p
+
+
 def write_mask_geotiff(grid: HeightGrid, mask: np.ndarray, path, *, nodata_mask=None) -> Path:
     """Write a boolean raster over ``grid``'s samples as a uint8 GeoTIFF aligned with it.
 
     1 where ``mask`` is True, 0 where False, 255 (the nodata value) where ``nodata_mask``
-    is True; the grid's CRS and the transform of its own coordinates, as
-    :func:`~terrainvis.save_dem` writes them, so the file overlays the grid's GeoTIFF.
-    A viewshed is the intended use.
+    is True (:func:`write_geotiff`). A viewshed is the intended use.
 
     Parameters
     ----------
@@ -247,23 +295,12 @@ def write_mask_geotiff(grid: HeightGrid, mask: np.ndarray, path, *, nodata_mask=
         A ``.tif`` or ``.tiff`` file, written atomically.
     nodata_mask : (rows, cols) bool, optional
     """
-    rasterio = rasterio_module()
-    p = Path(path)
     if not isinstance(grid, HeightGrid):
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {type(grid).__name__}")
     m = np.asarray(mask, dtype=bool)
     if m.shape != grid.shape:
         raise ValueError(f"mask must have the grid's shape {grid.shape}, got {m.shape}")
-    if not grid.is_uniform:
-        raise ValueError("a GeoTIFF needs a uniform grid, and this one is rectilinear: write the raster as .npz")
-    _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix)
-    crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
     data = m.astype(np.uint8)
     if nodata_mask is not None:
         data[np.asarray(nodata_mask, dtype=bool)] = 255
-    rows, cols = data.shape
-    profile = dict(height=rows, width=cols, count=1, dtype="uint8", transform=_north_up_transform(nx, ny), crs=crs,
-                   nodata=255)
-    with atomic_path(p) as tmp:
-        _write_gtiff(tmp, np.ascontiguousarray(data[::-1]), profile)
-    return p
+    return write_geotiff(grid, data, path, nodata=255)

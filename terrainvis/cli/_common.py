@@ -1,0 +1,221 @@
+"""What the commands share: the one-line errors, the argument types and flags declared once, reading a terrain.
+
+Flags that several commands take (``--fill``/``--crop-valid``, ``--frame``/``--metric``,
+``--target-height``, ``--max-distance``, ``--curvature``/``--earth-radius``) are declared
+here once, by ``add_*`` functions, so that they read and fail the same everywhere.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+class UsageError(ValueError):
+    """A mistake on the command line: reported in one line, exit status 2."""
+
+
+class ParseError(ValueError):
+    """argparse's complaint, reported in one line by :func:`main` (exit status 2)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (no usage block), like every other error of the command line."""
+
+    def error(self, message):
+        raise ParseError(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+
+def number_arg(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def height_arg(text: str) -> float:
+    """A height above the surface: finite and >= 0 (a negative eye height would stand underground)."""
+    value = number_arg(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a height >= 0 above the surface, got {text!r}")
+    return value
+
+
+def distance_arg(text: str) -> float:
+    value = number_arg(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a distance >= 0, got {text!r}")
+    return value
+
+
+def add_target_height(p) -> None:
+    p.add_argument("--target-height", type=height_arg, default=0.0, help="target height above the surface, >= 0 (default 0)")
+
+
+def add_max_distance(p, help_text: str) -> None:
+    p.add_argument("--max-distance", type=distance_arg, default=None, help=help_text)
+
+
+def add_nodata(p) -> None:
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--fill", choices=["nearest", "linear"], default=None,
+                   help="fill nodata cells first (nearest sample, or linear inside the valid hull)")
+    g.add_argument("--crop-valid", action="store_true", help="cut the DEM to its largest window without nodata")
+
+
+def add_positions(p, *, frame: bool = True) -> None:
+    """``--frame`` (how positions are given and printed) and ``--metric`` (resample a lon/lat DEM first)."""
+    from ..core._positions import FRAMES
+
+    if frame:
+        p.add_argument("--frame", choices=FRAMES, default="native",
+                       help="positions given and printed in the DEM's CRS (native, the default: lon/lat degrees on a "
+                            "lon/lat DEM, x, y of its projection otherwise) or in the terrain's own frame (local: "
+                            "metres from the south-west sample on a lon/lat DEM; see terrainvis info)")
+    p.add_argument("--metric", action="store_true",
+                   help="a lon/lat DEM: resample it first onto a metric grid (a transverse Mercator centred on it), "
+                        "so distances are right across the whole DEM, not only at its centre latitude; changes the "
+                        "samples (heights read from the DEM's surface, over the largest rectangle inside it); positions "
+                        "stay lon/lat (docs/user-guide.md, Georeferencing)")
+
+
+def coefficient_arg(text: str) -> float:
+    """An earth curvature coefficient: finite and >= 0 (GDAL's -cc)."""
+    value = number_arg(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(
+            f"expected a coefficient >= 0 (0 flat, 1 geometric, 0.85714 GDAL's), got {text!r}")
+    return value
+
+
+def radius_arg(text: str) -> float:
+    value = number_arg(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a radius > 0, got {text!r}")
+    return value
+
+
+def add_earth(p) -> None:
+    """``--curvature`` and ``--earth-radius`` of the visibility commands (flat by default, as the API)."""
+    p.add_argument("--curvature", type=coefficient_arg, default=0.0,
+                   help="earth curvature and refraction coefficient, GDAL's -cc: 0 a flat earth (the default, as the "
+                        "Python API and the paper), 1 geometric curvature, 0.85714 standard refraction (gdal_viewshed's "
+                        "default); the command prints the model it used")
+    p.add_argument("--earth-radius", type=radius_arg, default=6378137.0,
+                   help="with --curvature: the earth's radius in the DEM's x/y units (default 6378137, WGS84's "
+                        "semi-major axis in metres, as GDAL takes it)")
+
+
+def earth_text(args) -> str:
+    """The earth model a command used, for its output (one phrase)."""
+    if args.curvature == 0:
+        return "earth: flat (curvature 0; --curvature 0.85714 for gdal_viewshed's default, standard refraction)"
+    name = {1.0: " (geometric)", 0.85714: " (standard refraction)"}.get(args.curvature, "")
+    return f"earth: curved, coefficient {args.curvature:g}{name}, radius {args.earth_radius:,.0f}"
+
+
+def read_terrain(name: str, args=None):
+    """One terrain from a bundled name or a DEM file, with --fill / --crop-valid applied."""
+    import numpy as np
+
+    from ..experiment.plan import resolve_one
+
+    if Path(name).suffix and not Path(name).exists():
+        raise UsageError(f"DEM file {name!r} does not exist")
+    label, grid = resolve_one(None, name, 0)
+    if not np.isfinite(grid.z).any():
+        raise UsageError(f"DEM {name!r} has no valid sample: all {plural(grid.size, 'cell')} are nodata")
+    if args is not None and getattr(args, "metric", False):
+        grid = metric_grid(name, grid)
+    if args is not None and getattr(args, "fill", None):
+        grid = grid.fill_nodata(args.fill)
+    elif args is not None and getattr(args, "crop_valid", False):
+        rs, cs = grid.valid_window()
+        grid = grid.crop(rs, cs)
+    return label, grid
+
+
+def metric_grid(name: str, grid):
+    """``--metric``: a lon/lat DEM resampled onto a transverse Mercator grid (:func:`terrainvis.io.to_metric`)."""
+    from ..io import to_metric
+
+    if not grid.attrs.get("geographic"):
+        crs = grid.attrs.get("crs")
+        raise UsageError(f"--metric resamples lon/lat DEMs; {name!r} is "
+                         + (f"in {crs}, whose x, y are metres already" if crs else "not georeferenced (no CRS)"))
+    return to_metric(grid)
+
+
+def position_frame(grid, args):
+    """The :class:`~terrainvis.core._positions.PositionFrame` of a command's positions (``--frame``)."""
+    from ..core._positions import PositionFrame
+
+    return PositionFrame(grid, getattr(args, "frame", "native"))
+
+
+def outside_message(frame, xy_user, what: str = "") -> str:
+    """``lies outside the DEM's footprint ... (or on nodata)`` in the user's frame, with a hint when the
+    position is on the DEM in the other frame (lon/lat given to --frame local, or local metres to native)."""
+    import numpy as np
+
+    from ..core._positions import PositionFrame
+
+    text = f"lies outside the DEM's footprint {frame.footprint()}{what} (or on nodata)"
+    other = PositionFrame(frame.terrain, "local" if frame.frame == "native" else "native")
+    if other.identity and frame.identity:
+        return text  # both frames are the same
+    try:
+        fits = np.isfinite(frame.terrain.height_at(other.to_grid(np.asarray([xy_user[:2]], float)))[0])
+    except ValueError:
+        fits = False
+    if fits:
+        text += f"; it is on the DEM as {other.describe()}: add --frame {other.frame} if you meant those"
+    return text
+
+
+def plural(n: int, word: str, plural: str | None = None) -> str:
+    """``1 terrain``, ``2 terrains``, ``12,000 vertices`` (with ``plural`` for irregular words)."""
+    return f"{n:,} {word if n == 1 else plural or word + 's'}"
+
+
+def read_columns(path: str, flag: str, columns, optional=()):
+    """The named columns of a CSV as an (n, k) float array (the ``optional`` ones NaN when absent);
+    a missing column or a bad cell is named by file, row and column."""
+    import numpy as np
+    import pandas as pd
+
+    try:
+        table = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"{flag} {path!r} could not be read as CSV: {exc}") from None
+    missing = [c for c in columns if c not in table.columns]
+    if missing:
+        raise UsageError(f"{flag} needs the columns {', '.join(columns)}; {path!r} lacks {missing}")
+    wanted = list(columns) + list(optional)
+    values = np.full((len(table), len(wanted)), np.nan)
+    for j, c in enumerate(wanted):
+        if c not in table.columns:
+            continue
+        for i, text in enumerate(table[c]):
+            try:
+                values[i, j] = float(text)
+            except ValueError:
+                values[i, j] = np.nan
+            if not np.isfinite(values[i, j]):
+                what = "is empty" if not text.strip() else f"holds {text!r}, not a finite number"
+                raise UsageError(f"{flag} {path!r}: row {i + 1} (line {i + 2}), column {c} {what}")
+    return values
+
+
+def dask_client(address: str):
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise UsageError('--scheduler needs the dask extra: pip install "terrainvis[dask]"') from None
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise UsageError(f"--scheduler {address!r} could not be reached within 10 s ({type(exc).__name__})") from None

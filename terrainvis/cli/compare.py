@@ -1,0 +1,217 @@
+"""``terrainvis compare``: the paper's experiment, its tables, figures and simplified terrains in ``--out``."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from ._common import UsageError, add_nodata, dask_client, plural, read_terrain
+
+
+#: ``--quick``: a run of seconds for smoke tests (terrains, and options by name, each unless given);
+#: the calibrated relocation against its core partners alone (512, calibrated jointly), whose
+#: cost does not grow with the points, as the sets are small.
+QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "n_points": 20, "n_sets": 2, "n_partners": 512}
+
+
+def add_parser(sub) -> None:
+    """``terrainvis compare``: the options' flags come from :data:`terrainvis.experiment.options.OPTIONS`."""
+    from ..experiment.options import add_flags
+    from ..experiment.plan import DEFAULT_TERRAINS
+
+    c = sub.add_parser(
+        "compare", help="run the paper's experiment and print its tables",
+        description=(
+            "Simplify each terrain with each method and level, relocate random point sets onto the "
+            "simplification, and count the line-of-sight verdicts that survive. Defaults reproduce the "
+            "paper's protocol: the five bundled 120x120 terrains plus the central 120x120 window of the "
+            "Jacksboro DEM, 6 sets of 50 points, levels 1-3, all seven methods, all three relocations."
+        ),
+    )
+    c.add_argument("--terrain", nargs="+", default=None, metavar="T",
+                   help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}) or DEM files (.npz .npy .asc .tif)")
+    add_flags(c)
+    c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
+    c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")
+    c.add_argument("--no-plots", action="store_true", help="do not write the figures")
+    c.add_argument("--quick", action="store_true",
+                   help=f"a run of seconds for smoke tests: {_quick_flags()} (each unless given)")
+    again = c.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="keep the units already in OUT/results.csv and run only the rest (same settings)")
+    again.add_argument("--overwrite", action="store_true",
+                       help="replace an earlier run in OUT: remove the files it wrote (and only those) first")
+    c.add_argument("--out", default="terrainvis-results",
+                   help="output folder (default: ./terrainvis-results); one run at a time")
+    add_nodata(c)
+
+
+def _quick_flags() -> str:
+    from ..experiment.options import OPTIONS
+
+    words = lambda v: " ".join(map(str, v)) if isinstance(v, list) else str(v)  # noqa: E731
+    return " ".join(f"{'--terrain' if k == 'terrains' else OPTIONS[k].flag} {words(v)}" for k, v in QUICK.items())
+
+
+def run(args) -> int:
+    from ..core.fileio import RunLock, check_writable_dir, refuse_protected
+    from ..experiment._outdir import LOCK, foreign_files
+
+    refuse_protected(args.out, "--out")
+    out = check_writable_dir(args.out, "--out")
+    foreign = foreign_files(out)  # a results.lock terrainvis did not write: the lock would replace it
+    if foreign:
+        raise UsageError(_foreign_message(out, foreign))
+    with RunLock(out / LOCK, f"--out {str(out)!r}", "terrainvis compare"):
+        return _compare_in(out, args)
+
+
+def _compare_in(out: Path, args) -> int:
+    """``terrainvis compare`` with the output folder locked: check everything, clear an earlier run, run, report."""
+    from ..experiment.comparison import compare, resolve_terrains
+    from ..experiment.options import given
+    from ..experiment.plan import DEFAULT_TERRAINS, settings_for
+
+    terrains = args.terrain or (QUICK["terrains"] if args.quick else list(DEFAULT_TERRAINS))
+    options = given(args)
+    if args.quick:
+        options = {**{k: v for k, v in QUICK.items() if k != "terrains"}, **options}
+    grids = {}
+    for t in terrains:
+        label, grid = read_terrain(t, args)
+        if label in grids:
+            raise UsageError(f"--terrain names must be unique, got {label!r} twice")
+        grids[label] = grid
+    grids = resolve_terrains(grids)
+    settings = settings_for(grids, options)  # compare checks them again; here before anything is removed
+    _earlier_run(out, args, list(grids), settings, inputs=[t for t in terrains if Path(t).is_file()])
+    client = dask_client(args.scheduler) if args.scheduler else None
+    t0 = time.perf_counter()
+    df = compare(grids, **options, workers=args.workers, client=client, out_csv=out / "results.csv",
+                 resume=args.resume, save_dir=out / "simplified", progress=True)
+    return _compare_report(df, grids, settings, out, args, time.perf_counter() - t0)
+
+
+def _earlier_run(out: Path, args, names, settings, inputs) -> None:
+    """An earlier run's results in ``out``: refused without --resume or --overwrite; --overwrite removes them.
+
+    Files at the names this run writes that terrainvis did not write are refused in any
+    case: neither the run nor --overwrite replaces them.
+    """
+    from ..experiment._outdir import describe, earlier_run, foreign_files, remove
+
+    foreign = foreign_files(out, names, settings.methods, settings.relocations)
+    if foreign:
+        raise UsageError(_foreign_message(out, foreign))
+    files = earlier_run(out)
+    if not files or args.resume:
+        return
+    if not args.overwrite:
+        raise UsageError(
+            f"--out {str(out)!r} holds the results of an earlier run ({describe(files)}); add --resume to "
+            "continue it (same settings), --overwrite to replace it, or choose another --out"
+        )
+    for f in files:
+        for inp in inputs:
+            if Path(inp).resolve() == f.resolve():
+                raise UsageError(f"--overwrite would remove {str(f)!r}, which is an input (--terrain); "
+                                 "move it out of --out first")
+    remove(out, files)
+    print(f"terrainvis compare: --overwrite: removed the earlier run's {describe(files)}", file=sys.stderr)
+
+
+def _foreign_message(out: Path, files) -> str:
+    names = [p.relative_to(out).as_posix() for p in files]
+    if len(names) == 1:
+        shown = names[0]
+    elif len(names) <= 4:
+        shown = ", ".join(names[:-1]) + " and " + names[-1]
+    else:
+        shown = ", ".join(names[:4]) + f" and {len(names) - 4} more"
+    which = "it" if len(names) == 1 else "them"
+    return (f"--out {str(out)!r} holds {shown}, which terrainvis did not write but a run writes under "
+            f"{'that name' if len(names) == 1 else 'those names'}; terrainvis never replaces a file it did not "
+            f"write: move {which} away or choose another --out")
+
+
+def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int:
+    """Print and write the tables, draw the figures; the exit status."""
+    from ..experiment import report
+    from ..core.fileio import atomic_write_text
+
+    extra = {}
+    beyond = report.beyond_paper(df) if settings.measure == "pairs" else None
+    if beyond is not None and not beyond.empty:
+        extra["beyond"] = beyond
+    elif (df["relocation"] == "oracle").any():
+        extra["oracle"] = report.oracle_gap(df)
+    if df["max_distance"].nunique(dropna=False) > 1:
+        extra["localized"] = report.localized(df)
+    if settings.measure == "viewshed":
+        if df["accuracy"].notna().any():
+            extra["viewsheds"] = report.viewshed_table(df)
+        text = report.to_markdown({**report.paper_tables(df), **extra})
+        lines = []  # the paper's findings are about pairs
+    else:
+        text = (report.to_markdown({**report.paper_tables(df), **extra}) + "\n"
+                + report.comparison_markdown(report.paper_comparison(df)))
+        lines = report.findings_markdown(report.findings(df)) + report.beyond_paper_findings(df)
+    fast = sorted(set(df[(df["method"] == "qec") & (df["backend"] == "fast-simplification")]["terrain"]))
+    if fast:
+        from simplifiers.quadric import AUTO_MAX_SAMPLES
+
+        lines += ["", f"Note: QEC ran on fast-simplification for {', '.join(fast)} (more than {AUTO_MAX_SAMPLES:,} "
+                      "samples, where pymeshlab takes minutes per level); pymeshlab, the paper's QEC, ran elsewhere."]
+    units = df[["terrain", "method", "level"]].drop_duplicates().shape[0]
+    failed = df[df["error"] != ""].drop_duplicates(["terrain", "method", "level"])
+    if len(failed):
+        lines += ["", "### Failed units", ""]
+        lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
+    summary = (f"{plural(units, 'unit')}, {plural(len(df), 'row')}, {plural(len(grids), 'terrain')}, "
+               f"predicate {settings.predicate}, {seconds:.1f} s")
+    atomic_write_text(out / "tables.md", f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")
+    print(text)
+    print("\n".join(lines))
+    if not args.no_plots:
+        _write_plots(df, grids, out)
+    print(f"\n{summary}; wrote {out / 'results.csv'}, {out / 'tables.md'}" + ("" if args.no_plots else " and figures"))
+    if df["accuracy"].notna().any():
+        return 0
+    if len(failed) == units:
+        print("terrainvis compare: every unit failed (see 'Failed units' above)", file=sys.stderr)
+    else:
+        print("terrainvis compare: no pair was counted: every accuracy is undefined (with --max-distance, "
+              "no two points of a set lie that close; try a larger distance or more --points)", file=sys.stderr)
+    return 1
+
+
+def _write_plots(df, grids, out: Path) -> None:
+    """The figures, drawn from the rows and the saved simplified terrains (nothing is simplified again)."""
+    from simplifiers import METHODS
+
+    from ..experiment import plot
+    from ..experiment.units import simplified_path
+    from ..io import load_terrain, save_figure
+
+    def save(fig, name, dpi):
+        save_figure(fig, out / name, dpi=dpi)
+
+    ok = df[df["error"] == ""]
+    if ok.empty:
+        return
+    save(plot.accuracy_vs_size(ok), "accuracy_vs_size.png", 110)
+    for rel in sorted(set(ok["relocation"])):
+        save(plot.tradeoff(ok, relocation=rel), f"tradeoff_{rel}.png", 110)
+    if ok["max_distance"].nunique(dropna=True) >= 1:
+        save(plot.accuracy_vs_distance(ok), "accuracy_vs_distance.png", 110)
+    level = int(ok["level"].min())
+    for name, grid in grids.items():
+        views = {}
+        for m in METHODS:
+            path = simplified_path(out / "simplified", name, m, level)
+            if path.exists():  # a failed unit saved nothing and is reported in the tables already
+                views[m] = load_terrain(path)
+        fig = plot.terrain_views(grid, views)
+        fig.suptitle(f"{name}: level {level}")
+        save(fig, f"views_{name}.png", 90)

@@ -1,0 +1,169 @@
+"""``terrainvis cumulative``: how many of a CSV's observers see each sample (a cumulative viewshed)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from ._common import (
+    UsageError,
+    add_earth,
+    add_max_distance,
+    add_nodata,
+    add_positions,
+    add_target_height,
+    dask_client,
+    earth_text,
+    height_arg,
+    outside_message,
+    plural,
+    position_frame,
+    read_columns,
+    read_terrain,
+)
+
+
+def add_parser(sub) -> None:
+    c = sub.add_parser(
+        "cumulative", help="how many observers see each sample of a DEM",
+        description=(
+            "Compute the cumulative viewshed of many observers on a DEM: for every sample, how many observers see it "
+            "(each observer's exact viewshed, summed; count > 0 is the area seen by any). Observers come from a CSV "
+            "with columns x, y (lon, lat on a lon/lat DEM; see --frame) and optionally height (each eye's height "
+            "above the surface, instead of --observer-height). Writes the counts as a GeoTIFF aligned with the DEM "
+            "(CRS and transform kept; unsigned integers, nodata the type's largest value) or an .npz, and with --png "
+            "a picture of them over the hillshade."
+        ),
+    )
+    c.add_argument("dem", help="DEM file or bundled name")
+    c.add_argument("--observers", required=True, metavar="CSV",
+                   help="the observers: a CSV with columns x, y (lon, lat on a lon/lat DEM) and optionally height")
+    c.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif (counts aligned with the "
+                                                                         "DEM) or .npz")
+    c.add_argument("--png", metavar="PNG", help="also draw the counts over the hillshade into this .png")
+    c.add_argument("--observer-height", "--height", dest="height", type=height_arg, default=1.7,
+                   help="eye height above the surface, >= 0, for observers without a height column (default 1.7)")
+    add_target_height(c)
+    add_max_distance(c, "each observer sees only the samples within this distance")
+    c.add_argument("--workers", type=workers_arg, default=None,
+                   help="local worker processes (default 1: in this process, each viewshed on every core)")
+    c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler "
+                                                                        "(needs the dask extra)")
+    add_earth(c)
+    add_nodata(c)
+    add_positions(c)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from ..core.fileio import check_output_file
+    from ..visibility import cumulative_viewshed
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in (".tif", ".tiff", ".npz"):
+        raise UsageError(f"-o must end in .tif or .npz, got {out.name!r}")
+    png = Path(args.png) if args.png else None
+    if png is not None and png.suffix.lower() != ".png":
+        raise UsageError(f"--png must end in .png, got {png.name!r}")
+    inputs = [args.dem, args.observers]
+    check_output_file(out, "-o", inputs=inputs)
+    if png is not None:
+        check_output_file(png, "--png", inputs=inputs + [str(out)])
+    label, grid = read_terrain(args.dem, args)
+    if suffix in (".tif", ".tiff") and not grid.is_uniform:
+        raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
+    table = read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))
+    if not len(table):
+        raise UsageError(f"--observers {args.observers!r} holds no observer (a header and no rows)")
+    frame = position_frame(grid, args)
+    user = table[:, :2]
+    xy = frame.to_grid(user)
+    outside = np.isnan(grid.height_at(xy))
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        raise UsageError(f"--observers {args.observers!r}: row {k + 1} {frame.point(user[k])} {outside_message(frame, user[k])}; "
+                         f"{plural(int(outside.sum()), 'observer')} of {len(xy):,} do")
+    heights = np.where(np.isnan(table[:, 2]), args.height, table[:, 2])
+    if (heights < 0).any():
+        k = int(np.flatnonzero(heights < 0)[0])
+        raise UsageError(f"--observers {args.observers!r}: row {k + 1}, column height is {heights[k]:g}; "
+                         "heights above the surface must be >= 0")
+    client = dask_client(args.scheduler) if args.scheduler else None
+    try:
+        t0 = time.perf_counter()
+        counts = cumulative_viewshed(grid, xy, observer_height=heights, target_height=args.target_height,
+                                     max_distance=args.max_distance, curvature=args.curvature,
+                                     earth_radius=args.earth_radius, workers=args.workers, client=client,
+                                     progress=True)
+        seconds = time.perf_counter() - t0
+    finally:
+        if client is not None:
+            client.close()
+    _write_counts(grid, counts, out, suffix, args, len(xy))
+    if png is not None:
+        _write_counts_png(grid, counts, xy, png, label)
+    valid = np.isfinite(grid.z)
+    n_valid = max(int(valid.sum()), 1)
+    seen = counts[valid]
+    if client is not None:
+        where = "on the dask cluster"
+    else:
+        where = "in this process" if (args.workers or 1) == 1 else "on " + plural(args.workers, "worker")
+    print(f"{label}: {plural(len(xy), 'observer')}, eyes {heights_text(heights)} above the surface, target "
+          f"{args.target_height:g}" + (f", within {args.max_distance:g}" if args.max_distance is not None else ""))
+    print(f"  {earth_text(args)}")
+    print(f"  seen by any {int((seen > 0).sum()):,} of {plural(n_valid, 'sample')} ({100 * (seen > 0).mean():.2f} %), "
+          f"by all {100 * (seen == len(xy)).mean():.2f} %, most observers on one sample {int(seen.max()):,}; "
+          f"{seconds:.1f} s {where} ({len(xy) / seconds:.1f} observers/s)")
+    print(f"  wrote {out}" + (f" and {png}" if png is not None else ""))
+    return 0
+
+
+def _write_counts(grid, counts, out: Path, suffix: str, args, k: int) -> None:
+    """The counts as a GeoTIFF aligned with the DEM (unsigned integers, nodata the type's maximum) or an .npz."""
+    import numpy as np
+
+    nodata = ~np.isfinite(grid.z)
+    if suffix == ".npz":
+        from ..io import save_terrain
+        from ..core.terrain import HeightGrid
+
+        z = np.where(nodata, np.nan, counts.astype(np.float64))
+        attrs = {**grid.attrs, "cumulative_observers": int(k), "cumulative_target_height": float(args.target_height),
+                 "cumulative_curvature": float(args.curvature), "cumulative_earth_radius": float(args.earth_radius)}
+        save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
+        return
+    from ..io import write_geotiff
+
+    dtype = np.uint16 if k < np.iinfo(np.uint16).max else np.uint32  # the largest value stays free for nodata
+    fill = np.iinfo(dtype).max
+    data = counts.astype(dtype)
+    data[nodata] = fill
+    write_geotiff(grid, data, out, nodata=fill,
+                  tags={"TERRAINVIS_CUMULATIVE": f"observers={k} target_height={args.target_height:g} "
+                                                 f"curvature={args.curvature:g} earth_radius={args.earth_radius:g}"})
+
+
+def _write_counts_png(grid, counts, xy, png: Path, label: str) -> None:
+    from ..experiment import plot
+    from ..io import save_figure
+
+    save_figure(plot.cumulative_viewshed(grid, counts, observers=xy, title=f"{label}: cumulative viewshed"), png)
+
+
+def heights_text(heights) -> str:
+    lo, hi = float(heights.min()), float(heights.max())
+    return f"{lo:g}" if lo == hi else f"{lo:g} to {hi:g}"
+
+
+def workers_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of processes >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of processes >= 1, got {text!r}")
+    return value

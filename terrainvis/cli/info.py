@@ -1,0 +1,67 @@
+"""``terrainvis info``: a terrain's shape, spacing, CRS, extent, heights, nodata and level sizes."""
+
+from __future__ import annotations
+
+import argparse
+
+from ._common import add_nodata, add_positions, plural, position_frame, read_terrain
+
+
+def add_parser(sub) -> None:
+    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
+    i.add_argument("terrain", help="bundled name or DEM file")
+    add_nodata(i)
+    add_positions(i, frame=False)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from simplifiers import METHODS, max_level, vertex_budget
+
+    label, grid = read_terrain(args.terrain, args)
+    rows, cols = grid.shape
+    local = position_frame(grid, argparse.Namespace(frame="local"))
+    xmin, xmax, ymin, ymax = (local.value(v) for v in grid.extent)
+    z = grid.z
+    kind = "uniform" if grid.is_uniform else "rectilinear"
+    nodata = f", {plural(grid.n_nodata, 'nodata cell')}" if grid.n_nodata else ""
+    print(f"{label}: {rows}x{cols} {kind} grid, x [{xmin}, {xmax}], y [{ymin}, {ymax}], "
+          f"z [{np.nanmin(z):.6g}, {np.nanmax(z):.6g}]{nodata}")
+    print(f"  samples   {rows} x {cols} = {grid.size:,}  ({grid.nbytes / 1e6:.2f} MB as a grid)")
+    print(f"  spacing   dx {grid.dx:g}, dy {grid.dy:g}" + ("" if grid.is_uniform else " (mean; rectilinear)"))
+    print(f"  extent    x [{xmin}, {xmax}], y [{ymin}, {ymax}]")
+    crs = grid.attrs.get("crs") or "not recorded"
+    print(f"  CRS       {crs}" + (" (x, y converted to local metres)" if grid.attrs.get("geographic") else ""))
+    _info_positions(grid)
+    print(f"  heights   {np.nanmin(z):.6g} to {np.nanmax(z):.6g}")
+    print(f"  nodata    {plural(grid.n_nodata, 'cell')} ({100 * grid.n_nodata / grid.size:.2f} %)"
+          + (" (use --fill or --crop-valid)" if grid.n_nodata else ""))
+    top = max_level(grid.shape)
+    print("  levels    vertices per level (regular methods keep a grid; irregular ones get the same budget)")
+    for level in range(1, top + 1):
+        n = vertex_budget(grid.shape, level)
+        print(f"    {level}: {n:>12,} {'vertex' if n == 1 else 'vertices'} ({100 * n / grid.size:.3g} %)")
+    print(f"  methods   {', '.join(METHODS)}")
+    return 0
+
+
+def _info_positions(grid) -> None:
+    """``info``'s lines on positions: the frame the commands take, and the local frame's distances."""
+    from ..core._georef import local_frame_error
+
+    native = position_frame(grid, None)
+    if native.identity:
+        print(f"  positions {native.describe()}, in the commands (--from, --to, --observer, CSVs; --frame local is "
+              "the same here)")
+    else:
+        print(f"  positions {native.describe()}, the commands' default: {native.footprint(units=False)}; "
+              "--frame local takes the x, y above (local metres)")
+    if grid.attrs.get("metric_resampling"):
+        print(f"  metric    {grid.attrs['metric_resampling']}")
+    errors = local_frame_error(grid.attrs, grid.ys)
+    if errors is not None:
+        south, north = errors
+        print(f"  distances local metres with one east-west scale for every row: east-west lengths "
+              f"{100 * south:+.2f} % off at the southern edge, {100 * north:+.2f} % at the northern edge "
+              "(--metric resamples onto a metric grid)")

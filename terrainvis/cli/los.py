@@ -1,0 +1,96 @@
+"""``terrainvis los``: visible or blocked, and the lowest clearance, for one segment or a CSV of pairs."""
+
+from __future__ import annotations
+
+
+from ._common import (
+    UsageError,
+    add_earth,
+    add_nodata,
+    add_positions,
+    add_target_height,
+    distance_arg,
+    earth_text,
+    height_arg,
+    number_arg,
+    outside_message,
+    position_frame,
+    read_columns,
+    read_terrain,
+)
+
+
+def add_parser(sub) -> None:
+    los = sub.add_parser(
+        "los", help="check lines of sight on a DEM",
+        description=(
+            "Print whether the points see each other, and the lowest clearance of the segment (segment height "
+            "minus surface height) with where it occurs. Positions are in the DEM's CRS (lon, lat in degrees on a "
+            "lon/lat DEM), or in the terrain's own frame with --frame local (see terrainvis info)."
+        ),
+    )
+    los.add_argument("dem", help="DEM file or bundled name")
+    los.add_argument("--from", dest="start", nargs=2, type=number_arg, metavar=("X", "Y"),
+                     help="observer position (lon lat on a lon/lat DEM)")
+    los.add_argument("--to", dest="end", nargs=2, type=number_arg, metavar=("X", "Y"),
+                     help="target position (lon lat on a lon/lat DEM)")
+    los.add_argument("--pairs", metavar="CSV", help="many pairs: a CSV with columns x1, y1, x2, y2 (lon, lat on a "
+                                                   "lon/lat DEM)")
+    los.add_argument("--height", type=height_arg, default=1.7, help="observer height above the surface, >= 0 (default 1.7)")
+    add_target_height(los)
+    los.add_argument("--end-radius", type=distance_arg, default=0.0,
+                     help="ignore the surface within this distance of each end (default 0)")
+    add_earth(los)
+    add_nodata(los)
+    add_positions(los)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from ..visibility import line_of_sight, min_clearance
+    from ..visibility.profile import lowest_point
+
+    label, grid = read_terrain(args.dem, args)
+    if args.pairs:
+        if args.start or args.end:
+            raise UsageError("give either --pairs or --from and --to, not both")
+        user1, user2 = _read_pairs(args.pairs)
+    else:
+        if not (args.start and args.end):
+            raise UsageError("give --from X Y and --to X Y (or --pairs CSV)")
+        user1 = np.array([args.start], float)
+        user2 = np.array([args.end], float)
+    frame = position_frame(grid, args)
+    xy1, xy2 = frame.to_grid(user1), frame.to_grid(user2)
+    z1 = grid.height_at(xy1) + args.height
+    z2 = grid.height_at(xy2) + args.target_height
+    outside = np.isnan(z1) | np.isnan(z2)
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        bad = user1[k] if np.isnan(z1[k]) else user2[k]
+        raise UsageError(
+            f"point pair {k} from {frame.point(user1[k])} to {frame.point(user2[k])}: {frame.point(bad)} "
+            f"{outside_message(frame, bad)}"
+        )
+    a = np.column_stack([xy1, z1])
+    b = np.column_stack([xy2, z2])
+    earth = {"curvature": args.curvature, "earth_radius": args.earth_radius}
+    visible = line_of_sight(grid, a, b, end_radius=args.end_radius, **earth)
+    clear = min_clearance(grid, a, b, end_radius=args.end_radius, **earth)
+    print(f"{label}: observer {args.height:g} above the surface, target {args.target_height:g} above it; "
+          f"{earth_text(args)}")
+    for k in range(a.shape[0]):
+        low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius, **earth)
+        verdict = "visible" if visible[k] else "blocked"
+        where = ("" if not np.isfinite(clear[k]) else
+                 f" at {frame.point(frame.from_grid([low['x'], low['y']]))}, {low['distance']:.6g} from the observer")
+        print(f"  {frame.point(user1[k])} -> {frame.point(user2[k])}: {verdict}; lowest clearance "
+              f"{clear[k]:.4g}{where}")
+    return 0
+
+
+def _read_pairs(path: str):
+    """The x1, y1 and x2, y2 columns of a --pairs CSV; a bad cell is named by row and column."""
+    values = read_columns(path, "--pairs", ("x1", "y1", "x2", "y2"))
+    return values[:, :2], values[:, 2:]

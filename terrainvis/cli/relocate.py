@@ -1,0 +1,144 @@
+"""``terrainvis relocate``: points of a DEM placed on its simplification (calibrated by default)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from ._common import (
+    UsageError,
+    add_earth,
+    add_nodata,
+    add_positions,
+    earth_text,
+    height_arg,
+    outside_message,
+    plural,
+    position_frame,
+    read_columns,
+    read_terrain,
+)
+
+
+def add_parser(sub) -> None:
+    from simplifiers import METHODS
+
+    from ..relocation.calibrated import N_PARTNERS
+    from ..relocation.registry import RELOCATIONS
+
+    r = sub.add_parser(
+        "relocate", help="place points of a DEM on its simplification",
+        description=(
+            "Give each point of a CSV (columns x, y, and optionally z: its height on the DEM; else the surface plus "
+            "--offset) a height on a simplification of the DEM: a file (--simplified) or the DEM simplified here "
+            "(-m METHOD -l LEVEL). The calibrated relocation (the default) picks the height whose lines of sight "
+            "agree best with the point's on the DEM (docs/relocation.md). Writes a CSV with x, y, z (the new "
+            "height), z_original and the surface of the simplification under each point."
+        ),
+    )
+    r.add_argument("dem", help="the original DEM (file or bundled name)")
+    r.add_argument("--points", required=True, metavar="CSV",
+                   help="the points: a CSV with columns x, y (lon, lat on a lon/lat DEM; see --frame) and optionally z")
+    r.add_argument("-o", "--output", required=True, metavar="OUT.csv", help="output CSV")
+    r.add_argument("--simplified", metavar="FILE", help="the simplification (.npz from simplify or compare, .tif, .asc)")
+    r.add_argument("-m", "--method", choices=list(METHODS), metavar="METHOD",
+                   help=f"simplify the DEM here instead, with one of {', '.join(METHODS)}")
+    r.add_argument("-l", "--level", type=int, default=None, help="with -m: the level (default 1)")
+    r.add_argument("--how", choices=list(RELOCATIONS), default="calibrated",
+                   help="the relocation (default calibrated)")
+    r.add_argument("--offset", type=height_arg, default=0.0,
+                   help="the points' height above the DEM's surface, >= 0 (default 0: on the surface)")
+    r.add_argument("--target-height", type=height_arg, default=None,
+                   help="calibrated: the points will look at targets this high above the surface (a viewshed's "
+                        "cells); without it they will look at each other")
+    r.add_argument("--no-neighbours", dest="neighbours", action="store_false",
+                   help="calibrated: the partners alone, without each point's neighbours 1.5-8 cells around it")
+    r.add_argument("--partners", type=int, default=N_PARTNERS,
+                   help=f"calibrated: partners spread over the DEM (default {N_PARTNERS})")
+    r.add_argument("--seed", type=int, default=0, help="calibrated: seed of the partners' positions (default 0)")
+    add_earth(r)  # the calibrated relocation's lines of sight
+    add_nodata(r)
+    add_positions(r)
+
+
+def run(args) -> int:
+    import numpy as np
+    import pandas as pd
+
+    from ..core.fileio import check_output_file
+    from ..io import write_csv
+    from ..relocation.registry import relocate
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".csv":
+        raise UsageError(f"-o must end in .csv, got {out.name!r}")
+    if (args.simplified is None) == (args.method is None):
+        raise UsageError("give the simplification as --simplified FILE or as -m METHOD [-l LEVEL], one of them")
+    if args.level is not None and args.method is None:
+        raise UsageError("-l goes with -m (the level to simplify the DEM to)")
+    if args.metric and args.simplified is not None:
+        raise UsageError("--metric resamples the DEM, and a --simplified file is in the DEM's frame as read: "
+                         "simplify here with -m METHOD [-l LEVEL] instead")
+    check_output_file(out, "-o", inputs=[args.dem, args.points] + ([args.simplified] if args.simplified else []))
+    label, grid = read_terrain(args.dem, args)
+    simplified, what = read_simplification(grid, args)
+    table = read_columns(args.points, "--points", ("x", "y"), optional=("z",))
+    frame = position_frame(grid, args)
+    user = table[:, :2]
+    xy = frame.to_grid(user)
+    ground = grid.height_at(xy)
+    outside = np.isnan(ground) | np.isnan(simplified.height_at(xy))
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        raise UsageError(f"--points {args.points!r}: row {k + 1} {frame.point(user[k])} "
+                         f"{outside_message(frame, user[k], ' or its simplification')}; {int(outside.sum())} point(s) do")
+    z = np.where(np.isnan(table[:, 2]), ground + args.offset, table[:, 2])
+    points = np.column_stack([xy, z])
+    t0 = time.perf_counter()
+    moved = relocate(points, simplified, args.how, offset=args.offset, original=grid, target_height=args.target_height,
+                     n_partners=args.partners, seed=args.seed, curvature=args.curvature,
+                     earth_radius=args.earth_radius, neighbours=args.neighbours)
+    seconds = time.perf_counter() - t0
+    surface = simplified.height_at(xy)
+    written = pd.DataFrame({**csv_positions(frame, user), "z": moved[:, 2], "z_original": z,
+                            "ground_simplified": surface})
+    write_csv(written, out, float_format="%.6f")
+    lift = moved[:, 2] - (surface + args.offset)
+    print(f"{label}: {plural(len(points), 'point')} relocated ({args.how}) onto {what}, {seconds:.2f} s")
+    if args.how == "calibrated" and len(points):
+        from ..tolerances import MOVED_ABS
+
+        off = np.abs(lift) > MOVED_ABS
+        print(f"  {int(off.sum())} off the full projection (S(T) + offset); height change from it "
+              f"{lift.min():+.4g} to {lift.max():+.4g}, median {np.median(lift):+.4g} (z units)")
+        print(f"  {earth_text(args)}")
+    print(f"  wrote {out}")
+    return 0
+
+
+def read_simplification(grid, args):
+    """The simplified terrain of ``relocate``: read from --simplified, or made with -m/-l; and how to name it."""
+    if args.method is not None:
+        from simplifiers import simplify
+
+        level = 1 if args.level is None else args.level
+        return simplify(grid, args.method, level), f"{args.method} level {level}"
+    from ..io import load_terrain
+
+    path = Path(args.simplified)
+    if not path.exists():
+        raise UsageError(f"--simplified {args.simplified!r} does not exist")
+    if path.suffix.lower() == ".npz":
+        terrain = load_terrain(path)
+    else:
+        from ..io import load_dem
+
+        terrain = load_dem(path)
+    return terrain, path.name
+
+
+def csv_positions(frame, user) -> dict:
+    """The x, y columns of a CSV the command writes, in the frame of its input (degrees to 1e-9, 0.1 mm)."""
+    if frame.degrees:
+        return {"x": [f"{v:.9f}" for v in user[:, 0]], "y": [f"{v:.9f}" for v in user[:, 1]]}
+    return {"x": user[:, 0], "y": user[:, 1]}

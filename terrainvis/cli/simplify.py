@@ -1,0 +1,93 @@
+"""``terrainvis simplify``: one method at one level, written as a grid or a mesh by the output's suffix."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ._common import UsageError, add_nodata, distance_arg, plural, read_terrain
+
+
+def add_parser(sub) -> None:
+    from simplifiers import METHODS
+
+    s = sub.add_parser(
+        "simplify", help="simplify a DEM and write the result",
+        description=(
+            "Simplify a DEM with one method, to a level or to a target error, and write it. OUT by extension: "
+            ".npz for grids and TINs; .tif .asc for grids, and for TINs sampled back at the DEM's samples (same "
+            "CRS and transform); .ply .obj .stl .glb for any result as a mesh."
+        ),
+    )
+    s.add_argument("dem", help="DEM file or bundled name")
+    s.add_argument("-m", "--method", required=True, choices=list(METHODS), metavar="METHOD",
+                   help=f"one of {', '.join(METHODS)}")
+    s.add_argument("-l", "--level", type=int, default=None,
+                   help="level: each one halves both axes (default 1; with --max-error, the finest allowed)")
+    s.add_argument("--max-error", type=distance_arg, default=None, metavar="E",
+                   help="the smallest result whose max vertical error is <= E (z units)")
+    s.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
+    s.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="an option of the method, e.g. weights=derived for lls (repeatable)")
+    add_nodata(s)
+
+
+_GRID_SUFFIXES = (".tif", ".tiff", ".asc", ".npz", ".npy")
+
+
+_MESH_SUFFIXES = (".ply", ".obj", ".stl", ".glb")
+
+
+def run(args) -> int:
+    from simplifiers import METHODS, simplify
+
+    from ..core.fileio import check_output_file
+    from ..io import save_terrain
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    regular = METHODS[args.method].regular
+    valid = _GRID_SUFFIXES + _MESH_SUFFIXES
+    if suffix not in valid:
+        raise UsageError(f"-o must end in one of {list(valid)}, got {out.name!r}")
+    check_output_file(out, "-o", inputs=[args.dem])
+    label, grid = read_terrain(args.dem, args)
+    level = 1 if args.level is None and args.max_error is None else args.level
+    result = simplify(grid, args.method, level, max_error=args.max_error, **parse_options(args.option))
+    # a TIN to a raster is sampled at the DEM's own samples (nodata outside the TIN)
+    save_terrain(result, out, like=None if regular or suffix == ".npz" else grid)
+    a = result.attrs
+    kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {plural(result.n_faces, 'face')}"
+    at = f"level {a['level']}" if a.get("level") is not None else f"max error <= {args.max_error:g}"
+    print(f"{label}: {args.method} {at}: {plural(a['n_vertices'], 'vertex', 'vertices')} ({kind}), "
+          f"{100 * a['n_vertices'] / grid.size:.2f} % of {grid.size:,}")
+    print(f"  max error {a['max_error']:.4g}, RMS error {a['rms_error']:.4g} (z units), {a['seconds']:.3f} s")
+    for note in a.get("notes", []):
+        print(f"  note: {note}")
+    if regular and suffix in (".tif", ".tiff", ".asc") and not result.is_uniform:
+        # the file holds the grid resampled onto uniform coordinates: its errors are not the ones above
+        from ..core.deviation import vertical_errors
+        from ..io import load_terrain
+
+        worst, rms = vertical_errors(grid, load_terrain(out))
+        print(f"  as written (resampled onto a uniform grid): max error {worst:.4g}, RMS error {rms:.4g}")
+    print(f"  wrote {out}")
+    return 0
+
+
+def parse_options(items) -> dict:
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise UsageError(f"--option must be KEY=VALUE, got {item!r}")
+        out[key.strip()] = option_value(value.strip())
+    return out
+
+
+def option_value(text: str):
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)

@@ -1,0 +1,103 @@
+"""``terrainvis viewshed``: an observer's exact viewshed, as a GeoTIFF, an ``.npz`` or a ``.png``."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from ._common import (
+    UsageError,
+    add_earth,
+    add_max_distance,
+    add_nodata,
+    add_positions,
+    add_target_height,
+    earth_text,
+    height_arg,
+    number_arg,
+    outside_message,
+    plural,
+    position_frame,
+    read_terrain,
+)
+
+
+def add_parser(sub) -> None:
+    v = sub.add_parser(
+        "viewshed", help="which samples of a DEM an observer sees",
+        description=(
+            "Compute the exact viewshed of one observer on a DEM (every sample as a target, on the piecewise-linear "
+            "surface) and write it as a GeoTIFF aligned with the DEM (CRS and transform kept; 1 visible, 0 not, "
+            "255 nodata), an .npz, or a .png drawn over the hillshade."
+        ),
+    )
+    v.add_argument("dem", help="DEM file or bundled name")
+    v.add_argument("--observer", nargs=2, type=number_arg, required=True, metavar=("X", "Y"),
+                   help="observer position (lon lat on a lon/lat DEM; see --frame)")
+    v.add_argument("--height", type=height_arg, default=1.7, help="eye height above the surface, >= 0 (default 1.7)")
+    add_target_height(v)
+    add_max_distance(v, "only samples within this distance")
+    v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
+    add_earth(v)
+    add_nodata(v)
+    add_positions(v)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from ..core.fileio import check_output_file
+    from ..visibility import viewshed
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    if suffix not in (".tif", ".tiff", ".npz", ".png"):
+        raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
+    check_output_file(out, "-o", inputs=[args.dem])
+    label, grid = read_terrain(args.dem, args)
+    frame = position_frame(grid, args)
+    observer = tuple(float(v) for v in frame.to_grid(args.observer))
+    if np.isnan(grid.height_at([observer])[0]):
+        raise UsageError(f"--observer {frame.point(args.observer)} {outside_message(frame, args.observer)}")
+    t0 = time.perf_counter()
+    vis = viewshed(grid, observer, observer_height=args.height, target_height=args.target_height,
+                   max_distance=args.max_distance, curvature=args.curvature, earth_radius=args.earth_radius)
+    seconds = time.perf_counter() - t0
+    valid = np.isfinite(grid.z)
+    n_vis = int(vis[valid].sum())
+    _write_viewshed(grid, vis, out, suffix, args, label, observer)
+    print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
+    print(f"  {earth_text(args)}")
+    print(f"  visible {n_vis:,} of {plural(int(valid.sum()), 'sample')} "
+          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %), {seconds:.2f} s")
+    print(f"  wrote {out}")
+    return 0
+
+
+def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer) -> None:
+    """The viewshed by OUT's suffix; ``observer`` in the grid's own frame."""
+    import numpy as np
+
+    if suffix == ".png":
+        from ..experiment import plot
+        from ..io import save_figure
+
+        save_figure(plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed"), out)
+        return
+    if suffix == ".npz":
+        from ..io import save_terrain
+
+        from ..core.terrain import HeightGrid
+
+        # a grid of the same samples: 1 visible, 0 not, NaN nodata (with the DEM's georeferencing)
+        z = np.where(np.isfinite(grid.z), vis.astype(np.float64), np.nan)
+        # the observer in the grid's frame (that of its xs, ys) and in the DEM's native CRS
+        attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in observer],
+                 "viewshed_observer_native": [float(v) for v in position_frame(grid, None).from_grid(observer)],
+                 "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height),
+                 "viewshed_curvature": float(args.curvature), "viewshed_earth_radius": float(args.earth_radius)}
+        save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
+        return
+    from ..io import write_mask_geotiff
+
+    write_mask_geotiff(grid, vis, out, nodata_mask=~np.isfinite(grid.z))
