@@ -62,7 +62,7 @@ def scale(args) -> None:
 
 
 def default(args) -> None:
-    from terrainvis.experiment.comparison import DEFAULT_TERRAINS, point_sets, resolve_terrains
+    from terrainvis.experiment import DEFAULT_TERRAINS, point_sets, resolve_terrains
 
     grids = resolve_terrains(list(DEFAULT_TERRAINS))
     methods = simplifiers.default_methods()  # compare's

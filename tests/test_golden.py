@@ -69,7 +69,7 @@ def test_golden_verdicts_agree_with_embree_on_the_same_meshes():
     from simplifiers import simplify
 
     from terrainvis import bundled_terrain, min_clearance, relocate, visibility_matrix
-    from terrainvis.experiment.comparison import point_sets
+    from terrainvis.experiment import point_sets
     from terrainvis.visibility import clearance_tolerance, embree_tolerance
 
     _, mg = _load("golden_compare.csv")

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from terrainvis.experiment.comparison import COLUMNS, TIMING_COLUMNS
+from terrainvis.experiment.collect import COLUMNS, TIMING_COLUMNS
 
 psutil = pytest.importorskip("psutil", reason="psutil (installed with the dask extra) lists the worker processes")
 

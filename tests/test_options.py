@@ -85,15 +85,15 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
         raise Stop
 
     monkeypatch.setattr(experiment, "compare", fake)
-    argv = ["compare", "--terrain", "hills", "--out", str(tmp_path), "--methods", "lls", "qec", "--levels", "2",
+    argv = ["compare", "--terrain", "hills", "--out", str(tmp_path), "--methods", "lls", "gls", "--levels", "2",
             "--relocations", "full", "--points", "7", "--sets", "3", "--seed", "5", "--max-distance", "100", "all",
-            "--distance-unit", "cells", "--offset", "1.5", "--engine", "embree", "--predicate", "paper",
+            "--distance-unit", "cells", "--offset", "1.5", "--engine", "grid", "--predicate", "paper",
             "--no-volume", "--repeats", "2", "--no-cascade", "--partners", "99", "--no-neighbours", "--curvature", "0.5",
             "--earth-radius", "6371000"]
     with pytest.raises(Stop):
         main(argv)
-    expected = dict(methods=["lls", "qec"], levels=[2], relocations=["full"], n_points=7, n_sets=3, seed=5,
-                    max_distance=[100.0, None], distance_unit="cells", offset=1.5, engine="embree",
+    expected = dict(methods=["lls", "gls"], levels=[2], relocations=["full"], n_points=7, n_sets=3, seed=5,
+                    max_distance=[100.0, None], distance_unit="cells", offset=1.5, engine="grid",
                     predicate="paper", volume=False, repeats=2, cascade=False, n_partners=99, neighbours=False,
                     curvature=0.5, earth_radius=6371000.0)
     assert {k: seen[k] for k in expected} == expected
@@ -143,16 +143,20 @@ def test_a_settings_file_without_a_newer_option_resumes_at_its_default(grid, tmp
         compare({"g": grid}, out_csv=out, resume=True, **_small(target_height=1.0))
 
 
-def test_relocations_and_methods_are_read_from_their_modules(monkeypatch, grid):
-    """A relocation added to terrainvis.relocation (as "calibrated" was) is a valid name at once."""
-    from terrainvis.relocation import registry as relocation
+def test_relocations_are_read_from_their_registry(grid):
+    """A relocation registered with terrainvis.relocation.register is a valid name at once, and gone after."""
+    import re
 
-    monkeypatch.setattr(relocation, "RELOCATIONS", relocation.RELOCATIONS + ("toy",))
-    s = validate({"g": grid}, {"relocations": ["toy", "full"]})
-    assert s.relocations == ("toy", "full")
-    monkeypatch.undo()
-    with pytest.raises(ValueError, match=r"relocations must be drawn from "
-                                         r"\['identity', 'full', 'half', 'calibrated', 'oracle'\], got 'toy'"):
+    from terrainvis.relocation import Relocation, available, register, unregister
+
+    register(Relocation("toy", lambda points, simplified, *, offset=0.0: points, "the points as given"))
+    try:
+        s = validate({"g": grid}, {"relocations": ["toy", "full"]})
+        assert s.relocations == ("toy", "full")
+        assert "toy" not in validate({"g": grid}, {}).relocations  # not declared default
+    finally:
+        unregister("toy")
+    with pytest.raises(ValueError, match=re.escape(f"relocations must be drawn from {available()}, got 'toy'")):
         validate({"g": grid}, {"relocations": ["toy"]})
 
 
@@ -201,8 +205,9 @@ def test_a_toy_option_is_on_the_command_line(toy, tmp_path, capsys):
 
 
 def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, grid):
-    """``los=True``: one entry, and the units pass it to visibility_matrix, viewshed and relocate (whose
-    calibrated and oracle relocations compute visibility), as they pass the earth-curvature coefficient."""
+    """``los=True``: one entry, and the units pass it to visibility_matrix, viewshed and every relocation
+    that computes visibility itself (declared ``predicate=True``: calibrated, oracle), as they pass the
+    earth-curvature coefficient; a relocation that does not (full) does not get it."""
     from terrainvis.relocation import registry as relocation
     from terrainvis import visibility
 
@@ -213,7 +218,8 @@ def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, g
     def spy(fn):
         def wrapped(*args, toy_refraction="not given", **kw):
             if not inside:  # the units' own calls, not relocate's calls of visibility_matrix
-                seen.append((fn.__name__, kw.get("reference") is not None, toy_refraction))
+                how = args[2] if fn.__name__ == "relocate" else None
+                seen.append((fn.__name__, how, toy_refraction))
             inside.append(fn)
             try:
                 return fn(*args, **kw)
@@ -223,12 +229,12 @@ def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, g
 
     for module, name in ((visibility, "visibility_matrix"), (visibility, "viewshed"), (relocation, "relocate")):
         monkeypatch.setattr(module, name, spy(getattr(module, name)))
-    df = compare({"g": grid}, toy_refraction=0.13, relocations=["full", "oracle"], **_small())
+    df = compare({"g": grid}, toy_refraction=0.13, relocations=["full", "calibrated", "oracle"], **_small())
     assert (df["error"] == "").all()
-    # every visibility computation got it, every relocation too (the oracle's among them)
-    assert {(n, v) for n, _, v in seen} == {("visibility_matrix", 0.13), ("relocate", 0.13)}
-    assert {oracle for n, oracle, _ in seen if n == "relocate"} == {True, False}
+    assert set(seen) == {("visibility_matrix", None, 0.13), ("relocate", "full", "not given"),
+                         ("relocate", "calibrated", 0.13), ("relocate", "oracle", 0.13)}
     seen.clear()
-    df = compare({"g": grid}, toy_refraction=0.25, measure="viewshed", n_observers=1, **_small())
+    df = compare({"g": grid}, toy_refraction=0.25, measure="viewshed", n_observers=1,
+                 **_small(relocations=["half", "calibrated"]))
     assert (df["error"] == "").all()
-    assert {(n, v) for n, _, v in seen} == {("viewshed", 0.25), ("relocate", 0.25)}
+    assert set(seen) == {("viewshed", None, 0.25), ("relocate", "half", "not given"), ("relocate", "calibrated", 0.25)}

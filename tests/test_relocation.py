@@ -99,7 +99,7 @@ def test_oracle_is_an_upper_bound_of_the_practical_relocations(method):
 
 def test_oracle_is_a_local_optimum_of_its_candidates():
     """No single point can improve the agreement by moving to another of its candidates."""
-    from terrainvis.relocation.registry import _candidates
+    from terrainvis.relocation.oracle import _candidates
 
     T, S, P, V = _oracle_case("simple", 2, seed=3)
     O = relocate(P, S, "oracle", reference=V, original=T)

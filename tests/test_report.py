@@ -157,6 +157,8 @@ def test_viewshed_table():
     sel = df[(df.level == 2) & (df.relocation == "full")]
     assert t.loc[("lls", 2, "full"), "cells_kept"] == pytest.approx(100 * sel["accuracy"].mean())
     assert t.loc[("lls", 2, "full"), "area_ratio"] == pytest.approx(sel["visible_area_ratio"].median())
-    assert "cells whose viewshed verdict survives" in report.paper_tables(df)["Table 1"].attrs["title"]
+    tables = report.paper_tables(df)
+    assert "cells whose verdict survives" in tables["Table 1"].attrs["title"]
+    assert tables["Table 4"].attrs["title"].startswith("Table 4: visible and blocked cells kept (%)")
     with pytest.raises(ValueError, match="no viewshed rows"):
         report.viewshed_table(compare(g, methods=["lls"], levels=[1], n_points=5, n_sets=1, workers=1, repeats=1))

@@ -24,7 +24,7 @@ def add_parser(sub) -> None:
     from simplifiers import METHODS
 
     from ..relocation.calibrated import N_PARTNERS
-    from ..relocation.registry import RELOCATIONS
+    from ..relocation.registry import RELOCATIONS, practical_relocations
 
     r = sub.add_parser(
         "relocate", help="place points of a DEM on its simplification",
@@ -44,8 +44,10 @@ def add_parser(sub) -> None:
     r.add_argument("-m", "--method", choices=list(METHODS), metavar="METHOD",
                    help=f"simplify the DEM here instead, with one of {', '.join(METHODS)}")
     r.add_argument("-l", "--level", type=int, default=None, help="with -m: the level (default 1)")
-    r.add_argument("--how", choices=list(RELOCATIONS), default="calibrated",
-                   help="the relocation (default calibrated)")
+    r.add_argument("--how", choices=list(practical_relocations()), default="calibrated", metavar="HOW",
+                   help="the relocation: " + "; ".join(f"{name}: {RELOCATIONS[name].summary}"
+                                                         for name in practical_relocations())
+                        + " (default calibrated)")
     r.add_argument("--offset", type=height_arg, default=0.0,
                    help="the points' height above the DEM's surface, >= 0 (default 0: on the surface)")
     r.add_argument("--target-height", type=height_arg, default=None,

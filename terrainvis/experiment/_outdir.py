@@ -145,7 +145,7 @@ def _candidates(out: Path, terrains, methods, relocations) -> list[Path]:
     from ..relocation import registry as relocation
 
     fixed = [out / RESULTS, _settings_file(out), out / TABLES]
-    relocations = list(dict.fromkeys(list(relocations) + list(relocation.RELOCATIONS) + [relocation.ORACLE]))
+    relocations = list(dict.fromkeys(list(relocations) + list(relocation.RELOCATIONS)))
     found = [p for p in fixed if p.is_file()]
     found += [out / f for f in figure_names(terrains, relocations) if (out / f).is_file()]
     folder = out / SIMPLIFIED

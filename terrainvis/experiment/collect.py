@@ -32,8 +32,9 @@ TIMING_COLUMNS = ("simplify_seconds", "los_seconds", "los_seconds_original", "lo
 
 def rows_per_unit(settings: Settings) -> int:
     """The rows of a complete unit: sets (or observers) x relocations x distances."""
-    sets = settings.n_observers if settings.measure == "viewshed" else settings.n_sets
-    return sets * len(settings.relocations) * len(settings.max_distance)
+    from .measures import MEASURES
+
+    return MEASURES[settings.measure].n_sets(settings) * len(settings.relocations) * len(settings.max_distance)
 
 
 def table(rows: list[dict]) -> pd.DataFrame:
@@ -52,7 +53,7 @@ def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
 
     rank_t = {t: i for i, t in enumerate(grids)}
     rank_m = {m: i for i, m in enumerate(METHODS)}
-    rank_r = {r: i for i, r in enumerate(relocation.RELOCATIONS + (relocation.ORACLE,))}
+    rank_r = {r: i for i, r in enumerate(relocation.RELOCATIONS)}
     df = df[list(COLUMNS)]
     df = df.assign(
         _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r),

@@ -33,12 +33,12 @@ import sys
 import pandas as pd
 
 from ..core._progress import progress_bar_class
+from .measures import MEASURES
 from .collect import COLUMNS, UNIT_KEY, order, rows_per_unit, table
 from .options import (
     CASCADE_AUTO_MIN_SAMPLES,
     DEFAULTS,
     DISTANCE_UNITS,
-    MEASURES,
     OPTIONS,
     PREDICATES,
     Settings,
@@ -47,11 +47,12 @@ from .options import (
 )
 from .plan import DEFAULT_TERRAINS, JACKSBORO_WINDOW, resolve_terrains, run_record
 from .plan import kernels_cached as _kernels_cached
-from .plan import check_memory, settings_for
+from .plan import check_memory, check_sendable, extensions, settings_for
 from .plan import tasks as _plan_tasks
 from .plan import warm_up_parts as _warm_up_parts
 from .units import call as _call
-from .units import end_radius_for, point_sets, simplified_path
+from .measures import point_sets
+from .units import end_radius_for, simplified_path
 from .units import run_unit as _run_unit
 from .units import warm_up as _warm_up
 
@@ -137,7 +138,10 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     settings = _settings(grids, **options)
     workers = check_workers(workers)
     client = check_client(client)
-    check_memory(settings, grids, _at_once(settings, grids, workers, client))
+    at_once = _at_once(settings, grids, workers, client)
+    check_memory(settings, grids, at_once)
+    if client is not None or at_once > 1:  # the units will run in other processes
+        check_sendable(extensions(settings), dask=client is not None)
 
     with _lock(out_csv):
         store, done = _store(out_csv, settings, grids, resume)
@@ -204,8 +208,9 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
     cold = bool(tasks) and client is None and _kernels_cached() is False
     parts = _warm_up_parts(tasks, grids, settings) if cold and ((n_local > 1 and len(tasks) > 1) or progress) else []
     # the parts and the units interleaved so that no two workers compile the same kernels
-    work = [(("warm-up", x), (_warm_up, x, settings)) if kind == "part" else
-            (x, (_run_unit, grids[x[0]], x[0], x[1], x[2], settings, save_dir))
+    sent = extensions(settings)
+    work = [(("warm-up", x), (sent, _warm_up, x, settings)) if kind == "part" else
+            (x, (sent, _run_unit, grids[x[0]], x[0], x[1], x[2], settings, save_dir))
             for kind, x in work_order(parts, tasks, min(n_local, len(parts) + len(tasks)))]
     bars = _Progress(progress and bool(tasks), parts, todo, min(n_local, len(work)))
     new_rows: list[dict] = []

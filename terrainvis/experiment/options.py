@@ -31,17 +31,13 @@ import numpy as np
 
 from ..core.validate import as_bool, as_finite_scalar, as_float_array, as_int, choice, describe
 from ..relocation.calibrated import N_PARTNERS
-from ..relocation.registry import ORACLE, RELOCATIONS
 from ..visibility import EARTH_RADIUS
 
 __all__ = [
     "Option", "Flag", "Switch", "OPTIONS", "RULES", "Settings", "DEFAULTS", "validate", "los_keywords",
-    "add_flags", "given", "MEASURES", "PREDICATES", "DISTANCE_UNITS", "CASCADE_AUTO_MIN_SAMPLES",
+    "add_flags", "given", "PREDICATES", "DISTANCE_UNITS", "CASCADE_AUTO_MIN_SAMPLES",
 ]
 
-#: What a run measures: ``"pairs"`` (the paper's visibility matrices of point sets) or
-#: ``"viewshed"`` (each observer's viewshed of every sample of T).
-MEASURES = ("pairs", "viewshed")
 
 #: Line-of-sight predicates for the verdicts on S(T) (verdicts on T are always exact):
 #: ``"exact"`` tests the whole segment; ``"paper"`` ignores the surface within one cell
@@ -106,9 +102,10 @@ class Option:
         The type as the docstring shows it (``"int"``, ``"sequence of str"``, ...).
     doc : str
         More for the docstring (optional).
-    measures : tuple of str
-        The measures (:data:`MEASURES`) the option applies to; the help says so when it
-        is not every measure.
+    measures : tuple of str, optional
+        The measures (:data:`terrainvis.experiment.measures.MEASURES`) the option applies
+        to; None (the default) is every measure. The help says so when it is not every
+        measure.
     cli : Flag, Switch or None
         How ``terrainvis compare`` spells it (None: the API only).
     los : bool
@@ -126,7 +123,7 @@ class Option:
     help: str
     type: str
     doc: str = ""
-    measures: tuple = MEASURES
+    measures: tuple | None = None
     cli: Flag | Switch | None = Flag()
     los: bool = False
     default_text: str | None = None
@@ -155,7 +152,7 @@ class Option:
 
     def scope(self) -> str:
         """``" (pairs only)"`` for an option of some measures only, else ``""``."""
-        if set(MEASURES) <= set(self.measures):
+        if self.measures is None:
             return ""
         return f" ({', '.join(self.measures)} only)"
 
@@ -300,21 +297,27 @@ def _default_method_names():
 
 
 def _relocation_names():
-    from ..relocation import registry as relocation
+    from ..relocation.registry import available
 
-    return relocation.RELOCATIONS + (relocation.ORACLE,)
+    return available()
 
 
 def _default_relocations():
-    from ..relocation import registry as relocation
+    from ..relocation.registry import default_relocations
 
-    return relocation.RELOCATIONS
+    return default_relocations()
+
+
+def _measure_names():
+    from .measures import available
+
+    return available()
 
 
 def _engines():
-    from ..visibility import ENGINES
+    from ..visibility import engine_names
 
-    return ENGINES
+    return engine_names()
 
 
 # ---------------------------------------------------------------------- the options
@@ -332,12 +335,15 @@ _DECLARED = [
         cli=Flag(type=int, many=True),
     ),
     Option(
-        "relocations", RELOCATIONS, names(_relocation_names, _default_relocations),
+        "relocations", None, names(_relocation_names, _default_relocations),
         "relocations of the points onto S(T) (add 'oracle' for the upper bound)", "sequence of str",
-        doc=("Any of the paper's ``\"identity\"``, ``\"full\"``, ``\"half\"``, the ``\"calibrated\"`` "
-             "relocation (:func:`terrainvis.relocate`; :mod:`terrainvis.relocation.calibrated`), and ``\"oracle\"``, "
-             "the upper bound that needs T's verdicts (not a practical relocation; it costs many visibility "
-             "queries per point set)."),
+        default_text="every relocation declared default: identity, full, half, calibrated",
+        doc=("Names of the registry :data:`terrainvis.relocation.RELOCATIONS`: the paper's ``\"identity\"``, "
+             "``\"full\"``, ``\"half\"``, the ``\"calibrated\"`` relocation (:func:`terrainvis.relocate`; "
+             ":mod:`terrainvis.relocation.calibrated`), ``\"oracle\"``, the upper bound that needs T's verdicts "
+             "(not a practical relocation; it costs many visibility queries per point set), and any registered "
+             "with :func:`terrainvis.relocation.register`. The default is every relocation declared "
+             "``default=True``."),
         cli=Flag(many=True, metavar="R"),
     ),
     Option(
@@ -385,8 +391,10 @@ _DECLARED = [
         doc="See :mod:`terrainvis.relocation`.", cli=Flag(type=float),
     ),
     Option(
-        "engine", "auto", one_of(_engines), "visibility engine", "{'auto', 'grid', 'embree'}",
-        doc="See :func:`terrainvis.visibility_matrix`.", cli=Flag(choices=_engines), los=True,
+        "engine", "auto", one_of(_engines), "visibility engine", "str: 'auto' or a name of terrainvis.visibility.ENGINES",
+        doc=("``\"auto\"`` (the exact grid walk on grids; on TINs Embree, or the exact TIN clipper under curvature) or "
+             "an engine of :data:`terrainvis.visibility.ENGINES`: see :func:`terrainvis.visibility_matrix`."),
+        cli=Flag(choices=_engines), los=True,
     ),
     Option(
         "curvature", 0.0, _nonnegative, "earth curvature coefficient: 0 a flat earth (the paper's), 1 geometric, "
@@ -427,15 +435,15 @@ _DECLARED = [
                    off_help="simplify every level from the terrain itself, as the paper does, whatever its size"),
     ),
     Option(
-        "measure", "pairs", one_of(lambda: MEASURES),
+        "measure", "pairs", one_of(_measure_names),
         "pairs: the paper's visibility matrices; viewshed: each observer's viewshed of every sample",
-        "{'pairs', 'viewshed'}",
+        "str: a measure of terrainvis.experiment.measures.MEASURES",
         doc=("With ``\"viewshed\"``, for ``n_observers`` random observers per terrain (``offset`` above T, "
              "relocated onto S(T) like the points), the viewshed of every sample of T on T and on S(T) "
              "(targets ``target_height`` above the surface under test); each row is one observer and "
              "counts cells as pairs (observer, cell), with the share of cells whose verdict survives in "
              "``accuracy`` and the visible-area ratio S(T) / T in ``visible_area_ratio``."),
-        cli=Flag(choices=lambda: MEASURES),
+        cli=Flag(choices=_measure_names),
     ),
     Option("n_observers", 20, integer(minimum=1), "observers per terrain", "int", measures=("viewshed",),
            cli=Flag("--observers", int)),
@@ -463,30 +471,52 @@ def _levels_fit(settings: Settings, grids: dict) -> None:
             )
 
 
-def _grid_engine_needs_grids(settings: Settings, grids: dict) -> None:
+def _engine_runs_on_every_surface(settings: Settings, grids: dict) -> None:
+    """A named engine answers on T (a grid), on every method's result, and under the run's curvature."""
     from simplifiers import METHODS
 
-    if settings.engine == "grid":
+    from ..visibility.engines import AUTO, ENGINES
+
+    if settings.engine == AUTO:
+        return
+    engine = ENGINES[settings.engine]
+    if "grid" not in engine.terrains:
+        raise ValueError(f"engine {settings.engine!r} does not run on grids, and the verdicts on each terrain T are "
+                         "computed on its grid; use engine='auto'")
+    if "tin" not in engine.terrains:
         tins = [m for m in settings.methods if not METHODS[m].regular]
         if tins:
             raise ValueError(
-                f"engine 'grid' works on grids only, but methods {tins} produce TINs; use engine='auto' "
+                f"engine {settings.engine!r} works on grids only, but methods {tins} produce TINs; use engine='auto' "
                 "(the grid engine on grids, Embree on TINs) or leave those methods out"
             )
+    if settings.curvature != 0.0 and not engine.curvature:
+        raise ValueError(f"engine {settings.engine!r} cannot model earth curvature, and curvature is "
+                         f"{settings.curvature:g}; use engine='auto' (exact on grids and TINs) or curvature=0")
 
 
-def _viewshed_limits(settings: Settings, grids: dict) -> None:
-    if settings.measure != "viewshed":
-        return
-    if settings.predicate != "exact":
-        raise ValueError(f"measure 'viewshed' supports predicate 'exact' only, got {settings.predicate!r}")
-    if ORACLE in settings.relocations:
-        raise ValueError("measure 'viewshed' does not support the 'oracle' relocation (it bounds pair verdicts)")
+def _measure_supports_the_predicate(settings: Settings, grids: dict) -> None:
+    from .measures import MEASURES
+
+    supported = MEASURES[settings.measure].predicates
+    if settings.predicate not in supported:
+        raise ValueError(f"measure {settings.measure!r} supports predicate {' and '.join(map(repr, supported))} only, "
+                         f"got {settings.predicate!r}")
+
+
+def _relocations_serve_the_measure(settings: Settings, grids: dict) -> None:
+    from ..relocation.registry import RELOCATIONS
+
+    for name in settings.relocations:
+        if RELOCATIONS[name].measures is not None and settings.measure not in RELOCATIONS[name].measures:
+            raise ValueError(f"measure {settings.measure!r} does not support the {name!r} relocation (it serves "
+                             f"the measure(s) {list(RELOCATIONS[name].measures)})")
 
 
 #: Checks across options (and the terrains), run after every option's own check:
 #: ``rule(settings, grids)`` raises a ValueError naming the options involved.
-RULES: list[Callable] = [_grid_engine_needs_grids, _viewshed_limits, _levels_fit]
+RULES: list[Callable] = [_engine_runs_on_every_surface, _measure_supports_the_predicate, _relocations_serve_the_measure,
+                         _levels_fit]
 
 
 # ---------------------------------------------------------------------- settings

@@ -172,19 +172,12 @@ def settings_for(grids: dict, values: dict) -> Settings:
 
 
 def unit_bytes(settings: Settings, grids: dict) -> int:
-    """A lower bound of the memory one unit allocates, in bytes (on the largest terrain).
+    """A lower bound of the memory one unit allocates, in bytes (on the largest terrain): the
+    measure's own estimate (:attr:`terrainvis.experiment.measures.Measure.unit_bytes`); the
+    terrains and S(T) themselves are not counted."""
+    from .measures import MEASURES
 
-    Pairs: the visibility matrices on T and on S(T) (a byte per ordered pair each),
-    :func:`terrainvis.agreement`'s indices of the upper triangle (16 bytes per pair), and
-    with ``max_distance`` a distance and a mask per distance (8 + 1 bytes per pair).
-    Viewsheds: six arrays of 8 bytes per sample of the terrain (coordinates, distances,
-    the two viewsheds, a mask). The terrains and S(T) themselves are not counted.
-    """
-    if settings.measure == "viewshed":
-        return 8 * 6 * max(g.size for g in grids.values())
-    n = settings.n_points
-    per_pair = 2 + 16 + (0 if settings.max_distance == (None,) else 8 + len(settings.max_distance))
-    return per_pair * n * n
+    return int(MEASURES[settings.measure].unit_bytes(settings, grids))
 
 
 def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
@@ -207,7 +200,7 @@ def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
     if settings.measure == "pairs":
         what = f"n_points={settings.n_points:,} (visibility matrices of {settings.n_points:,}² pairs)"
     else:
-        what = f"the viewshed measure on {max(g.size for g in grids.values()):,} samples"
+        what = f"the {settings.measure} measure on {max(g.size for g in grids.values()):,} samples"
     side_by_side = f" with {at_once} units at once" if at_once > 1 else ""
     raise NotEnoughMemoryError(
         f"{what} needs at least {format_bytes(need)} of memory{side_by_side}, but this machine has "
@@ -241,6 +234,64 @@ def cascades(settings: Settings, grid: HeightGrid, method: str, *,
     if settings.cascade == "auto":
         return grid.size > auto_min_samples
     return bool(settings.cascade)
+
+
+def extensions(settings: Settings) -> tuple:
+    """The entries of the run's measure, engine and relocations that were registered at run time, not built in.
+
+    A worker process imports terrainvis afresh and knows only the built-in entries: these
+    are sent with every task (:func:`terrainvis.experiment.units.call` installs them).
+    """
+    from ..relocation import registry as relocations
+    from ..visibility import engines
+    from . import measures
+
+    out = [relocations.RELOCATIONS[r] for r in settings.relocations if r not in relocations.BUILTIN]
+    if settings.measure not in measures.BUILTIN:
+        out.append(measures.MEASURES[settings.measure])
+    if settings.engine != engines.AUTO and settings.engine not in engines.BUILTIN:
+        out.append(engines.ENGINES[settings.engine])
+    return tuple(out)
+
+
+def check_sendable(entries, *, dask: bool) -> None:
+    """Refuse, before anything runs, an entry whose function cannot reach the workers.
+
+    A local pool's workers (``dask=False``) get a function by reference (its module and
+    name) and import it again: a lambda, a function defined inside another, or one
+    defined in an interactive session's ``__main__`` (a notebook, ``python -c``) cannot
+    be. A dask cluster (``dask=True``) sends functions with cloudpickle, by value where
+    needed: only what cloudpickle cannot serialise is refused.
+
+    Raises
+    ------
+    TypeError
+        Naming the entry, its function and the ways forward.
+    """
+    import pickle
+    import sys
+
+    where = "the dask cluster" if dask else "worker processes"
+    for entry in entries:
+        fn = next(getattr(entry, a) for a in ("function", "rows", "pairs") if hasattr(entry, a))
+        what = f"{type(entry).__name__.lower()} {entry.name!r}"
+        name = getattr(fn, "__qualname__", repr(fn))
+        advice = ("define it at the top level of a module the workers can import (a file, not a notebook cell), or "
+                  "run in this process (workers=1)")
+        if dask:
+            import cloudpickle
+
+            dumps = cloudpickle.dumps
+        else:
+            dumps = pickle.dumps
+            main = sys.modules.get("__main__")
+            if getattr(fn, "__module__", None) == "__main__" and not getattr(main, "__file__", None):
+                raise TypeError(f"{what}: its function {name} was defined in an interactive session, which {where} "
+                                f"cannot import; {advice}")
+        try:
+            dumps(entry)
+        except Exception as exc:  # pickle raises PicklingError, AttributeError or TypeError, cloudpickle others
+            raise TypeError(f"{what}: its function {name} cannot be sent to {where} ({exc}); {advice}") from None
 
 
 def tasks(grids: dict, settings: Settings, done=frozenset(), *,

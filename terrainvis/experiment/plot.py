@@ -199,10 +199,10 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
     """
     from simplifiers import METHODS
 
-    from ..relocation.registry import RELOCATIONS
+    from ..relocation.registry import practical_relocations
 
     data = _check_df(df, {"method", "relocation", "size_fraction", "accuracy", "level"})
-    rels = [r for r in RELOCATIONS if r in set(data["relocation"])]
+    rels = [r for r in practical_relocations() if r in set(data["relocation"])]
     fig, axes = _panels(max(1, len(rels)), 4.2, 3.8, figsize)
     for ax, rel in zip(axes, rels):
         sub = data[data["relocation"] == rel]
@@ -271,10 +271,6 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
     return fig
 
 
-_RELOCATION_STYLE = {"identity": ("tab:red", "o"), "full": ("tab:blue", "s"), "half": ("tab:green", "^"),
-                     "calibrated": ("tab:purple", "D"), "oracle": ("k", "*")}
-
-
 def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     """Accuracy of localized tests against the pair distance, per relocation (a distance sweep).
 
@@ -282,7 +278,7 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     (mean over terrains, methods and point sets); the pairs at every distance ("all")
     are drawn at the right end.
     """
-    from ..relocation.registry import ORACLE, RELOCATIONS
+    from ..relocation.registry import RELOCATIONS
 
     data = _check_df(df, {"relocation", "accuracy", "level", "max_distance"}, sweep=True)
     if data["max_distance"].nunique(dropna=True) < 1:
@@ -294,12 +290,12 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     fig, axes = _panels(len(levels), 4.2, 3.8, figsize)
     for ax, level in zip(axes, levels):
         sub = data[data["level"] == level]
-        for rel in [r for r in RELOCATIONS + (ORACLE,) if r in set(sub["relocation"])]:
+        for rel in [r for r in RELOCATIONS if r in set(sub["relocation"])]:
             g = sub[sub["relocation"] == rel].assign(_d=lambda t: t["max_distance"].fillna(x_all))
             mu = 100 * g.groupby("_d")["accuracy"].mean()
-            color, marker = _RELOCATION_STYLE.get(rel, ("k", "o"))
-            ax.plot(mu.index, mu.to_numpy(), marker=marker, color=color, label=rel,
-                    linestyle="--" if rel == ORACLE else "-")
+            style = RELOCATIONS[rel]
+            ax.plot(mu.index, mu.to_numpy(), marker=style.marker, color=style.color, label=rel,
+                    linestyle=style.linestyle)
         ax.set_xscale("log")
         ticks = finite + [x_all]
         ax.set_xticks(ticks, [f"{v:g}" for v in finite] + ["all"])

@@ -61,6 +61,17 @@ def _ordered(index_values, order):
     return sorted(index_values, key=lambda v: rank.get(v, len(rank)))
 
 
+def _counts(data: pd.DataFrame) -> str:
+    """What the rows' agreement counts (the measure's :attr:`~terrainvis.experiment.measures.Measure.counts`):
+    ``"pairs"`` unless every row is of one measure that counts something else."""
+    from .measures import MEASURES
+
+    measures = set(data["measure"]) if "measure" in data.columns else set()
+    if len(measures) == 1 and next(iter(measures)) in MEASURES:
+        return MEASURES[next(iter(measures))].counts
+    return "pairs"
+
+
 def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str, pd.DataFrame]:
     """Tables 1-3, Table 4 and the cost table.
 
@@ -94,8 +105,8 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
         raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
     data = _ok(df, predicate)
     data = data[data["relocation"].isin(RELOCATIONS)]  # the paper's tables: its relocations only
-    viewsheds = "measure" in data.columns and (data["measure"] == "viewshed").any()
-    what = "cells whose viewshed verdict survives (%)" if viewsheds else "accuracy (%)"
+    counts = _counts(data)
+    what = "accuracy (%)" if counts == "pairs" else f"{counts} whose verdict survives (%)"
     tables: dict[str, pd.DataFrame] = {}
     levels = sorted(int(v) for v in data["level"].unique())
     for k, level in enumerate(levels, start=1):
@@ -120,7 +131,7 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
             t4 = t4.swaplevel(0, 1, axis=1)
             cols = [(r, c) for r in ("identity", "half") for c in ("visible_kept", "blocked_kept") if (r, c) in t4.columns]
             t4 = t4[cols].loc[_ordered(t4.index, METHODS)]
-            t4.attrs["title"] = f"Table 4: visible and blocked pairs kept (%) at level {deepest}"
+            t4.attrs["title"] = f"Table 4: visible and blocked {counts} kept (%) at level {deepest}"
             tables["Table 4"] = t4
     per_unit = data.drop_duplicates(["terrain", "method", "level", "set", "relocation"])
     per_unit = per_unit.assign(
@@ -418,13 +429,13 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
     """
     from simplifiers import METHODS
 
-    from ..relocation.registry import ORACLE, RELOCATIONS
+    from ..relocation.registry import ORACLE, practical_relocations
 
     data = _ok(df, predicate)
     mu = 100 * data.groupby(["method", "level", "relocation"])["accuracy"].mean().unstack("relocation")
     if ORACLE not in mu.columns:
         return pd.DataFrame(columns=["oracle", "best", "best_accuracy", "gap"])
-    practical = mu[[r for r in RELOCATIONS if r in mu.columns]]
+    practical = mu[[r for r in practical_relocations() if r in mu.columns]]
     out = pd.DataFrame({
         "oracle": mu[ORACLE], "best": practical.idxmax(axis=1), "best_accuracy": practical.max(axis=1),
     })
@@ -437,39 +448,45 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
 
 
 def beyond_paper(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame:
-    """The calibrated relocation beside the paper's three and the oracle bound, per method and level.
+    """The relocations beyond the paper's beside the paper's three and the bounds, per method and level.
 
     Returns
     -------
     pandas.DataFrame
         Index (method, level); columns: the mean accuracy (%) of every relocation present
-        (``identity``, ``full``, ``half``, ``calibrated``, ``oracle``), ``best_paper`` (the
-        best of the paper's three), ``gain`` (calibrated - best_paper, points) and, with the
-        oracle, ``closed`` (the share of the gap between the best of the paper's
-        relocations and the oracle that the calibrated relocation closes, %) and
-        ``to_oracle`` (oracle - calibrated, points). Empty without calibrated rows.
+        in registry order (the paper's ``identity``, ``full``, ``half``, then
+        ``calibrated`` and any registered relocation, then bounds such as ``oracle``),
+        ``best_paper`` (the best of the paper's three) and, with the calibrated
+        relocation, ``gain`` (calibrated - best_paper, points) and, with the oracle too,
+        ``closed`` (the share of the gap between the best of the paper's relocations and
+        the oracle that the calibrated relocation closes, %) and ``to_oracle`` (oracle -
+        calibrated, points). Empty when no relocation beyond the paper's ran.
     """
     from simplifiers import METHODS
 
-    from ..relocation.registry import CALIBRATED, ORACLE, PAPER_RELOCATIONS
+    from ..relocation.registry import CALIBRATED, ORACLE, PAPER_RELOCATIONS, RELOCATIONS
 
     data = _ok(df, predicate)
     mu = 100 * data.groupby(["method", "level", "relocation"])["accuracy"].mean().unstack("relocation")
-    if CALIBRATED not in mu.columns:
+    beyond = [r for r in RELOCATIONS if r not in PAPER_RELOCATIONS and not RELOCATIONS[r].bound and r in mu.columns]
+    if not beyond:
         return pd.DataFrame()
-    cols = [r for r in PAPER_RELOCATIONS + (CALIBRATED, ORACLE) if r in mu.columns]
+    cols = [r for r in RELOCATIONS if r in mu.columns]
     out = mu[cols].copy()
     paper = [r for r in PAPER_RELOCATIONS if r in mu.columns]
     out["best_paper"] = mu[paper].max(axis=1) if paper else np.nan
-    out["gain"] = out[CALIBRATED] - out["best_paper"]
-    if ORACLE in mu.columns:
-        out["closed"] = 100 * (out[CALIBRATED] - out["best_paper"]) / (out[ORACLE] - out["best_paper"])
-        out["to_oracle"] = out[ORACLE] - out[CALIBRATED]
+    if CALIBRATED in mu.columns:
+        out["gain"] = out[CALIBRATED] - out["best_paper"]
+        if ORACLE in mu.columns:
+            out["closed"] = 100 * (out[CALIBRATED] - out["best_paper"]) / (out[ORACLE] - out["best_paper"])
+            out["to_oracle"] = out[ORACLE] - out[CALIBRATED]
     idx = [(m, lv) for m in _ordered({i[0] for i in out.index}, METHODS) for lv in sorted({i[1] for i in out.index})
            if (m, lv) in out.index]
     out = out.loc[idx]
-    out.attrs["title"] = ("Beyond the paper: the calibrated relocation beside the paper's relocations"
-                          + (" and the oracle bound" if ORACLE in mu.columns else "") + " (accuracy %)")
+    bounds = [r for r in cols if RELOCATIONS[r].bound]
+    out.attrs["title"] = (f"Beyond the paper: the {' and '.join(beyond)} relocation{'s' if len(beyond) > 1 else ''} "
+                          "beside the paper's relocations"
+                          + (f" and the {' and '.join(bounds)} bound" if bounds else "") + " (accuracy %)")
     return out
 
 
@@ -484,7 +501,7 @@ def beyond_paper_findings(df: pd.DataFrame, *, predicate: str | None = None) -> 
     from ..relocation.registry import CALIBRATED, PAPER_RELOCATIONS
 
     t = beyond_paper(df, predicate=predicate)
-    if t.empty:
+    if t.empty or CALIBRATED not in t.columns or t["best_paper"].isna().all():
         return []
     lines = ["", "### Beyond the paper: regular against irregular, with the calibrated relocation", ""]
     for level in sorted({lv for _, lv in t.index}):
@@ -516,7 +533,7 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
         Index (level, relocation); one column per distance (in the run's
         ``distance_unit``), ``all`` for every pair.
     """
-    from ..relocation.registry import ORACLE, RELOCATIONS
+    from ..relocation.registry import RELOCATIONS
 
     data = df[df["error"].fillna("").astype(str) == ""] if "error" in df.columns else df
     if predicate is not None:
@@ -526,8 +543,7 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
     d = data["max_distance"].fillna(np.inf)
     mu = 100 * data.assign(_d=d).groupby(["level", "relocation", "_d"])["accuracy"].mean().unstack("_d")
     mu.columns = ["all" if c == np.inf else _fmt(float(c)) for c in mu.columns]
-    order = list(RELOCATIONS) + [ORACLE]
-    idx = [(lv, r) for lv in sorted({i[0] for i in mu.index}) for r in order if (lv, r) in mu.index]
+    idx = [(lv, r) for lv in sorted({i[0] for i in mu.index}) for r in RELOCATIONS if (lv, r) in mu.index]
     mu = mu.loc[idx]
     unit = data["distance_unit"].iloc[0] if "distance_unit" in data.columns and len(data) else "world"
     mu.attrs["title"] = f"Localized tests: mean accuracy (%) of the pairs within each distance ({unit} units)"

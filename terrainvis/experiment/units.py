@@ -13,14 +13,12 @@ These functions run in the worker processes; they read the run's options from
 
 from __future__ import annotations
 
-import time
-import zlib
 from pathlib import Path
 
 import numpy as np
 
+from .measures import MEASURES, observers, point_sets
 from .options import Settings, los_keywords
-from ..relocation.registry import CALIBRATED, ORACLE
 from ..core.terrain import HeightGrid
 
 __all__ = [
@@ -28,30 +26,7 @@ __all__ = [
 ]
 
 
-# ---------------------------------------------------------------------- point sets
-def _set_seed(seed: int, name: str, index: int) -> np.random.SeedSequence:
-    # Keyed on the terrain's name, not its position, so adding a terrain changes nothing else.
-    return np.random.SeedSequence([int(seed), zlib.crc32(name.encode()), int(index)])
-
-
-def point_sets(grid: HeightGrid, name: str, n_points: int, n_sets: int, seed: int, offset: float):
-    """The ``n_sets`` point sets of the terrain called ``name`` (deterministic for a seed and name)."""
-    from ..core.sampling import sample_points
-
-    return [
-        sample_points(grid, n_points, seed=np.random.default_rng(_set_seed(seed, name, s)), offset=offset)
-        for s in range(n_sets)
-    ]
-
-
-def observers(grid: HeightGrid, name: str, settings: Settings) -> list:
-    """The observers of the viewshed measure: ``n_observers`` eyes ``offset`` above T, one per row."""
-    from ..core.sampling import sample_points
-
-    rng = np.random.default_rng(_set_seed(settings.seed, name, 10**6))  # apart from the pair sets
-    return list(sample_points(grid, settings.n_observers, seed=rng, offset=settings.offset))
-
-
+# ---------------------------------------------------------------------- the predicate and the files
 def end_radius_for(simplified, original: HeightGrid, level: int, predicate: str) -> float:
     """The end radius of the verdicts on S(T) under ``predicate`` (0 for ``"exact"``).
 
@@ -75,31 +50,6 @@ def simplified_path(save_dir, name: str, method: str, level: int) -> Path:
     return Path(save_dir) / f"{name}__{method}__level{level}.npz"
 
 
-def _limit(max_distance, grid: HeightGrid, unit: str) -> float:
-    """``max_distance`` (in ``unit``) in world units; None is no limit."""
-    if max_distance is None:
-        return np.inf
-    return max_distance * (max(grid.dx, grid.dy) if unit == "cells" else 1.0)
-
-
-def _pair_mask(points: np.ndarray, max_distance, grid: HeightGrid, unit: str):
-    """The pairs within ``max_distance`` (in ``unit``) of each other, or None for every pair."""
-    if max_distance is None:
-        return None
-    d = np.hypot(points[:, None, 0] - points[None, :, 0], points[:, None, 1] - points[None, :, 1])
-    return d <= _limit(max_distance, grid, unit)
-
-
-def _timed(fn, *args, repeats: int = 3, **kwargs):
-    best = np.inf
-    out = None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn(*args, **kwargs)
-        best = min(best, time.perf_counter() - t0)
-    return out, best
-
-
 # ---------------------------------------------------------------------- a task
 def run_unit(grid: HeightGrid, name: str, method: str, levels: tuple, settings: Settings, save_dir) -> list[dict]:
     """The rows of one task: simplify at each level, then every point set and relocation.
@@ -108,10 +58,7 @@ def run_unit(grid: HeightGrid, name: str, method: str, levels: tuple, settings: 
     that cascades: :func:`terrainvis.experiment.plan.cascades`) all the levels of a terrain and
     method, finest first, each simplification starting from the previous one.
     """
-    if settings.measure == "viewshed":
-        sets = observers(grid, name, settings)
-    else:
-        sets = point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
+    sets = MEASURES[settings.measure].sets(grid, name, settings)
     cascade = len(levels) > 1
     rows, previous = [], None
     for level in levels:
@@ -129,7 +76,7 @@ def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
 
     base = {
         "terrain": name, "method": method, "kind": METHODS[method].kind, "level": level, "measure": settings.measure,
-        "predicate": settings.predicate, "n_points": settings.n_points if settings.measure == "pairs" else 1,
+        "predicate": settings.predicate, "n_points": MEASURES[settings.measure].n_points(settings),
         "n_vertices_original": grid.size, "nbytes_original": grid.nbytes, "seed": settings.seed,
         "distance_unit": settings.distance_unit, "offset": settings.offset, "cascaded": start is not None,
         "error": "",
@@ -148,8 +95,7 @@ def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
             end_radius=end_radius_for(simplified, grid, level, settings.predicate),
             backend=str(meta.get("backend", "")),
         )
-        measure = _viewshed_rows if settings.measure == "viewshed" else _pair_rows
-        rows = measure(grid, simplified, base, settings, sets)
+        rows = MEASURES[settings.measure].rows(grid, simplified, base, settings, sets, los_keywords(settings))
     except Exception as exc:  # record the failure in this unit's rows; the run goes on
         message = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         rows = [
@@ -185,83 +131,6 @@ def _simplify_level(grid, method, level, start):
     return out
 
 
-# ---------------------------------------------------------------------- the measures
-def _pair_rows(grid, simplified, base, settings, sets) -> list[dict]:
-    """The pair measure: visibility matrices of each point set on T and on S(T), per relocation."""
-    from ..core.metrics import agreement
-    from ..relocation.registry import relocate
-    from ..visibility import visibility_matrix
-
-    radius = base["end_radius"]
-    los = los_keywords(settings)
-    test_kw = {**los, "end_radius": radius}
-    # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
-    t0 = time.perf_counter()
-    visibility_matrix(simplified, sets[0][:2], **test_kw)
-    base = dict(base, los_build_seconds=time.perf_counter() - t0)
-    rows = []
-    for s, pts in enumerate(sets):
-        v_true, t_true = _timed(visibility_matrix, grid, pts, repeats=settings.repeats, **los)
-        masks = [(d, _pair_mask(pts, d, grid, settings.distance_unit)) for d in settings.max_distance]
-        placed = {how: relocate(pts, simplified, how, **_relocation_keywords(settings, grid, radius))
-                  for how in settings.relocations if how != ORACLE}
-        for how in settings.relocations:
-            if how == ORACLE:  # an upper bound, optimised for the pairs each distance counts
-                start = placed[CALIBRATED][:, 2] if CALIBRATED in placed else None  # never below the calibrated
-                for d, mask in masks:
-                    moved = relocate(pts, simplified, how, offset=settings.offset, reference=v_true,
-                                     original=grid, mask=mask, end_radius=radius, start=start, **los)
-                    v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
-                    rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
-                continue
-            v_test, t_test = _timed(visibility_matrix, simplified, placed[how], repeats=settings.repeats, **test_kw)
-            for d, mask in masks:
-                rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
-    return rows
-
-
-def _viewshed_rows(grid, simplified, base, settings, eyes) -> list[dict]:
-    """The viewshed measure: each observer's viewshed of T's samples on T and on S(T), per relocation.
-
-    The observer is relocated onto S(T) as the points of the pair measure are; the targets
-    are T's samples, standing ``target_height`` above the surface under test. A cell
-    counts as a pair (observer, cell), so the agreement counts read as in the pair measure.
-    """
-    from ..core.metrics import viewshed_agreement
-    from ..relocation.registry import relocate
-    from ..visibility import viewshed
-
-    kw = {"target_height": settings.target_height, **los_keywords(settings)}
-    X, Y = np.meshgrid(grid.xs, grid.ys)
-    rows = []
-    for s, eye in enumerate(eyes):
-        eye = eye[None, :]
-        v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, **kw)
-        dist = np.hypot(X - eye[0, 0], Y - eye[0, 1])
-        for how in settings.relocations:
-            moved = relocate(eye, simplified, how, target_height=settings.target_height,
-                             **_relocation_keywords(settings, grid, 0.0))[0]
-            v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, **kw)
-            for d in settings.max_distance:
-                counted = dist <= _limit(d, grid, settings.distance_unit)
-                rows.append(_row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted)))
-    return rows
-
-
-def _relocation_keywords(settings: Settings, grid: HeightGrid, end_radius: float) -> dict:
-    """What :func:`terrainvis.relocate` takes besides the points, S(T) and the relocation: the
-    observers' offset and, for the calibrated relocation, T, the partners (from the run's
-    seed) and the verdicts' predicate on S(T) (end radius, curvature)."""
-    return {"offset": settings.offset, "original": grid, "end_radius": end_radius, "n_partners": settings.n_partners,
-            "neighbours": settings.neighbours, "seed": settings.seed, **los_keywords(settings)}
-
-
-def _row(base, s, how, d, t_test, t_true, counts) -> dict:
-    row = dict(base, set=s, relocation=how, max_distance=d, los_seconds=t_test, los_seconds_original=t_true)
-    row.update(counts)
-    return row
-
-
 def _save(terrain, path: Path) -> None:
     from ..io import save_terrain
 
@@ -270,14 +139,37 @@ def _save(terrain, path: Path) -> None:
 
 
 # ---------------------------------------------------------------------- running in a worker
-def call(fn, *args):
-    """``fn(*args)``, then freed memory back to the OS: lets one pool run both units and warm-up parts."""
+def call(extensions, fn, *args):
+    """``fn(*args)`` with the run's ``extensions`` installed, then freed memory back to the OS.
+
+    One entry point lets one pool run both units and warm-up parts. ``extensions``
+    (:func:`terrainvis.experiment.plan.extensions`) are the entries registered at run time
+    in the process that started the run; a worker process imported terrainvis afresh and
+    has only the built-in ones, so they are registered here first.
+    """
     from ..core.memory import release_freed_memory
 
+    install(extensions)
     try:
         return fn(*args)
     finally:
         release_freed_memory()
+
+
+def install(extensions) -> None:
+    """Register each of ``extensions`` (relocations, measures and engines registered at run time) unless
+    this process has it already."""
+    from ..relocation import registry as relocations
+    from ..visibility import engines
+    from . import measures
+
+    registries = ((relocations.Relocation, relocations.RELOCATIONS, relocations.register),
+                  (measures.Measure, measures.MEASURES, measures.register),
+                  (engines.Engine, engines.ENGINES, engines.register))
+    for entry in extensions:
+        for kind, table, register in registries:
+            if isinstance(entry, kind) and table.get(entry.name) != entry:
+                register(entry, replace=True)
 
 
 def warm_up(part: tuple, settings: Settings) -> list:
@@ -318,7 +210,5 @@ def warm_up_part(part: tuple, settings: Settings) -> None:
     small = settings.replace(n_points=6, n_sets=1, n_observers=1, repeats=1)
     simplified = simplify(grid, "simple", 1) if name == "grid" else grid.to_tin()
     base = {"end_radius": end_radius_for(simplified, grid, 1, small.predicate)}
-    if small.measure == "viewshed":
-        _viewshed_rows(grid, simplified, base, small, observers(grid, "warm-up", small))
-    else:
-        _pair_rows(grid, simplified, base, small, point_sets(grid, "warm-up", 6, 1, small.seed, small.offset))
+    measure = MEASURES[small.measure]
+    measure.rows(grid, simplified, base, small, measure.sets(grid, "warm-up", small), los_keywords(small))

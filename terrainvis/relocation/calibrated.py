@@ -536,3 +536,64 @@ def _pairs_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve
         out[i:i + _CHUNK_PAIRS] = line_of_sight(original, a[i:i + _CHUNK_PAIRS], b[i:i + _CHUNK_PAIRS],
                                                 engine="grid", **curve)
     return out
+
+
+# ---------------------------------------------------------------------- the relocation
+def relocate_calibrated(points, simplified, *, offset: float = 0.0, original=None, target_height=None,
+                        end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
+                        n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
+                        min_gain: int = MIN_GAIN, neighbours: bool = True) -> np.ndarray:
+    """The calibrated relocation, registered as ``"calibrated"``: :func:`calibrated_heights` with its input checked.
+
+    Parameters
+    ----------
+    points : (n, 3) array_like
+        Points on (or ``offset`` above) T, inside both footprints. Never modified.
+    simplified : HeightGrid or TIN
+        S(T); a HeightGrid must be free of nodata.
+    original : HeightGrid
+        Required: T, free of nodata (the points' verdicts on T).
+    offset, target_height, end_radius, curvature, earth_radius, n_partners, sweeps, seed, min_gain, neighbours
+        See :func:`calibrated_heights`. A point's height depends on these, T, S(T) and
+        the point, never on the other points.
+
+    Returns
+    -------
+    (n, 3) float64
+        A new array; x and y are unchanged.
+    """
+    from ..core.validate import as_bool, as_height, as_nonnegative_finite, as_points
+    from ..visibility import terrain_scale
+    from .paper import ground_heights
+
+    pts = as_points(points, "points", 3)
+    if original is None:
+        raise TypeError("relocate(..., 'calibrated') needs original=, the original terrain T (a HeightGrid)")
+    if not isinstance(original, HeightGrid):
+        raise TypeError(f"original must be a terrainvis.HeightGrid, got {describe(original)}")
+    original.require_finite("relocate(..., 'calibrated') (original)")
+    if isinstance(simplified, HeightGrid):
+        simplified.require_finite("relocate(..., 'calibrated') (simplified)")
+    scale = float(terrain_scale(original))
+    ground = float(np.nanmax(np.abs(original.z)))
+    off = as_height(offset, "offset", scale=scale, ground=ground)
+    if target_height is not None:
+        target_height = as_height(target_height, "target_height", scale=scale, ground=ground, minimum=0.0)
+    curvature_coefficient(curvature, earth_radius)  # validates both
+    options = dict(end_radius=as_nonnegative_finite(end_radius, "end_radius"), curvature=curvature,
+                   earth_radius=earth_radius, n_partners=as_int(n_partners, "n_partners", minimum=1),
+                   sweeps=as_int(sweeps, "sweeps", minimum=0), seed=as_int(seed, "seed", minimum=0),
+                   min_gain=as_int(min_gain, "min_gain", minimum=1), neighbours=as_bool(neighbours, "neighbours"))
+    out = pts.copy()
+    if pts.shape[0] == 0:
+        return out
+    ground_heights(simplified, pts)  # inside S(T)'s footprint
+    on_t = original.height_at(pts[:, :2])
+    if np.isnan(on_t).any():
+        first = int(np.flatnonzero(np.isnan(on_t))[0])
+        raise OutsideFootprintError(
+            f"points must lie inside the original terrain's footprint, but {int(np.isnan(on_t).sum())} of "
+            f"{pts.shape[0]} do not (first at index {first})"
+        )
+    out[:, 2] = calibrated_heights(pts, simplified, original, offset=off, target_height=target_height, **options)
+    return out

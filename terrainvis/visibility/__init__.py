@@ -54,8 +54,16 @@ Engines
     tested part (the underground fix). It agrees with the exact answer on every pair whose minimum
     clearance is farther than :func:`~terrainvis.visibility.embree.embree_tolerance`
     from zero.
+``"tin"`` (TIN only)
+    The exact clip of each segment's ground track against every face it crosses; any
+    earth curvature.
 ``"auto"``
-    ``"grid"`` for a HeightGrid, ``"embree"`` for a TIN.
+    ``"grid"`` for a HeightGrid; for a TIN ``"embree"`` on a flat earth, ``"tin"`` under
+    curvature.
+
+The engines are the registry :data:`ENGINES` (:mod:`terrainvis.visibility.engines`):
+each answers ``pairs`` and ``matrix`` through one interface, and
+:func:`register_engine` adds one.
 
 :func:`min_clearance` is always exact: the grid walk on a HeightGrid, and on a TIN a
 clip of the ground track (over the tested interval) against every face it crosses.
@@ -67,10 +75,12 @@ sight calculations", AFRIGRAPH 2009, doi:10.1145/1503454.1503465.
 """
 
 from .cumulative import cumulative_viewshed
+from .engines import ENGINES, Engine, Predicate, engine_names
+from .engines import register as register_engine
+from .engines import unregister as unregister_engine
 from .los import embree_tolerance, line_of_sight, min_clearance, visibility_matrix
 from .predicate import (
     EARTH_RADIUS,
-    ENGINES,
     STANDARD_REFRACTION,
     TOL_REL,
     TRIM_REL,
@@ -84,6 +94,11 @@ from .sweep import viewshed
 
 __all__ = [
     "ENGINES",
+    "Engine",
+    "Predicate",
+    "engine_names",
+    "register_engine",
+    "unregister_engine",
     "TRIM_REL",
     "TOL_REL",
     "EARTH_RADIUS",

@@ -31,7 +31,8 @@ import numpy as np
 from ..core.validate import as_float_array, as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
-from .predicate import EARTH_RADIUS, _check_engine, curvature_coefficient
+from .engines import choose
+from .predicate import EARTH_RADIUS, curvature_coefficient
 from .sweep import _check_overlap, _surface_at, viewshed
 
 __all__ = ["cumulative_viewshed"]
@@ -214,7 +215,7 @@ def _as_heights(observer_height, k: int) -> np.ndarray:
 def _options(terrain, target_height, max_distance, at, engine, curvature, earth_radius) -> dict:
     """The viewshed options of every unit, validated here once (the units run them as given)."""
     kc = curvature_coefficient(curvature, earth_radius)
-    _check_engine(engine, terrain, kc)
+    choose(engine, terrain, kc)
     as_nonnegative_finite(target_height, "target_height", "z units")
     if max_distance is not None:
         as_nonnegative_finite(max_distance, "max_distance", "xy units")

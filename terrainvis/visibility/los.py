@@ -10,11 +10,11 @@ import numpy as np
 from ..core.validate import as_points
 from ..core.terrain import HeightGrid, as_terrain
 from . import embree as _embree
-from .grid import grid_clearance, grid_matrix
+from .engines import Predicate, choose
+from .grid import grid_clearance
 from .predicate import (
     EARTH_RADIUS,
     _check_end_radius,
-    _check_engine,
     _check_inside,
     _prepare_segments,
     _prepare_terrain,
@@ -22,7 +22,7 @@ from .predicate import (
     curvature_coefficient,
     trim_length,
 )
-from .tin import tin_clearance, tin_matrix
+from .tin import tin_clearance
 
 __all__ = ["min_clearance", "line_of_sight", "visibility_matrix", "embree_tolerance"]
 
@@ -123,9 +123,11 @@ def line_of_sight(
     terrain : HeightGrid or TIN
     a, b : (m, 3) array_like
         Segment ends inside the footprint.
-    engine : {"auto", "grid", "embree"}
-        ``"grid"``: exact grid walk (HeightGrid only). ``"embree"``: Embree rays in
-        float32 on the terrain's TIN (flat earth only). ``"auto"``: grid for a
+    engine : str
+        A name of :data:`terrainvis.visibility.ENGINES`: ``"grid"``, the exact grid walk
+        (HeightGrid only); ``"tin"``, the exact TIN clipper (TIN only); ``"embree"``,
+        Embree rays in float32 on the terrain's TIN (flat earth only); or one registered
+        with :func:`terrainvis.visibility.register_engine`. ``"auto"``: grid for a
         HeightGrid; for a TIN Embree, or the exact TIN clipper under earth curvature.
     end_radius : float, default 0.0
         Horizontal distance around each end inside which the surface is not tested (see
@@ -153,15 +155,9 @@ def line_of_sight(
     """
     a, b = _prepare_segments(terrain, a, b, "line_of_sight")
     kc = curvature_coefficient(curvature, earth_radius)
-    engine = _check_engine(engine, terrain, kc)
-    end_radius = _check_end_radius(end_radius)
-    delta = trim_length(terrain)
-    tol = clearance_tolerance(terrain)
-    if engine == "grid":
-        return grid_clearance(terrain, a, b, delta=delta, tol=tol, los=True, end_radius=end_radius, kc=kc) >= -tol
-    if engine == "tin":
-        return tin_clearance(terrain, a, b, delta=delta, end_radius=end_radius, kc=kc) >= -tol
-    return _embree.embree_visible(terrain, a, b, delta=delta, end_radius=end_radius)
+    chosen = choose(engine, terrain, kc)
+    predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), _check_end_radius(end_radius), kc)
+    return np.asarray(chosen.pairs(terrain, a, b, predicate), dtype=bool)
 
 
 def visibility_matrix(
@@ -179,7 +175,7 @@ def visibility_matrix(
     terrain : HeightGrid or TIN
     points : (n, 3) array_like
         Points inside the footprint.
-    engine : {"auto", "grid", "embree"}
+    engine : str
         As in :func:`line_of_sight`.
     end_radius : float, default 0.0
         Horizontal distance around each end inside which the surface is not tested (see
@@ -212,12 +208,6 @@ def visibility_matrix(
     pts = np.ascontiguousarray(as_points(points, "points", 3), dtype=np.float64)
     _check_inside(terrain, pts, "points")
     kc = curvature_coefficient(curvature, earth_radius)
-    engine = _check_engine(engine, terrain, kc)
-    end_radius = _check_end_radius(end_radius)
-    delta = trim_length(terrain)
-    tol = clearance_tolerance(terrain)
-    if engine == "grid":
-        return grid_matrix(terrain, pts, delta=delta, tol=tol, end_radius=end_radius, kc=kc)
-    if engine == "tin":
-        return tin_matrix(terrain, pts, delta=delta, tol=tol, end_radius=end_radius, kc=kc)
-    return _embree.embree_matrix(terrain, pts, delta=delta, end_radius=end_radius)
+    chosen = choose(engine, terrain, kc)
+    predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), _check_end_radius(end_radius), kc)
+    return np.asarray(chosen.matrix(terrain, pts, predicate), dtype=bool)

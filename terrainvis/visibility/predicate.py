@@ -15,12 +15,10 @@ from ..core.terrain import HeightGrid, as_terrain
 from ..tolerances import CLEARANCE_REL, EXTENT_INSIDE_REL
 
 __all__ = [
-    "ENGINES", "TRIM_REL", "TOL_REL", "EARTH_RADIUS", "STANDARD_REFRACTION", "terrain_scale", "trim_length",
+    "TRIM_REL", "TOL_REL", "EARTH_RADIUS", "STANDARD_REFRACTION", "terrain_scale", "trim_length",
     "clearance_tolerance", "curvature_coefficient",
 ]
 
-#: Valid values of the ``engine`` argument.
-ENGINES = ("auto", "grid", "embree")
 #: Trim length as a fraction of the horizontal diagonal (see :func:`trim_length`).
 TRIM_REL = 1e-5
 #: Clearance tolerance as a fraction of :func:`terrain_scale`.
@@ -97,29 +95,6 @@ def curvature_coefficient(curvature: float = 0.0, earth_radius: float = EARTH_RA
 
 
 # ----------------------------------------------------------------- validation
-def _check_engine(engine, terrain, kc: float = 0.0) -> str:
-    """The engine to run: "grid", "embree", or "tin" (the exact TIN clipper, which "auto"
-    picks for a TIN under earth curvature: Embree traces straight rays against one fixed
-    mesh and cannot raise the surface by a bulge that depends on each pair)."""
-    if not isinstance(engine, str) or engine not in ENGINES:
-        raise ValueError(f"engine must be one of {list(ENGINES)}, got {engine!r}")
-    if engine == "auto":
-        if isinstance(terrain, HeightGrid):
-            return "grid"
-        return "embree" if kc == 0.0 else "tin"
-    if engine == "grid" and not isinstance(terrain, HeightGrid):
-        raise ValueError(
-            f"engine 'grid' needs a HeightGrid, got {describe(terrain)}; use engine='embree' or 'auto' for a TIN"
-        )
-    if engine == "embree" and kc != 0.0:
-        raise ValueError(
-            "engine 'embree' cannot model earth curvature (its straight rays meet one fixed mesh, and the "
-            "curvature bulge depends on each pair); use engine='auto' (exact: the grid walk on a HeightGrid, "
-            "the TIN clipper on a TIN) or curvature=0"
-        )
-    return engine
-
-
 def _check_end_radius(end_radius) -> float:
     if isinstance(end_radius, (str, bytes)):
         raise TypeError(f"end_radius must be a real number, got {describe(end_radius)}")

@@ -77,12 +77,11 @@ from ..core.validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
 from . import _sweep_kernels as _vk
-from .predicate import EARTH_RADIUS, ENGINES, _check_engine, clearance_tolerance, curvature_coefficient, trim_length
+from .engines import Predicate, choose
+from .predicate import EARTH_RADIUS, clearance_tolerance, curvature_coefficient, trim_length
 
-__all__ = ["viewshed", "VIEWSHED_ENGINES"]
+__all__ = ["viewshed"]
 
-#: Valid values of the ``engine`` argument.
-VIEWSHED_ENGINES = ENGINES
 
 # Sweep layout (see the module docstring): sectors (a multiple of 4), wedges near the eye
 # (a power of 2, a multiple of the sectors), first ring where the wedges double (a multiple
@@ -227,7 +226,7 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     """
     as_terrain(terrain)
     kc = curvature_coefficient(curvature, earth_radius)
-    engine = _check_engine(engine, terrain, kc)
+    engine = choose(engine, terrain, kc)
     ox, oy, oz = _as_observer(observer)
     h_o = as_nonnegative_finite(observer_height, "observer_height", "z units")
     h_t = as_nonnegative_finite(target_height, "target_height", "z units")
@@ -252,7 +251,7 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     own = at is terrain or (
         isinstance(terrain, HeightGrid) and np.array_equal(at.xs, terrain.xs) and np.array_equal(at.ys, terrain.ys)
     )
-    if engine == "grid":
+    if engine.name == "grid":
         # The sweep's bounds assume the eye on or above its own cell's surface (so the
         # part of every ray inside the trim cannot block). An eye below it, e.g. an
         # observer relocated by identity onto a simplification, goes to the exact walk.
@@ -536,12 +535,10 @@ def _sector_order(nsec: int) -> np.ndarray:
 
 
 # ----------------------------------------------------------------- other targets
-def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine: str):
-    """Viewshed at ``at``'s samples one segment per target, in chunks: Embree rays
-    (float32, flat earth) or the exact TIN clipper (``engine`` "tin", any curvature)."""
-    from .embree import embree_visible
-    from .tin import tin_clearance
-
+def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine):
+    """Viewshed at ``at``'s samples one segment per target, in chunks, answered by ``engine``
+    (an :class:`~terrainvis.visibility.engines.Engine`: Embree's rays, the exact TIN
+    clipper, or any registered engine)."""
     h_t, dmax, kc = query
     rows, cols = at.shape
     if own:
@@ -558,8 +555,7 @@ def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine: st
     idx = np.flatnonzero(ok.ravel())
     out = np.zeros(rows * cols, dtype=bool)
     info = {"targets": int(idx.size), "lb": 0, "ub": 0, "walk": 0, "exact": int(idx.size), "ub_bound": 0}
-    delta = trim_length(terrain)
-    tol = clearance_tolerance(terrain)
+    predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), 0.0, kc)
     zflat = zt.ravel()
     for s in range(0, idx.size, _CHUNK):
         part = idx[s : s + _CHUNK]
@@ -567,10 +563,7 @@ def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine: st
         b = np.column_stack([at.xs[c], at.ys[r], zflat[part] + h_t])
         a = np.empty_like(b)
         a[:] = eye
-        if engine == "tin":
-            out[part] = tin_clearance(terrain, a, b, delta=delta, kc=kc) >= -tol
-        else:
-            out[part] = embree_visible(terrain, a, b, delta=delta)
+        out[part] = engine.pairs(terrain, a, b, predicate)
     return out.reshape(rows, cols), info
 
 

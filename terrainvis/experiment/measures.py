@@ -1,0 +1,304 @@
+"""The measures of :func:`terrainvis.compare`: what one unit counts, each declared once.
+
+A :class:`Measure` says how a unit draws its test sets from T (point sets, observers),
+how it turns T, S(T) and those sets into rows of agreement counts, what those counts
+count (pairs, cells), the predicates it supports and how much memory a unit needs. The
+registry :data:`MEASURES` is what ``compare(measure=...)``, ``--measure``, the plan's
+memory check, the rows a complete unit has and the report's wording read.
+
+The built-in measures:
+
+``"pairs"``
+    The paper's: the visibility matrix of each point set on T and on S(T), per
+    relocation (:func:`pair_rows`); a bound relocation (the oracle) is fitted to the pairs
+    each distance counts, so it runs once per distance, after the practical ones.
+``"viewshed"``
+    Each observer's viewshed of every sample of T, on T and on S(T), per relocation
+    (:func:`viewshed_rows`); a cell counts as a pair (observer, cell).
+
+A measure's functions read the run's settings by attribute and take the line-of-sight
+predicate's options (``los``) as an argument; they import nothing from the rest of the
+experiment, which imports them.
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..core.terrain import HeightGrid
+from ..core.validate import describe
+
+__all__ = [
+    "Measure", "MEASURES", "register", "unregister", "available", "point_sets", "observers", "pair_rows",
+    "viewshed_rows",
+]
+
+
+@dataclass(frozen=True)
+class Measure:
+    """Every fact about one measure of :func:`terrainvis.compare`.
+
+    Parameters
+    ----------
+    name : str
+        How users name it (``compare(measure=name)``, ``--measure name``).
+    sets : callable
+        ``sets(grid, name, settings) -> list``: the unit's test sets drawn from T (the
+        terrain called ``name``), deterministic for the run's seed: each an (n, 3) array
+        of points on (``offset`` above) T.
+    rows : callable
+        ``rows(grid, simplified, base, settings, sets, los) -> list of dict``: for each set,
+        relocation (``settings.relocations``) and distance (``settings.max_distance``), one
+        row: ``dict(base, set=, relocation=, max_distance=, los_seconds=,
+        los_seconds_original=)`` with the agreement counts of
+        :func:`terrainvis.agreement` (``accuracy``, ``visible_kept``, ...). ``los`` holds
+        the options of the run's line-of-sight predicate.
+    counts : str
+        What its agreement counts, as the tables say it (``"pairs"``, ``"cells"``).
+    summary : str
+        One line for ``--help`` and the docs.
+    n_points : callable
+        ``n_points(settings) -> int``: the points of one set (the rows' ``n_points``).
+    n_sets : callable
+        ``n_sets(settings) -> int``: the sets of a unit (a complete unit has ``n_sets x
+        relocations x distances`` rows).
+    unit_bytes : callable
+        ``unit_bytes(settings, grids) -> int``: a lower bound of the memory one unit
+        allocates (the run is refused before it starts when its units cannot fit).
+    predicates : tuple of str
+        The predicates it supports (``"exact"``, ``"paper"``).
+    """
+
+    name: str
+    sets: Callable
+    rows: Callable
+    counts: str
+    summary: str
+    n_points: Callable
+    n_sets: Callable
+    unit_bytes: Callable
+    predicates: tuple = ("exact", "paper")
+
+
+def _set_seed(seed: int, name: str, index: int) -> np.random.SeedSequence:
+    # Keyed on the terrain's name, not its position, so adding a terrain changes nothing else.
+    return np.random.SeedSequence([int(seed), zlib.crc32(name.encode()), int(index)])
+
+
+def point_sets(grid: HeightGrid, name: str, n_points: int, n_sets: int, seed: int, offset: float):
+    """The ``n_sets`` point sets of the terrain called ``name`` (deterministic for a seed and name)."""
+    from ..core.sampling import sample_points
+
+    return [
+        sample_points(grid, n_points, seed=np.random.default_rng(_set_seed(seed, name, s)), offset=offset)
+        for s in range(n_sets)
+    ]
+
+
+def observers(grid: HeightGrid, name: str, settings) -> list:
+    """The observers of the viewshed measure: ``n_observers`` eyes ``offset`` above T, one per row."""
+    from ..core.sampling import sample_points
+
+    rng = np.random.default_rng(_set_seed(settings.seed, name, 10**6))  # apart from the pair sets
+    return list(sample_points(grid, settings.n_observers, seed=rng, offset=settings.offset))
+
+
+def _limit(max_distance, grid: HeightGrid, unit: str) -> float:
+    """``max_distance`` (in ``unit``) in world units; None is no limit."""
+    if max_distance is None:
+        return np.inf
+    return max_distance * (max(grid.dx, grid.dy) if unit == "cells" else 1.0)
+
+
+def _pair_mask(points: np.ndarray, max_distance, grid: HeightGrid, unit: str):
+    """The pairs within ``max_distance`` (in ``unit``) of each other, or None for every pair."""
+    if max_distance is None:
+        return None
+    d = np.hypot(points[:, None, 0] - points[None, :, 0], points[:, None, 1] - points[None, :, 1])
+    return d <= _limit(max_distance, grid, unit)
+
+
+def _timed(fn, *args, repeats: int = 3, **kwargs):
+    best = np.inf
+    out = None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        best = min(best, time.perf_counter() - t0)
+    return out, best
+
+
+def pair_rows(grid, simplified, base, settings, sets, los: dict) -> list[dict]:
+    """The pair measure: visibility matrices of each point set on T and on S(T), per relocation.
+
+    The practical relocations place each set once; a bound (the oracle) is fitted to T's
+    verdicts of the pairs each distance counts, so it runs once per distance, after them.
+    """
+    from ..core.metrics import agreement
+    from ..relocation.registry import RELOCATIONS, relocate
+    from ..visibility import visibility_matrix
+
+    radius = base["end_radius"]
+    test_kw = {**los, "end_radius": radius}
+    # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
+    t0 = time.perf_counter()
+    visibility_matrix(simplified, sets[0][:2], **test_kw)
+    base = dict(base, los_build_seconds=time.perf_counter() - t0)
+    known = _relocation_keywords(settings, grid, radius)
+    rows = []
+    for s, pts in enumerate(sets):
+        v_true, t_true = _timed(visibility_matrix, grid, pts, repeats=settings.repeats, **los)
+        masks = [(d, _pair_mask(pts, d, grid, settings.distance_unit)) for d in settings.max_distance]
+        placed = {how: relocate(pts, simplified, how, **RELOCATIONS[how].keywords(known, los))
+                  for how in settings.relocations if not RELOCATIONS[how].bound}
+        for how in settings.relocations:
+            relocation = RELOCATIONS[how]
+            if relocation.bound:  # fitted to the pairs each distance counts
+                for d, mask in masks:
+                    fit = dict(known, reference=v_true, mask=mask, **_start(relocation, placed))
+                    moved = relocate(pts, simplified, how, **relocation.keywords(fit, los))
+                    v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
+                    rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
+                continue
+            v_test, t_test = _timed(visibility_matrix, simplified, placed[how], repeats=settings.repeats, **test_kw)
+            for d, mask in masks:
+                rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
+    return rows
+
+
+def _start(relocation, placed: dict) -> dict:
+    """``start=``: the heights of the first relocation a bound starts from that this set has."""
+    for name in relocation.starts_from:
+        if name in placed:
+            return {"start": placed[name][:, 2]}
+    return {}
+
+
+def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dict]:
+    """The viewshed measure: each observer's viewshed of T's samples on T and on S(T), per relocation.
+
+    The observer is relocated onto S(T) as the points of the pair measure are; the targets
+    are T's samples, standing ``target_height`` above the surface under test. A cell
+    counts as a pair (observer, cell), so the agreement counts read as in the pair measure.
+    """
+    from ..core.metrics import viewshed_agreement
+    from ..relocation.registry import RELOCATIONS, relocate
+    from ..visibility import viewshed
+
+    kw = {"target_height": settings.target_height, **los}
+    known = dict(_relocation_keywords(settings, grid, 0.0), target_height=settings.target_height)
+    X, Y = np.meshgrid(grid.xs, grid.ys)
+    rows = []
+    for s, eye in enumerate(eyes):
+        eye = np.asarray(eye, dtype=np.float64).reshape(1, 3)
+        v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, **kw)
+        dist = np.hypot(X - eye[0, 0], Y - eye[0, 1])
+        for how in settings.relocations:
+            moved = relocate(eye, simplified, how, **RELOCATIONS[how].keywords(known, los))[0]
+            v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, **kw)
+            for d in settings.max_distance:
+                counted = dist <= _limit(d, grid, settings.distance_unit)
+                rows.append(_row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted)))
+    return rows
+
+
+def _relocation_keywords(settings, grid: HeightGrid, end_radius: float) -> dict:
+    """What a unit knows that a relocation may take (each takes those its entry declares,
+    :meth:`terrainvis.relocation.Relocation.keywords`): the observers' offset, T, the
+    partners of the calibrated relocation (from the run's seed) and the predicate of the
+    verdicts on S(T) (its end radius; a relocation that evaluates visibility gets the
+    predicate's options as well)."""
+    return {"offset": settings.offset, "original": grid, "end_radius": end_radius, "n_partners": settings.n_partners,
+            "neighbours": settings.neighbours, "seed": settings.seed}
+
+
+def _row(base, s, how, d, t_test, t_true, counts) -> dict:
+    row = dict(base, set=s, relocation=how, max_distance=d, los_seconds=t_test, los_seconds_original=t_true)
+    row.update(counts)
+    return row
+
+
+# ---------------------------------------------------------------------- the registry
+def _pair_bytes(settings, grids) -> int:
+    """The visibility matrices on T and on S(T) (a byte per ordered pair each),
+    :func:`terrainvis.agreement`'s indices of the upper triangle (16 bytes per pair), and
+    with ``max_distance`` a distance and a mask per distance (8 + 1 bytes per pair)."""
+    n = settings.n_points
+    per_pair = 2 + 16 + (0 if tuple(settings.max_distance) == (None,) else 8 + len(settings.max_distance))
+    return per_pair * n * n
+
+
+def _viewshed_bytes(settings, grids) -> int:
+    """Six arrays of 8 bytes per sample of the largest terrain (coordinates, distances, the two
+    viewshed, a mask)."""
+    return 8 * 6 * max(g.size for g in grids.values())
+
+
+def _pair_sets(grid, name, settings) -> list:
+    return point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
+
+
+def _observer_sets(grid, name, settings) -> list:
+    return [eye[None, :] for eye in observers(grid, name, settings)]
+
+
+#: Every measure by name.
+MEASURES: dict[str, Measure] = {
+    m.name: m for m in (
+        Measure("pairs", _pair_sets, pair_rows, "pairs", "the paper's visibility matrices of random point sets",
+                n_points=lambda s: s.n_points, n_sets=lambda s: s.n_sets, unit_bytes=_pair_bytes),
+        Measure("viewshed", _observer_sets, viewshed_rows, "cells",
+                "each observer's viewshed of every sample of T", n_points=lambda s: 1,
+                n_sets=lambda s: s.n_observers, unit_bytes=_viewshed_bytes, predicates=("exact",)),
+    )
+}
+#: The measures terrainvis ships, which :func:`register` never replaces.
+BUILTIN = frozenset(MEASURES)
+
+
+def register(measure: Measure, *, replace: bool = False) -> Measure:
+    """Add a measure to :data:`MEASURES` and return it.
+
+    Raises
+    ------
+    TypeError
+        ``measure`` is not a :class:`Measure`, or one of its functions is not callable.
+    ValueError
+        Its name is empty or taken (a built-in name always is), or its predicates are unknown.
+    """
+    if not isinstance(measure, Measure):
+        raise TypeError(f"measure must be a terrainvis.experiment.measures.Measure, got {describe(measure)}")
+    name = measure.name
+    if not isinstance(name, str) or not name.strip() or name != name.strip():
+        raise ValueError(f"measure.name must be a non-empty name without surrounding spaces, got {name!r}")
+    for field in ("sets", "rows", "n_points", "n_sets", "unit_bytes"):
+        if not callable(getattr(measure, field)):
+            raise TypeError(f"measure {name!r}: {field} must be callable, got {describe(getattr(measure, field))}")
+    if not measure.predicates or any(p not in ("exact", "paper") for p in measure.predicates):
+        raise ValueError(f"measure {name!r}: predicates must be some of ['exact', 'paper'], got "
+                         f"{list(measure.predicates)}")
+    if name in BUILTIN:
+        raise ValueError(f"measure {name!r} is built in and cannot be replaced; register yours under another name")
+    if name in MEASURES and not replace:
+        raise ValueError(f"a measure named {name!r} is registered already; pass replace=True to replace it")
+    MEASURES[name] = measure
+    return measure
+
+
+def unregister(name: str) -> Measure:
+    """Remove a measure added with :func:`register` and return it (built-in ones stay)."""
+    if name in BUILTIN:
+        raise ValueError(f"measure {name!r} is built in and cannot be removed")
+    if name not in MEASURES:
+        raise ValueError(f"no measure named {name!r} is registered; the measures are {available()}")
+    return MEASURES.pop(name)
+
+
+def available() -> list[str]:
+    """Every measure's name."""
+    return list(MEASURES)

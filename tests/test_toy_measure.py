@@ -1,0 +1,139 @@
+"""Adding a measure touches the registry and the measure's own module only.
+
+A toy measure, *stars* (each point set's first point against every other point: n - 1
+pairs instead of the matrix's n (n - 1) / 2), is written as a module of its own (in a
+temporary folder) and given one :func:`terrainvis.experiment.measures.register` call.
+``compare`` runs it in this process and on worker processes, the plan's memory check and
+the rows of a complete unit read it, the report's tables say what it counts, and the
+command line's ``--measure`` offers it.
+"""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from terrainvis import agreement, compare, relocate, synthetic_terrain, visibility_matrix
+from terrainvis.cli import main
+from terrainvis.experiment import measures, point_sets, report
+
+_MODULE = '''
+"""A toy measure: each set's first point against every other one."""
+import time
+
+import numpy as np
+
+from terrainvis import agreement, relocate, visibility_matrix
+from terrainvis.experiment.measures import point_sets
+
+
+def sets(grid, name, settings):
+    return point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
+
+
+def rows(grid, simplified, base, settings, sets, los):
+    out = []
+    for s, pts in enumerate(sets):
+        star = np.zeros((len(pts), len(pts)), dtype=bool)
+        star[0, 1:] = True
+        t0 = time.perf_counter()
+        v_true = visibility_matrix(grid, pts, **los)
+        t_true = time.perf_counter() - t0
+        for how in settings.relocations:
+            moved = relocate(pts, simplified, how, offset=settings.offset, original=grid)
+            t0 = time.perf_counter()
+            v_test = visibility_matrix(simplified, moved, end_radius=base["end_radius"], **los)
+            t_test = time.perf_counter() - t0
+            for d in settings.max_distance:
+                out.append(dict(base, set=s, relocation=how, max_distance=d, los_seconds=t_test,
+                                los_seconds_original=t_true, **agreement(v_true, v_test, star)))
+    return out
+
+
+def unit_bytes(settings, grids):
+    return 2 * settings.n_points ** 2
+
+
+def n_points(settings):
+    return settings.n_points
+
+
+def n_sets(settings):
+    return settings.n_sets
+'''
+
+
+@pytest.fixture
+def toy(tmp_path, monkeypatch):
+    (tmp_path / "toy_stars.py").write_text(textwrap.dedent(_MODULE))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    import toy_stars
+
+    entry = measures.register(measures.Measure(
+        "stars", toy_stars.sets, toy_stars.rows, "pairs", "the first point of each set against the others",
+        n_points=toy_stars.n_points, n_sets=toy_stars.n_sets, unit_bytes=toy_stars.unit_bytes))
+    yield entry
+    measures.unregister("stars")
+
+
+def _kw(**extra):
+    return {**dict(methods=["lls"], levels=[1], n_points=10, n_sets=2, repeats=1, seed=4,
+                   relocations=["full", "half"]), **extra}
+
+
+def test_compare_runs_it_and_counts_the_star(toy):
+    grid = synthetic_terrain("hills", size=33, seed=3)
+    df = compare({"g": grid}, measure="stars", workers=1, **_kw())
+    assert (df["error"] == "").all() and len(df) == 2 * 2 and set(df["measure"]) == {"stars"}
+    assert (df["n_pairs"] == 9).all()  # n - 1 pairs per set
+    # the same counts by hand from the public API
+    from simplifiers import simplify
+
+    S = simplify(grid, "lls", 1)
+    pts = point_sets(grid, "g", 10, 2, 4, 0.0)[1]
+    star = np.zeros((10, 10), dtype=bool)
+    star[0, 1:] = True
+    expected = agreement(visibility_matrix(grid, pts), visibility_matrix(S, relocate(pts, S, "half")), star)
+    row = df[(df["set"] == 1) & (df["relocation"] == "half")].iloc[0]
+    assert row["agree_visible"] == expected["agree_visible"] and row["accuracy"] == pytest.approx(expected["accuracy"])
+    tables = report.paper_tables(df)
+    assert tables["Table 1"].attrs["title"].startswith("Table 1: accuracy (%)")
+
+
+def test_the_registry_is_checked(toy):
+    with pytest.raises(ValueError, match="measure 'pairs' is built in and cannot be replaced"):
+        measures.register(measures.Measure("pairs", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
+                                           toy.unit_bytes))
+    with pytest.raises(ValueError, match=r"predicates must be some of \['exact', 'paper'\], got \['fuzzy'\]"):
+        measures.register(measures.Measure("fuzzy", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
+                                           toy.unit_bytes, predicates=("fuzzy",)))
+    with pytest.raises(TypeError, match="measure 'broken': rows must be callable"):
+        measures.register(measures.Measure("broken", toy.sets, None, "pairs", "x", toy.n_points, toy.n_sets,
+                                           toy.unit_bytes))
+    with pytest.raises(ValueError, match=r"measure must be one of \['pairs', 'viewshed', 'stars'\], got 'star'"):
+        compare({"g": synthetic_terrain("hills", size=33)}, measure="star", workers=1, **_kw())
+
+
+@pytest.mark.slow
+def test_worker_processes_get_it(toy):
+    grid = synthetic_terrain("hills", size=33, seed=3)
+    serial = compare({"g": grid}, measure="stars", workers=1, **_kw(levels=[1, 2]))
+    pooled = compare({"g": grid}, measure="stars", workers=2, **_kw(levels=[1, 2]))
+    cols = ["level", "set", "relocation", "accuracy", "n_pairs"]
+    pd.testing.assert_frame_equal(serial[cols], pooled[cols])
+
+
+def test_the_command_line_offers_it(toy, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["compare", "--terrain", "hills", "--levels", "1", "--methods", "lls", "--points", "8", "--sets", "1",
+                 "--repeats", "1", "--workers", "1", "--measure", "stars", "--relocations", "full", "--no-plots",
+                 "--out", str(out)]) == 0
+    df = pd.read_csv(out / "results.csv")
+    assert set(df["measure"]) == {"stars"} and (df["n_pairs"] == 7).all()
+    with pytest.raises(SystemExit):
+        main(["compare", "--help"])
+    assert "stars" in capsys.readouterr().out
