@@ -30,7 +30,7 @@ import simplifiers
 import terrainvis as tv
 from terrainvis.experiment.plan import DEFAULT_TERRAINS, resolve_terrains
 from terrainvis.relocation.registry import _candidate_pass, _candidates, _ground, _oracle_start
-from terrainvis.experiment.units import point_sets
+from terrainvis.experiment.measures import point_sets
 
 #: Candidate heights per point (relocate's default ``n_candidates``, as when the issue was filed).
 N_CANDIDATES = 9

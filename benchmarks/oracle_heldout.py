@@ -29,7 +29,7 @@ import pandas as pd
 import simplifiers
 import terrainvis as tv
 from terrainvis.experiment.plan import DEFAULT_TERRAINS, resolve_terrains
-from terrainvis.experiment.units import point_sets
+from terrainvis.experiment.measures import point_sets
 
 
 def halves(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

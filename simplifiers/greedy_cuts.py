@@ -225,7 +225,7 @@ def _kappa(density: float) -> float:
     """Vertices of the triangulation per product of the row and column 1-D densities.
 
     An empirical fit (2.85 at a quarter of the samples, 3.7 at a sixteenth and below;
-    how it was measured is in docs/simplifiers-and-files.md): a first guess only, which
+    how it was measured is in docs/performance.md#simplifiers-figures-behind-their-defaults): a first guess only, which
     the search corrects.
     """
     return float(np.clip(2.85 * (0.25 / density) ** 0.19, 2.0, 3.7))

@@ -4,13 +4,13 @@ The collapses themselves are done by a library: pymeshlab's
 ``meshing_decimation_quadric_edge_collapse`` (VCG; planar quadric, normal preservation
 and optimal placement), the paper's method, or ``fast_simplification.simplify``
 (Forstmann's threshold variant), faster and smaller in memory (measured figures:
-``docs/simplifiers-and-files.md``). ``backend="auto"`` (the default) takes pymeshlab up to
+``docs/performance.md#simplifiers-figures-behind-their-defaults``). ``backend="auto"`` (the default) takes pymeshlab up to
 :data:`AUTO_MAX_SAMPLES` grid samples and fast-simplification above; ``attrs["backend"]``
 records the library used.
 
 This module holds the library adapters and the search for the exact vertex budget; every
 decimated mesh is then turned into a valid height field over the grid's exact extent by
-:class:`simplifiers._quadric_repair.PostProcessor` (boundary snapping, fold-over repair).
+:class:`terrainvis.core.repair.PostProcessor` (boundary snapping, fold-over repair).
 
 **Units for pymeshlab.** VCG ranks a collapse by its quadric error after normalising it by
 the bounding-box diagonal (``1e8 / diag**6``); an error below its ``QuadricEpsilon``
@@ -82,7 +82,7 @@ from terrainvis.errors import SimplificationError
 from terrainvis.core.terrain import TIN, HeightGrid
 from terrainvis.tolerances import TILE_BORDER_REL
 
-from ._quadric_repair import PostError, PostProcessor
+from terrainvis.core.repair import PostError, PostProcessor
 from .levels import budget_tolerance, check_budget
 
 __all__ = [
@@ -94,7 +94,7 @@ BACKENDS = ("pymeshlab", "fast-simplification")
 
 #: ``backend="auto"`` uses pymeshlab (the paper's method) for grids of at most this many
 #: samples (1024² and 1025² included, 1095² at most) and fast-simplification above, where
-#: pymeshlab's time per level grows past a minute (figures in docs/simplifiers-and-files.md).
+#: pymeshlab's time per level grows past a minute (figures in docs/performance.md#simplifiers-figures-behind-their-defaults).
 AUTO_MAX_SAMPLES = 1_200_000
 
 #: pymeshlab filter settings used unless overridden through ``**tuning``. ``boundaryweight``
@@ -575,7 +575,7 @@ class _BudgetSearch:
             try:
                 if f.shape[0] == 0:
                     raise PostError(f"qec ({self.backend} backend) returned an empty mesh")
-                result = self.post.run(v + self.origin, f, self.backend)
+                result = self.post.run(v + self.origin, f, f"qec ({self.backend} backend)")
             except PostError as exc:
                 self.timing["post"] += time.perf_counter() - t1
                 self.failures += 1

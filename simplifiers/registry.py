@@ -4,8 +4,10 @@ Every fact about a method lives in its :class:`Method` entry here: its name, kin
 paper's row order (the order of :data:`METHODS`), where its code is, the halo it needs
 on the block-wise path, how expensive it is (the runner schedules expensive units
 first), how figures draw it, and the options it accepts. The rest of terrainvis reads
-them through :data:`METHODS` and :func:`method_info`; adding a method means adding an
-entry here and writing its module.
+them through :data:`METHODS` and :func:`method_info`. A method from outside the package
+is added with :func:`register` (a function), or by an installed plugin: a package that
+declares an entry point in the group ``terrainvis.simplifiers`` whose value is a
+:class:`Method` (:func:`load_plugins`, run when :mod:`simplifiers` is imported).
 
 A *regular* method provides a curve operator ``op(f, axis=..., **options)`` that
 reduces one axis of an array; :func:`simplify` applies it along rows, then columns,
@@ -20,22 +22,35 @@ vertex budget, checks the result against the height-field rules
 from __future__ import annotations
 
 import importlib
+import inspect
 import time
+import warnings
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from terrainvis.core.memory import check_memory
-from terrainvis.core.mesh import NotADiskError, boundary_loop, footprint_matches, signed_area2
+from terrainvis.core.repair import height_field_problems
 from terrainvis.core.validate import as_int, as_nonnegative_finite, describe
 from terrainvis.core.deviation import vertical_errors
 from terrainvis.errors import SimplificationError
 from terrainvis.core.terrain import TIN, HeightGrid
 
 from ._target import qec_within, regular_within
-from .levels import check_budget, check_level, check_vertex_count, coarse_coords, vertex_budget
+from .levels import check_budget, check_level, coarse_coords, coarse_shape, vertex_budget
 
-__all__ = ["Method", "METHODS", "available", "default_methods", "method_info", "simplify", "check_height_field"]
+__all__ = [
+    "Method", "METHODS", "KINDS", "register", "unregister", "load_plugins", "available", "default_methods",
+    "method_info", "simplify", "check_height_field",
+]
+
+#: The kinds of method: ``"regular"`` returns a HeightGrid at the reverse Faber coarse
+#: positions; ``"irregular"`` a TIN of the level's vertex budget; ``"semi-regular"`` a TIN
+#: too, from a regular hierarchy of triangles (RTIN, as web-terrain tilers build).
+KINDS = ("regular", "irregular", "semi-regular")
+#: The entry-point group of plugin packages: each entry's value is a :class:`Method`.
+PLUGIN_GROUP = "terrainvis.simplifiers"
 
 
 @dataclass(frozen=True)
@@ -46,10 +61,12 @@ class Method:
     ----------
     name : str
         The name passed to :func:`simplify` (and written in result tables).
-    kind : {"regular", "irregular"}
-        Regular methods return a HeightGrid, irregular ones a TIN.
+    kind : {"regular", "irregular", "semi-regular"}
+        Regular methods return a HeightGrid, irregular and semi-regular ones a TIN
+        (:data:`KINDS`).
     module, attr : str
-        Where the code is: a curve operator (regular) or ``build`` (irregular).
+        Where the code is: a curve operator (regular), ``op(grid, level)`` (regular and
+        ``whole_grid``) or ``build(grid, n_vertices)`` (irregular, semi-regular).
     description : str
         One line, with the reference.
     options : tuple of str
@@ -75,6 +92,10 @@ class Method:
         the rest cost :data:`_BYTES_PER_SAMPLE_BEYOND`) and per vertex of the result, the
         errors' evaluation included: the estimate :func:`simplify` checks against the
         memory available before it starts (:meth:`memory_need`).
+    function : callable, optional
+        The code itself, for a method registered with :func:`register` (``module`` and
+        ``attr`` then name where it was defined, for messages and for worker processes,
+        which import it from there).
     """
 
     name: str
@@ -90,6 +111,7 @@ class Method:
     memory: tuple = (32, 0, None)
     default: bool = True
     whole_grid: bool = False
+    function: Callable | None = None
 
     def memory_need(self, n_samples: int, n_vertices: int) -> int:
         """Estimated peak bytes of simplifying ``n_samples`` grid samples to ``n_vertices`` vertices."""
@@ -98,8 +120,13 @@ class Method:
         return per_sample * heavy + _BYTES_PER_SAMPLE_BEYOND * (n_samples - heavy) + per_vertex * n_vertices
 
     def load(self):
-        """The method's operator (regular) or build function (irregular)."""
-        return getattr(importlib.import_module(self.module), self.attr)
+        """The method's operator (regular) or build function (irregular, semi-regular)."""
+        if self.function is not None:
+            return self.function
+        target = importlib.import_module(self.module)
+        for part in self.attr.split("."):
+            target = getattr(target, part)
+        return target
 
     @property
     def regular(self) -> bool:
@@ -154,6 +181,161 @@ METHODS: dict[str, Method] = {
 }
 
 
+#: The methods terrainvis ships: :func:`register` refuses their names.
+BUILTIN = frozenset(METHODS)
+
+
+# ---------------------------------------------------------------------- methods from outside
+def register(name: str, function: Callable, *, kind: str, description: str = "", options=(), cost_rank: int = 9,
+             style=("k", "o"), memory=(32, 0, None), default: bool = False, replace: bool = False) -> Method:
+    """Register a simplification method from outside the package, and return its :class:`Method`.
+
+    It is then a method like the built-in ones: :func:`simplify` runs it with the budget,
+    height-field and memory checks, and :func:`terrainvis.compare` (serially, on worker
+    processes and on dask, with resume), the tables, the figures and the command line's
+    ``--methods`` take it by name.
+
+    Parameters
+    ----------
+    name : str
+        Its name (not one of the built-in methods'; :data:`BUILTIN`).
+    function : callable
+        ``kind="regular"``: ``function(grid, level, **options) -> HeightGrid`` with the
+        coarse grid at the reverse Faber positions (:func:`simplifiers.levels.coarse_coords`
+        of the grid's x and y at that level). ``kind="irregular"`` or ``"semi-regular"``:
+        ``function(grid, n_vertices, **options) -> TIN``, a height field over the grid's
+        extent with its four corners and ``n_vertices`` vertices (within
+        :func:`~simplifiers.levels.budget_tolerance`). To run on worker processes it must
+        be importable there: defined at the top level of a module (not a lambda, not in a
+        notebook cell).
+    kind : {"regular", "irregular", "semi-regular"}
+    description : str
+        One line for listings (default: the first line of the function's docstring).
+    options : sequence of str
+        The keyword options it accepts (through :func:`simplify`).
+    cost_rank, style, memory, default
+        As in :class:`Method`: scheduling order (lower first), the figures' colour and
+        marker, the memory estimate, and whether a comparison runs it by default.
+    replace : bool
+        Replace a method registered earlier under this name (never a built-in one).
+
+    Returns
+    -------
+    Method
+
+    Raises
+    ------
+    ValueError
+        A name that is empty, built in or (without ``replace``) taken; an unknown kind.
+    TypeError
+        A function that is not callable or cannot take ``(grid, level_or_n_vertices,
+        **options)``.
+
+    Examples
+    --------
+    >>> from terrainvis import synthetic_terrain
+    >>> from simplifiers.levels import coarse_coords
+    >>> from terrainvis import HeightGrid
+    >>> def every_other(grid, level):
+    ...     step = 2 ** level
+    ...     xs, ys = coarse_coords(grid.xs, level), coarse_coords(grid.ys, level)
+    ...     return HeightGrid.from_coords(grid.height_on_grid(xs, ys), xs, ys)
+    >>> m = register("every-other", every_other, kind="regular", description="samples at the coarse positions")
+    >>> simplify(synthetic_terrain("hills", size=33), "every-other", 2).shape
+    (9, 9)
+    >>> _ = unregister("every-other")
+    """
+    if not isinstance(name, str) or not name.strip() or name != name.strip() or "," in name:
+        raise ValueError(f"name must be a non-empty method name without commas or surrounding spaces, got {name!r}")
+    if name in BUILTIN:
+        raise ValueError(f"method {name!r} is built in: register yours under another name")
+    if name in METHODS and not replace:
+        raise ValueError(f"a method named {name!r} is registered already; pass replace=True to replace it, or "
+                         "choose another name")
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {list(KINDS)}, got {kind!r}")
+    if not callable(function):
+        raise TypeError(f"function must be callable, got {describe(function)}")
+    if isinstance(options, str) or not all(isinstance(o, str) for o in options):
+        raise TypeError(f"options must be a sequence of option names, got {options!r}")
+    _check_signature(name, function, kind, tuple(options))
+    if not description:
+        doc = inspect.getdoc(function) or ""
+        description = doc.splitlines()[0] if doc else f"{kind} method {name} (registered)"
+    method = Method(
+        name, kind, getattr(function, "__module__", None) or "", getattr(function, "__qualname__", name),
+        description, options=tuple(options), cost_rank=as_int(cost_rank, "cost_rank"), style=tuple(style),
+        memory=tuple(memory), default=bool(default), whole_grid=kind == "regular", function=function,
+    )
+    METHODS[name] = method
+    return method
+
+
+def _check_signature(name: str, function, kind: str, options: tuple) -> None:
+    try:
+        sig = inspect.signature(function)
+    except (TypeError, ValueError):  # a builtin or an extension function: nothing to check
+        return
+    second = "level" if kind == "regular" else "n_vertices"
+    try:
+        sig.bind(None, 1, **{o: None for o in options})
+    except TypeError as exc:
+        raise TypeError(f"method {name!r}: its function must take (grid, {second}"
+                        + "".join(f", {o}=..." for o in options) + f"); its signature is {sig} ({exc})") from None
+
+
+def unregister(name: str) -> Method:
+    """Remove a method added by :func:`register` (or a plugin) and return it; built-in methods stay."""
+    if name in BUILTIN:
+        raise ValueError(f"method {name!r} is built in and cannot be removed")
+    if name not in METHODS:
+        raise ValueError(f"no method named {name!r} is registered; the methods are {list(METHODS)}")
+    return METHODS.pop(name)
+
+
+#: The plugins that failed to load, by entry-point name (each reported once).
+PLUGIN_FAILURES: dict[str, str] = {}
+
+
+def load_plugins() -> list[str]:
+    """Register the methods of installed plugins; return the names added.
+
+    A plugin is a package that declares, in its ``pyproject.toml``,
+    ``[project.entry-points."terrainvis.simplifiers"]`` ``my-method = "my_pkg.module:METHOD"``,
+    where ``METHOD`` is a :class:`Method` (its ``name`` is the method's name). A plugin
+    that fails to import, or whose entry is not a Method, or whose name is taken, is
+    reported once (a :class:`UserWarning` naming it and the cause, recorded in
+    :data:`PLUGIN_FAILURES`) and skipped; the other plugins load. Called when
+    :mod:`simplifiers` is imported; calling it again loads only what is new.
+    """
+    from importlib.metadata import entry_points
+
+    added = []
+    for ep in entry_points(group=PLUGIN_GROUP):
+        if ep.name in PLUGIN_FAILURES or any(m.module == ep.module and m.name == ep.name for m in METHODS.values()):
+            continue
+        try:
+            method = ep.load()
+            if not isinstance(method, Method):
+                raise TypeError(f"its value {ep.value!r} is a {type(method).__name__}, not a simplifiers.Method")
+            if method.kind not in KINDS:
+                raise ValueError(f"its kind {method.kind!r} is not one of {list(KINDS)}")
+            if method.name in METHODS:
+                if METHODS[method.name] == method:
+                    continue
+                raise ValueError(f"its method name {method.name!r} is taken"
+                                 + (" by a built-in method" if method.name in BUILTIN else ""))
+        except Exception as exc:  # a broken plugin must not break terrainvis or the other plugins
+            reason = f"{type(exc).__name__}: {exc}"
+            PLUGIN_FAILURES[ep.name] = reason
+            warnings.warn(f"simplifier plugin {ep.name!r} ({ep.value}) was not loaded: {reason}", UserWarning,
+                          stacklevel=2)
+            continue
+        METHODS[method.name] = method
+        added.append(method.name)
+    return added
+
+
 def available() -> dict[str, str]:
     """Every registered method and its kind, in the paper's order.
 
@@ -178,6 +360,8 @@ def default_methods() -> list[str]:
 
 def method_info(method) -> Method:
     """The registry entry of ``method``, or ValueError naming the valid methods."""
+    if isinstance(method, Method) and METHODS.get(method.name) == method:
+        return method
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {list(METHODS)} (see simplifiers.available()), got {method!r}")
     return METHODS[method]
@@ -234,6 +418,7 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
     if not isinstance(grid, HeightGrid):
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
     info = method_info(method)
+    method = info.name
     grid.require_finite(f"simplify(method={method!r})")
     unknown = sorted(set(options) - set(info.options) - ({"n_vertices"} if not info.regular else set()))
     if unknown:
@@ -254,6 +439,7 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
             out, extra = regular_within(grid, info.load(), level, target, options)
             level = extra.pop("level")
         seconds = time.perf_counter() - t0
+        _check_regular_result(out, grid, level, info)
     else:
         out, seconds, level, budget, extra = _run_irregular(grid, info, level, options, target)
         extra["budget"] = budget
@@ -264,6 +450,24 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
         max_error=err_max, rms_error=err_rms, seconds=seconds, **extra,
     )
     return out
+
+
+def _check_regular_result(out, grid: HeightGrid, level: int, info: Method) -> None:
+    """A regular method's result is a HeightGrid at the reverse Faber coarse positions of ``level``."""
+    if not isinstance(out, HeightGrid):
+        raise SimplificationError(f"{info.name} returned {describe(out)}, not a terrainvis.HeightGrid (a regular "
+                                  "method returns the coarse grid)")
+    shape = coarse_shape(grid.shape, level)
+    if out.shape != shape:
+        raise SimplificationError(f"{info.name} returned a {out.shape[0]}x{out.shape[1]} grid at level {level}, "
+                                  f"not the {shape[0]}x{shape[1]} of the reverse Faber coarse positions")
+    if not (np.array_equal(out.xs, coarse_coords(grid.xs, level)) and np.array_equal(out.ys, coarse_coords(grid.ys,
+                                                                                                             level))):
+        raise SimplificationError(f"{info.name} returned a grid whose coordinates are not the reverse Faber coarse "
+                                  f"positions of level {level} (simplifiers.levels.coarse_coords)")
+    if not np.isfinite(out.z).all():
+        raise SimplificationError(f"{info.name} returned a grid with {int((~np.isfinite(out.z)).sum())} non-finite "
+                                  "heights")
 
 
 def _apply_regular(grid: HeightGrid, info: Method, level: int, options) -> HeightGrid:
@@ -333,6 +537,9 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
             raise
         except Exception as exc:  # a library failed: name the method and the cause
             raise SimplificationError(f"{info.name} failed on a {grid.shape} grid: {type(exc).__name__}: {exc}") from exc
+        if not isinstance(tin, TIN):
+            raise SimplificationError(f"{info.name} returned {describe(tin)}, not a terrainvis.TIN (an {info.kind} "
+                                      "method returns a TIN)")
     seconds = time.perf_counter() - t0
     early = "max_error" in (tin.attrs.get("stopped_by"), extra.get("stopped_by"))
     if early and tin.n_vertices > budget:
@@ -359,54 +566,9 @@ def _error_note(tin: TIN, target: float, budget: int) -> dict:
 def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int | None = None) -> None:
     """Raise :class:`SimplificationError` unless ``tin`` is a valid height field over ``grid``'s extent.
 
-    The rules: the four corners are vertices and no vertex lies outside the extent; the
-    mesh is one triangulated disk (every edge shared by at most two faces, consistently
-    oriented, one boundary loop, Euler characteristic 1) whose boundary edges all lie
-    on the four boundary lines; every face is counter-clockwise in projection; the
-    projected area equals the extent's; and the vertex count is within
-    :func:`~simplifiers.levels.budget_tolerance` of ``budget`` (when given).
-
-    Together these mean the TIN covers the extent exactly once: with every face
-    counter-clockwise, the number of faces over a point equals the winding number of the
-    boundary loop around it. A loop running along the rectangle's sides has one winding
-    number k everywhere inside, and the area rule makes k = 1. So no grid sample needs to
-    be located to check coverage.
+    The rules and what the message says are :func:`terrainvis.core.repair.height_field_problems`'s
+    (with ``budget``: the vertex count within :func:`~simplifiers.levels.budget_tolerance` of it).
     """
-    xmin, xmax, ymin, ymax = grid.extent
-    v = tin.vertices
-    problems = []
-    for cx, cy in ((xmin, ymin), (xmax, ymin), (xmin, ymax), (xmax, ymax)):
-        if not ((v[:, 0] == cx) & (v[:, 1] == cy)).any():
-            problems.append(f"corner ({cx:g}, {cy:g}) is missing")
-    outside = (v[:, 0] < xmin) | (v[:, 0] > xmax) | (v[:, 1] < ymin) | (v[:, 1] > ymax)
-    if outside.any():
-        problems.append(f"{int(outside.sum())} vertices lie outside the extent")
-    area2 = signed_area2(v, tin.faces)
-    if not (area2 > 0).all():
-        problems.append(f"{int((area2 <= 0).sum())} of {area2.size} faces fold over (not counter-clockwise)")
-    area = (xmax - xmin) * (ymax - ymin)
-    if not footprint_matches(0.5 * area2.sum(), area):
-        problems.append(f"the projected area is {0.5 * area2.sum() / area:.6%} of the extent's")
-    used = np.zeros(tin.n_vertices, dtype=bool)
-    used[tin.faces.ravel()] = True
-    if not used.all():
-        problems.append(f"{int((~used).sum())} vertices belong to no face")
-    else:
-        try:
-            loop = boundary_loop(tin.faces, tin.n_vertices)
-        except NotADiskError as exc:
-            problems.append(str(exc))
-        else:
-            p, q = v[loop], v[np.roll(loop, -1)]
-            on_line = (
-                ((p[:, 0] == xmin) & (q[:, 0] == xmin)) | ((p[:, 0] == xmax) & (q[:, 0] == xmax))
-                | ((p[:, 1] == ymin) & (q[:, 1] == ymin)) | ((p[:, 1] == ymax) & (q[:, 1] == ymax))
-            )
-            if not on_line.all():
-                problems.append(f"{int((~on_line).sum())} boundary edges lie off the boundary lines")
-    if budget is not None:
-        count = check_vertex_count(tin.n_vertices, budget)
-        if count:
-            problems.append(count)
+    problems = height_field_problems(tin, grid, budget=budget)
     if problems:
         raise SimplificationError(f"{method} returned an invalid height field: " + "; ".join(problems))

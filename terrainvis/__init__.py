@@ -38,6 +38,8 @@ _API = {
     "vertical_errors": "terrainvis.core.deviation",
     "volume_error": "terrainvis.core.deviation",
     "compare": "terrainvis.experiment",
+    "evaluate": "terrainvis.experiment.evaluate",
+    "repair_tin": "terrainvis.core.repair",
 }
 #: Modules reachable as attributes (``terrainvis.io``), imported on first use.
 _MODULES = {
@@ -48,6 +50,7 @@ _MODULES = {
     "sampling": "terrainvis.core.sampling", "deviation": "terrainvis.core.deviation",
     "metrics": "terrainvis.core.metrics", "report": "terrainvis.experiment.report",
     "plot": "terrainvis.experiment.plot", "options": "terrainvis.experiment.options",
+    "testing": "terrainvis.testing",
 }
 
 __all__ = sorted(_API) + sorted(_MODULES)

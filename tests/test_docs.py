@@ -9,6 +9,12 @@
 * The README stays navigable: a table of contents, at most 200 lines, a link to every
   document in docs/, every figure in docs/figures/ shown somewhere.
 * The README's quick start is the install and test command that ``.ci/run`` runs.
+* The docs say what the code is: docs/architecture.md names every module of
+  ``terrainvis/`` and ``simplifiers/``; the user guide's options table of ``compare``
+  lists exactly the flags of ``terrainvis compare --help``; the default relocations the
+  user guide and paper.md name are ``terrainvis.relocation.default_relocations()``; the
+  output of ``terrainvis info hills`` the user guide shows is what the command prints.
+  The expected values are read from the code, never written here.
 
 The checker itself is tested on hand-worked cases (slugs, a broken file, a broken
 anchor, a link inside code) so that a checker that finds nothing cannot pass unnoticed.
@@ -16,6 +22,7 @@ anchor, a link inside code) so that a checker that finds nothing cannot pass unn
 
 from __future__ import annotations
 
+import argparse
 import re
 import unicodedata
 from pathlib import Path
@@ -216,3 +223,140 @@ def test_quick_start_is_what_ci_runs():
     assert "python3.11 -m venv .venv" in ci
     assert install in ci
     assert ".venv/bin/python -m pytest" in ci
+
+
+# ------------------------------------------------------------------ the docs say what the code is
+ARCHITECTURE = DOCS / "architecture.md"
+USER_GUIDE = DOCS / "user-guide.md"
+PAPER = DOCS / "paper.md"
+
+
+def code_modules(root: Path = REPO) -> list[str]:
+    """Every module of terrainvis/ and simplifiers/ by its path from the repository
+    (``terrainvis/core/mesh.py``), leaving out terrainvis/data/ and the ``__init__.py``
+    and ``__main__.py`` files."""
+    out = []
+    for pkg in ("terrainvis", "simplifiers"):
+        for p in sorted((root / pkg).rglob("*.py")):
+            rel = p.relative_to(root)
+            if rel.parts[:2] == ("terrainvis", "data") or p.name in ("__init__.py", "__main__.py"):
+                continue
+            out.append(rel.as_posix())
+    return out
+
+
+def unnamed(text: str, modules) -> list[str]:
+    """The modules whose path (``terrainvis/core/mesh.py``) ``text`` never writes out."""
+    return [m for m in modules if not re.search(rf"(?<![\w/.-]){re.escape(m)}(?![\w/])", text)]
+
+
+def section(text: str, title: str) -> list[str]:
+    """The lines of the section under the heading ``title`` (to the next heading of its level or above)."""
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        m = _HEADING.match(line)
+        if m and m.group(2) == title:
+            level = len(m.group(1))
+            out = []
+            for nxt in lines[i + 1:]:
+                h = _HEADING.match(nxt)
+                if h and len(h.group(1)) <= level:
+                    break
+                out.append(nxt)
+            return out
+    raise AssertionError(f"no heading {title!r}")
+
+
+def table(lines, first: str) -> list[list[str]]:
+    """The body rows (cells stripped) of the first Markdown table in ``lines`` whose first header cell is ``first``."""
+    rows, found = [], False
+    for line in lines:
+        if not line.lstrip().startswith("|"):
+            if found:
+                break
+            continue
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", line.strip())[1:-1]]
+        if not found:
+            found = cells[0] == first
+            continue
+        if not all(set(c) <= set("-: ") for c in cells):
+            rows.append(cells)
+    assert found, f"no table with the header {first!r}"
+    return rows
+
+
+def flags_in(cell: str) -> set[str]:
+    """The long flags written in a cell's code spans (```--points N```, ```--cascade` / `--no-cascade```)."""
+    spans = re.findall(r"`([^`]+)`", cell)
+    return {f for span in spans for f in re.findall(r"(?<![\w-])--[a-z][a-z-]*", span)}
+
+
+def compare_flags() -> set[str]:
+    """The long flags of ``terrainvis compare`` as its parser declares them (``--help`` aside)."""
+    from terrainvis.cli import _parser
+
+    sub = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return {s for a in sub.choices["compare"]._actions for s in a.option_strings
+            if s.startswith("--") and s != "--help"}
+
+
+def test_the_module_checker_on_hand_worked_cases(tmp_path):
+    for rel in ("terrainvis/__init__.py", "terrainvis/core/__init__.py", "terrainvis/core/mesh.py",
+                "terrainvis/core/_kernels.py", "terrainvis/cli/__main__.py", "terrainvis/data/make_bundled.py",
+                "simplifiers/registry.py"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("", encoding="utf-8")
+    found = code_modules(tmp_path)
+    assert found == ["terrainvis/core/_kernels.py", "terrainvis/core/mesh.py", "simplifiers/registry.py"]
+    text = "| `terrainvis/core/mesh.py` | meshes |\nsee my_terrainvis/core/_kernels.py and simplifiers/registry.pyc"
+    assert unnamed(text, found) == ["terrainvis/core/_kernels.py", "simplifiers/registry.py"]
+    assert flags_in("`--cascade` / `--no-cascade`, `--fill`, `--crop-valid` and not --workers") == {
+        "--cascade", "--no-cascade", "--fill", "--crop-valid"}
+    rows = table(["| option | default |", "|---|---|", "| `--a\\|b` | 1 |", "", "| other |"], "option")
+    assert rows == [["`--a\\|b`", "1"]]
+
+
+def test_architecture_names_every_module():
+    modules = code_modules()
+    assert "terrainvis/core/mesh.py" in modules and "simplifiers/registry.py" in modules
+    missing = unnamed(ARCHITECTURE.read_text(encoding="utf-8"), modules)
+    assert not missing, ("docs/architecture.md does not name these modules (write each path, e.g. "
+                         "`terrainvis/core/mesh.py`, with one line on what it is for): " + ", ".join(missing))
+
+
+def test_the_user_guides_options_table_is_compares_help():
+    rows = table(section(USER_GUIDE.read_text(encoding="utf-8"), "`compare`: the paper's experiment"), "option")
+    documented = set().union(*(flags_in(r[0]) for r in rows))
+    flags = compare_flags()
+    assert "--points" in flags and "--overwrite" in flags
+    assert documented == flags, (f"the user guide's options table of compare lacks {sorted(flags - documented)} "
+                                 f"and lists {sorted(documented - flags)}, which terrainvis compare does not take")
+
+
+def test_the_default_relocations_the_docs_name_are_the_codes():
+    from terrainvis.relocation import RELOCATIONS, default_relocations
+
+    expected = list(default_relocations())
+    rows = table(section(USER_GUIDE.read_text(encoding="utf-8"), "`compare`: the paper's experiment"), "option")
+    default = [r[1] for r in rows if "--relocations" in flags_in(r[0])]
+    assert len(default) == 1, "one row of the options table for --relocations"
+    assert re.findall(r"[\w-]+", default[0]) == expected, f"user guide: default relocations {default[0]!r}"
+    protocol = "\n".join(section(PAPER.read_text(encoding="utf-8"), "The protocol"))
+    bullet = re.findall(r"^- \*\*Relocations:\*\*.*(?:\n  .*)*", protocol, re.MULTILINE)
+    assert len(bullet) == 1, "paper.md: one '- **Relocations:**' bullet in the protocol"
+    named = [s for s in re.findall(r"`([^`]+)`", bullet[0]) if s in RELOCATIONS]
+    assert named == expected, f"paper.md's protocol names the relocations {named}, the code's defaults are {expected}"
+
+
+def test_info_as_the_user_guide_shows_it(capsys):
+    from terrainvis.cli import main
+
+    text = USER_GUIDE.read_text(encoding="utf-8").splitlines()
+    start = text.index("$ terrainvis info hills")
+    shown = []
+    for line in text[start + 1:]:
+        if line.startswith("$ ") or _FENCE.match(line):
+            break
+        shown.append(line)
+    assert main(["info", "hills"]) == 0
+    assert shown == capsys.readouterr().out.rstrip("\n").splitlines()

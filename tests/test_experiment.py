@@ -405,7 +405,7 @@ def test_viewshed_measure(small):
 
     from terrainvis import relocate, viewshed
     from terrainvis.experiment import Settings
-    from terrainvis.experiment.units import observers as _observers
+    from terrainvis.experiment.measures import observers as _observers
 
     g = {"a": small["a"]}
     kw = dict(methods=["lls", "greedy-insertion"], levels=[2], seed=3, repeats=1, measure="viewshed", n_observers=3,

@@ -20,11 +20,11 @@ LAYERS = (
     ("terrainvis.relocation",),
     ("simplifiers",),
     ("terrainvis.experiment",),
-    ("terrainvis.cli", "terrainvis.__main__"),
+    ("terrainvis.cli", "terrainvis.__main__", "terrainvis.testing"),
 )
 #: The folders the parts live in (and the top-level modules beside them).
 PARTS = {"core", "io", "visibility", "relocation", "experiment", "cli", "data"}
-TOP_LEVEL = {"__init__.py", "__main__.py", "errors.py", "tolerances.py"}
+TOP_LEVEL = {"__init__.py", "__main__.py", "errors.py", "tolerances.py", "testing.py"}
 
 
 def _files():

@@ -19,7 +19,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import simplifiers
-from simplifiers import _quadric_repair, quadric
+from simplifiers import quadric
+from terrainvis.core import repair as _quadric_repair
 from simplifiers.registry import check_height_field
 from terrainvis import TIN, HeightGrid
 from terrainvis.core.mesh import signed_area2
@@ -563,7 +564,7 @@ def test_snapping_by_hand():
     )
     f = np.array([[0, 1, 5], [1, 2, 5], [2, 3, 5], [3, 4, 5], [4, 0, 5]])
     before = v.copy(), f.copy()
-    out_v, out_f, side, stats = post.run(v, f, "test")
+    out_v, out_f, side, stats = post.run(v, f, "qec (test backend)")
     assert np.array_equal(v, before[0]) and np.array_equal(f, before[1]), "the input is not modified"
     expected = np.array(
         [[0.3, 0.0, 1.0], [2.0, 0.0, 2.0], [2.0, 2.0, 8.0], [0.0, 2.0, 6.0], [0.0, 0.35, 3.0], [1.0, 1.0, 4.0],
@@ -587,7 +588,7 @@ def test_a_mesh_that_is_not_a_disk_is_a_post_error():
     keep = np.ones(f.shape[0], dtype=bool)
     keep[[2 * (1 * 4 + 1), 2 * (1 * 4 + 1) + 1]] = False  # a hole: the two faces of cell (1, 1)
     with pytest.raises(_quadric_repair.PostError, match=r"qec \(test backend\) produced a mesh that is not a disk"):
-        post.run(base.vertices, f[keep], "test")
+        post.run(base.vertices, f[keep], "qec (test backend)")
 
 
 def test_remove_vertices_keeps_a_valid_height_field():
@@ -595,7 +596,7 @@ def test_remove_vertices_keeps_a_valid_height_field():
     grid = _grid_5x5()
     base = grid.to_tin()
     post = _quadric_repair.PostProcessor(grid, corner_tol=0.25)
-    v, f, side, _ = post.run(base.vertices, base.faces, "test")
+    v, f, side, _ = post.run(base.vertices, base.faces, "qec (test backend)")
     out_v, out_f, out_side, removed = post.remove_vertices(v, f, side, 10)
     assert removed == 10 and out_v.shape[0] == 15
     assert (out_side >= 4).sum() == 4
@@ -623,7 +624,7 @@ def test_fold_over_repair_moves_only_vertices_of_folded_faces(r, c, du, dv):
     f = base.faces.astype(np.int64)
     post = _quadric_repair.PostProcessor(grid, corner_tol=0.25)
     bad = signed_area2(v, f) <= post.area_eps
-    out_v, out_f, side, stats = post.run(v, f, "test")
+    out_v, out_f, side, stats = post.run(v, f, "qec (test backend)")
     assert np.array_equal(out_f, f)
     assert stats["collapses"] == 0 and stats["snapped"] == 0
     moved = np.flatnonzero((out_v[:, :2] != v[:, :2]).any(axis=1))
@@ -651,7 +652,7 @@ def test_boundary_vertices_snap_back_onto_their_line(k, along, inward, which):
     vid = r * 5 + c
     v[vid, :2] += 10.0 * (along * e + inward * n)
     post = _quadric_repair.PostProcessor(grid, corner_tol=0.25)
-    out_v, out_f, side, stats = post.run(v, base.faces.astype(np.int64), "test")
+    out_v, out_f, side, stats = post.run(v, base.faces.astype(np.int64), "qec (test backend)")
     expected = base.vertices[vid, :2] + 10.0 * along * e
     assert out_v[vid, 0] == pytest.approx(expected[0], abs=1e-9)
     assert out_v[vid, 1] == pytest.approx(expected[1], abs=1e-9)

@@ -4,6 +4,8 @@
   120x120 terrains and the real Jacksboro DEM), prints Tables 1-4, the cost table and
   the paper's findings, and writes ``results.csv``, ``tables.md``, figures and the
   simplified terrains (``simplified/``) into ``--out``.
+* ``terrainvis evaluate DEM SIMPLIFIED...`` measures simplifications made elsewhere (meshes,
+  rasters) as ``compare`` measures a method's, optionally beside built-in methods.
 * ``terrainvis simplify DEM -m METHOD -l LEVEL -o OUT`` simplifies a DEM and writes the
   result as a grid (``.tif``, ``.asc``, ``.npz``) or a mesh (``.ply``, ``.obj``, ``.stl``,
   ``.glb``; TINs also ``.npz``).
@@ -36,7 +38,7 @@ import argparse
 import contextlib
 import sys
 
-from . import compare, cumulative, info, los, relocate, simplify, viewshed
+from . import compare, cumulative, evaluate, info, los, relocate, simplify, viewshed
 from ._common import ParseError, Parser
 
 __all__ = ["main"]
@@ -44,8 +46,8 @@ __all__ = ["main"]
 
 #: The commands, in the order ``terrainvis --help`` lists them: each module declares its
 #: sub-parser (``add_parser(sub)``) and runs it (``run(args) -> exit status``).
-COMMANDS = {"compare": compare, "simplify": simplify, "los": los, "viewshed": viewshed, "cumulative": cumulative,
-            "relocate": relocate, "info": info}
+COMMANDS = {"compare": compare, "evaluate": evaluate, "simplify": simplify, "los": los, "viewshed": viewshed,
+            "cumulative": cumulative, "relocate": relocate, "info": info}
 
 
 def _parser() -> argparse.ArgumentParser:

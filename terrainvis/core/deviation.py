@@ -129,7 +129,7 @@ def volume_error(fine: HeightGrid, coarse, *, method: str = "exact") -> float:
     compensated (Neumaier [2]_) per chunk of faces and the chunks added exactly
     (:func:`math.fsum`), so the result does not depend on the thread count. The tests
     check it against manifold3d (``method="manifold"``) to 1e-12 relative; its cost is
-    O(coarse faces + fine cells crossed) (timings in docs/simplifiers-and-files.md).
+    O(coarse faces + fine cells crossed) (timings in docs/performance.md#simplifiers-figures-behind-their-defaults).
 
     References
     ----------

@@ -1,8 +1,10 @@
 """The paper's experiment as one call: :func:`compare`.
 
 For every terrain T, method, level and point set P, :func:`compare` simplifies T into
-S(T), computes the visibility matrix of P on T, relocates P onto S(T) in each of the
-three ways, computes the visibility matrix there, and counts how many verdicts agree.
+S(T), computes the visibility matrix of P on T, relocates P onto S(T) with each
+relocation of the run (:data:`terrainvis.relocation.RELOCATIONS`), computes the
+visibility matrix there, and counts how many verdicts agree (the measure,
+:mod:`terrainvis.experiment.measures`, may count viewshed cells instead).
 It also measures what the paper claimed but never measured: the time and memory that
 S(T) saves, and how far its shape is from T.
 

@@ -16,7 +16,7 @@ passed on to every visibility computation of the run. From that one entry:
   (:func:`los_keywords`).
 
 Checks that involve several options (or the terrains) are the :data:`RULES`.
-``docs/architecture-options.md`` shows how to add an option.
+``docs/architecture.md`` ("How to add an option") shows how to add one.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ DISTANCE_UNITS = ("world", "cells")
 #: ``cascade="auto"`` cascades on grids of more than this many samples (above about
 #: 724²; at 1024² three independent QEC decimations take minutes and, two at once on two
 #: workers, 2.9 GB; the paper's 120² terrains stay independent). :func:`terrainvis.compare`
-#: reads it as ``terrainvis.experiment.CASCADE_AUTO_MIN_SAMPLES`` when it plans a run.
+#: reads it as ``terrainvis.experiment.comparison.CASCADE_AUTO_MIN_SAMPLES`` when it plans a run.
 CASCADE_AUTO_MIN_SAMPLES = 1 << 19
 
 
@@ -290,6 +290,38 @@ def _method_names():
     return list(METHODS)
 
 
+def _methods(value, name: str) -> tuple:
+    """A check: method names, a :class:`simplifiers.Method` counting as its name (registered first if new)."""
+    from simplifiers import METHODS, Method
+
+    if isinstance(value, (list, tuple)):
+        named = []
+        for v in value:
+            if isinstance(v, Method):
+                if v.name not in METHODS:
+                    _register_entry(v)
+                elif METHODS[v.name] != v:
+                    raise ValueError(f"{name}: a different method named {v.name!r} is registered already; "
+                                     "unregister it or give yours another name")
+                v = v.name
+            named.append(v)
+        value = named
+    elif isinstance(value, Method):
+        return _methods([value], name)
+    return names(_method_names, _default_method_names)(value, name)
+
+
+def _register_entry(method) -> None:
+    from simplifiers.registry import METHODS, register
+
+    if method.function is not None:
+        register(method.name, method.function, kind=method.kind, description=method.description,
+                 options=method.options, cost_rank=method.cost_rank, style=method.style, memory=method.memory,
+                 default=method.default)
+    else:  # a Method that names its module and attribute, as a plugin's does
+        METHODS[method.name] = method
+
+
 def _default_method_names():
     from simplifiers import default_methods
 
@@ -323,10 +355,12 @@ def _engines():
 # ---------------------------------------------------------------------- the options
 _DECLARED = [
     Option(
-        "methods", None, names(_method_names, _default_method_names),
-        "simplification methods", "sequence of str", default_text="all registered methods but visopt",
-        doc=("The registry :data:`simplifiers.METHODS` lists them, in the paper's order; the default is "
-             "every method whose entry has ``default=True`` (all but ``visopt``)."),
+        "methods", None, _methods,
+        "simplification methods", "sequence of str or simplifiers.Method", default_text="all registered methods but visopt",
+        doc=("Names of the registry :data:`simplifiers.METHODS` (in the paper's order, then the methods registered "
+             "from outside: :func:`simplifiers.register`, plugins) or :class:`simplifiers.Method` entries, which "
+             "are registered under their names if they are not yet; the default is every method whose entry has "
+             "``default=True`` (all built-in ones but ``visopt``)."),
         cli=Flag(many=True, metavar="M"),
     ),
     Option(
@@ -638,14 +672,17 @@ def docstring_section(indent: str = "    ") -> str:
 
 
 # ---------------------------------------------------------------------- the command line
-def add_flags(parser: argparse.ArgumentParser) -> None:
-    """Add every option's flag to ``terrainvis compare``'s parser.
+def add_flags(parser: argparse.ArgumentParser, *, exclude=()) -> None:
+    """Add every option's flag (but those named in ``exclude``) to a command's parser.
 
-    A flag not given leaves no attribute on the parsed namespace (``argparse.SUPPRESS``),
-    so :func:`given` returns only what the user typed, and everything else takes the
-    option's default in :func:`validate`.
+    ``terrainvis compare`` takes them all; ``terrainvis evaluate`` all but the methods,
+    levels and cascading. A flag not given leaves no attribute on the parsed namespace
+    (``argparse.SUPPRESS``), so :func:`given` returns only what the user typed, and
+    everything else takes the option's default in :func:`validate`.
     """
     for option in OPTIONS.values():
+        if option.name in exclude:
+            continue
         cli = option.cli
         if isinstance(cli, Switch):
             _add_switch(parser, option, cli)

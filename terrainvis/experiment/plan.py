@@ -237,16 +237,19 @@ def cascades(settings: Settings, grid: HeightGrid, method: str, *,
 
 
 def extensions(settings: Settings) -> tuple:
-    """The entries of the run's measure, engine and relocations that were registered at run time, not built in.
+    """The entries of the run's methods, measure, engine and relocations that were not built in.
 
     A worker process imports terrainvis afresh and knows only the built-in entries: these
     are sent with every task (:func:`terrainvis.experiment.units.call` installs them).
     """
+    import simplifiers.registry as methods
+
     from ..relocation import registry as relocations
     from ..visibility import engines
     from . import measures
 
-    out = [relocations.RELOCATIONS[r] for r in settings.relocations if r not in relocations.BUILTIN]
+    out = [methods.METHODS[m] for m in settings.methods if m not in methods.BUILTIN]
+    out += [relocations.RELOCATIONS[r] for r in settings.relocations if r not in relocations.BUILTIN]
     if settings.measure not in measures.BUILTIN:
         out.append(measures.MEASURES[settings.measure])
     if settings.engine != engines.AUTO and settings.engine not in engines.BUILTIN:
@@ -273,7 +276,10 @@ def check_sendable(entries, *, dask: bool) -> None:
 
     where = "the dask cluster" if dask else "worker processes"
     for entry in entries:
-        fn = next(getattr(entry, a) for a in ("function", "rows", "pairs") if hasattr(entry, a))
+        fn = next((getattr(entry, a) for a in ("function", "rows", "pairs") if getattr(entry, a, None) is not None),
+                  None)
+        if fn is None:  # a plugin's Method names a module and an attribute: the workers import it themselves
+            continue
         what = f"{type(entry).__name__.lower()} {entry.name!r}"
         name = getattr(fn, "__qualname__", repr(fn))
         advice = ("define it at the top level of a module the workers can import (a file, not a notebook cell), or "

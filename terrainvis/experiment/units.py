@@ -17,12 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .measures import MEASURES, observers, point_sets
+from .measures import MEASURES
 from .options import Settings, los_keywords
 from ..core.terrain import HeightGrid
 
 __all__ = [
-    "point_sets", "observers", "end_radius_for", "simplified_path", "run_unit", "call", "warm_up", "warm_up_part",
+    "end_radius_for", "simplified_path", "run_unit", "measured_rows", "failed_rows", "call", "install", "warm_up",
+    "warm_up_part",
 ]
 
 
@@ -72,38 +73,61 @@ def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
     """The rows of one terrain x method x level, and the simplified terrain (None when it failed)."""
     from simplifiers import METHODS
 
-    from ..core.deviation import volume_error
-
-    base = {
-        "terrain": name, "method": method, "kind": METHODS[method].kind, "level": level, "measure": settings.measure,
-        "predicate": settings.predicate, "n_points": MEASURES[settings.measure].n_points(settings),
-        "n_vertices_original": grid.size, "nbytes_original": grid.nbytes, "seed": settings.seed,
-        "distance_unit": settings.distance_unit, "offset": settings.offset, "cascaded": start is not None,
-        "error": "",
-    }
+    base = _base(grid, name, method, METHODS[method].kind, level, settings)
+    base["cascaded"] = start is not None
     simplified = None
     try:
         simplified = _simplify_level(grid, method, level, start)
         base["cascaded"] = bool(simplified.attrs.get("cascaded", False))
         if save_dir is not None:
             _save(simplified, simplified_path(save_dir, name, method, level))
-        meta = simplified.attrs
-        base.update(
-            n_vertices=meta["n_vertices"], size_fraction=meta["n_vertices"] / grid.size, nbytes=meta["nbytes"],
-            max_error=meta["max_error"], rms_error=meta["rms_error"], simplify_seconds=meta["seconds"],
-            volume_error=volume_error(grid, simplified) if settings.volume else np.nan,
-            end_radius=end_radius_for(simplified, grid, level, settings.predicate),
-            backend=str(meta.get("backend", "")),
-        )
-        rows = MEASURES[settings.measure].rows(grid, simplified, base, settings, sets, los_keywords(settings))
+        rows = measured_rows(grid, simplified, base, settings, sets)
     except Exception as exc:  # record the failure in this unit's rows; the run goes on
-        message = f"{type(exc).__name__}: {exc}".replace("\n", " ")
-        rows = [
-            dict(base, set=s, relocation=how, max_distance=d, error=message)
-            for s in range(len(sets)) for how in settings.relocations for d in settings.max_distance
-        ]
+        rows = failed_rows(base, exc, settings, sets)
         simplified = None
     return rows, simplified
+
+
+def _base(grid: HeightGrid, name: str, method: str, kind: str, level: int, settings: Settings) -> dict:
+    """The columns every row of a unit shares before anything is measured."""
+    return {
+        "terrain": name, "method": method, "kind": kind, "level": level, "measure": settings.measure,
+        "predicate": settings.predicate, "n_points": MEASURES[settings.measure].n_points(settings),
+        "n_vertices_original": grid.size, "nbytes_original": grid.nbytes, "seed": settings.seed,
+        "distance_unit": settings.distance_unit, "offset": settings.offset, "cascaded": False, "error": "",
+    }
+
+
+def measured_rows(grid: HeightGrid, simplified, base: dict, settings: Settings, sets) -> list[dict]:
+    """The rows of a unit whose simplified terrain is ``simplified``: its size, errors and volume, then the measure.
+
+    ``base`` holds the unit's shared columns (terrain, method, kind, level, ...);
+    ``simplified.attrs`` may hold ``seconds`` (the simplification's time) and ``backend``.
+    :func:`terrainvis.evaluate` calls it with a terrain simplified elsewhere.
+    """
+    from ..core.deviation import vertical_errors, volume_error
+
+    meta = simplified.attrs
+    n_vertices = simplified.size if isinstance(simplified, HeightGrid) else simplified.n_vertices
+    if "max_error" in meta and "rms_error" in meta:
+        err_max, err_rms = meta["max_error"], meta["rms_error"]
+    else:
+        err_max, err_rms = vertical_errors(grid, simplified)
+    base = dict(
+        base, n_vertices=int(n_vertices), size_fraction=n_vertices / grid.size, nbytes=int(simplified.nbytes),
+        max_error=err_max, rms_error=err_rms, simplify_seconds=meta.get("seconds", np.nan),
+        volume_error=volume_error(grid, simplified) if settings.volume else np.nan,
+        end_radius=end_radius_for(simplified, grid, base["level"], settings.predicate),
+        backend=str(meta.get("backend", "")),
+    )
+    return MEASURES[settings.measure].rows(grid, simplified, base, settings, sets, los_keywords(settings))
+
+
+def failed_rows(base: dict, exc: BaseException, settings: Settings, sets) -> list[dict]:
+    """The rows of a unit that failed: every set, relocation and distance, with the message in ``error``."""
+    message = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+    return [dict(base, set=s, relocation=how, max_distance=d, error=message)
+            for s in range(len(sets)) for how in settings.relocations for d in settings.max_distance]
 
 
 def _simplify_level(grid, method, level, start):
@@ -157,8 +181,10 @@ def call(extensions, fn, *args):
 
 
 def install(extensions) -> None:
-    """Register each of ``extensions`` (relocations, measures and engines registered at run time) unless
-    this process has it already."""
+    """Register each of ``extensions`` (methods, relocations, measures and engines registered at run time)
+    unless this process has it already."""
+    import simplifiers.registry as methods
+
     from ..relocation import registry as relocations
     from ..visibility import engines
     from . import measures
@@ -167,6 +193,9 @@ def install(extensions) -> None:
                   (measures.Measure, measures.MEASURES, measures.register),
                   (engines.Engine, engines.ENGINES, engines.register))
     for entry in extensions:
+        if isinstance(entry, methods.Method) and methods.METHODS.get(entry.name) != entry:
+            methods.METHODS[entry.name] = entry  # an entry checked where it was registered
+            continue
         for kind, table, register in registries:
             if isinstance(entry, kind) and table.get(entry.name) != entry:
                 register(entry, replace=True)

@@ -1,10 +1,16 @@
-"""Turn a decimated mesh into a valid height field over a grid's exact extent.
+"""Height fields over a grid's extent: the rules a TIN must obey, and the repair that makes a mesh obey them.
 
-The decimation libraries behind :mod:`simplifiers.quadric` do not keep a terrain's
-footprint: pymeshlab pulls the border in by a fraction of a cell (or freezes every border
-vertex), fast-simplification moves corners away, and both can leave a few faces folded
-over in projection. :class:`PostProcessor` repairs one decimated mesh so that it obeys the
-rules of :func:`simplifiers.registry.check_height_field`:
+A simplified terrain in TIN form must cover the grid's rectangle exactly once: its four
+corners are vertices, no vertex lies outside, every face is counter-clockwise seen from
+above, and the mesh is one disk whose boundary runs along the rectangle's sides.
+:func:`height_field_problems` lists what a mesh breaks, each with where (the first folded
+face's centre, the first vertex outside, a missing corner).
+
+Mesh decimators do not keep a terrain's footprint: pymeshlab pulls the border in by a
+fraction of a cell (or freezes every border vertex), fast-simplification and
+meshoptimizer move corners away, and all can leave faces folded over in projection.
+:func:`repair_tin` (built on :class:`PostProcessor`, which :mod:`simplifiers.quadric`
+runs on every decimated mesh) repairs such a mesh and reports what it changed:
 
 1. **Boundary snapping.** The boundary loop of the decimated disk is split into four
    chains by the four corners. A boundary vertex within ``corner_tol`` of a corner
@@ -35,12 +41,12 @@ import math
 
 import numpy as np
 
-from terrainvis.core.mesh import NotADiskError, boundary_loop, edge_keys, half_edges, signed_area2
-from terrainvis.errors import SimplificationError
-from terrainvis.core.terrain import HeightGrid
-from terrainvis.tolerances import DIVISOR_FLOOR, FACE_AREA_REL, STAR_MARGIN_MIN
+from ..errors import SimplificationError
+from ..tolerances import DIVISOR_FLOOR, FACE_AREA_REL, STAR_MARGIN_MIN
+from .mesh import NotADiskError, boundary_loop, edge_keys, footprint_matches, half_edges, signed_area2
+from .terrain import TIN, HeightGrid
 
-__all__ = ["PostError", "PostProcessor"]
+__all__ = ["PostError", "PostProcessor", "height_field_problems", "repair_tin"]
 
 # side codes of a vertex: INTERIOR, k in 0..3 on side k (from corner k to corner k+1,
 # counter-clockwise from (xmin, ymin)), CORNER + k for corner k
@@ -49,7 +55,7 @@ CORNER = 4
 
 
 class PostError(SimplificationError):
-    """Post-processing could not turn one decimated mesh into a valid height field."""
+    """A mesh could not be repaired into a valid height field (the message says why)."""
 
 
 class PostProcessor:
@@ -100,7 +106,7 @@ class PostProcessor:
         faces : (m, 3) int
             Its faces; every vertex must be used.
         backend : str
-            Named in error messages.
+            What produced the mesh, named in error messages (``"qec (pymeshlab backend)"``).
 
         Returns
         -------
@@ -125,7 +131,7 @@ class PostProcessor:
         try:
             loop = boundary_loop(f, v.shape[0])
         except NotADiskError as exc:
-            raise PostError(f"qec ({backend} backend) produced a mesh that is not a disk: {exc}") from None
+            raise PostError(f"{backend} produced a mesh that is not a disk: {exc}") from None
         # a library never flips the whole mesh, but make sure rather than trust it: the faces'
         # signed areas sum to the boundary loop's (shoelace), which is cheaper to compute
         p, q = v[loop, :2], v[np.roll(loop, -1), :2]
@@ -166,7 +172,7 @@ class PostProcessor:
         existing = [p for p, ins in corner_at if not ins]
         if not ok or len(set(existing)) != len(existing):
             raise PostError(
-                f"qec ({backend} backend): the decimated boundary does not pass the four corners in order "
+                f"{backend}: the boundary does not pass the four corners in order "
                 f"(corner positions along the boundary loop: {rel})"
             )
         return corner_at, start, rel
@@ -293,7 +299,7 @@ class PostProcessor:
         area2 = signed_area2(mesh.v, mesh.f)
         nbad = int((mesh.alive & (area2 <= self.area_eps)).sum())
         raise PostError(
-            f"qec ({backend} backend): {nbad} faces still fold over after {repairs} relocations and "
+            f"{backend}: {nbad} faces still fold over after {repairs} relocations and "
             f"{collapses} collapses"
         )
 
@@ -494,3 +500,168 @@ def _line_distance(p, k: int, extent) -> float:
     """Distance from point ``p`` to the line of side ``k`` of ``extent``."""
     xmin, xmax, ymin, ymax = extent
     return float((abs(p[1] - ymin), abs(p[0] - xmax), abs(p[1] - ymax), abs(p[0] - xmin))[k])
+
+
+# ---------------------------------------------------------------------- the rules and the public repair
+def height_field_problems(tin, grid, *, budget: int | None = None) -> list[str]:
+    """What keeps ``tin`` from being a valid height field over ``grid``'s extent, each with where; [] when valid.
+
+    The rules: the four corners are vertices and no vertex lies outside the extent; every
+    face is counter-clockwise in projection; every vertex belongs to a face; the mesh is
+    one triangulated disk (every edge shared by at most two faces, consistently oriented,
+    one boundary loop) whose boundary edges all lie on the four boundary lines; the
+    projected area equals the extent's; and, with ``budget``, the vertex count is within
+    :func:`simplifiers.levels.budget_tolerance` of it.
+
+    Together these mean the TIN covers the extent exactly once: with every face
+    counter-clockwise, the number of faces over a point equals the winding number of the
+    boundary loop around it. A loop running along the rectangle's sides has one winding
+    number k everywhere inside, and the area rule makes k = 1. So no grid sample needs to
+    be located to check coverage.
+
+    Parameters
+    ----------
+    tin : TIN
+    grid : HeightGrid
+        Its extent is the footprint the TIN must cover.
+    budget : int, optional
+
+    Returns
+    -------
+    list of str
+        One entry per broken rule, the first offender's position in the grid's
+        coordinates: ``"corner (0, 3570) is missing"``, ``"12 vertices lie outside the
+        extent (the first at (3581.2, 40))"``, ``"3 of 5,102 faces fold over (not
+        counter-clockwise; the first around (1210.5, 877.3))"``, ...
+    """
+    xmin, xmax, ymin, ymax = grid.extent
+    v = tin.vertices
+    problems = []
+    for cx, cy in ((xmin, ymin), (xmax, ymin), (xmin, ymax), (xmax, ymax)):
+        if not ((v[:, 0] == cx) & (v[:, 1] == cy)).any():
+            problems.append(f"corner ({cx:g}, {cy:g}) is missing")
+    outside = (v[:, 0] < xmin) | (v[:, 0] > xmax) | (v[:, 1] < ymin) | (v[:, 1] > ymax)
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        problems.append(f"{int(outside.sum())} vertices lie outside the extent (the first at ({v[k, 0]:.6g}, "
+                        f"{v[k, 1]:.6g}))")
+    area2 = signed_area2(v, tin.faces)
+    bad = area2 <= 0
+    if bad.any():
+        f = int(np.flatnonzero(bad)[0])
+        cx, cy = v[tin.faces[f], :2].mean(axis=0)
+        problems.append(f"{int(bad.sum())} of {area2.size:,} faces fold over (not counter-clockwise; the first "
+                        f"around ({cx:.6g}, {cy:.6g}))")
+    area = (xmax - xmin) * (ymax - ymin)
+    if not footprint_matches(0.5 * area2.sum(), area):
+        problems.append(f"the projected area is {0.5 * area2.sum() / area:.6%} of the extent's")
+    used = np.zeros(tin.n_vertices, dtype=bool)
+    used[tin.faces.ravel()] = True
+    if not used.all():
+        k = int(np.flatnonzero(~used)[0])
+        problems.append(f"{int((~used).sum())} vertices belong to no face (the first at ({v[k, 0]:.6g}, "
+                        f"{v[k, 1]:.6g}))")
+    else:
+        try:
+            loop = boundary_loop(tin.faces, tin.n_vertices)
+        except NotADiskError as exc:
+            problems.append(str(exc))
+        else:
+            p, q = v[loop], v[np.roll(loop, -1)]
+            on_line = (
+                ((p[:, 0] == xmin) & (q[:, 0] == xmin)) | ((p[:, 0] == xmax) & (q[:, 0] == xmax))
+                | ((p[:, 1] == ymin) & (q[:, 1] == ymin)) | ((p[:, 1] == ymax) & (q[:, 1] == ymax))
+            )
+            if not on_line.all():
+                k = int(np.flatnonzero(~on_line)[0])
+                problems.append(f"{int((~on_line).sum())} boundary edges lie off the boundary lines (the first from "
+                                f"({p[k, 0]:.6g}, {p[k, 1]:.6g}))")
+    if budget is not None:
+        tol = max(1, int(_budget_window() * budget))
+        if abs(tin.n_vertices - budget) > tol:
+            problems.append(f"it has {tin.n_vertices} vertices for a budget of {budget} +- {tol}")
+    return problems
+
+
+def _budget_window() -> float:
+    from ..tolerances import BUDGET_WINDOW_REL
+
+    return BUDGET_WINDOW_REL
+
+
+def repair_tin(tin, grid: HeightGrid, *, corner_tol: float = 0.5, source: str = "the mesh") -> TIN:
+    """A mesh made into a valid height field over ``grid``'s extent, with a record of what changed.
+
+    What :mod:`simplifiers.quadric` does to every mesh a decimation library returns, for
+    any mesh (:class:`PostProcessor`): boundary vertices are snapped onto the rectangle's
+    sides (within ``corner_tol`` grid spacings of a corner: onto the corner), missing
+    corners are inserted with the grid's heights, folded faces are repaired by moving a
+    vertex into the kernel of its star (taking the grid's height there) or, as a last
+    resort, by collapsing it. A mesh that is not one disk (holes, non-manifold edges,
+    several pieces) cannot be repaired.
+
+    Parameters
+    ----------
+    tin : TIN or (vertices, faces)
+        The mesh, in the grid's coordinates. Never modified.
+    grid : HeightGrid
+        The terrain whose extent the result covers (and whose heights inserted or moved
+        vertices take).
+    corner_tol : float
+        How close (in grid spacings) a boundary vertex must be to a corner to become it.
+    source : str
+        What produced the mesh, named in error messages.
+
+    Returns
+    -------
+    TIN
+        ``attrs`` keeps the input's and adds ``repair``: ``snapped`` (boundary vertices
+        moved onto a side), ``max_snap`` (the farthest such move), ``corners_inserted``,
+        ``reordered`` (sides whose order along the line was restored), ``repairs``
+        (vertices moved to unfold faces), ``collapses`` (vertices removed) and
+        ``unused_removed`` (vertices that belonged to no face).
+
+    Raises
+    ------
+    PostError
+        A :class:`~terrainvis.errors.SimplificationError` saying why the mesh cannot be
+        repaired.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from terrainvis import HeightGrid
+    >>> grid = HeightGrid(np.arange(9.0).reshape(3, 3), dx=1.0, dy=1.0)
+    >>> t = grid.to_tin()
+    >>> v = t.vertices.copy()
+    >>> v[1, :2] = [1.2, -0.1]  # a border vertex drifted outside
+    >>> for problem in height_field_problems(TIN(v, t.faces), grid):
+    ...     print(problem)
+    1 vertices lie outside the extent (the first at (1.2, -0.1))
+    the projected area is 102.500000% of the extent's
+    2 boundary edges lie off the boundary lines (the first from (0, 0))
+    >>> fixed = repair_tin(TIN(v, t.faces), grid)
+    >>> height_field_problems(fixed, grid), fixed.attrs["repair"]["snapped"]
+    ([], 1)
+    """
+    if isinstance(tin, TIN):
+        vertices, faces, attrs = tin.vertices, tin.faces, dict(tin.attrs)
+    else:
+        vertices, faces = tin
+        vertices, faces, attrs = np.asarray(vertices, dtype=np.float64), np.asarray(faces), {}
+    if not isinstance(grid, HeightGrid):
+        raise TypeError(f"grid must be a terrainvis.HeightGrid, got {type(grid).__name__}")
+    used = np.zeros(vertices.shape[0], dtype=bool)
+    used[np.asarray(faces).ravel()] = True
+    unused = int((~used).sum())
+    if unused:
+        remap = np.cumsum(used) - 1
+        vertices, faces = vertices[used], remap[np.asarray(faces)]
+    v, f, _, stats = PostProcessor(grid, corner_tol).run(vertices, faces, source)
+    record = {k: (float(val) if isinstance(val, float) else int(val)) for k, val in stats.items() if k != "boundary"}
+    record["unused_removed"] = unused
+    out = TIN(v, f, attrs={**attrs, "repair": record})
+    problems = height_field_problems(out, grid)
+    if problems:
+        raise PostError(f"{source} could not be repaired into a height field: {problems[0]}")
+    return out

@@ -1,0 +1,385 @@
+"""Evaluating a simplification made elsewhere, on the comparison's measure: :func:`evaluate`.
+
+A mesh written by another tool (a ``.ply``, ``.obj``, ``.off``, ``.stl`` or ``.glb``), a
+raster (``.tif``, ``.asc``, ``.npz``) or, in Python, a TIN, a HeightGrid or a trimesh mesh
+is measured exactly as :func:`terrainvis.compare` measures a method's result: the same
+point sets of the terrain (by its name and the seed), the same relocations, predicate and
+measure, the same columns. Its rows can therefore stand beside a comparison's, or beside
+the built-in methods at the same vertex count (``against=``).
+
+Before it is measured, the simplified terrain is put in the original's frame and
+checked:
+
+* **Frame.** Coordinates in the DEM's CRS (``frame="native"``, lon/lat degrees on a
+  geographic DEM) are moved to the terrain's own frame; ``frame="local"`` takes them as
+  they are (the frame of the Python API and of the meshes terrainvis writes). A
+  simplified terrain that does not overlap the original is refused, saying where each is.
+* **Height field.** A TIN must cover the original's footprint exactly once (its corners,
+  no vertex outside, no folded face, one disk whose boundary runs along the sides:
+  :func:`terrainvis.core.repair.height_field_problems`). Without ``repair`` the first
+  defect is reported with where it is; with ``repair=True`` the mesh is repaired as QEC's
+  output is (:func:`terrainvis.core.repair.repair_tin`) and ``attrs["repair"]`` says what
+  changed.
+* **Coverage of a raster.** A coarser raster resampled from the DEM (``gdalwarp -tr``)
+  has its sample centres half a coarse cell inside the DEM's: its edge samples are
+  extended to the DEM's footprint (recorded in ``attrs["padded"]``); a raster that covers
+  less than that is refused.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..core.terrain import TIN, HeightGrid
+from ..core.validate import choice, describe
+
+__all__ = ["evaluate", "as_simplified", "MESH_SUFFIXES", "RASTER_SUFFIXES"]
+
+#: Mesh files :func:`evaluate` reads (through trimesh).
+MESH_SUFFIXES = (".ply", ".obj", ".off", ".stl", ".glb")
+#: Raster and grid files it reads (through :func:`terrainvis.load_dem`).
+RASTER_SUFFIXES = (".tif", ".tiff", ".asc", ".npz", ".npy")
+#: The frames simplified coordinates may be given in; None chooses by what is given.
+FRAMES = ("native", "local")
+
+
+def evaluate(original, simplified, *, name: str | None = None, against=(), frame: str | None = None,
+             repair: bool = False, **options) -> pd.DataFrame:
+    """Measure simplifications made elsewhere as :func:`terrainvis.compare` measures a method's.
+
+    Parameters
+    ----------
+    original : HeightGrid, str or Path, or {name: terrain}
+        The original terrain T: a HeightGrid, a bundled name, a DEM file, or a one-entry
+        dict naming it. Its name keys the point sets, as in :func:`terrainvis.compare`:
+        evaluating a method's output under the terrain's name and the run's seed gives
+        that comparison's rows.
+    simplified : terrain or path, or a list or dict of them
+        S(T): a TIN, a HeightGrid, a ``trimesh.Trimesh``, or a file (a mesh of
+        :data:`MESH_SUFFIXES`, a raster of :data:`RASTER_SUFFIXES`, or a terrainvis
+        ``.npz`` of either kind). Several are measured one after the other; a dict gives
+        their names, else a file's stem, ``attrs["method"]`` or ``"simplified"``.
+    name : str, optional
+        The method column of a single simplified terrain.
+    against : sequence of str
+        Built-in or registered methods measured beside them at the same size: an
+        irregular method at the simplified TIN's vertex count, a regular one at the level
+        whose grid is closest to it.
+    frame : {"native", "local"}, optional
+        The frame of the simplified terrain's coordinates (see the module docstring).
+        Default: ``"local"`` for terrains given as Python objects and for files terrainvis
+        wrote (they record the georeferencing of the terrain's frame), ``"native"`` for
+        other files.
+    repair : bool
+        Repair a mesh that is not a valid height field instead of refusing it.
+    **options
+        The options of :func:`terrainvis.compare` that concern the measure (``relocations``,
+        ``n_points``, ``n_sets``, ``seed``, ``predicate``, ``measure``, ``curvature``,
+        ``max_distance``, ``offset``, ``engine``, ``volume``, ``repeats``, ...).
+
+    Returns
+    -------
+    pandas.DataFrame
+        :func:`terrainvis.compare`'s columns: one row per point set (or observer) x
+        simplified terrain (then each ``against`` method) x relocation (x distance). A
+        terrain that could not be measured keeps its rows with the message in ``error``.
+
+    Raises
+    ------
+    ValueError
+        A simplified terrain that cannot be read, is in another frame than said, does
+        not overlap or cover the original, or is not a height field (without
+        ``repair``): one line naming it and the first problem.
+
+    Examples
+    --------
+    >>> import terrainvis as tv, simplifiers
+    >>> T = tv.bundled_terrain("hills")
+    >>> S = simplifiers.simplify(T, "greedy-insertion", 3)
+    >>> df = evaluate({"hills": T}, S, name="mine", relocations=["full"], n_points=20, n_sets=1)
+    >>> df["method"].unique().tolist(), int(df["n_vertices"].iloc[0])
+    (['mine'], 225)
+    """
+    from .plan import resolve_terrains, settings_for
+
+    grids = resolve_terrains(original if isinstance(original, dict) else [original])
+    if len(grids) != 1:
+        raise ValueError(f"original must be one terrain, got {len(grids)}")
+    (tname, grid), = grids.items()
+    against = [against] if isinstance(against, str) else list(against)
+    items = _named(simplified, name, taken=against)
+    settings = settings_for(grids, {**options, "methods": against or ["simple"]})
+    if frame is not None:
+        frame = choice(frame, "frame", FRAMES)
+    terrains = {label: as_simplified(s, grid, frame=frame, repair=repair, label=label) for label, s in items}
+    _check_engine(settings, terrains)
+    return _rows(grid, tname, terrains, against, settings)
+
+
+def _named(simplified, name, taken=()) -> list[tuple[str, object]]:
+    """(label, terrain) pairs: a dict's keys, ``name``, a file's stem or the terrain's method; unique, and
+    apart from the ``taken`` names (the methods measured beside them)."""
+    if isinstance(simplified, dict):
+        items = [(str(k), v) for k, v in simplified.items()]
+    elif isinstance(simplified, (list, tuple)):
+        items = [(None, v) for v in simplified]
+    else:
+        items = [(name, simplified)]
+    if not items:
+        raise ValueError("simplified must hold at least one terrain, got an empty collection")
+    if name is not None and len(items) > 1:
+        raise ValueError("name names a single simplified terrain; give a dict {name: terrain} for several")
+    out, seen = [], set()
+    for i, (label, s) in enumerate(items):
+        if label is None:
+            if isinstance(s, (str, Path)):
+                label = Path(s).stem
+            else:
+                label = str(getattr(s, "attrs", {}).get("method") or "simplified")
+        if label in taken:
+            label = f"{label}-evaluated"
+        base, k = label, 2
+        while label in seen or label in taken:
+            label, k = f"{base}-{k}", k + 1
+        seen.add(label)
+        out.append((label, s))
+    return out
+
+
+# ---------------------------------------------------------------------- reading and checking
+def as_simplified(simplified, grid: HeightGrid, *, frame: str | None = None, repair: bool = False,
+                  label: str = "simplified"):
+    """``simplified`` (a terrain, a trimesh mesh or a file) as a TIN or HeightGrid in ``grid``'s frame, checked.
+
+    See the module docstring for the frame, the height-field rules and the coverage of a
+    raster. ``label`` names it in messages.
+    """
+    from_file = isinstance(simplified, (str, Path))
+    terrain = _read(simplified, label) if from_file else _as_terrain(simplified, label)
+    if frame is None:
+        frame = "native" if from_file and not _written_by_terrainvis(terrain) else "local"
+    terrain = _into_frame(terrain, grid, frame, label)
+    _check_overlap(terrain, grid, frame, label)
+    if isinstance(terrain, TIN):
+        return _checked_tin(terrain, grid, repair, label)
+    return _covering(terrain, grid, label)
+
+
+def _read(path, label: str):
+    from ..io import load_dem, load_terrain
+
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"simplified terrain {label!r}: {str(p)!r} does not exist")
+    suffix = p.suffix.lower()
+    if suffix == ".off":
+        return _as_terrain(_trimesh_load(p, label), label)
+    if suffix in MESH_SUFFIXES or suffix == ".npz":
+        return load_terrain(p)
+    if suffix in RASTER_SUFFIXES:
+        return load_dem(p)
+    raise ValueError(f"simplified terrain {label!r}: {p.name!r} is neither a mesh ({', '.join(MESH_SUFFIXES)}) nor a "
+                     f"raster ({', '.join(RASTER_SUFFIXES)})")
+
+
+def _trimesh_load(p: Path, label: str):
+    import trimesh
+
+    try:
+        return trimesh.load(p, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many kinds on a damaged file
+        raise ValueError(f"simplified terrain {label!r}: {p.name!r} could not be read as a mesh "
+                         f"({type(exc).__name__}: {exc})") from None
+
+
+def _as_terrain(obj, label: str):
+    if isinstance(obj, (TIN, HeightGrid)):
+        return obj
+    vertices, faces = getattr(obj, "vertices", None), getattr(obj, "faces", None)
+    if vertices is not None and faces is not None:  # a trimesh.Trimesh or alike
+        v = np.asarray(vertices, dtype=np.float64)
+        f = np.asarray(faces)
+        if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or not len(f):
+            raise ValueError(f"simplified terrain {label!r} must be a triangle mesh with 3-D vertices, got vertices "
+                             f"{v.shape} and faces {f.shape}")
+        return TIN(v, f.astype(np.int64))
+    raise TypeError(f"simplified terrain {label!r} must be a TIN, a HeightGrid, a trimesh mesh or a file path, got "
+                    f"{describe(obj)}")
+
+
+def _written_by_terrainvis(terrain) -> bool:
+    """A terrain read from a file terrainvis wrote: its coordinates are the terrain's own frame."""
+    return "xy_to_native" in terrain.attrs or "method" in terrain.attrs or "crs" in terrain.attrs
+
+
+def _into_frame(terrain, grid: HeightGrid, frame: str, label: str):
+    from ..core._positions import PositionFrame
+
+    to = PositionFrame(grid, frame)
+    if isinstance(terrain, TIN):
+        v = terrain.vertices.copy()
+        given = v[:, :2].copy()
+        v[:, :2] = to.to_grid(given)
+        # a vertex on the footprint's edge lands just beside it when the conversion rounds, or when the file
+        # stored float32 coordinates (as many mesh writers do): within that rounding it is put on the edge
+        slack = _float32_slack(grid, to) if np.array_equal(given.astype(np.float32), given) else (0.0, 0.0)
+        xmin, xmax, ymin, ymax = grid.extent
+        v[:, 0] = _onto_edge(v[:, 0], xmin, xmax, slack[0])
+        v[:, 1] = _onto_edge(v[:, 1], ymin, ymax, slack[1])
+        return TIN(v, terrain.faces, attrs=dict(terrain.attrs))
+    if frame == "local":
+        return terrain
+    # a raster: its samples in native coordinates (through its own georeferencing), then the grid's frame
+    own = PositionFrame(terrain, "native")
+    xs = to.to_grid(own.from_grid(np.column_stack([terrain.xs, np.full(terrain.xs.size, terrain.ys[0])])))
+    ys = to.to_grid(own.from_grid(np.column_stack([np.full(terrain.ys.size, terrain.xs[0]), terrain.ys])))
+    if np.ptp(xs[:, 1]) > 1e-6 * max(1.0, np.ptp(xs[:, 0])) or np.ptp(ys[:, 0]) > 1e-6 * max(1.0, np.ptp(ys[:, 1])):
+        raise ValueError(f"simplified terrain {label!r}: its rows and columns are not aligned with the DEM's in the "
+                         "DEM's frame (another projection?); resample it onto the DEM's CRS first")
+    order_x, order_y = np.argsort(xs[:, 0]), np.argsort(ys[:, 1])
+    z = terrain.z[np.ix_(order_y, order_x)]
+    return HeightGrid.from_coords(z, xs[order_x, 0], ys[order_y, 1], attrs=dict(terrain.attrs))
+
+
+def _float32_slack(grid: HeightGrid, to) -> tuple[float, float]:
+    """How far (x, y in the grid's frame) one float32 step of the given coordinates moves a position at the edge."""
+    xmin, xmax, ymin, ymax = grid.extent
+    given = to.from_grid(np.array([[xmin, ymin], [xmax, ymax]]))
+    ulp = np.spacing(np.abs(given).max(axis=0).astype(np.float32)).astype(np.float64)
+    step = np.abs(to.to_grid(given + ulp) - to.to_grid(given))
+    return float(step[:, 0].max()), float(step[:, 1].max())
+
+
+def _onto_edge(v: np.ndarray, lo: float, hi: float, slack: float = 0.0) -> np.ndarray:
+    """Coordinates within rounding (and ``slack``) of ``lo`` or ``hi``, either side, put exactly on it."""
+    from ..tolerances import EDGE_SNAP_REL, ROUNDING_ULPS
+
+    tol = EDGE_SNAP_REL * (hi - lo) + ROUNDING_ULPS * np.spacing(max(abs(lo), abs(hi))) + slack
+    v = v.copy()
+    v[np.abs(v - lo) <= tol] = lo
+    v[np.abs(v - hi) <= tol] = hi
+    return v
+
+
+def _check_overlap(terrain, grid: HeightGrid, frame: str, label: str) -> None:
+    from ..core._positions import PositionFrame
+
+    xmin, xmax, ymin, ymax = terrain.extent
+    gx0, gx1, gy0, gy1 = grid.extent
+    if xmax < gx0 or xmin > gx1 or ymax < gy0 or ymin > gy1:
+        where = PositionFrame(grid, frame)
+        hint = ("; is it in the terrain's own frame? pass frame='local' (--frame local)" if frame == "native" else
+                "; is it in the DEM's CRS? pass frame='native' (--frame native)")
+        raise ValueError(f"simplified terrain {label!r} covers x [{xmin:.6g}, {xmax:.6g}], y [{ymin:.6g}, {ymax:.6g}] "
+                         f"in the terrain's frame, which does not overlap the DEM's footprint "
+                         f"{where.footprint()}{hint}")
+
+
+def _checked_tin(tin: TIN, grid: HeightGrid, repair: bool, label: str) -> TIN:
+    from ..core.repair import height_field_problems, repair_tin
+
+    problems = height_field_problems(tin, grid)
+    if not problems:
+        return tin
+    if not repair:
+        raise ValueError(f"simplified terrain {label!r} is not a height field over the DEM's footprint: {problems[0]}"
+                         + (f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})"
+                            if len(problems) > 1 else "")
+                         + "; repair it with repair=True (--repair), as terrainvis repairs QEC's meshes")
+    try:
+        return repair_tin(tin, grid, source=f"simplified terrain {label!r}")
+    except ValueError as exc:
+        raise ValueError(str(exc)) from None
+
+
+def _covering(s: HeightGrid, grid: HeightGrid, label: str) -> HeightGrid:
+    """A raster extended by its edge samples to the grid's footprint, when it falls short by at most one of its cells."""
+    xs, ys, z = s.xs, s.ys, s.z
+    if not np.isfinite(z).all():
+        raise ValueError(f"simplified terrain {label!r} has {int((~np.isfinite(z)).sum())} nodata samples; a "
+                         "simplification must cover every point of the original")
+    gx0, gx1, gy0, gy1 = grid.extent
+    pads = []
+    for lo, hi, axis_lo, axis_hi, step, what in (
+            (gx0, gx1, xs[0], xs[-1], xs[1] - xs[0] if xs.size > 1 else 0.0, "x"),
+            (gy0, gy1, ys[0], ys[-1], ys[1] - ys[0] if ys.size > 1 else 0.0, "y")):
+        short_lo, short_hi = max(0.0, axis_lo - lo), max(0.0, hi - axis_hi)
+        if max(short_lo, short_hi) > step * (1 + 1e-9):
+            raise ValueError(f"simplified terrain {label!r} covers {what} [{axis_lo:.6g}, {axis_hi:.6g}], short of "
+                             f"the DEM's [{lo:.6g}, {hi:.6g}] by more than one of its cells; a simplification must "
+                             "cover the original's footprint")
+        pads.append((short_lo > 0, short_hi > 0))
+    (pad_x0, pad_x1), (pad_y0, pad_y1) = pads
+    if not any((pad_x0, pad_x1, pad_y0, pad_y1)):
+        return s
+    if pad_x0:
+        xs, z = np.concatenate([[gx0], xs]), np.concatenate([z[:, :1], z], axis=1)
+    if pad_x1:
+        xs, z = np.concatenate([xs, [gx1]]), np.concatenate([z, z[:, -1:]], axis=1)
+    if pad_y0:
+        ys, z = np.concatenate([[gy0], ys]), np.concatenate([z[:1], z], axis=0)
+    if pad_y1:
+        ys, z = np.concatenate([ys, [gy1]]), np.concatenate([z, z[-1:]], axis=0)
+    attrs = {**s.attrs, "padded": "edge samples extended to the DEM's footprint (a raster's sample centres lie half "
+                                  "a cell inside it)"}
+    return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+
+
+def _check_engine(settings, terrains: dict) -> None:
+    from ..visibility.engines import AUTO, ENGINES
+
+    if settings.engine == AUTO:
+        return
+    for label, t in terrains.items():
+        if not ENGINES[settings.engine].runs_on(t):
+            raise ValueError(f"engine {settings.engine!r} does not run on simplified terrain {label!r} "
+                             f"({describe(t)}); use engine='auto'")
+
+
+# ---------------------------------------------------------------------- the rows
+def _nearest_level(shape, n_vertices: int) -> int:
+    from simplifiers.levels import max_level, vertex_budget
+
+    levels = range(0, max_level(shape) + 1)
+    return min(levels, key=lambda lv: (abs(np.log(vertex_budget(shape, lv) / max(n_vertices, 1))), lv))
+
+
+def _rows(grid: HeightGrid, tname: str, terrains: dict, against: list, settings) -> pd.DataFrame:
+    from simplifiers import METHODS, simplify
+
+    from .collect import order, table
+    from .measures import MEASURES
+    from .units import _base, failed_rows, measured_rows
+
+    sets = MEASURES[settings.measure].sets(grid, tname, settings)
+    rows = []
+    for label, s in terrains.items():
+        n = s.size if isinstance(s, HeightGrid) else s.n_vertices
+        kind = "regular" if isinstance(s, HeightGrid) else str(s.attrs.get("kind") or "irregular")
+        if kind not in ("regular", "irregular", "semi-regular") or (kind == "regular") != isinstance(s, HeightGrid):
+            kind = "regular" if isinstance(s, HeightGrid) else "irregular"
+        base = _base(grid, tname, label, kind, _nearest_level(grid.shape, n), settings)
+        try:
+            rows += measured_rows(grid, s, base, settings, sets)
+        except Exception as exc:  # as compare records a unit that failed
+            rows += failed_rows(base, exc, settings, sets)
+    sizes = sorted({(s.size if isinstance(s, HeightGrid) else s.n_vertices) for s in terrains.values()})
+    for method in against:
+        info = METHODS[method]
+        done = set()
+        for n in sizes:
+            level = _nearest_level(grid.shape, n)
+            if (level if info.regular else n) in done:  # a regular method has one size per level
+                continue
+            done.add(level if info.regular else n)
+            base = _base(grid, tname, method, info.kind, level, settings)
+            try:
+                out = simplify(grid, method, level) if info.regular else simplify(grid, method, level, n_vertices=n)
+                rows += measured_rows(grid, out, base, settings, sets)
+            except Exception as exc:
+                rows += failed_rows(base, exc, settings, sets)
+    df = table(rows)
+    return order(df, {tname: grid})
