@@ -27,7 +27,7 @@ from __future__ import annotations
 
 __all__ = [
     "CLEARANCE_REL",
-    "UNIFORM_STEP_REL", "ROUNDING_ULPS", "EDGE_SNAP_REL", "DEGREE_CELL_SLACK", "SPACING_MATCH_REL",
+    "UNIFORM_STEP_REL", "ROUNDING_ULPS", "EDGE_SNAP_REL", "COVER_EDGE_CELL_REL", "DEGREE_CELL_SLACK", "SPACING_MATCH_REL",
     "RESAMPLE_SHIFT_REL", "METRIC_EDGE_MARGIN", "FLOAT32_ROUNDING_REL",
     "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
     "BUDGET_WINDOW_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
@@ -57,6 +57,11 @@ UNIFORM_STEP_REL = 1e-9
 #: were computed (``origin + step * i`` far from 0, a transform and its inverse): in the
 #: uniform-axis test and when positions are snapped onto an extent's edge.
 ROUNDING_ULPS = 8.0
+#: ``vertical_errors``: a fine sample outside the coarse terrain's extent by at most this
+#: fraction of a coarse cell counts as on its edge. A simplified grid written to a raster
+#: and read back ends up to millimetres short of the fine extent (its georeferencing is
+#: stored as an origin and a step, in degrees on a lon/lat DEM).
+COVER_EDGE_CELL_REL = 1e-3
 #: Snapping of positions onto an extent's edge: a position outside ``[lo, hi]`` by at most
 #: this fraction of ``hi - lo`` (plus :data:`ROUNDING_ULPS`) is put on the edge (positions
 #: converted from the native CRS round to just outside the terrain).

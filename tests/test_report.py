@@ -145,7 +145,7 @@ def test_oracle_gap_and_localized_tables():
     sel = df[(df["relocation"] == "half") & (df["max_distance"] == 10)]["accuracy"]
     assert loc.loc[(2, "half"), "10.00"] == pytest.approx(100 * sel.mean())
     # the main tables and the findings use the all-pairs rows of a sweep
-    assert report.paper_tables(df)["Table 1"]["n"].eq(2).all()
+    assert report.paper_tables(df)["Table 2"]["n"].eq(2).all()  # level 2: the paper's Table 2
     assert "oracle" not in report.findings(df)[3]["evidence"]
 
 

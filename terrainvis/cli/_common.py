@@ -138,6 +138,45 @@ def read_terrain(name: str, args=None):
     return label, grid
 
 
+#: Mesh files the commands read as a TIN (what ``simplify -o`` writes, and ``.off``).
+MESH_SUFFIXES = (".ply", ".obj", ".off", ".stl", ".glb")
+
+
+def read_surface(name: str, args=None, *, command: str):
+    """A terrain a command reads as it is: a TIN from a mesh file (or a TIN ``.npz``), else :func:`read_terrain`.
+
+    ``--fill``, ``--crop-valid`` and ``--metric`` concern grids; with a TIN they are refused,
+    naming ``command``.
+    """
+    path = Path(name)
+    suffix = path.suffix.lower()
+    if path.is_file() and (suffix in MESH_SUFFIXES or (suffix == ".npz" and _holds_tin(path))):
+        for flag, on in (("--fill", getattr(args, "fill", None)), ("--crop-valid", getattr(args, "crop_valid", False)),
+                         ("--metric", getattr(args, "metric", False))):
+            if on:
+                raise UsageError(f"{flag} works on a grid DEM, and {name!r} is a mesh (a TIN)")
+        return path.stem, _read_tin(path)
+    if suffix in MESH_SUFFIXES and not path.exists():
+        raise UsageError(f"mesh file {name!r} does not exist")
+    return read_terrain(name, args)
+
+
+def _holds_tin(path: Path) -> bool:
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as a:
+            return "faces" in a.files
+    except (OSError, ValueError):
+        return False
+
+
+def _read_tin(path: Path):
+    from ..experiment.evaluate import _read
+
+    return _read(path, path.stem)
+
+
 def metric_grid(name: str, grid):
     """``--metric``: a lon/lat DEM resampled onto a transverse Mercator grid (:func:`terrainvis.io.to_metric`)."""
     from ..io import to_metric

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ._common import UsageError, add_nodata, plural, read_terrain
 
+
 #: Options of compare that do not apply: what is simplified, and how, is given.
 _NOT_HERE = ("methods", "levels", "cascade")
 

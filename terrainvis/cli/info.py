@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-from ._common import add_nodata, add_positions, plural, position_frame, read_terrain
+from ..core.terrain import TIN
+from ._common import add_nodata, add_positions, plural, position_frame, read_surface
 
 
 def add_parser(sub) -> None:
-    i = sub.add_parser("info", help="describe a terrain (bundled name or DEM file)")
-    i.add_argument("terrain", help="bundled name or DEM file")
+    i = sub.add_parser("info", help="describe a terrain (bundled name, DEM file or mesh)")
+    i.add_argument("terrain", help="bundled name, DEM file, or a mesh or TIN file (.ply .obj .off .stl .glb .npz)")
     add_nodata(i)
     add_positions(i, frame=False)
 
@@ -19,7 +20,9 @@ def run(args) -> int:
 
     from simplifiers import METHODS, max_level, vertex_budget
 
-    label, grid = read_terrain(args.terrain, args)
+    label, grid = read_surface(args.terrain, args, command="info")
+    if isinstance(grid, TIN):
+        return _info_tin(label, grid)
     rows, cols = grid.shape
     local = position_frame(grid, argparse.Namespace(frame="local"))
     xmin, xmax, ymin, ymax = (local.value(v) for v in grid.extent)
@@ -46,8 +49,35 @@ def run(args) -> int:
     return 0
 
 
+def _info_tin(label: str, tin) -> int:
+    """``info`` of a mesh (a TIN): its size, extent, heights and what terrainvis recorded about it."""
+    import argparse
+
+    import numpy as np
+
+    local = position_frame(tin, argparse.Namespace(frame="local"))
+    xmin, xmax, ymin, ymax = (local.value(v) for v in tin.extent)
+    z = tin.vertices[:, 2]
+    print(f"{label}: TIN of {plural(tin.n_vertices, 'vertex', 'vertices')} and {plural(tin.n_faces, 'face')}, "
+          f"x [{xmin}, {xmax}], y [{ymin}, {ymax}], z [{np.min(z):.6g}, {np.max(z):.6g}]")
+    print(f"  size      {tin.nbytes / 1e6:.2f} MB as a TIN")
+    print(f"  extent    x [{xmin}, {xmax}], y [{ymin}, {ymax}]")
+    crs = tin.attrs.get("crs") or "not recorded"
+    print(f"  CRS       {crs}" + (" (x, y converted to local metres)" if tin.attrs.get("geographic") else ""))
+    _info_positions(tin)
+    print(f"  heights   {np.min(z):.6g} to {np.max(z):.6g}")
+    made = [f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+            for k in ("method", "level", "n_vertices", "max_error", "rms_error")
+            if (v := tin.attrs.get(k)) is not None]
+    if made:
+        print(f"  made by   {', '.join(made)}")
+    return 0
+
+
 def _info_positions(grid) -> None:
     """``info``'s lines on positions: the frame the commands take, and the local frame's distances."""
+    import numpy as np
+
     from ..core._georef import local_frame_error
 
     native = position_frame(grid, None)
@@ -59,7 +89,8 @@ def _info_positions(grid) -> None:
               "--frame local takes the x, y above (local metres)")
     if grid.attrs.get("metric_resampling"):
         print(f"  metric    {grid.attrs['metric_resampling']}")
-    errors = local_frame_error(grid.attrs, grid.ys)
+    ys = grid.ys if hasattr(grid, "ys") else np.array(grid.extent[2:])  # a TIN: its southern and northern edge
+    errors = local_frame_error(grid.attrs, ys)
     if errors is not None:
         south, north = errors
         print(f"  distances local metres with one east-west scale for every row: east-west lengths "

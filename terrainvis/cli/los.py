@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from ._common import (
     UsageError,
     add_earth,
@@ -16,7 +15,7 @@ from ._common import (
     outside_message,
     position_frame,
     read_columns,
-    read_terrain,
+    read_surface,
 )
 
 
@@ -51,7 +50,7 @@ def run(args) -> int:
     from ..visibility import line_of_sight, min_clearance
     from ..visibility.profile import lowest_point
 
-    label, grid = read_terrain(args.dem, args)
+    label, grid = read_surface(args.dem, args, command="los")
     if args.pairs:
         if args.start or args.end:
             raise UsageError("give either --pairs or --from and --to, not both")

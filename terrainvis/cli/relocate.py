@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 from ._common import (
+    MESH_SUFFIXES,
     UsageError,
     add_earth,
     add_nodata,
@@ -16,6 +17,7 @@ from ._common import (
     plural,
     position_frame,
     read_columns,
+    read_surface,
     read_terrain,
 )
 
@@ -40,7 +42,9 @@ def add_parser(sub) -> None:
     r.add_argument("--points", required=True, metavar="CSV",
                    help="the points: a CSV with columns x, y (lon, lat on a lon/lat DEM; see --frame) and optionally z")
     r.add_argument("-o", "--output", required=True, metavar="OUT.csv", help="output CSV")
-    r.add_argument("--simplified", metavar="FILE", help="the simplification (.npz from simplify or compare, .tif, .asc)")
+    r.add_argument("--simplified", metavar="FILE",
+                   help="the simplification: a grid (.npz, .tif, .asc) or a mesh (.ply, .obj, .off, .stl, .glb) as "
+                        "simplify writes them")
     r.add_argument("-m", "--method", choices=list(METHODS), metavar="METHOD",
                    help=f"simplify the DEM here instead, with one of {', '.join(METHODS)}")
     r.add_argument("-l", "--level", type=int, default=None, help="with -m: the level (default 1)")
@@ -130,8 +134,8 @@ def read_simplification(grid, args):
     path = Path(args.simplified)
     if not path.exists():
         raise UsageError(f"--simplified {args.simplified!r} does not exist")
-    if path.suffix.lower() == ".npz":
-        terrain = load_terrain(path)
+    if path.suffix.lower() == ".npz" or path.suffix.lower() in MESH_SUFFIXES:
+        terrain = load_terrain(path) if path.suffix.lower() != ".off" else read_surface(str(path), command="relocate")[1]
     else:
         from ..io import load_dem
 

@@ -64,11 +64,13 @@ def run(args) -> int:
     for note in a.get("notes", []):
         print(f"  note: {note}")
     if regular and suffix in (".tif", ".tiff", ".asc") and not result.is_uniform:
-        # the file holds the grid resampled onto uniform coordinates: its errors are not the ones above
+        # the file holds the grid resampled onto uniform coordinates: its errors are not the ones above.
+        # It is read back as evaluate reads a raster: in the DEM's CRS, moved to the DEM's own frame
+        # (a lon/lat file's local metres start at its own corner, not at the DEM's)
         from ..core.deviation import vertical_errors
-        from ..io import load_terrain
+        from ..experiment.evaluate import as_simplified
 
-        worst, rms = vertical_errors(grid, load_terrain(out))
+        worst, rms = vertical_errors(grid, as_simplified(out, grid, frame="native", label=out.name))
         print(f"  as written (resampled onto a uniform grid): max error {worst:.4g}, RMS error {rms:.4g}")
     print(f"  wrote {out}")
     return 0

@@ -16,7 +16,7 @@ from .interrupt import call, for_threads
 from .mesh import boundary_edges, footprint_matches
 from .validate import describe
 from .terrain import TIN, HeightGrid
-from ..tolerances import EXTENT_MATCH_REL
+from ..tolerances import COVER_EDGE_CELL_REL, EXTENT_MATCH_REL
 
 __all__ = ["vertical_errors", "volume_error"]
 
@@ -37,13 +37,33 @@ def vertical_errors(fine: HeightGrid, coarse) -> tuple[float, float]:
         Over every finite sample of ``fine``: max |coarse(x, y) - z| and its RMS.
     """
     _check_pair(fine, coarse)
-    approx = coarse.height_on_grid(fine.xs, fine.ys)
+    # a coarse terrain read back from a file may end a little short of the fine one's extent
+    # (COVER_EDGE_CELL_REL): samples that close are on its edge
+    xmin, xmax, ymin, ymax = coarse.extent
+    slack = COVER_EDGE_CELL_REL * _cell(coarse)
+    approx = coarse.height_on_grid(_onto(fine.xs, xmin, xmax, slack), _onto(fine.ys, ymin, ymax, slack))
     valid = np.isfinite(fine.z)
     uncovered = int(np.isnan(approx[valid]).sum())
     if uncovered:
         raise ValueError(f"coarse must cover the fine grid, but {uncovered} fine samples fall outside it")
     diff = approx[valid] - fine.z[valid]
     return float(np.abs(diff).max()), float(np.sqrt(np.mean(diff**2)))
+
+
+def _cell(terrain) -> float:
+    """A cell of ``terrain``: a grid's smaller mean spacing, a TIN's mean vertex spacing."""
+    if isinstance(terrain, HeightGrid):
+        return float(min(terrain.dx, terrain.dy))
+    xmin, xmax, ymin, ymax = terrain.extent
+    return math.sqrt(max((xmax - xmin) * (ymax - ymin), 0.0) / max(terrain.n_vertices, 1))
+
+
+def _onto(v: np.ndarray, lo: float, hi: float, slack: float) -> np.ndarray:
+    """``v`` with the values outside ``[lo, hi]`` by at most ``slack`` put on ``lo`` or ``hi``."""
+    v = np.array(v, dtype=np.float64, copy=True)
+    v[(v < lo) & (v >= lo - slack)] = lo
+    v[(v > hi) & (v <= hi + slack)] = hi
+    return v
 
 
 def _check_pair(fine, coarse) -> None:

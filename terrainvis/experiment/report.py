@@ -85,8 +85,9 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
     Returns
     -------
     dict of str to DataFrame
-        ``"Table 1"``, ``"Table 2"``, ``"Table 3"`` (one per level present, shallowest
-        first): index (method, relocation), columns ``mu`` and ``sigma`` of accuracy
+        ``"Table k"`` for each of the paper's levels k = 1, 2, 3 present (the paper's
+        table numbers, whichever levels ran) and ``"Level k"`` for a deeper level,
+        shallowest first: index (method, relocation), columns ``mu`` and ``sigma`` of accuracy
         (%) and ``n`` (terrain x set samples). ``"Table 4"``: index method, columns
         (relocation, ``visible_kept`` / ``blocked_kept``) in % at the deepest level, for
         identity and half. ``"Cost"``: index (method, level), columns ``size`` (% of
@@ -103,13 +104,13 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
     missing = {"method", "level", "relocation", "accuracy"} - set(df.columns)
     if missing:
         raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
-    data = _ok(df, predicate)
-    data = data[data["relocation"].isin(RELOCATIONS)]  # the paper's tables: its relocations only
+    every = _ok(df, predicate)
+    data = every[every["relocation"].isin(RELOCATIONS)]  # the paper's tables: its relocations only
     counts = _counts(data)
     what = "accuracy (%)" if counts == "pairs" else f"{counts} whose verdict survives (%)"
     tables: dict[str, pd.DataFrame] = {}
     levels = sorted(int(v) for v in data["level"].unique())
-    for k, level in enumerate(levels, start=1):
+    for level in levels:
         sub = data[data["level"] == level]
         g = sub.groupby(["method", "relocation"])["accuracy"]
         t = pd.DataFrame({"mu": 100 * g.mean(), "sigma": 100 * g.std(ddof=1), "n": g.size()})
@@ -120,8 +121,11 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
             if (m, r) in t.index
         ]
         t = t.loc[idx]
-        t.attrs["title"] = f"Table {k}: {what} at level {level} ({_LEVEL_FRACTION.get(level, f'level {level}')})"
-        tables[f"Table {k}"] = t
+        # the paper's Tables 1-3 are its levels 1-3: the same numbers, whichever levels ran
+        name = f"Table {level}" if level in _LEVEL_FRACTION else f"Level {level}"
+        share = f" ({_LEVEL_FRACTION[level]})" if level in _LEVEL_FRACTION else ""
+        t.attrs["title"] = f"{name}: {what} at level {level}{share}"
+        tables[name] = t
     if levels:
         deepest = levels[-1]
         sub = data[(data["level"] == deepest) & data["relocation"].isin(["identity", "half"])]
@@ -133,7 +137,7 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
             t4 = t4[cols].loc[_ordered(t4.index, METHODS)]
             t4.attrs["title"] = f"Table 4: visible and blocked {counts} kept (%) at level {deepest}"
             tables["Table 4"] = t4
-    per_unit = data.drop_duplicates(["terrain", "method", "level", "set", "relocation"])
+    per_unit = every.drop_duplicates(["terrain", "method", "level", "set", "relocation"])  # cost: every relocation
     per_unit = per_unit.assign(
         speedup=per_unit["los_seconds_original"] / per_unit["los_seconds"],
         memory_ratio=per_unit["nbytes"] / per_unit["nbytes_original"],
@@ -150,7 +154,8 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
             "volume_error": g["volume_error"].median(),
         }
     )
-    idx = [(m, lv) for m in _ordered({i[0] for i in cost.index}, METHODS) for lv in levels if (m, lv) in cost.index]
+    every_level = sorted(int(v) for v in every["level"].unique())
+    idx = [(m, lv) for m in _ordered({i[0] for i in cost.index}, METHODS) for lv in every_level if (m, lv) in cost.index]
     cost = cost.loc[idx]
     cost.attrs["title"] = "Cost: what S(T) buys (medians over terrains, point sets and relocations)"
     tables["Cost"] = cost
@@ -319,7 +324,11 @@ def findings(df: pd.DataFrame) -> list[dict]:
     rows = df[df["error"].fillna("").astype(str) == ""] if "error" in df.columns else df
     if "max_distance" in rows.columns and rows["max_distance"].nunique(dropna=False) > 1:
         rows = rows[rows["max_distance"].isna()]
-    rows = rows[rows["accuracy"].notna() & rows["relocation"].isin(RELOCATIONS)]
+    measured = rows[rows["accuracy"].notna()]
+    rows = measured[measured["relocation"].isin(RELOCATIONS)]
+    reason = ("no row has an accuracy" if measured.empty else
+              f"needs the paper's relocations ({', '.join(RELOCATIONS)}); this run has "
+              f"{', '.join(sorted(set(measured['relocation'])))}")
     predicates = sorted(set(rows["predicate"])) if "predicate" in rows.columns and len(rows) else ["exact"]
     regular = [m for m, info in METHODS.items() if info.regular]
     out = []
@@ -328,7 +337,7 @@ def findings(df: pd.DataFrame) -> list[dict]:
         checks = (
             _qec_best(data), _simple_weakest(data, regular), _trio_equal(data), _identity_best(data),
             _half_worst(data), _regular_marginal(data, regular),
-        ) if len(data) else (("no data", "no row has an accuracy"),) * len(CLAIMS)
+        ) if len(data) else (("no data", reason),) * len(CLAIMS)
         for claim, (verdict, evidence) in zip(CLAIMS, checks):
             out.append({"claim": claim, "predicate": pred, "verdict": verdict, "evidence": evidence})
     return out

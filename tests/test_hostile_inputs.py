@@ -1,0 +1,86 @@
+"""What a new and a hostile user broke (issue 31): each case fails on the code before its fix.
+
+The data-loss cases (a failed write, --overwrite) are in test_failed_writes.py and
+test_outputs.py; these are the wrong answers, refused files and misleading tables.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+import simplifiers
+from terrainvis import bundled_terrain, compare, save_terrain
+from terrainvis.cli import main
+from terrainvis.experiment import report
+
+from conftest import shared_dem_path
+
+
+def _run(capsys, argv):
+    capsys.readouterr()
+    code = main([str(a) for a in argv])
+    io = capsys.readouterr()
+    return code, io.out, io.err
+
+
+# ---------------------------------------------------------------------- 2: as-written check of a raster
+@pytest.mark.parametrize("method", ["simple", "gls", "lls", "feature"])
+@pytest.mark.parametrize("terrain, suffix", [("hills", ".tif"), ("mesas", ".asc"), ("jacksboro", ".tif")])
+def test_a_simplified_raster_is_written_and_checked_without_a_false_error(tmp_path, capsys, method, terrain, suffix):
+    pytest.importorskip("rasterio")
+    code, out, err = _run(capsys, ["simplify", terrain, "-m", method, "-l", 2, "-o", tmp_path / f"s{suffix}"])
+    assert code == 0, err
+    assert "as written (resampled onto a uniform grid): max error" in out and "error:" not in err
+
+
+def test_a_lon_lat_dem_simplified_to_asc_reads_back_within_millimetres(tmp_path, capsys):
+    pytest.importorskip("rasterio")
+    dem = shared_dem_path("jacksboro_fault_tn")
+    code, out, err = _run(capsys, ["simplify", dem, "-m", "lls", "-l", 2, "--fill", "nearest", "-o",
+                                   tmp_path / "j.asc"])
+    assert code == 0, err
+    assert "as written" in out
+
+
+# ---------------------------------------------------------------------- 5: every format the toolkit writes is read
+def test_commands_read_the_meshes_simplify_writes(tmp_path, capsys):
+    for suffix in (".ply", ".obj", ".stl"):
+        mesh = tmp_path / f"s{suffix}"
+        assert _run(capsys, ["simplify", "hills", "-m", "greedy-insertion", "-l", 2, "-o", mesh])[0] == 0
+        code, out, err = _run(capsys, ["info", mesh])
+        assert code == 0 and out.startswith(f"s: TIN of 900 vertices"), err
+        code, out, err = _run(capsys, ["los", mesh, "--from", 500, 500, "--to", 3000, 3000])
+        assert code == 0 and ("visible" in out or "blocked" in out), err
+        pts = tmp_path / "p.csv"
+        pts.write_text("x,y\n600,600\n1800,2400\n")
+        code, out, err = _run(capsys, ["relocate", "hills", "--simplified", mesh, "--points", pts, "--how", "full",
+                                       "-o", tmp_path / f"r{suffix}.csv"])
+        assert code == 0, err
+    code, out, err = _run(capsys, ["info", tmp_path / "s.ply", "--fill", "nearest"])
+    assert code == 2 and err.strip() == ("terrainvis info: error: --fill works on a grid DEM, and "
+                                         f"'{tmp_path / 's.ply'}' is a mesh (a TIN)")
+
+
+# ---------------------------------------------------------------------- 8: tables named by the paper's levels
+def test_tables_are_numbered_by_level_as_the_paper_numbers_them():
+    df = compare(["hills"], methods=["lls"], levels=[1, 3], n_points=10, n_sets=1, relocations=["full", "half"],
+                 repeats=1, workers=1)
+    tables = report.paper_tables(df)
+    assert [k for k in tables if k.startswith(("Table", "Level"))] == ["Table 1", "Table 3", "Table 4"]
+    assert tables["Table 3"].attrs["title"].startswith("Table 3: accuracy (%) at level 3 (1.5%)")
+    deep = compare(["hills"], methods=["lls"], levels=[4], n_points=10, n_sets=1, relocations=["full"], repeats=1,
+                   workers=1)
+    assert "Level 4" in report.paper_tables(deep) and "Table 1" not in report.paper_tables(deep)
+
+
+# ---------------------------------------------------------------------- 14: the calibrated relocation alone
+def test_a_run_without_the_papers_relocations_reports_what_it_has(tmp_path, capsys):
+    argv = ["compare", "--terrain", "hills", "--methods", "lls", "greedy-insertion", "--levels", 2, "--points", 15,
+            "--sets", 1, "--relocations", "calibrated", "--partners", 128, "--workers", 1, "--no-plots",
+            "--out", tmp_path / "c"]
+    code, out, err = _run(capsys, argv)
+    assert code == 0, err
+    tables = (tmp_path / "c" / "tables.md").read_text()
+    assert "| lls | 2 | 6.25 |" in tables  # the cost table is there
+    assert "needs the paper's relocations (identity, full, half); this run has calibrated" in tables
+    assert _run(capsys, argv[:-2] + ["--out", tmp_path / "c", "--resume"])[0] == 0
