@@ -84,3 +84,30 @@ def test_a_run_without_the_papers_relocations_reports_what_it_has(tmp_path, caps
     assert "| lls | 2 | 6.25 |" in tables  # the cost table is there
     assert "needs the paper's relocations (identity, full, half); this run has calibrated" in tables
     assert _run(capsys, argv[:-2] + ["--out", tmp_path / "c", "--resume"])[0] == 0
+
+
+# ---------------------------------------------------------------------- 1: heights float64 cannot resolve
+def test_heights_beyond_what_float64_resolves_are_refused(tmp_path, capsys):
+    import numpy as np
+
+    from terrainvis import line_of_sight, viewshed, visibility_matrix
+
+    g = bundled_terrain("hills")
+    code, out, err = _run(capsys, ["los", "hills", "--from", 500, 500, "--to", 3000, 3000, "--height", "1e9"])
+    assert code == 0 and "visible" in out  # high, still resolved: the answer is right
+    for flag in ("--height", "--target-height"):
+        for value in ("1e20", "1e300"):
+            code, out, err = _run(capsys, ["los", "hills", "--from", 500, 500, "--to", 3000, 3000, flag, value])
+            assert code == 2 and err.startswith(f"terrainvis los: error: {flag} must be within [0, 2.27e+10] for "
+                                                "this terrain") and "\n" not in err.strip() and "overflow" not in err
+    code, out, err = _run(capsys, ["viewshed", "hills", "--observer", 500, 500, "--height", "1e20", "-o",
+                                   tmp_path / "v.tif"])
+    assert code == 2 and "--height must be within" in err and not (tmp_path / "v.tif").exists()
+    with pytest.raises(ValueError, match=r"a has 1 point\(s\) at heights float64 cannot resolve"):
+        line_of_sight(g, [[500.0, 500.0, 1e20]], [[3000.0, 3000.0, 300.0]])
+    with pytest.raises(ValueError, match="points has 1 point"):
+        visibility_matrix(g, np.array([[500.0, 500.0, 300.0], [600.0, 600.0, -1e20]]))
+    with pytest.raises(ValueError, match="observer_height must be within"):
+        viewshed(g, (500.0, 500.0), observer_height=1e20)
+    with pytest.raises(ValueError, match=r"offset must be within \[0, .*\(terrain 'hills'\)"):
+        compare(["hills"], methods=["lls"], levels=[1], offset=1e20, workers=1)

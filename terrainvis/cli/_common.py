@@ -177,6 +177,23 @@ def _read_tin(path: Path):
     return _read(path, path.stem)
 
 
+#: The height flags and their names in the API: each is checked against the terrain once it is read.
+_HEIGHT_FLAGS = (("height", "--height"), ("target_height", "--target-height"), ("offset", "--offset"))
+
+
+def check_heights(terrain, args) -> None:
+    """Refuse a height flag that float64 cannot resolve against ``terrain`` (one line naming the flag)."""
+    from ..visibility.predicate import _height_above
+
+    for dest, flag in _HEIGHT_FLAGS:
+        value = getattr(args, dest, None)
+        if value is not None:
+            try:
+                _height_above(value, flag, terrain)
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
+
+
 def metric_grid(name: str, grid):
     """``--metric``: a lon/lat DEM resampled onto a transverse Mercator grid (:func:`terrainvis.io.to_metric`)."""
     from ..io import to_metric

@@ -13,6 +13,7 @@ from ._common import (
     add_nodata,
     add_positions,
     add_target_height,
+    check_heights,
     dask_client,
     earth_text,
     height_arg,
@@ -73,6 +74,7 @@ def run(args) -> int:
     if png is not None:
         check_output_file(png, "--png", inputs=inputs + [str(out)])
     label, grid = read_terrain(args.dem, args)
+    check_heights(grid, args)
     if suffix in (".tif", ".tiff") and not grid.is_uniform:
         raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
     table = read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from ..core.terrain import TIN
 from ._common import add_nodata, add_positions, plural, position_frame, read_surface
+
+from ..core.terrain import TIN
 
 
 def add_parser(sub) -> None:

@@ -8,6 +8,7 @@ from ._common import (
     add_nodata,
     add_positions,
     add_target_height,
+    check_heights,
     distance_arg,
     earth_text,
     height_arg,
@@ -51,6 +52,7 @@ def run(args) -> int:
     from ..visibility.profile import lowest_point
 
     label, grid = read_surface(args.dem, args, command="los")
+    check_heights(grid, args)
     if args.pairs:
         if args.start or args.end:
             raise UsageError("give either --pairs or --from and --to, not both")

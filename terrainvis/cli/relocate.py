@@ -11,6 +11,7 @@ from ._common import (
     add_earth,
     add_nodata,
     add_positions,
+    check_heights,
     earth_text,
     height_arg,
     outside_message,
@@ -87,6 +88,7 @@ def run(args) -> int:
                          "simplify here with -m METHOD [-l LEVEL] instead")
     check_output_file(out, "-o", inputs=[args.dem, args.points] + ([args.simplified] if args.simplified else []))
     label, grid = read_terrain(args.dem, args)
+    check_heights(grid, args)
     simplified, what = read_simplification(grid, args)
     table = read_columns(args.points, "--points", ("x", "y"), optional=("z",))
     frame = position_frame(grid, args)

@@ -12,6 +12,7 @@ from ._common import (
     add_nodata,
     add_positions,
     add_target_height,
+    check_heights,
     earth_text,
     height_arg,
     number_arg,
@@ -55,6 +56,7 @@ def run(args) -> int:
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
     check_output_file(out, "-o", inputs=[args.dem])
     label, grid = read_terrain(args.dem, args)
+    check_heights(grid, args)
     frame = position_frame(grid, args)
     observer = tuple(float(v) for v in frame.to_grid(args.observer))
     if np.isnan(grid.height_at([observer])[0]):

@@ -538,6 +538,21 @@ def _measure_supports_the_predicate(settings: Settings, grids: dict) -> None:
                          f"got {settings.predicate!r}")
 
 
+def _heights_resolve_on_every_terrain(settings: Settings, grids: dict) -> None:
+    """``offset`` and ``target_height`` within what float64 resolves against each terrain (else every unit fails)."""
+    from ..core.validate import as_height
+    from ..visibility import terrain_scale
+
+    for name, grid in grids.items():
+        z = grid.z[np.isfinite(grid.z)]
+        ground = float(np.abs(z).max()) if z.size else 0.0
+        for option in ("offset", "target_height"):
+            try:
+                as_height(getattr(settings, option), option, scale=terrain_scale(grid), ground=ground, minimum=0.0)
+            except ValueError as exc:
+                raise ValueError(f"{exc} (terrain {name!r})") from None
+
+
 def _relocations_serve_the_measure(settings: Settings, grids: dict) -> None:
     from ..relocation.registry import RELOCATIONS
 
@@ -550,7 +565,7 @@ def _relocations_serve_the_measure(settings: Settings, grids: dict) -> None:
 #: Checks across options (and the terrains), run after every option's own check:
 #: ``rule(settings, grids)`` raises a ValueError naming the options involved.
 RULES: list[Callable] = [_engine_runs_on_every_surface, _measure_supports_the_predicate, _relocations_serve_the_measure,
-                         _levels_fit]
+                         _heights_resolve_on_every_terrain, _levels_fit]
 
 
 # ---------------------------------------------------------------------- settings

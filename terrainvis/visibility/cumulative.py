@@ -32,7 +32,7 @@ from ..core.validate import as_float_array, as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
 from .engines import choose
-from .predicate import EARTH_RADIUS, curvature_coefficient
+from .predicate import EARTH_RADIUS, _height_above, curvature_coefficient
 from .sweep import _check_overlap, _surface_at, viewshed
 
 __all__ = ["cumulative_viewshed"]
@@ -143,7 +143,7 @@ def cumulative_viewshed(
     as_terrain(terrain)
     obs = _as_observers(observers)
     k = obs.shape[0]
-    heights = _as_heights(observer_height, k)
+    heights = _as_heights(observer_height, k, terrain)
     options = _options(terrain, target_height, max_distance, at, engine, curvature, earth_radius)
     workers = check_workers(workers)
     client = check_client(client)
@@ -194,10 +194,10 @@ def _as_observers(observers) -> np.ndarray:
     return np.array(arr, dtype=np.float64, order="C")  # our own copy: the caller's array is never held
 
 
-def _as_heights(observer_height, k: int) -> np.ndarray:
+def _as_heights(observer_height, k: int, terrain) -> np.ndarray:
     """One eye height per observer: a scalar repeated, or a (K,) array; finite and >= 0."""
     if np.ndim(observer_height) == 0:
-        return np.full(k, as_nonnegative_finite(observer_height, "observer_height", "z units"))
+        return np.full(k, _height_above(observer_height, "observer_height", terrain))
     h = as_float_array(observer_height, "observer_height")
     if h.ndim != 1 or h.shape[0] != k:
         raise ValueError(
@@ -209,6 +209,8 @@ def _as_heights(observer_height, k: int) -> np.ndarray:
             f"observer_height must be finite and >= 0 (z units), but {bad.size} value(s) are not "
             f"(first observer_height[{int(bad[0])}] = {h[bad[0]]!r})"
         )
+    if h.size:
+        _height_above(float(h.max()), "observer_height", terrain)  # the largest: within what float64 resolves
     return np.array(h, dtype=np.float64)
 
 
@@ -216,7 +218,7 @@ def _options(terrain, target_height, max_distance, at, engine, curvature, earth_
     """The viewshed options of every unit, validated here once (the units run them as given)."""
     kc = curvature_coefficient(curvature, earth_radius)
     choose(engine, terrain, kc)
-    as_nonnegative_finite(target_height, "target_height", "z units")
+    _height_above(target_height, "target_height", terrain)
     if max_distance is not None:
         as_nonnegative_finite(max_distance, "max_distance", "xy units")
     if at is not None and not isinstance(at, HeightGrid):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.validate import as_nonnegative_finite, as_points, as_positive_finite, describe
+from ..core.validate import as_nonnegative_finite, as_points, as_positive_finite, describe, height_limit
 from ..errors import OutsideFootprintError
 from ..core.terrain import HeightGrid, as_terrain
 from ..tolerances import CLEARANCE_REL, EXTENT_INSIDE_REL
@@ -102,8 +102,10 @@ def _check_end_radius(end_radius) -> float:
 
 
 def _check_inside(terrain, pts: np.ndarray, name: str) -> None:
+    """Every point inside the footprint, and at a height float64 resolves against the terrain."""
     if pts.shape[0] == 0:
         return
+    _check_heights(terrain, pts, name)
     if isinstance(terrain, HeightGrid):
         xmin, xmax, ymin, ymax = terrain.extent
         slack = EXTENT_INSIDE_REL * _extent_diagonal(terrain)
@@ -118,6 +120,34 @@ def _check_inside(terrain, pts: np.ndarray, name: str) -> None:
             f"{name} has {bad.size} point(s) outside the terrain's footprint {terrain.extent} "
             f"(first at index {int(bad[0])}: {pts[bad[0], :2].tolist()})"
         )
+
+
+def _check_heights(terrain, pts: np.ndarray, name: str) -> None:
+    """Refuse heights whose rounding exceeds the predicate's tolerance (:func:`~terrainvis.core.validate.height_limit`).
+
+    An end at height H is known to 2^-52 |H| only; past the limit the verdict would be
+    rounding noise (a line seen at 1e16 m turned blocked at 1e20 m).
+    """
+    limit = height_limit(terrain_scale(terrain))
+    z = pts[:, 2]
+    bad = ~(np.abs(z) <= limit)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"{name} has {int(bad.sum())} point(s) at heights float64 cannot resolve against this terrain (first at "
+            f"index {k}: z = {z[k]:.6g}); heights must be within +-{limit:.3g} (float64 keeps 2^-52 of a height, and "
+            f"line of sight compares clearances to {CLEARANCE_REL:g} x the terrain's scale "
+            f"{terrain_scale(terrain):.6g})"
+        )
+
+
+def _height_above(value, name: str, terrain) -> float:
+    """A height above the surface (an eye, a target), >= 0 and within what float64 resolves on ``terrain``."""
+    from ..core.validate import as_height
+
+    z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
+    ground = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 0.0
+    return as_height(value, name, scale=terrain_scale(terrain), ground=ground, minimum=0.0)
 
 
 def _prepare_terrain(terrain, operation: str):

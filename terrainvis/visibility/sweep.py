@@ -78,7 +78,7 @@ from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
 from . import _sweep_kernels as _vk
 from .engines import Predicate, choose
-from .predicate import EARTH_RADIUS, clearance_tolerance, curvature_coefficient, trim_length
+from .predicate import EARTH_RADIUS, _check_heights, _height_above, clearance_tolerance, curvature_coefficient, trim_length
 
 __all__ = ["viewshed"]
 
@@ -228,8 +228,8 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     kc = curvature_coefficient(curvature, earth_radius)
     engine = choose(engine, terrain, kc)
     ox, oy, oz = _as_observer(observer)
-    h_o = as_nonnegative_finite(observer_height, "observer_height", "z units")
-    h_t = as_nonnegative_finite(target_height, "target_height", "z units")
+    h_o = _height_above(observer_height, "observer_height", terrain)
+    h_t = _height_above(target_height, "target_height", terrain)
     dmax = math.inf if max_distance is None else as_nonnegative_finite(max_distance, "max_distance", "xy units")
     if at is not None and not isinstance(at, HeightGrid):
         raise TypeError(f"at must be a terrainvis.HeightGrid (the grid of target samples) or None, got {describe(at)}")
@@ -248,6 +248,7 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
             "or on nodata (a triangle touching a NaN sample)"
         )
     eye = np.array([ox, oy, zs + h_o if oz is None else oz])
+    _check_heights(terrain, eye[None, :], "observer")
     own = at is terrain or (
         isinstance(terrain, HeightGrid) and np.array_equal(at.xs, terrain.xs) and np.array_equal(at.ys, terrain.ys)
     )
