@@ -95,9 +95,9 @@ def run(workload: str, folder: Path, extra: list[str]) -> dict:
     single = int(m.group(1)) * 1024 if m else float("nan")
     if proc.returncode != 0:
         print(err[-3000:], file=sys.stderr)
-    df = pd.read_csv(out / "results.csv", dtype={"error": str}).fillna({"error": ""})
+    df = pd.read_csv(out / "results.csv", dtype={"error": str})
     return {"workload": workload, "exit": proc.returncode, "wall_s": wall, "peak_tree_gb": peak[0] / 1e9,
-            "peak_single_gb": single / 1e9, "rows": len(df), "failed_units": df[df.error != ""][["terrain", "method", "level"]].drop_duplicates().shape[0],
+            "peak_single_gb": single / 1e9, "rows": len(df), "failed_units": df[df.error.notna()][["terrain", "method", "level"]].drop_duplicates().shape[0],
             "df": df}
 
 
@@ -125,7 +125,7 @@ def main():
               + (f" (target <= {mem_t:g} GB)" if mem_t else ""))
         print("   simplification seconds (median over terrains) by method and level:")
         print(_breakdown(r["df"]).round(2).to_string())
-        ok = r["df"][r["df"].error == ""]
+        ok = r["df"][r["df"].error.isna()]
         per = ok.drop_duplicates(["terrain", "method", "level"])
         print(f"   volume error computed for {per['volume_error'].notna().sum()} of {len(per)} units; "
               f"backends: {sorted(set(ok.get('backend', pd.Series(dtype=str)).dropna()))}")

@@ -47,7 +47,7 @@ def test_shape_and_columns(serial):
     assert list(serial.columns) == list(COLUMNS)
     # terrains x sets x methods x levels x relocations
     assert len(serial) == 2 * 2 * 3 * 2 * 3
-    assert (serial["error"] == "").all() and (serial["predicate"] == "exact").all()
+    assert serial["error"].isna().all() and (serial["predicate"] == "exact").all()
     assert serial["n_pairs"].eq(12 * 11 // 2).all()
     assert serial["accuracy"].between(0, 1).all() and serial["end_radius"].eq(0).all()
     lv1 = serial[serial["level"] == 1]
@@ -115,7 +115,7 @@ def test_failure_is_recorded_and_the_run_goes_on(small, monkeypatch):
     df = compare({"a": small["a"]}, workers=1, **_kw(methods=["lls"], levels=[1, 2]))
     bad = df[df["level"] == 2]
     assert len(bad) == 6 and bad["error"].eq("SimplificationError: lls: injected failure").all()
-    assert bad["accuracy"].isna().all() and (df[df["level"] == 1]["error"] == "").all()
+    assert bad["accuracy"].isna().all() and (df[df["level"] == 1]["error"].isna()).all()
 
 
 def test_everything_is_validated_before_any_unit_runs(small):
@@ -184,7 +184,7 @@ def test_incremental_csv_and_resume(small, tmp_path, monkeypatch, serial):
     assert len(df) == 72 and len(pd.read_csv(out)) == 72
     assert not df.duplicated(KEYS).any()
     pd.testing.assert_frame_equal(df[STABLE], serial[STABLE], check_dtype=False)
-    pd.testing.assert_frame_equal(pd.read_csv(out, dtype={"error": str}).fillna({"error": ""})[STABLE],
+    pd.testing.assert_frame_equal(pd.read_csv(out, dtype={"error": str})[STABLE],
                                   serial[STABLE], check_dtype=False)
 
 
@@ -412,7 +412,7 @@ def test_viewshed_measure(small):
               offset=1.7)
     df = compare(g, workers=1, **kw)
     # 2 methods x 3 observers x the 4 default relocations
-    assert len(df) == 2 * 3 * 4 and (df["measure"] == "viewshed").all() and (df["error"] == "").all()
+    assert len(df) == 2 * 3 * 4 and (df["measure"] == "viewshed").all() and df["error"].isna().all()
     assert df["n_pairs"].eq(33 * 33).all()  # every sample of T is a target
     # one row by hand: observer 1 relocated by half onto the TIN, its viewshed of T's samples there
     T = small["a"]
@@ -489,5 +489,5 @@ def test_a_cascade_level_that_fails_is_simplified_from_the_grid(small, monkeypat
 
     monkeypatch.setattr(simplifiers, "simplify", no_cascade)
     fallback = compare(g, workers=1, cascade=True, **kw)
-    assert (fallback["error"] == "").all() and not fallback["cascaded"].any()
+    assert fallback["error"].isna().all() and not fallback["cascaded"].any()
     pd.testing.assert_frame_equal(fallback[STABLE], independent[STABLE])

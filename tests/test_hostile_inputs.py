@@ -111,3 +111,14 @@ def test_heights_beyond_what_float64_resolves_are_refused(tmp_path, capsys):
         viewshed(g, (500.0, 500.0), observer_height=1e20)
     with pytest.raises(ValueError, match=r"offset must be within \[0, .*\(terrain 'hills'\)"):
         compare(["hills"], methods=["lls"], levels=[1], offset=1e20, workers=1)
+
+
+# ---------------------------------------------------------------------- 21: one convention for "no error"
+def test_no_error_is_missing_in_the_frame_and_in_the_csv(tmp_path):
+    import pandas as pd
+
+    df = compare(["hills"], methods=["lls"], levels=[1], n_points=8, n_sets=1, relocations=["full"], repeats=1,
+                 workers=1, out_csv=tmp_path / "r.csv")
+    back = pd.read_csv(tmp_path / "r.csv")
+    assert df["error"].isna().all() and back["error"].isna().all()
+    assert len(df[df.error.isna()]) == len(back[back.error.isna()]) == len(df)

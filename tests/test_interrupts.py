@@ -62,7 +62,7 @@ def _stop(p, how: str, after: float):
 
 
 def _table(path):
-    df = pd.read_csv(path, dtype={"error": str}).fillna({"error": ""})
+    df = pd.read_csv(path, dtype={"error": str})
     return df[STABLE].sort_values(["terrain", "method", "level", "set", "relocation"]).reset_index(drop=True)
 
 

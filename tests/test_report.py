@@ -81,7 +81,7 @@ def _synthetic(acc: dict) -> pd.DataFrame:
     for (m, lv, r), values in acc.items():
         for s, a in enumerate(values):
             rows.append({"terrain": "t", "set": s, "method": m, "level": lv, "relocation": r, "accuracy": a,
-                         "predicate": "exact", "error": ""})
+                         "predicate": "exact", "error": None})
     return pd.DataFrame(rows)
 
 

@@ -90,7 +90,7 @@ def test_a_broken_result_is_refused_by_the_registry(toy, monkeypatch):
 def test_compare_report_and_figures_pick_it_up(toy):
     # workers=1: spawned workers would import the registry afresh, without a test's entry
     df = compare(["hills"], methods=["toy", "lls", "qec"], levels=[1, 2], n_points=12, n_sets=2, workers=1)
-    assert set(df["method"]) == {"toy", "lls", "qec"} and (df["error"] == "").all()
+    assert set(df["method"]) == {"toy", "lls", "qec"} and df["error"].isna().all()
     assert set(df.loc[df["method"] == "toy", "kind"]) == {"irregular"}
     tables = report.paper_tables(df)
     t1 = tables["Table 1"]

@@ -99,7 +99,7 @@ def test_a_relocation_that_moves_points_sideways_is_refused():
 def test_compare_the_report_and_the_figures_pick_it_up(toy):
     grid = synthetic_terrain("hills", size=33, seed=2)
     df = compare({"g": grid}, relocations=["full", "toy"], workers=1, **_small(max_distance=[None, 300.0]))
-    assert (df["error"] == "").all() and list(dict.fromkeys(df["relocation"])) == ["full", "toy"]
+    assert df["error"].isna().all() and list(dict.fromkeys(df["relocation"])) == ["full", "toy"]
     beyond = report.beyond_paper(df)
     assert "toy" in beyond.columns and "beyond the paper" in beyond.attrs["title"].lower()
     assert "toy" in beyond.attrs["title"] and "gain" not in beyond.columns  # no calibrated rows: no gain column
@@ -126,7 +126,7 @@ def test_worker_processes_get_it_and_give_the_same_rows(toy):
     pooled = compare({"g": grid}, relocations=["toy"], workers=2, **kw)
     cols = ["terrain", "method", "level", "relocation", "accuracy", "n_pairs", "agree_visible"]
     pd.testing.assert_frame_equal(serial[cols], pooled[cols])
-    assert (pooled["error"] == "").all()
+    assert pooled["error"].isna().all()
 
 
 def test_a_function_workers_cannot_import_is_refused_before_the_run(tmp_path):
@@ -137,7 +137,7 @@ def test_a_function_workers_cannot_import_is_refused_before_the_run(tmp_path):
                                             r"processes .*top level of a module.*workers=1"):
             compare({"g": grid}, relocations=["inline"], workers=2, out_csv=tmp_path / "r.csv", **_small(levels=[1, 2]))
         assert not (tmp_path / "r.csv").exists()  # refused before anything was written
-        assert (compare({"g": grid}, relocations=["inline"], workers=1, **_small())["error"] == "").all()
+        assert (compare({"g": grid}, relocations=["inline"], workers=1, **_small())["error"].isna()).all()
     finally:
         unregister("inline")
 

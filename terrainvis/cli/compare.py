@@ -165,7 +165,7 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
         lines += ["", f"Note: QEC ran on fast-simplification for {', '.join(fast)} (more than {AUTO_MAX_SAMPLES:,} "
                       "samples, where pymeshlab takes minutes per level); pymeshlab, the paper's QEC, ran elsewhere."]
     units = df[["terrain", "method", "level"]].drop_duplicates().shape[0]
-    failed = df[df["error"] != ""].drop_duplicates(["terrain", "method", "level"])
+    failed = df[df["error"].notna()].drop_duplicates(["terrain", "method", "level"])
     if len(failed):
         lines += ["", "### Failed units", ""]
         lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
@@ -196,7 +196,7 @@ def _write_plots(df, grids, out: Path) -> None:
     def save(fig, name, dpi):
         save_figure(fig, out / name, dpi=dpi)
 
-    ok = df[df["error"] == ""]
+    ok = df[df["error"].isna()]
     if ok.empty:
         return
     save(plot.accuracy_vs_size(ok), "accuracy_vs_size.png", 110)

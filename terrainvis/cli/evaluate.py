@@ -95,7 +95,7 @@ def _check_out(args, label: str) -> Path:
 def _print(df, label: str, seconds: float) -> None:
     import pandas as pd
 
-    ok = df[df["error"] == ""]
+    ok = df[df["error"].isna()]
     if len(ok):
         g = ok.groupby(["method", "relocation"], sort=False)
         t = pd.DataFrame({"vertices": g["n_vertices"].first(), "level": g["level"].first(),
@@ -103,7 +103,7 @@ def _print(df, label: str, seconds: float) -> None:
                           "blocked_kept": 100 * g["blocked_kept"].mean(), "max_error": g["max_error"].first()})
         print(f"{label}: accuracy (%) of each simplified terrain, mean over {ok['set'].nunique()} point set(s)")
         print(t.to_string(float_format=lambda v: f"{v:.2f}"))
-    for r in df[df["error"] != ""].drop_duplicates("method").itertuples():
+    for r in df[df["error"].notna()].drop_duplicates("method").itertuples():
         print(f"{label}: {r.method}: failed: {r.error}", file=sys.stderr)
     print(f"{plural(len(df), 'row')}, {seconds:.1f} s")
 
@@ -134,7 +134,7 @@ def _write(df, grid, label: str, out: Path, args, options: dict, seconds: float)
 
 
 def _verdict(df, args) -> int:
-    failed = df[df["error"] != ""]
+    failed = df[df["error"].notna()]
     if len(failed):
         return 1
     if args.min_accuracy is None:

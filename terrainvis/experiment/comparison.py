@@ -114,7 +114,8 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
         One row per terrain x point set x method x level x relocation (x distance), with the columns
         :data:`COLUMNS`, sorted (terrains as given, methods in the paper's order,
         relocations identity, full, half). A unit whose simplification failed keeps its
-        rows, with the message in ``error`` and NaN measurements.
+        rows, with the message in ``error`` and NaN measurements; the ``error`` of a unit that did
+        not fail is missing (NA), as in ``results.csv`` read back.
 
     Raises
     ------

@@ -48,14 +48,24 @@ TEXT_COLUMNS = ("terrain", "method", "kind", "relocation", "predicate", "measure
 def _read_csv(text: str, columns) -> pd.DataFrame:
     dtype = {c: str for c in TEXT_COLUMNS if c in columns}
     df = pd.read_csv(io.StringIO(text), keep_default_na=True, dtype=dtype)
-    df["error"] = df["error"].astype(object).where(df["error"].notna(), "").astype(str)
+    df["error"] = _error_column(df["error"])
     return df
 
 
 def _frame(rows, columns) -> pd.DataFrame:
     df = pd.DataFrame(list(rows), columns=list(columns))
-    df["error"] = df["error"].astype(object).where(df["error"].notna(), "").astype(str)
+    df["error"] = _error_column(df["error"])
     return df
+
+
+def _error_column(values: pd.Series) -> pd.Series:
+    """The ``error`` column: the message of a unit that failed, NA (missing) for one that did not.
+
+    One convention whether the rows come from :func:`terrainvis.compare` or from the CSV
+    (which writes NA as an empty field): ``df[df.error.isna()]`` keeps the good rows.
+    """
+    text = values.astype(object)
+    return text.where(text.notna() & (text != ""), np.nan)
 
 
 def as_table(rows, columns) -> pd.DataFrame:
@@ -195,7 +205,7 @@ class ResultStore:
         for key, idx in old.groupby(self.unit_key, sort=False).groups.items():
             key = tuple(key) if isinstance(key, tuple) else (key,)
             rows = old.loc[idx]
-            if len(rows) == rows_per_unit(key) and (rows["error"] == "").all():
+            if len(rows) == rows_per_unit(key) and rows["error"].isna().all():
                 self.done.add(key)
                 keep[old.index.get_indexer(idx)] = True
         kept = old[keep]

@@ -94,7 +94,7 @@ def _base(grid: HeightGrid, name: str, method: str, kind: str, level: int, setti
         "terrain": name, "method": method, "kind": kind, "level": level, "measure": settings.measure,
         "predicate": settings.predicate, "n_points": MEASURES[settings.measure].n_points(settings),
         "n_vertices_original": grid.size, "nbytes_original": grid.nbytes, "seed": settings.seed,
-        "distance_unit": settings.distance_unit, "offset": settings.offset, "cascaded": False, "error": "",
+        "distance_unit": settings.distance_unit, "offset": settings.offset, "cascaded": False, "error": None,
     }
 
 

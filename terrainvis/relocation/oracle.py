@@ -11,8 +11,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.terrain import HeightGrid
-from ..core.validate import as_finite_scalar, as_float_array, as_int, as_nonnegative_finite, as_points, describe
-from ..visibility import EARTH_RADIUS
+from ..core.validate import (
+    as_finite_scalar,
+    as_float_array,
+    as_int,
+    as_nonnegative_finite,
+    as_points,
+    describe,
+    height_limit,
+)
+from ..visibility import EARTH_RADIUS, terrain_scale
 from .calibrated import best_responses
 from .paper import ground_heights
 
@@ -88,9 +96,15 @@ def oracle(points, simplified, *, offset: float = 0.0, reference=None, mask=None
         return pts.copy()
     cand = _candidates(pts, simplified, ground_heights(simplified, pts), off, original, k)
     out = _oracle_start(pts, simplified, cand, start, ref, counted, los_kw)
+    # a best response above a partner's threshold near a wall can be 1e10 m: past what float64
+    # resolves against the terrain, where verdicts are rounding noise; such a point keeps its height
+    limit = height_limit(terrain_scale(simplified))
     for _ in range(50):  # each round raises the agreement or stops; 50 is a safety bound
         changed = _candidate_pass(pts, simplified, cand, out, ref, counted, los_kw)
-        out[:, 2], moved = best_responses(out, simplified, ref, counted, end_radius=radius, **curve)
+        best, _ = best_responses(out, simplified, ref, counted, end_radius=radius, **curve)
+        best = np.where(np.abs(best) <= limit, best, out[:, 2])
+        moved = bool((best != out[:, 2]).any())
+        out[:, 2] = best
         if not (changed or moved):
             break
     return out
