@@ -27,7 +27,7 @@ from __future__ import annotations
 
 __all__ = [
     "CLEARANCE_REL",
-    "UNIFORM_STEP_REL", "ROUNDING_ULPS", "EDGE_SNAP_REL", "COVER_EDGE_CELL_REL", "DEGREE_CELL_SLACK", "SPACING_MATCH_REL",
+    "UNIFORM_STEP_REL", "ROUNDING_ULPS", "EDGE_SNAP_REL", "COVER_EDGE_CELL_REL", "FRAME_AXIS_REL", "DEGREE_CELL_SLACK", "SPACING_MATCH_REL",
     "RESAMPLE_SHIFT_REL", "METRIC_EDGE_MARGIN", "FLOAT32_ROUNDING_REL",
     "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
     "BUDGET_WINDOW_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
@@ -62,6 +62,9 @@ ROUNDING_ULPS = 8.0
 #: and read back ends up to millimetres short of the fine extent (its georeferencing is
 #: stored as an origin and a step, in degrees on a lon/lat DEM).
 COVER_EDGE_CELL_REL = 1e-3
+#: ``evaluate``: a raster moved into the DEM's frame must keep its rows and columns on the
+#: frame's axes to this fraction of their span (a raster in another projection does not).
+FRAME_AXIS_REL = 1e-6
 #: Snapping of positions onto an extent's edge: a position outside ``[lo, hi]`` by at most
 #: this fraction of ``hi - lo`` (plus :data:`ROUNDING_ULPS`) is put on the edge (positions
 #: converted from the native CRS round to just outside the terrain).

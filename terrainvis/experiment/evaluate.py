@@ -236,7 +236,10 @@ def _into_frame(terrain, grid: HeightGrid, frame: str, label: str):
     own = PositionFrame(terrain, "native")
     xs = to.to_grid(own.from_grid(np.column_stack([terrain.xs, np.full(terrain.xs.size, terrain.ys[0])])))
     ys = to.to_grid(own.from_grid(np.column_stack([np.full(terrain.ys.size, terrain.xs[0]), terrain.ys])))
-    if np.ptp(xs[:, 1]) > 1e-6 * max(1.0, np.ptp(xs[:, 0])) or np.ptp(ys[:, 0]) > 1e-6 * max(1.0, np.ptp(ys[:, 1])):
+    from ..tolerances import FRAME_AXIS_REL
+
+    if (np.ptp(xs[:, 1]) > FRAME_AXIS_REL * max(1.0, np.ptp(xs[:, 0]))
+            or np.ptp(ys[:, 0]) > FRAME_AXIS_REL * max(1.0, np.ptp(ys[:, 1]))):
         raise ValueError(f"simplified terrain {label!r}: its rows and columns are not aligned with the DEM's in the "
                          "DEM's frame (another projection?); resample it onto the DEM's CRS first")
     order_x, order_y = np.argsort(xs[:, 0]), np.argsort(ys[:, 1])
@@ -297,6 +300,8 @@ def _checked_tin(tin: TIN, grid: HeightGrid, repair: bool, label: str) -> TIN:
 
 def _covering(s: HeightGrid, grid: HeightGrid, label: str) -> HeightGrid:
     """A raster extended by its edge samples to the grid's footprint, when it falls short by at most one of its cells."""
+    from ..tolerances import EDGE_SNAP_REL
+
     xs, ys, z = s.xs, s.ys, s.z
     if not np.isfinite(z).all():
         raise ValueError(f"simplified terrain {label!r} has {int((~np.isfinite(z)).sum())} nodata samples; a "
@@ -307,7 +312,7 @@ def _covering(s: HeightGrid, grid: HeightGrid, label: str) -> HeightGrid:
             (gx0, gx1, xs[0], xs[-1], xs[1] - xs[0] if xs.size > 1 else 0.0, "x"),
             (gy0, gy1, ys[0], ys[-1], ys[1] - ys[0] if ys.size > 1 else 0.0, "y")):
         short_lo, short_hi = max(0.0, axis_lo - lo), max(0.0, hi - axis_hi)
-        if max(short_lo, short_hi) > step * (1 + 1e-9):
+        if max(short_lo, short_hi) > step + EDGE_SNAP_REL * (hi - lo):  # one of its cells, and rounding
             raise ValueError(f"simplified terrain {label!r} covers {what} [{axis_lo:.6g}, {axis_hi:.6g}], short of "
                              f"the DEM's [{lo:.6g}, {hi:.6g}] by more than one of its cells; a simplification must "
                              "cover the original's footprint")

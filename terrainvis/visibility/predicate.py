@@ -145,6 +145,7 @@ def _height_above(value, name: str, terrain) -> float:
     """A height above the surface (an eye, a target), >= 0 and within what float64 resolves on ``terrain``."""
     from ..core.validate import as_height
 
+    as_nonnegative_finite(value, name, "z units")  # the plain mistakes first, in their own words
     z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
     ground = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 0.0
     return as_height(value, name, scale=terrain_scale(terrain), ground=ground, minimum=0.0)
