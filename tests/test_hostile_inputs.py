@@ -122,3 +122,57 @@ def test_no_error_is_missing_in_the_frame_and_in_the_csv(tmp_path):
     back = pd.read_csv(tmp_path / "r.csv")
     assert df["error"].isna().all() and back["error"].isna().all()
     assert len(df[df.error.isna()]) == len(back[back.error.isna()]) == len(df)
+
+
+# ---------------------------------------------------------------------- 16: workers that die, from the command line
+def test_dead_workers_are_one_line_on_the_command_line(tmp_path):
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    info = tmp_path / "dying-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: dying\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[terrainvis.simplifiers]\ndying = dying_method:METHOD\n")
+    (tmp_path / "dying_method.py").write_text(textwrap.dedent('''
+        import os
+        from simplifiers import Method
+
+        def build(grid, n_vertices):
+            os._exit(3)  # a worker killed mid-unit (out of memory, a segfault in a library)
+
+        METHOD = Method("dying", "irregular", __name__, "build", "a method whose worker dies", default=False)
+    '''))
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    r = subprocess.run([sys.executable, "-m", "terrainvis", "compare", "--terrain", "hills", "ridges", "--methods",
+                        "dying", "lls", "--levels", "1", "--points", "8", "--sets", "1", "--relocations", "full",
+                        "--workers", "2", "--no-plots", "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, env=env, timeout=600)
+    assert r.returncode == 1, r.stderr
+    lines = [line for line in r.stderr.strip().splitlines() if "%|" not in line]
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert lines[0].startswith("terrainvis compare: failed: the worker processes died (")
+    assert "--workers 1" in lines[0] and "__main__" not in lines[0]
+
+
+# ---------------------------------------------------------------------- 18, 20: refusals before numpy's own errors
+def test_sizes_and_values_that_cannot_work_are_refused_by_name():
+    import numpy as np
+
+    from terrainvis import HeightGrid, TIN, sample_points, synthetic_terrain, visibility_matrix
+    from terrainvis.errors import NotEnoughMemoryError
+
+    g = bundled_terrain("hills")
+    with pytest.raises(NotEnoughMemoryError, match=r"sample_points of 1,000,000,000 points needs about"):
+        sample_points(g, 10**9)
+    with pytest.raises(NotEnoughMemoryError, match=r"visibility_matrix of 200,000 points \(a 200,000 x 200,000"):
+        visibility_matrix(g, np.tile([[100.0, 100.0, 300.0]], (200_000, 1)))
+    with pytest.raises(ValueError, match="seed must be >= 0, got -1"):
+        synthetic_terrain("hills", seed=-1)
+    with pytest.raises(TypeError, match=r"attrs must be a dict \(name -> value\) or None, got list"):
+        HeightGrid(np.zeros((2, 2)), attrs=[1])
+    with pytest.raises(ValueError, match=r"z holds a height of 1e\+308, beyond \+-1e\+15"):
+        HeightGrid(np.full((2, 2), 1e308))
+    with pytest.raises(ValueError, match=r"vertices holds a height of -1e\+300"):
+        TIN([[0.0, 0.0, -1e300], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[0, 1, 2]])

@@ -474,10 +474,11 @@ def test_real_minus_9999_heights_survive_asc_and_tif(tmp_path):
 
     with rasterio.open(tmp_path / "m.tif") as src:
         assert src.nodata == -99999.0
-    # When every usual nodata value is a real height, one below the lowest height is used.
-    z = np.array([[-9999.0, -32768.0], [-99999.0, -3.4028234663852886e38]])
+    # When every usual nodata value is a real height, float32's lowest value (never a height) is used.
+    z = np.array([[-9999.0, -32768.0], [-99999.0, np.nan]])
     back = load_dem(save_dem(HeightGrid(z), tmp_path / "all.asc"))
     np.testing.assert_array_equal(back.z, z)
+    assert "NODATA_value -3.4028234663852886e+38" in (tmp_path / "all.asc").read_text()
 
 
 def test_geotiff_scale_and_offset_are_applied(tmp_path):

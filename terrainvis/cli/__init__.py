@@ -124,6 +124,7 @@ def _main_thread() -> bool:
 
 def _run(args, name: str) -> int:
     from ..core.fileio import OutputError
+    from ..core.runner import WorkersDied
     from ..errors import NodataError, SimplificationError
 
     try:
@@ -132,6 +133,10 @@ def _run(args, name: str) -> int:
         raise
     except SimplificationError as exc:
         print(f"{name}: failed: {exc}", file=sys.stderr)
+        return 1
+    except WorkersDied as exc:  # no script to guard here: the advice for one means nothing
+        print(f"{name}: failed: the worker processes died ({exc.cause}); the units finished before are kept "
+              "(--resume continues); --workers 1 runs them in this process and shows why", file=sys.stderr)
         return 1
     except NodataError as exc:
         rows, cols = exc.shape

@@ -37,6 +37,22 @@ class Interrupted(KeyboardInterrupt):
         super().__init__(f"interrupted by {signal.Signals(self.signum).name}")
 
 
+class WorkersDied(RuntimeError):
+    """The worker processes died (killed, out of memory, or a script re-imported by spawn without its guard).
+
+    ``cause`` is the pool's own message. ``str()`` gives the advice for a script; the
+    command line, which has no script to guard, says what to do there itself.
+    """
+
+    def __init__(self, cause: str):
+        self.cause = cause
+        super().__init__(
+            "the worker processes died. They are started with 'spawn', which imports your __main__ module "
+            "again: in a script, call compare() under `if __name__ == \"__main__\":`, or pass workers=1 to run in "
+            f"this process. Units finished before the failure are in out_csv if one was given ({cause})"
+        )
+
+
 def check_workers(workers) -> int | None:
     """``workers`` as None (one per CPU) or an int >= 1."""
     return None if workers is None else as_int(workers, "workers", minimum=1)
@@ -69,8 +85,9 @@ def run_units(tasks, fn, *, on_result, workers=None, client=None) -> None:
     ------
     Interrupted
         On SIGINT or SIGTERM, after cleaning up (see the module docstring).
-    RuntimeError
-        When the worker processes died (e.g. an unguarded script re-imported by spawn).
+    WorkersDied
+        A :class:`RuntimeError`: the worker processes died (e.g. an unguarded script
+        re-imported by spawn, or one killed for memory).
     """
     if not tasks:
         return
@@ -224,12 +241,7 @@ def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
         _stop_pool(pool)
         if signals.pending is not None:  # the same signal reached a worker too: the user's stop
             raise Interrupted(signals.pending) from None
-        raise RuntimeError(
-            "compare's worker processes died. They are started with 'spawn', which imports "
-            "your __main__ module again: in a script, call compare() under "
-            "`if __name__ == \"__main__\":`, or pass workers=1 to run in this process. "
-            f"Units finished before the failure are in out_csv if one was given ({exc})"
-        ) from exc
+        raise WorkersDied(str(exc)) from exc
     except BaseException as exc:
         _stop_pool(pool)
         if isinstance(exc, KeyboardInterrupt):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .memory import check_memory
 from .validate import as_finite_scalar, as_int, describe
 from .terrain import TIN, HeightGrid, as_terrain
 
@@ -40,6 +41,8 @@ def sample_points(terrain, n: int, seed=0, offset: float = 0.0) -> np.ndarray:
     n = as_int(n, "n", minimum=0)
     offset = as_finite_scalar(offset, "offset")
     rng = _generator(seed)
+    # the draws, the positions, the heights and the result: about 128 bytes a point
+    check_memory(128 * n, f"sample_points of {n:,} points")
     if isinstance(terrain, TIN):
         xy = _sample_tin(terrain, n, rng)
     else:

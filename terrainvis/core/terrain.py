@@ -94,6 +94,29 @@ def _check_z(z) -> np.ndarray:
     return np.array(arr, dtype=np.float64, order="C", copy=True)
 
 
+#: The largest |height| a terrain may hold (z units). Beyond it a value is no elevation in
+#: any unit a DEM uses (1e15 mm is a billion kilometres), and float64 arithmetic on it
+#: (the squares of least squares, areas, thresholds) overflows or loses every digit of
+#: the relief.
+MAX_HEIGHT = 1e15
+
+
+def _check_heights(z: np.ndarray, name: str) -> None:
+    finite = z[np.isfinite(z)]
+    if finite.size and np.abs(finite).max() > MAX_HEIGHT:
+        worst = finite[np.argmax(np.abs(finite))]
+        raise ValueError(f"{name} holds a height of {worst:.6g}, beyond +-{MAX_HEIGHT:g} (z units): no DEM's elevation, "
+                         "and float64 arithmetic on it loses the relief; check the file's scale and nodata value")
+
+
+def _as_attrs(attrs) -> dict:
+    if attrs is None:
+        return {}
+    if not isinstance(attrs, dict):
+        raise TypeError(f"attrs must be a dict (name -> value) or None, got {describe(attrs)}")
+    return dict(attrs)
+
+
 class HeightGrid:
     """A rectilinear height grid and the piecewise-linear surface over it.
 
@@ -220,10 +243,11 @@ class HeightGrid:
         return grid_to_dataarray(self, name=name)
 
     def _init(self, z, xs, ys, attrs):
+        _check_heights(z, "z")
         self.z = _frozen(z)
         self.xs = _frozen(xs)
         self.ys = _frozen(ys)
-        self.attrs = dict(attrs or {})
+        self.attrs = _as_attrs(attrs)
         self._cache = {}
 
     def __reduce__(self):
@@ -592,6 +616,7 @@ class TIN:
             raise ValueError(f"vertices must hold at least 3 vertices, got {v.shape[0]}")
         if not np.isfinite(v).all():
             raise ValueError(f"vertices must be finite, got {int((~np.isfinite(v)).any(axis=1).sum())} non-finite row(s)")
+        _check_heights(v[:, 2], "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3:
             raise ValueError(f"faces must have shape (m, 3), got {f.shape}")
@@ -604,7 +629,7 @@ class TIN:
         self.vertices = _frozen(np.array(v, dtype=np.float64, order="C", copy=True))
         dtype = np.int32 if v.shape[0] < 2**31 - 1 else np.int64
         self.faces = _frozen(np.array(f, dtype=dtype, order="C", copy=True))
-        self.attrs = dict(attrs or {})
+        self.attrs = _as_attrs(attrs)
         self._cache = {}
 
     def __reduce__(self):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import warnings
 
 import numpy as np
@@ -66,16 +65,19 @@ def native_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _nodata_value(z: np.ndarray, *, always: bool = False) -> float | None:
-    """None without NaN (unless ``always``); else -9999 unless it is a real height, else another value that does not occur."""
+    """None without NaN (unless ``always``); else -9999 unless it is a real height, else another value that does not occur.
+
+    The last candidate, float32's lowest value, is never a height (a terrain holds no
+    |height| above :data:`terrainvis.core.terrain.MAX_HEIGHT`), so one always remains.
+    """
     nan = np.isnan(z)
     if not nan.any() and not always:
         return None
     finite = z[~nan]
-    for candidate in (-9999.0, -32768.0, -99999.0, -3.4028234663852886e38):
+    for candidate in (-9999.0, -32768.0, -99999.0):
         if not (finite == candidate).any():
             return candidate
-    below = float(np.nextafter(finite.min(), -np.inf))  # below every height, so not one of them
-    return below if math.isfinite(below) else float(np.nextafter(finite.max(), np.inf))
+    return -3.4028234663852886e38
 
 
 def _uniform_layout(grid: HeightGrid, suffix: str):

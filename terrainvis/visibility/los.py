@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.memory import check_memory
 from ..core.validate import as_points
 from ..core.terrain import HeightGrid, as_terrain
 from . import embree as _embree
@@ -206,6 +207,8 @@ def visibility_matrix(
     """
     _prepare_terrain(terrain, "visibility_matrix")
     pts = np.ascontiguousarray(as_points(points, "points", 3), dtype=np.float64)
+    n = pts.shape[0]
+    check_memory(n * n, f"visibility_matrix of {n:,} points (a {n:,} x {n:,} boolean matrix)")
     _check_inside(terrain, pts, "points")
     kc = curvature_coefficient(curvature, earth_radius)
     chosen = choose(engine, terrain, kc)
