@@ -176,3 +176,17 @@ def test_sizes_and_values_that_cannot_work_are_refused_by_name():
         HeightGrid(np.full((2, 2), 1e308))
     with pytest.raises(ValueError, match=r"vertices holds a height of -1e\+300"):
         TIN([[0.0, 0.0, -1e300], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[0, 1, 2]])
+
+
+# ---------------------------------------------------------------------- 3: partners that cannot fit
+def test_partners_that_cannot_fit_are_refused_before_anything_is_allocated(tmp_path, capsys):
+    pts = tmp_path / "p.csv"
+    pts.write_text("x,y\n600,600\n1800,2400\n")
+    code, out, err = _run(capsys, ["relocate", "hills", "-m", "lls", "-l", 1, "--points", pts, "--partners",
+                                   1_000_000_000, "-o", tmp_path / "r.csv"])
+    assert code == 2 and "the calibrated relocation of 2 points against 1,000,000,000 partners needs about" in err
+    assert not (tmp_path / "r.csv").exists()
+    code, out, err = _run(capsys, ["compare", "--terrain", "hills", "--methods", "lls", "--levels", 1, "--partners",
+                                   100_000_000, "--out", tmp_path / "c"])
+    assert code == 2 and "n_partners=100,000,000 (the calibrated relocation's partners) needs at least" in err
+    assert not (tmp_path / "c" / "results.csv").exists()

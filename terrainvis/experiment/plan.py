@@ -175,9 +175,14 @@ def unit_bytes(settings: Settings, grids: dict) -> int:
     """A lower bound of the memory one unit allocates, in bytes (on the largest terrain): the
     measure's own estimate (:attr:`terrainvis.experiment.measures.Measure.unit_bytes`); the
     terrains and S(T) themselves are not counted."""
+    from ..relocation.calibrated import memory_need
+    from ..relocation.registry import CALIBRATED
     from .measures import MEASURES
 
-    return int(MEASURES[settings.measure].unit_bytes(settings, grids))
+    need = int(MEASURES[settings.measure].unit_bytes(settings, grids))
+    if CALIBRATED in settings.relocations:  # its partners, whatever the measure
+        need += memory_need(settings.n_partners, settings.n_points)
+    return need
 
 
 def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
@@ -197,14 +202,19 @@ def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
     have = available_memory()
     if have is None or need <= have:
         return
-    if settings.measure == "pairs":
+    from ..relocation.calibrated import memory_need
+    from ..relocation.registry import CALIBRATED
+
+    if CALIBRATED in settings.relocations and memory_need(settings.n_partners, settings.n_points) > have:
+        what = f"n_partners={settings.n_partners:,} (the calibrated relocation's partners)"
+    elif settings.measure == "pairs":
         what = f"n_points={settings.n_points:,} (visibility matrices of {settings.n_points:,}² pairs)"
     else:
         what = f"the {settings.measure} measure on {max(g.size for g in grids.values()):,} samples"
     side_by_side = f" with {at_once} units at once" if at_once > 1 else ""
     raise NotEnoughMemoryError(
         f"{what} needs at least {format_bytes(need)} of memory{side_by_side}, but this machine has "
-        f"{format_bytes(have)} available; use fewer points" + (" or fewer workers" if at_once > 1 else "")
+        f"{format_bytes(have)} available; use fewer points or partners" + (" or fewer workers" if at_once > 1 else "")
     )
 
 

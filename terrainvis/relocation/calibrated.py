@@ -562,6 +562,7 @@ def relocate_calibrated(points, simplified, *, offset: float = 0.0, original=Non
     (n, 3) float64
         A new array; x and y are unchanged.
     """
+    from ..core.memory import check_memory
     from ..core.validate import as_bool, as_height, as_nonnegative_finite, as_points
     from ..visibility import terrain_scale
     from .paper import ground_heights
@@ -584,6 +585,8 @@ def relocate_calibrated(points, simplified, *, offset: float = 0.0, original=Non
                    earth_radius=earth_radius, n_partners=as_int(n_partners, "n_partners", minimum=1),
                    sweeps=as_int(sweeps, "sweeps", minimum=0), seed=as_int(seed, "seed", minimum=0),
                    min_gain=as_int(min_gain, "min_gain", minimum=1), neighbours=as_bool(neighbours, "neighbours"))
+    check_memory(memory_need(options["n_partners"], pts.shape[0]),
+                 f"the calibrated relocation of {pts.shape[0]:,} points against {options['n_partners']:,} partners")
     out = pts.copy()
     if pts.shape[0] == 0:
         return out
@@ -597,3 +600,12 @@ def relocate_calibrated(points, simplified, *, offset: float = 0.0, original=Non
         )
     out[:, 2] = calibrated_heights(pts, simplified, original, offset=off, target_height=target_height, **options)
     return out
+
+
+def memory_need(n_partners: int, n_points: int = 0) -> int:
+    """A lower bound of the bytes the calibrated relocation allocates: per partner its positions and
+    heights and its verdicts against the core and the neighbours (a byte each), per point a row of
+    thresholds and verdicts against the partners (chunked to at most :data:`_CHUNK_PAIRS` pairs)."""
+    per_partner = 64 + CORE_PARTNERS + NEIGHBOUR_DIRECTIONS * len(NEIGHBOUR_RINGS)
+    rows = min(n_points * n_partners, max(_CHUNK_PAIRS, n_partners))
+    return int(n_partners) * per_partner + 9 * rows
