@@ -190,3 +190,26 @@ def test_partners_that_cannot_fit_are_refused_before_anything_is_allocated(tmp_p
                                    100_000_000, "--out", tmp_path / "c"])
     assert code == 2 and "n_partners=100,000,000 (the calibrated relocation's partners) needs at least" in err
     assert not (tmp_path / "c" / "results.csv").exists()
+
+
+# ---------------------------------------------------------------------- 6, 7: progress where someone watches, lines in a log
+def test_progress_is_shown_on_a_terminal_and_written_as_lines_into_a_log(tmp_path, capsys):
+    import subprocess
+    import sys
+
+    from terrainvis.core._progress import show_by_default
+
+    capsys.readouterr()
+    compare(["hills"], methods=["lls"], levels=[1], n_points=8, n_sets=1, relocations=["full"], repeats=1, workers=1)
+    assert capsys.readouterr().err == "" and not show_by_default()  # not a terminal: tqdm's convention, nothing
+    compare(["hills"], methods=["lls"], levels=[1, 2], n_points=8, n_sets=1, relocations=["full"], repeats=1,
+            workers=1, progress=True)
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].startswith("compare: 2/2 units, ") and "\r" not in err and "\x1b" not in err
+    r = subprocess.run([sys.executable, "-m", "terrainvis", "compare", "--terrain", "hills", "ridges", "--methods",
+                        "lls", "simple", "--levels", "1", "--points", "8", "--sets", "1", "--relocations", "full",
+                        "--workers", "2", "--no-plots", "--out", str(tmp_path / "o")], capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert "\x1b" not in r.stderr and "\r" not in r.stderr  # a log file gets lines, not bars redrawn in place
+    assert r.stderr.strip().splitlines()[-1].startswith("compare: 4/4 units, ")

@@ -13,15 +13,33 @@ def progress_bar_class():
     """
     from tqdm.std import tqdm as plain
 
-    try:
-        shell = sys.modules["IPython"].get_ipython() if "IPython" in sys.modules else None
-        kernel = "ipykernel.zmqshell" in sys.modules or (shell is not None and "IPKernelApp" in shell.config)
-        if not kernel:
-            return plain
-        import ipywidgets  # noqa: F401
-
-        from tqdm import notebook
-
-        return notebook.tqdm if getattr(notebook, "IProgress", None) is not None else plain
-    except Exception:  # no ipywidgets, or an IPython without .config
+    if not in_kernel():
         return plain
+    try:
+        import ipywidgets  # noqa: F401  (tqdm's notebook bar needs it)
+        from tqdm import notebook
+    except ImportError:
+        return plain
+    return notebook.tqdm if getattr(notebook, "IProgress", None) is not None else plain
+
+
+def in_kernel() -> bool:
+    """Whether this process is a Jupyter kernel (where a progress bar is drawn by the front end)."""
+    shell = sys.modules["IPython"].get_ipython() if "IPython" in sys.modules else None
+    try:
+        return "ipykernel.zmqshell" in sys.modules or (shell is not None and "IPKernelApp" in shell.config)
+    except Exception:  # an IPython without .config
+        return False
+
+
+def on_a_terminal() -> bool:
+    """Whether stderr is a terminal, where bars are redrawn in place (a log file gets plain lines instead)."""
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):  # replaced or closed
+        return False
+
+
+def show_by_default() -> bool:
+    """tqdm's convention: progress is shown where someone watches, a terminal or a notebook."""
+    return on_a_terminal() or in_kernel()

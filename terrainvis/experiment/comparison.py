@@ -76,7 +76,7 @@ def _tasks(grids: dict, settings: Settings, done=frozenset()) -> list[tuple]:
 
 # ---------------------------------------------------------------------- compare
 def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=None, out_csv=None,
-            resume: bool = False, save_dir=None, progress: bool = False, **options) -> pd.DataFrame:
+            resume: bool = False, save_dir=None, progress: bool | None = None, **options) -> pd.DataFrame:
     """Run the paper's experiment: how many LOS verdicts survive each simplification.
 
     Parameters
@@ -101,9 +101,12 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     save_dir : str or Path, optional
         Save every simplified terrain there (:func:`simplified_path`,
         :func:`terrainvis.load_terrain`).
-    progress : bool
-        Show a progress bar on stderr (a widget in Jupyter with ipywidgets); on a cold
-        numba cache, first what is being compiled, with an estimate of how long.
+    progress : bool, optional
+        Show the progress on stderr: on a cold numba cache, first what is being compiled
+        with an estimate of how long, then the units. None (the default) shows it where
+        someone watches, tqdm's convention: on a terminal (bars redrawn in place) or in
+        Jupyter (a widget with ipywidgets); True shows it anywhere, as plain lines when
+        stderr is a file; False never.
 
     The options (between ``terrains`` and ``workers``) are declared in
     :data:`terrainvis.experiment.options.OPTIONS`; their defaults are :data:`DEFAULTS`.
@@ -202,8 +205,10 @@ def _store(out_csv, settings: Settings, grids: dict, resume: bool):
 
 def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, progress) -> list[dict]:
     """Run the tasks (after the warm-up parts of a cold numba cache); every finished unit goes to ``store``."""
+    from ..core._progress import show_by_default
     from ..core.runner import run_units
 
+    progress = show_by_default() if progress is None else bool(progress)
     from .plan import work_order
 
     todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
@@ -238,44 +243,83 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
 class _Progress:
     """The progress shown on stderr: the kernels being compiled (a cold cache), then the units.
 
-    The compile bar names each part as it finishes. Its first estimate comes from the
-    compile times measured on this project's machine (:func:`terrainvis.experiment.plan.compile_seconds`);
-    as parts finish, the time left is rescaled by how fast this machine compiles them.
+    On a terminal or in Jupyter, bars: the compile bar names each part as it finishes and
+    closes when the last one has (it is not left open to the end); its first estimate
+    comes from the compile times measured on this project's machine
+    (:func:`terrainvis.experiment.plan.compile_seconds`), rescaled as parts finish by how
+    fast this machine compiles them. Into a file (a log), plain lines instead of bars
+    redrawn in place (two bars there leave cursor escapes): the compiling's start and
+    end, and the units done, at most every 10 s and at the end.
     """
+
+    #: Seconds between the plain lines of the units' progress in a log.
+    LINE_EVERY = 10.0
 
     def __init__(self, show: bool, parts: list, units: int, at_once: int):
         import time
 
+        from ..core._progress import in_kernel, on_a_terminal
         from .plan import compile_seconds, compile_weight
 
-        tqdm = progress_bar_class()
+        self.show = show
+        self.bars = show and (on_a_terminal() or in_kernel())
         self.compile = None
+        self.units = None
         self.weight = compile_weight
+        self.n_parts, self.parts_done = len(parts), 0
         self.left = sum(map(compile_weight, parts))
         self.done = 0.0
-        self.start = time.perf_counter()
+        self.total, self.count = units, 0
+        self.start = self.last_line = time.perf_counter()
+        tqdm = progress_bar_class()
         if show and parts:
             estimate = compile_seconds(parts, at_once)
-            tqdm.write(f"terrainvis: first run: compiling the numba kernels this run needs ({len(parts)} parts, "
-                       f"about {estimate:.0f} s on this project's shared 2-core machine; later runs load them "
-                       "from numba's cache)", file=sys.stderr)
-            self.compile = tqdm(total=len(parts), desc="compiling", unit="part", file=sys.stderr)
-        self.units = tqdm(total=units, desc="compare", unit="unit", file=sys.stderr, disable=not show)
+            self._say(f"terrainvis: first run: compiling the numba kernels this run needs ({len(parts)} parts, "
+                      f"about {estimate:.0f} s on this project's shared 2-core machine; later runs load them "
+                      "from numba's cache)", tqdm)
+            if self.bars:
+                self.compile = tqdm(total=len(parts), desc="compiling", unit="part", file=sys.stderr)
+        if self.bars:
+            self.units = tqdm(total=units, desc="compare", unit="unit", file=sys.stderr)
+
+    def _say(self, line: str, tqdm=None) -> None:
+        if tqdm is not None:
+            tqdm.write(line, file=sys.stderr)  # above any bar being drawn
+        else:
+            print(line, file=sys.stderr, flush=True)
 
     def compiled(self, part: tuple) -> None:
         import time
 
-        if self.compile is None:
+        if not self.show or not self.n_parts:
             return
+        self.parts_done += 1
         w = self.weight(part)
         self.done, self.left = self.done + w, max(0.0, self.left - w)
-        rate = (time.perf_counter() - self.start) / self.done if self.done else 0.0
-        note = f"{part[1]} done" + (f", about {self.left * rate:.0f} s left" if self.left else "")
-        self.compile.set_postfix_str(note, refresh=False)
-        self.compile.update(1)
+        if self.compile is not None:
+            rate = (time.perf_counter() - self.start) / self.done if self.done else 0.0
+            note = f"{part[1]} done" + (f", about {self.left * rate:.0f} s left" if self.left else "")
+            self.compile.set_postfix_str(note, refresh=False)
+            self.compile.update(1)
+        if self.parts_done == self.n_parts:
+            if self.compile is not None:
+                self.compile.close()
+                self.compile = None
+            else:
+                self._say(f"terrainvis: compiled the kernels ({self.n_parts} parts) in "
+                          f"{time.perf_counter() - self.start:.0f} s")
 
     def finished(self, n: int) -> None:
-        self.units.update(n)
+        import time
+
+        self.count += n
+        if self.units is not None:
+            self.units.update(n)
+        elif self.show:
+            now = time.perf_counter()
+            if self.count >= self.total or now - self.last_line >= self.LINE_EVERY:
+                self.last_line = now
+                self._say(f"compare: {self.count}/{self.total} units, {now - self.start:.0f} s")
 
     def close(self) -> None:
         for bar in (self.compile, self.units):
