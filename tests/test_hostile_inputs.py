@@ -213,3 +213,29 @@ def test_progress_is_shown_on_a_terminal_and_written_as_lines_into_a_log(tmp_pat
     assert r.returncode == 0, r.stderr
     assert "\x1b" not in r.stderr and "\r" not in r.stderr  # a log file gets lines, not bars redrawn in place
     assert r.stderr.strip().splitlines()[-1].startswith("compare: 4/4 units, ")
+
+
+def test_long_commands_say_what_they_do_on_a_terminal(tmp_path):
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    main_fd, tty = pty.openpty()  # stderr a terminal, as a user's
+    try:
+        r = subprocess.run([sys.executable, "-m", "terrainvis", "simplify", "hills", "-m", "qec", "-l", "2", "-o",
+                            str(tmp_path / "q.ply")], stdout=subprocess.PIPE, stderr=tty, timeout=600)
+        os.close(tty)
+        said = b""
+        while True:
+            try:
+                chunk = os.read(main_fd, 4096)
+            except OSError:
+                break
+            if not chunk:
+                break
+            said += chunk
+    finally:
+        os.close(main_fd)
+    assert r.returncode == 0
+    assert b"terrainvis simplify: simplifying 120x120 samples with qec to level 2 ..." in said

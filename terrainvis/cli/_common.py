@@ -177,6 +177,16 @@ def _read_tin(path: Path):
     return _read(path, path.stem)
 
 
+def working(command: str, what: str) -> None:
+    """On a terminal, say what a long step is doing before it starts (a log gets only the results)."""
+    import sys
+
+    from ..core._progress import on_a_terminal
+
+    if on_a_terminal():
+        print(f"terrainvis {command}: {what} ...", file=sys.stderr, flush=True)
+
+
 #: The height flags and their names in the API: each is checked against the terrain once it is read.
 _HEIGHT_FLAGS = (("height", "--height"), ("target_height", "--target-height"), ("offset", "--offset"))
 

@@ -20,6 +20,7 @@ from ._common import (
     read_columns,
     read_surface,
     read_terrain,
+    working,
 )
 
 
@@ -102,6 +103,8 @@ def run(args) -> int:
                          f"{outside_message(frame, user[k], ' or its simplification')}; {int(outside.sum())} point(s) do")
     z = np.where(np.isnan(table[:, 2]), ground + args.offset, table[:, 2])
     points = np.column_stack([xy, z])
+    working("relocate", f"placing {plural(len(points), 'point')} on {what} ({args.how}"
+            + (f", {args.partners:,} partners)" if args.how == "calibrated" else ")"))
     t0 = time.perf_counter()
     moved = relocate(points, simplified, args.how, offset=args.offset, original=grid, target_height=args.target_height,
                      n_partners=args.partners, seed=args.seed, curvature=args.curvature,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import UsageError, add_nodata, distance_arg, plural, read_terrain
+from ._common import UsageError, add_nodata, distance_arg, plural, read_terrain, working
 
 
 def add_parser(sub) -> None:
@@ -52,6 +52,8 @@ def run(args) -> int:
     check_output_file(out, "-o", inputs=[args.dem])
     label, grid = read_terrain(args.dem, args)
     level = 1 if args.level is None and args.max_error is None else args.level
+    at = f"level {level}" if level is not None else f"max error {args.max_error:g}"
+    working("simplify", f"simplifying {grid.shape[0]}x{grid.shape[1]} samples with {args.method} to {at}")
     result = simplify(grid, args.method, level, max_error=args.max_error, **parse_options(args.option))
     # a TIN to a raster is sampled at the DEM's own samples (nodata outside the TIN)
     save_terrain(result, out, like=None if regular or suffix == ".npz" else grid)
