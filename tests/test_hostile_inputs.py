@@ -239,3 +239,23 @@ def test_long_commands_say_what_they_do_on_a_terminal(tmp_path):
         os.close(main_fd)
     assert r.returncode == 0
     assert b"terrainvis simplify: simplifying 120x120 samples with qec to level 2 ..." in said
+
+
+# ---------------------------------------------------------------------- 13: the nearest sample under curvature
+def test_the_nearest_sample_takes_the_pair_engines_verdict_under_curvature():
+    import numpy as np
+
+    from terrainvis import line_of_sight, viewshed
+
+    g = bundled_terrain("hills")
+    rng = np.random.default_rng(0)
+    blocked = 0
+    for _ in range(40):
+        x, y = rng.uniform(0, 3570, 2)
+        seen = viewshed(g, (x, y), observer_height=0.0, curvature=0.85714)
+        c, r = int(np.argmin(np.abs(g.xs - x))), int(np.argmin(np.abs(g.ys - y)))
+        eye = [[x, y, float(g.height_at([[x, y]])[0])]]
+        exact = line_of_sight(g, eye, [[g.xs[c], g.ys[r], g.z[r, c]]], curvature=0.85714)[0]
+        assert seen[r, c] == exact
+        blocked += not exact
+    assert blocked > 0  # an eye on the ground under curvature misses some of its nearest samples

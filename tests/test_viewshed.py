@@ -48,10 +48,11 @@ def _pairwise(grid, obs, h_o=1.7, h_t=0.0, max_distance=None, engine="grid"):
     b = _targets(grid, grid.z, h_t)
     a = np.repeat(_eye(grid, obs, h_o)[None, :], b.shape[0], axis=0)
     ref = line_of_sight(grid, a, b, engine=engine).reshape(grid.shape)
+    own = ref[_nearest(grid, obs)]  # the ground the observer stands on: its verdict at any distance
     if max_distance is not None:
         X, Y = np.meshgrid(grid.xs, grid.ys)
         ref &= (X - obs[0]) ** 2 + (Y - obs[1]) ** 2 <= max_distance**2
-    ref[_nearest(grid, obs)] = True
+    ref[_nearest(grid, obs)] = own
     return ref
 
 
@@ -279,11 +280,7 @@ def _pairwise_at(terrain, at, obs, h_o, h_t):
     a = np.repeat(_eye(terrain, obs, h_o)[None, :], b.shape[0], axis=0)
     ref = np.zeros(b.shape[0], bool)
     ref[ok] = line_of_sight(terrain, a[ok], b[ok], engine="grid")
-    ref = ref.reshape(at.shape)
-    r, c = _nearest(at, obs)
-    if np.isfinite(zt[r, c]) and (not at.n_nodata or np.isfinite(at.z[r, c])):
-        ref[r, c] = True
-    return ref
+    return ref.reshape(at.shape)  # the nearest sample too: the pair engine's verdict
 
 
 def test_at_other_grid():
@@ -480,8 +477,7 @@ def test_an_eye_given_explicitly_even_below_the_surface(dz):
         X, Y = np.meshgrid(T.xs, T.ys)
         b = np.column_stack([X.ravel(), Y.ravel(), S.height_at(np.column_stack([X.ravel(), Y.ravel()]))])
         ref = line_of_sight(S, np.repeat(eye[None], b.shape[0], axis=0), b).reshape(T.shape)
-        ref[_nearest(T, obs)] = True
-        np.testing.assert_array_equal(out, ref, err_msg=f"observer {obs}, eye {dz:+} m")
+        np.testing.assert_array_equal(out, ref, err_msg=f"observer {obs}, eye {dz:+} m")  # the nearest sample too
         if dz < 0:  # an eye under the ground sees (almost) nothing
             assert out.sum() <= 9
     with pytest.raises(ValueError, match=r"observer must have 2 values \(x, y\) or 3 \(x, y, z\)"):

@@ -158,9 +158,10 @@ def viewshed(
         :func:`~terrainvis.visibility.trim_length` and the tolerance
         :func:`~terrainvis.visibility.clearance_tolerance` of ``terrain``, as in
         :func:`~terrainvis.visibility.line_of_sight`. Nodata samples (of ``at``, or where
-        the surface under test is absent) are False, samples beyond ``max_distance`` are
-        False, and the sample nearest the observer (the ground it stands on) is always
-        True.
+        the surface under test is absent) are False, and samples beyond ``max_distance``
+        are False, but for the sample nearest the observer (the ground it stands on),
+        which gets the pair engine's verdict at any distance (with earth curvature an
+        eye on the ground may not see it).
 
     Raises
     ------
@@ -181,10 +182,9 @@ def viewshed(
     for most samples and approaches the cost of one exact walk per sample. See the module
     docstring.
 
-    An observer exactly on a sample stands at that sample's height. The sample nearest the
-    observer is True even in the rare case where the predicate says otherwise (on a
-    rectilinear grid's elongated cell, the nearest sample can lie across a ridged
-    diagonal).
+    An observer exactly on a sample stands at that sample's height. On a grid with nodata
+    the sample nearest the observer is True, as GIS viewsheds mark the observer's own
+    cell (the pair engine needs a NaN-free grid to say otherwise).
 
     References
     ----------
@@ -259,7 +259,7 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
         out, info = _grid(terrain, at, eye, (h_t, dmax, kc), own, sweep=bool(eye[2] >= zs))
     else:
         out, info = _rays(terrain, at, eye, (h_t, dmax, kc), own, engine)
-    _mark_nearest(out, terrain, at, eye)
+    _mark_nearest(out, terrain, at, eye, (h_t, dmax, kc), engine)
     return out, info
 
 
@@ -568,11 +568,25 @@ def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine):
     return out.reshape(rows, cols), info
 
 
-def _mark_nearest(out: np.ndarray, terrain, at: HeightGrid, eye) -> None:
-    """The sample nearest the observer is visible (unless it is not a target at all)."""
+def _mark_nearest(out: np.ndarray, terrain, at: HeightGrid, eye, query, engine) -> None:
+    """The sample nearest the observer (the ground it stands on) takes the pair engine's verdict.
+
+    The sweep does not decide the observer's own cell on its own: this one segment is
+    answered exactly, so that with earth curvature an eye on the ground that cannot see
+    the next sample is not said to see it. On a grid with nodata, whose pair engine needs
+    a NaN-free grid, the sample is visible, as GIS viewsheds mark the observer's cell.
+    """
+    h_t, _, kc = query  # the ground the observer stands on counts at any max_distance
     c = int(np.argmin(np.abs(at.xs - eye[0])))
     r = int(np.argmin(np.abs(at.ys - eye[1])))
     if at.n_nodata and not np.isfinite(at.z[r, c]):
         return
-    if np.isfinite(_surface_at(terrain, float(at.xs[c]), float(at.ys[r]))):
+    x, y = float(at.xs[c]), float(at.ys[r])
+    zs = _surface_at(terrain, x, y)
+    if not np.isfinite(zs):
+        return
+    if isinstance(terrain, HeightGrid) and terrain.n_nodata:
         out[r, c] = True
+        return
+    predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), 0.0, kc)
+    out[r, c] = bool(engine.pairs(terrain, eye[None, :], np.array([[x, y, zs + h_t]]), predicate)[0])
