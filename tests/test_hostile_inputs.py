@@ -259,3 +259,31 @@ def test_the_nearest_sample_takes_the_pair_engines_verdict_under_curvature():
         assert seen[r, c] == exact
         blocked += not exact
     assert blocked > 0  # an eye on the ground under curvature misses some of its nearest samples
+
+
+# ---------------------------------------------------------------------- 15: outputs on the DEM's own lattice
+def test_outputs_of_a_lon_lat_dem_carry_its_own_transform(tmp_path):
+    import warnings
+
+    import numpy as np
+
+    rasterio = pytest.importorskip("rasterio")
+    from terrainvis import load_dem, save_dem, viewshed
+    from terrainvis.io import write_mask_geotiff
+
+    dem = shared_dem_path("jacksboro_fault_tn")
+    source = tuple(np.load(dem)["geotransform"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = load_dem(dem).fill_nodata("nearest")
+    write_mask_geotiff(g, viewshed(g, (g.xs[200], g.ys[170])), tmp_path / "v.tif")
+    with rasterio.open(tmp_path / "v.tif") as src:
+        t = src.transform
+    assert (t.c, t.a, t.f, t.e) == (source[0], source[1], source[3], source[5])  # bit for bit, no rounding noise
+    save_dem(g, tmp_path / "d.asc")
+    header = (tmp_path / "d.asc").read_text().splitlines()[:5]
+    assert f"cellsize {float(source[1])!r}" in header  # square cells: cellsize, not dx and dy lines
+    crop = g.crop(rows=(10, 60), cols=(20, 90))  # a window of the lattice: the cells still lie on it
+    save_dem(crop, tmp_path / "c.tif")
+    with rasterio.open(tmp_path / "c.tif") as src:
+        assert src.transform.a == source[1] and src.transform.c == source[0] + 20 * source[1]

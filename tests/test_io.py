@@ -434,8 +434,9 @@ def test_round_trip(tmp_path, suffix):
     assert back.attrs["crs"] == "EPSG:32610"
     if suffix != ".asc":  # ESRI ASCII grids hold no other metadata
         want = dict(grid.attrs)
-        if suffix == ".tif":
-            want.update(geographic=False, xy_to_native=(1.0, 0.0, 1.0, 0.0))
+        if suffix == ".tif":  # the file's georeferencing, and its cells as stored
+            want.update(geographic=False, xy_to_native=(1.0, 0.0, 1.0, 0.0),
+                        native_lattice=(560000.0 - 15.0, 30.0, 5.1e6 + 6 * 25.0 + 12.5, 25.0))
         assert_attrs_equal(back.attrs, want)
 
 

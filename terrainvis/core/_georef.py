@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 #: The ``attrs`` keys that hold a grid's georeferencing (see the module docstring).
-GEOREF_KEYS = ("crs", "geographic", "xy_to_native", "source_crs")
+GEOREF_KEYS = ("crs", "geographic", "xy_to_native", "source_crs", "native_lattice")
 #: ``xy_to_native`` of a grid whose coordinates are already native.
 IDENTITY = (1.0, 0.0, 1.0, 0.0)
 

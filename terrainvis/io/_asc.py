@@ -12,7 +12,7 @@ from ..core.fileio import atomic_path
 from ..core._georef import parse_crs
 from ..core.terrain import HeightGrid
 from ._common import _check_read_memory, _Corrupt
-from ._raster import _georeference, _nodata_value, _uniform_layout
+from ._raster import _georeference, _nodata_value, _uniform_layout, native_lattice
 
 _ASC_KEYS = {"ncols", "nrows", "xllcorner", "yllcorner", "xllcenter", "yllcenter", "cellsize", "dx", "dy", "nodata_value"}
 
@@ -95,7 +95,8 @@ def _read_asc(p: Path, *, crs=None, band=None) -> HeightGrid:
     if prj is not None:
         file_crs = _crs_from_prj(prj)
     source = p.name if prj is None else f"{p.name} (with {prj.name})"
-    return _georeference(z[::-1], xs, ys, {}, file_crs, crs, source, dlon=dx, dlat=dy)
+    lattice = (x0 - 0.5 * dx, dx, y0 + (nrows - 0.5) * dy, dy)  # the cells' west and north edges
+    return _georeference(z[::-1], xs, ys, {}, file_crs, crs, source, dlon=dx, dlat=dy, lattice=lattice)
 
 
 def _crs_from_prj(prj: Path) -> str:
@@ -139,13 +140,13 @@ def _write_asc(grid: HeightGrid, p: Path) -> None:
             UserWarning, stacklevel=3,
         )
     rows, cols = z.shape
-    dx = float((nx[-1] - nx[0]) / (cols - 1))
-    dy = float((ny[-1] - ny[0]) / (rows - 1))
+    left, dx, top, dy = native_lattice(grid.attrs, nx, ny)
+    x0, y0 = left + 0.5 * dx, top - (rows - 0.5) * dy
     nodata = _nodata_value(z)
     body = (z if nodata is None else np.where(np.isnan(z), nodata, z))[::-1]
     size_lines = f"cellsize {dx!r}\n" if dx == dy else f"dx {dx!r}\ndy {dy!r}\n"
     header = (
-        f"ncols {cols}\nnrows {rows}\nxllcenter {float(nx[0])!r}\nyllcenter {float(ny[0])!r}\n{size_lines}"
+        f"ncols {cols}\nnrows {rows}\nxllcenter {x0!r}\nyllcenter {y0!r}\n{size_lines}"
         + ("" if nodata is None else f"NODATA_value {nodata!r}\n")
     )
     if prj_text is not None:

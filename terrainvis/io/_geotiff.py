@@ -15,7 +15,7 @@ from ..core._georef import GEOREF_KEYS, parse_crs, rasterio_module
 from ..core.terrain import HeightGrid
 from ._attrs import _attrs_from_json, _attrs_to_json
 from ._common import _check_read_memory, _Corrupt, _UserError
-from ._raster import _georeference, _nodata_value, _uniform_layout
+from ._raster import _georeference, _nodata_value, _uniform_layout, native_lattice
 
 _ATTRS_TAG = "TERRAINVIS_ATTRS"
 _RESAMPLED_TAG = "TERRAINVIS_RESAMPLED"
@@ -87,7 +87,8 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
                 pass
     for key in GEOREF_KEYS:
         attrs.pop(key, None)  # the file's own georeferencing decides
-    return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy)
+    lattice = (t.c if t.a > 0 else t.c + t.a * cols, dx, t.f if t.e < 0 else t.f + t.e * rows, dy)
+    return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy, lattice=lattice)
 
 
 #: Rasters with at least this many rows and columns are written in tiles (GDAL's usual 256 x 256).
@@ -118,7 +119,7 @@ def _write_tif(grid: HeightGrid, p: Path) -> None:
     z, nx, ny, crs_text, note = _uniform_layout(grid, p.suffix)
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None  # before any file is touched
     rows, cols = z.shape
-    transform = _north_up_transform(nx, ny)
+    transform = _north_up_transform(nx, ny, grid.attrs)
     nodata = _nodata_value(z, always=True)  # GIS tools expect the tag even when no sample uses it
     north_up = np.where(np.isnan(z), nodata, z)[::-1]
     dtype = _height_dtype(north_up)
@@ -221,13 +222,13 @@ def _stderr_lines():
         sink.close()
 
 
-def _north_up_transform(nx: np.ndarray, ny: np.ndarray):
-    """The GDAL transform of a north-up raster whose sample centres are the native axes nx, ny."""
+def _north_up_transform(nx: np.ndarray, ny: np.ndarray, attrs: dict | None = None):
+    """The GDAL transform of a north-up raster whose sample centres are the native axes nx, ny
+    (on the lattice of the raster ``attrs`` were read from, that raster's numbers: :func:`native_lattice`)."""
     from rasterio.transform import Affine
 
-    dx = float((nx[-1] - nx[0]) / (nx.size - 1))
-    dy = float((ny[-1] - ny[0]) / (ny.size - 1))
-    return Affine(dx, 0.0, float(nx[0]) - 0.5 * dx, 0.0, -dy, float(ny[-1]) + 0.5 * dy)
+    left, dx, top, dy = native_lattice(attrs or {}, nx, ny)
+    return Affine(dx, 0.0, left, 0.0, -dy, top)
 
 
 def write_geotiff(grid: HeightGrid, data: np.ndarray, path, *, nodata=None, tags: dict | None = None) -> Path:
@@ -273,7 +274,7 @@ def write_geotiff(grid: HeightGrid, data: np.ndarray, path, *, nodata=None, tags
     _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix)
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
     rows, cols = values.shape
-    profile = dict(height=rows, width=cols, count=1, dtype=values.dtype.name, transform=_north_up_transform(nx, ny),
+    profile = dict(height=rows, width=cols, count=1, dtype=values.dtype.name, transform=_north_up_transform(nx, ny, grid.attrs),
                    crs=crs, nodata=nodata)
     with atomic_path(p) as tmp:
         _write_gtiff(tmp, np.ascontiguousarray(values[::-1]), profile, tags)

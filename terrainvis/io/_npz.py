@@ -182,6 +182,8 @@ def _from_north_up(a: dict, z_north_up: np.ndarray) -> HeightGrid:
             raise _Corrupt(f"geotransform must be 6 numbers of a north-up raster (no rotation), got {gt.tolist()}")
         x0 = gt[0] + 0.5 * gt[1]  # the south-west sample centre in native coordinates
         y0 = gt[3] + gt[5] * (rows - 0.5)
+        if gt[1] > 0 and gt[5] < 0:  # north-up: the cells as stored (see _raster.native_lattice)
+            attrs["native_lattice"] = (float(gt[0]), float(gt[1]), float(gt[3]), float(-gt[5]))
         if geographic:
             dx_native = _scalar(a, "dx_native") if "dx_native" in a else abs(gt[1])
             dy_native = _scalar(a, "dy_native") if "dy_native" in a else abs(gt[5])

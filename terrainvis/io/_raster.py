@@ -13,8 +13,18 @@ from ..tolerances import DIVISOR_FLOOR, RESAMPLE_SHIFT_REL
 from ._common import _UserError
 
 
-def _georeference(z, xs, ys, attrs: dict, file_crs, crs_arg, source: str, *, dlon=None, dlat=None) -> HeightGrid:
-    """A HeightGrid from native sample coordinates (increasing), with its georeferencing attrs."""
+def _georeference(z, xs, ys, attrs: dict, file_crs, crs_arg, source: str, *, dlon=None, dlat=None,
+                  lattice=None) -> HeightGrid:
+    """A HeightGrid from native sample coordinates (increasing), with its georeferencing attrs.
+
+    ``dlon`` / ``dlat`` are the file's own steps (native units); ``lattice`` its cells as
+    stored, ``(left, dx, top, dy)`` (the west and north edges, the positive steps), which
+    is recorded in ``attrs["native_lattice"]`` so that a grid written back on that lattice
+    gets the file's numbers, not their rounding through the terrain's frame
+    (:func:`native_lattice`).
+    """
+    if lattice is not None:
+        attrs["native_lattice"] = tuple(float(v) for v in lattice)
     if file_crs and crs_arg:
         raise _UserError(f"crs: {source} records the CRS {file_crs!r}; crs= is only for files that record none, got {crs_arg!r}")
     text = file_crs or crs_arg
@@ -28,6 +38,38 @@ def _georeference(z, xs, ys, attrs: dict, file_crs, crs_arg, source: str, *, dlo
         affine = IDENTITY
     attrs.update(crs=text, geographic=geographic, xy_to_native=affine)
     return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+
+
+def native_lattice(attrs: dict, nx: np.ndarray, ny: np.ndarray) -> tuple[float, float, float, float]:
+    """``(left, dx, top, dy)`` of a north-up raster whose sample centres are the native axes ``nx``, ``ny``.
+
+    Native axes computed from the terrain's frame carry rounding (a lon/lat step of 0.01
+    comes back as 0.009999999999999995). When the axes lie on the cells of the raster the
+    grid was read from (``attrs["native_lattice"]``): the same steps and their samples on
+    its cell centres, within :data:`~terrainvis.tolerances.UNIFORM_STEP_REL`, that
+    raster's own numbers are used: a viewshed of a DEM carries the DEM's transform, and
+    an ``.asc`` of square cells its ``cellsize``.
+    """
+    from ..tolerances import UNIFORM_STEP_REL
+
+    nx, ny = np.asarray(nx, dtype=np.float64), np.asarray(ny, dtype=np.float64)
+    dx = float((nx[-1] - nx[0]) / (nx.size - 1)) if nx.size > 1 else None
+    dy = float((ny[-1] - ny[0]) / (ny.size - 1)) if ny.size > 1 else None
+    lattice = attrs.get("native_lattice")
+    if isinstance(lattice, (tuple, list)) and len(lattice) == 4:
+        left, sdx, top, sdy = (float(v) for v in lattice)
+
+        def whole(v):
+            return abs(v - round(v)) <= UNIFORM_STEP_REL * max(1.0, abs(v))
+
+        same = all(d is None or abs(d / s - 1.0) <= UNIFORM_STEP_REL for d, s in ((dx, sdx), (dy, sdy)))
+        k = (float(nx[0]) - (left + 0.5 * sdx)) / sdx
+        j = ((top - 0.5 * sdy) - float(ny[-1])) / sdy
+        if same and whole(k) and whole(j):
+            return left + round(k) * sdx, sdx, top - round(j) * sdy, sdy
+    dx = 1.0 if dx is None else dx
+    dy = 1.0 if dy is None else dy
+    return float(nx[0]) - 0.5 * dx, dx, float(ny[-1]) + 0.5 * dy, dy
 
 
 def native_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray]:
