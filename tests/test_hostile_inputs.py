@@ -287,3 +287,28 @@ def test_outputs_of_a_lon_lat_dem_carry_its_own_transform(tmp_path):
     save_dem(crop, tmp_path / "c.tif")
     with rasterio.open(tmp_path / "c.tif") as src:
         assert src.transform.a == source[1] and src.transform.c == source[0] + 20 * source[1]
+
+
+# ---------------------------------------------------------------------- 12: heights as GIS tools write them
+def test_simplified_geotiffs_store_float32_heights_unless_asked(tmp_path, capsys):
+    import numpy as np
+
+    rasterio = pytest.importorskip("rasterio")
+    from terrainvis import HeightGrid, load_dem, save_dem
+
+    code, out, err = _run(capsys, ["simplify", "hills", "-m", "lls", "-l", 1, "-o", tmp_path / "a.tif"])
+    assert code == 0 and "heights stored as float32, rounded by up to" in out
+    code, out, err = _run(capsys, ["simplify", "hills", "-m", "lls", "-l", 1, "-o", tmp_path / "b.tif", "--dtype",
+                                   "float64"])
+    assert code == 0 and "float32" not in out
+    with rasterio.open(tmp_path / "a.tif") as a, rasterio.open(tmp_path / "b.tif") as b:
+        assert a.dtypes == ("float32",) and b.dtypes == ("float64",)
+    g = HeightGrid(np.array([[0.1, 1000.123456789], [2.0, 3.0]]))
+    exact = load_dem(save_dem(g, tmp_path / "exact.tif"))  # default: whatever keeps every height
+    np.testing.assert_array_equal(exact.z, g.z)
+    rounded = load_dem(save_dem(g, tmp_path / "f32.tif", dtype="float32"))
+    np.testing.assert_array_equal(rounded.z, g.z.astype(np.float32).astype(np.float64))
+    with pytest.raises(ValueError, match="dtype chooses how a GeoTIFF stores heights; 'x.asc' is not one"):
+        save_dem(g, tmp_path / "x.asc", dtype="float32")
+    with pytest.raises(ValueError, match=r"dtype must be one of \['float32', 'float64'\] or None, got 'float16'"):
+        save_dem(g, tmp_path / "x.tif", dtype="float16")

@@ -26,6 +26,9 @@ def add_parser(sub) -> None:
     s.add_argument("--max-error", type=distance_arg, default=None, metavar="E",
                    help="the smallest result whose max vertical error is <= E (z units)")
     s.add_argument("-o", "--output", required=True, metavar="OUT", help="output file")
+    s.add_argument("--dtype", choices=["float32", "float64"], default="float32",
+                   help="how a GeoTIFF stores the heights: float32 as GIS tools write elevation (the rounding is "
+                        "printed), or float64 (default: float32)")
     s.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an option of the method, e.g. weights=derived for lls (repeatable)")
     add_nodata(s)
@@ -56,7 +59,9 @@ def run(args) -> int:
     working("simplify", f"simplifying {grid.shape[0]}x{grid.shape[1]} samples with {args.method} to {at}")
     result = simplify(grid, args.method, level, max_error=args.max_error, **parse_options(args.option))
     # a TIN to a raster is sampled at the DEM's own samples (nodata outside the TIN)
-    save_terrain(result, out, like=None if regular or suffix == ".npz" else grid)
+    raster = suffix in (".tif", ".tiff")
+    save_terrain(result, out, like=None if regular or suffix == ".npz" else grid,
+                 dtype=args.dtype if raster else None)
     a = result.attrs
     kind = f"{result.shape[0]} x {result.shape[1]} grid" if regular else f"TIN with {plural(result.n_faces, 'face')}"
     at = f"level {a['level']}" if a.get("level") is not None else f"max error <= {args.max_error:g}"
@@ -74,6 +79,12 @@ def run(args) -> int:
 
         worst, rms = vertical_errors(grid, as_simplified(out, grid, frame="native", label=out.name))
         print(f"  as written (resampled onto a uniform grid): max error {worst:.4g}, RMS error {rms:.4g}")
+    if raster and args.dtype == "float32":
+        import numpy as np
+
+        z = result.z if regular else result.vertices[:, 2]
+        loss = float(np.nanmax(np.abs(z.astype(np.float32).astype(np.float64) - z))) if z.size else 0.0
+        print(f"  heights stored as float32, rounded by up to {loss:.3g} (z units; --dtype float64 keeps them)")
     print(f"  wrote {out}")
     return 0
 

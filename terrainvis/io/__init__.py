@@ -159,7 +159,7 @@ from ._sample import bundled_terrain, sample_dem
 #   _metric    to_metric: a lon/lat grid resampled onto a local transverse Mercator grid
 
 __all__ = [
-    "load_terrain", "write_geotiff", "write_mask_geotiff", "save_figure", "write_csv", "figure_metadata",
+    "load_terrain", "HEIGHT_DTYPES", "write_geotiff", "write_mask_geotiff", "save_figure", "write_csv", "figure_metadata",
     "FIGURE_SOFTWARE", "save_terrain", "load_dem", "save_dem", "sample_dem", "bundled_terrain", "native_coords",
     "metres_per_degree", "to_metric",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",
@@ -307,7 +307,7 @@ def _read(p: Path, suffix: str, *, crs, band):
 
 
 # ---------------------------------------------------------------------- public: save
-def save_terrain(terrain, path, *, like: HeightGrid | None = None) -> Path:
+def save_terrain(terrain, path, *, like: HeightGrid | None = None, dtype: str | None = None) -> Path:
     """Write a HeightGrid or a TIN so that :func:`load_terrain` reads it back.
 
     Parameters
@@ -361,6 +361,12 @@ def save_terrain(terrain, path, *, like: HeightGrid | None = None) -> Path:
         raise ValueError(f"path {str(p)!r} is a folder; give a file name ending in {suffix}")
     if like is not None and not isinstance(like, HeightGrid):
         raise TypeError(f"like must be a terrainvis.HeightGrid (the grid to sample a TIN on), got {describe(like)}")
+    if dtype is not None:
+        if dtype not in HEIGHT_DTYPES:
+            raise ValueError(f"dtype must be one of {list(HEIGHT_DTYPES)} or None, got {dtype!r}")
+        if suffix not in (".tif", ".tiff"):
+            raise ValueError(f"dtype chooses how a GeoTIFF stores heights; {p.name!r} is not one (other formats "
+                             "keep float64)")
     if isinstance(terrain, TIN) and suffix not in (".npz",) + MESH_SUFFIXES:
         if like is None:
             raise ValueError(
@@ -378,11 +384,15 @@ def save_terrain(terrain, path, *, like: HeightGrid | None = None) -> Path:
     elif suffix == ".asc":
         _write_asc(terrain, p)
     else:
-        _write_tif(terrain, p)
+        _write_tif(terrain, p, dtype=dtype)
     return p
 
 
-def save_dem(grid: HeightGrid, path) -> Path:
+#: How a GeoTIFF may store heights (``dtype=`` of :func:`save_terrain` and :func:`save_dem`).
+HEIGHT_DTYPES = ("float32", "float64")
+
+
+def save_dem(grid: HeightGrid, path, *, dtype: str | None = None) -> Path:
     """Write a grid so that :func:`load_dem` reads it back (:func:`save_terrain` for grids).
 
     Parameters
@@ -395,6 +405,11 @@ def save_dem(grid: HeightGrid, path) -> Path:
         is a real height, none without NaN) or ``.npy`` (only z; the grid must have
         unit spacing and origin (0, 0)). Rows are written north-up (flipped back, see
         the module docstring).
+    dtype : {"float32", "float64"}, optional
+        How a GeoTIFF stores the heights. None (the default): float32 when every height
+        survives it exactly, else float64, so the file reads back as written; "float32"
+        as GIS tools write elevation (rounding each height by at most 2^-24 of its size:
+        under 0.1 mm below 1,000 m); "float64" always.
 
     Returns
     -------
@@ -412,4 +427,4 @@ def save_dem(grid: HeightGrid, path) -> Path:
     if not isinstance(grid, HeightGrid):
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
     p, suffix = _check_path(path, DEM_SUFFIXES)
-    return save_terrain(grid, p)
+    return save_terrain(grid, p, dtype=dtype)

@@ -113,7 +113,7 @@ def _height_dtype(values: np.ndarray) -> str:
     return "float32" if np.array_equal(z32.astype(np.float64), values) else "float64"
 
 
-def _write_tif(grid: HeightGrid, p: Path) -> None:
+def _write_tif(grid: HeightGrid, p: Path, *, dtype: str | None = None) -> None:
     rasterio = rasterio_module()
 
     z, nx, ny, crs_text, note = _uniform_layout(grid, p.suffix)
@@ -122,7 +122,7 @@ def _write_tif(grid: HeightGrid, p: Path) -> None:
     transform = _north_up_transform(nx, ny, grid.attrs)
     nodata = _nodata_value(z, always=True)  # GIS tools expect the tag even when no sample uses it
     north_up = np.where(np.isnan(z), nodata, z)[::-1]
-    dtype = _height_dtype(north_up)
+    dtype = _height_dtype(north_up) if dtype is None else dtype
     attrs = dict(grid.attrs)
     tags = {}
     if note is not None:
