@@ -312,3 +312,25 @@ def test_simplified_geotiffs_store_float32_heights_unless_asked(tmp_path, capsys
         save_dem(g, tmp_path / "x.asc", dtype="float32")
     with pytest.raises(ValueError, match=r"dtype must be one of \['float32', 'float64'\] or None, got 'float16'"):
         save_dem(g, tmp_path / "x.tif", dtype="float16")
+
+
+# ---------------------------------------------------------------------- 20: the rest of the probe's list
+def test_the_probes_small_cases_get_clear_answers(tmp_path, capsys):
+    import numpy as np
+
+    from terrainvis import HeightGrid, save_dem
+
+    code, out, err = _run(capsys, ["los", "hills", "--from", "1e300", 500, "--to", 3000, 3000])
+    assert code == 2 and "(1e+300, 500) lies outside the DEM's footprint" in err  # not 301 digits
+    (tmp_path / "folder.tif").mkdir()
+    code, out, err = _run(capsys, ["info", tmp_path / "folder.tif"])
+    assert code == 2 and err.strip().endswith(f"DEM '{tmp_path / 'folder.tif'}' is a folder, not a DEM file")
+    save_dem(HeightGrid(np.arange(4.0).reshape(2, 2)), tmp_path / "two.npz")
+    code, out, err = _run(capsys, ["compare", "--terrain", tmp_path / "two.npz", "--out", tmp_path / "c"])
+    assert code == 2 and "terrain 'two' (2x2) is too small to simplify: each level needs at least 3 samples" in err
+    pairs = tmp_path / "p.csv"
+    pairs.write_text("x1,y1,x2,y2\n")
+    code, out, err = _run(capsys, ["los", "hills", "--pairs", pairs])
+    assert code == 2 and out == "" and "holds no row after its header" in err
+    with pytest.raises(ValueError, match="resume=True continues the run stored in out_csv; give out_csv"):
+        compare(["hills"], methods=["lls"], levels=[1], resume=True, workers=1)

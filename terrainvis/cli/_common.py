@@ -123,6 +123,8 @@ def read_terrain(name: str, args=None):
 
     from ..experiment.plan import resolve_one
 
+    if Path(name).is_dir():
+        raise UsageError(f"DEM {name!r} is a folder, not a DEM file")
     if Path(name).suffix and not Path(name).exists():
         raise UsageError(f"DEM file {name!r} does not exist")
     label, grid = resolve_one(None, name, 0)
@@ -260,6 +262,8 @@ def read_columns(path: str, flag: str, columns, optional=()):
     missing = [c for c in columns if c not in table.columns]
     if missing:
         raise UsageError(f"{flag} needs the columns {', '.join(columns)}; {path!r} lacks {missing}")
+    if table.empty:
+        raise UsageError(f"{flag} {path!r} holds no row after its header: nothing to compute")
     wanted = list(columns) + list(optional)
     values = np.full((len(table), len(wanted)), np.nan)
     for j, c in enumerate(wanted):

@@ -132,7 +132,10 @@ class PositionFrame:
         step = self.step()
         decimals = max(0, 1 - math.floor(math.log10(step))) if step > 0 else 6
         whole = math.floor(math.log10(abs(v))) + 1 if v else 1
-        return f"{v:.{max(6, whole + decimals)}g}"
+        digits = max(6, whole + decimals)
+        if digits > 17:  # more than float64 holds (1e300 would be written out in full): its shortest form
+            return repr(float(v))
+        return f"{v:.{digits}g}"
 
     def point(self, xy) -> str:
         """``"(x, y)"`` of one position in this frame."""

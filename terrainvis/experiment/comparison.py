@@ -140,6 +140,8 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
 
     if terrains is None:
         raise TypeError("terrains must be a terrain, a list of terrains or a dict of them, got None")
+    if resume and out_csv is None:
+        raise ValueError("resume=True continues the run stored in out_csv; give out_csv (the results file to resume)")
     grids = resolve_terrains(terrains)
     settings = _settings(grids, **options)
     workers = check_workers(workers)

@@ -498,6 +498,9 @@ def _levels_fit(settings: Settings, grids: dict) -> None:
 
     for name, grid in grids.items():
         top = max_level(grid.shape)
+        if top == 0:
+            raise ValueError(f"terrain {name!r} ({grid.shape[0]}x{grid.shape[1]}) is too small to simplify: each level "
+                             "needs at least 3 samples per axis")
         if max(settings.levels) > top:
             raise ValueError(
                 f"levels must be at most {top} for terrain {name!r} ({grid.shape[0]}x{grid.shape[1]}: each "
