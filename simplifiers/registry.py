@@ -445,6 +445,13 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
         extra["budget"] = budget
     err_max, err_rms = vertical_errors(grid, out)
     n_vertices = out.size if info.regular else out.n_vertices
+    if target is not None and err_max <= target and "max_error" not in (extra.get("stopped_by"),
+                                                                         out.attrs.get("stopped_by")):
+        # the budget stopped the method, but the result meets the target all the same (max_error 0 with
+        # every vertex kept): say so, rather than "not met"
+        extra["stopped_by"] = "max_error"
+        extra["notes"] = [f"max_error {target:g}: met with {n_vertices:,} vertices (max error {err_max:.4g}), "
+                          "the most the budget allows"]
     out.attrs.update(
         method=method, kind=info.kind, level=level, n_vertices=int(n_vertices), nbytes=int(out.nbytes),
         max_error=err_max, rms_error=err_rms, seconds=seconds, **extra,

@@ -334,3 +334,15 @@ def test_the_probes_small_cases_get_clear_answers(tmp_path, capsys):
     assert code == 2 and out == "" and "holds no row after its header" in err
     with pytest.raises(ValueError, match="resume=True continues the run stored in out_csv; give out_csv"):
         compare(["hills"], methods=["lls"], levels=[1], resume=True, workers=1)
+
+
+def test_npy_is_refused_before_simplifying_and_a_met_target_is_said_met(tmp_path, capsys):
+    import time
+
+    t0 = time.perf_counter()
+    code, out, err = _run(capsys, ["simplify", "hills", "-m", "qec", "-l", 1, "-o", tmp_path / "t.npy"])
+    assert code == 2 and out == "" and "a .npy file keeps only the heights" in err  # nothing was simplified
+    assert time.perf_counter() - t0 < 30
+    tin = simplifiers.simplify(bundled_terrain("hills"), "greedy-insertion", max_error=0.0)
+    assert tin.attrs["max_error"] == 0.0 and tin.attrs["stopped_by"] == "max_error"
+    assert tin.attrs["notes"] == ["max_error 0: met with 14,400 vertices (max error 0), the most the budget allows"]

@@ -52,6 +52,9 @@ def run(args) -> int:
     valid = _GRID_SUFFIXES + _MESH_SUFFIXES
     if suffix not in valid:
         raise UsageError(f"-o must end in one of {list(valid)}, got {out.name!r}")
+    if suffix == ".npy":  # said before minutes of simplifying, not after
+        raise UsageError(f"-o {out.name!r}: a .npy file keeps only the heights, and a simplification needs its "
+                         "coordinates (a coarser grid or a TIN): write .npz, .tif, .asc or a mesh")
     check_output_file(out, "-o", inputs=[args.dem])
     label, grid = read_terrain(args.dem, args)
     level = 1 if args.level is None and args.max_error is None else args.level
