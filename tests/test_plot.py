@@ -41,8 +41,19 @@ def test_figures(df):
     changed = "false blocked (1)" if V[0, 1] else "false visible (1)"
     assert changed in legend
     # every method is drawn in its registry colour
-    lines = {ln.get_label(): ln.get_color() for ln in figs[3].axes[0].get_lines()}
-    assert lines["lls"] == METHODS["lls"].style[0] and lines["greedy-insertion"] == METHODS["greedy-insertion"].style[0]
+    bars = {c.get_label(): c.lines[0].get_color() for c in figs[3].axes[0].containers}
+    assert bars["lls"] == METHODS["lls"].style[0] and bars["greedy-insertion"] == METHODS["greedy-insertion"].style[0]
+    # the methods' error bars stand side by side at a size, not on top of each other
+    xs = {c.get_label(): c.lines[0].get_xdata()[0] for c in figs[3].axes[0].containers}
+    assert len(set(xs.values())) == len(xs) == 3
+    assert max(xs.values()) / min(xs.values()) < 1.2  # ... and near the size they stand for
+    # the legend is outside the panels, where it hides no data
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(figs[3]).get_renderer()
+    legend_box = figs[3].axes[-1].get_legend().get_window_extent(renderer)
+    assert legend_box.x0 >= figs[3].axes[-1].get_window_extent(renderer).x1
+    assert legend_box.x1 <= figs[3].bbox.x1  # ... and inside the figure
     with pytest.raises(ValueError, match="no rows"):
         plot.tradeoff(df[df.relocation == "full"], relocation="half")
 

@@ -123,7 +123,10 @@ def read_terrain(name: str, args=None):
 
     from ..experiment.plan import resolve_one
 
-    if Path(name).is_dir():
+    from ..core.synthetic import BUNDLED
+
+    # a folder named like a bundled terrain shadows nothing (only a file does): the bundled one is read
+    if Path(name).is_dir() and name not in (*BUNDLED, "jacksboro"):
         raise UsageError(f"DEM {name!r} is a folder, not a DEM file")
     if Path(name).suffix and not Path(name).exists():
         raise UsageError(f"DEM file {name!r} does not exist")

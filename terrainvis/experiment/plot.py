@@ -30,8 +30,9 @@ def _style(method: str) -> tuple[str, str]:
     return info.style if info is not None else ("k", "o")
 
 
-def _shade_image(terrain, resolution: int | None = None):
-    """An RGB hillshade image of a terrain and its extent (TINs are rasterised)."""
+def _shade_image(terrain, resolution: int | None = None, vrange: tuple | None = None):
+    """An RGB hillshade image of a terrain and its extent (TINs are rasterised); colours span
+    ``vrange`` (z min, z max) when given (panels that share a colour bar), else the terrain's heights."""
     if isinstance(terrain, HeightGrid) and terrain.is_uniform:
         z, (xmin, xmax, ymin, ymax) = terrain.z, terrain.extent
         dx, dy = terrain.dx, terrain.dy
@@ -48,21 +49,29 @@ def _shade_image(terrain, resolution: int | None = None):
     ls = LightSource(azdeg=315, altdeg=45)
     # imshow with origin="lower" puts row 0 at the bottom, i.e. y grows upwards (north).
     # LightSource assumes row 0 at the top, so shade the flipped array and flip back.
-    rgb = ls.shade(zf[::-1], cmap=mpl.colormaps["terrain"], vert_exag=1.0, dx=dx, dy=dy, blend_mode="soft")[::-1]
+    lo, hi = vrange if vrange is not None else (None, None)
+    rgb = ls.shade(zf[::-1], cmap=mpl.colormaps["terrain"], vert_exag=1.0, dx=dx, dy=dy, blend_mode="soft",
+                   vmin=lo, vmax=hi)[::-1]
     rgb[np.isnan(z)] = (1.0, 1.0, 1.0, 1.0)
     return rgb, (xmin, xmax, ymin, ymax)
 
 
-def _draw_terrain(ax, terrain, *, wireframe: bool = True, title: str | None = None, axes: bool = True):
-    rgb, extent = _shade_image(terrain)
+def _draw_terrain(ax, terrain, *, wireframe: bool = True, title: str | None = None, axes: bool = True,
+                  vrange: tuple | None = None):
+    rgb, extent = _shade_image(terrain, vrange=vrange)
     ax.imshow(rgb, origin="lower", extent=extent, interpolation="nearest")
     if isinstance(terrain, TIN) and wireframe:
         v = terrain.vertices
         ax.triplot(v[:, 0], v[:, 1], terrain.faces, color="k", lw=0.25, alpha=0.5)
     ax.set_aspect("equal")
     if axes:
+        from matplotlib.ticker import MaxNLocator
+
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
+        # few enough ticks that long coordinates (a UTM easting of 664,692) do not run together
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.yaxis.set_major_locator(MaxNLocator(5))
     else:  # a panel of many: the picture alone (ticks cost most of the drawing time)
         ax.set_xticks([])
         ax.set_yticks([])
@@ -101,17 +110,26 @@ def terrain_views(original: HeightGrid, simplified: dict, *, ncols: int = 4, pan
         raise TypeError(f"simplified must be a dict of title -> terrain, got {describe(simplified)}")
     panels = [("original", original)] + list(simplified.items())
     nrows = int(np.ceil(len(panels) / ncols))
-    fig = Figure(figsize=(panel_size * ncols, panel_size * nrows))
-    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.93, wspace=0.04, hspace=0.12)
+    fig = Figure(figsize=(panel_size * ncols + 1.0, panel_size * nrows + 0.3))
+    fig.subplots_adjust(left=0.01, right=1 - 1.0 / (panel_size * ncols + 1.0), bottom=0.06, top=0.92, wspace=0.04,
+                        hspace=0.12)
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     xmin, xmax, ymin, ymax = original.extent
+    vrange = (float(np.nanmin(original.z)), float(np.nanmax(original.z)))  # one colour scale for every panel
     for ax, (title, t) in zip(axes, panels):
         as_terrain(t, f"simplified[{title!r}]")
         n = t.size if isinstance(t, HeightGrid) else t.n_vertices
-        _draw_terrain(ax, t, title=f"{title} ({n} vertices)", axes=False)
-    axes[0].set_xlabel(f"{xmax - xmin:.4g} m x {ymax - ymin:.4g} m", fontsize=8)
+        _draw_terrain(ax, t, title=f"{title} ({n:,} vertices)", axes=False, vrange=vrange)
     for ax in axes[len(panels):]:
         ax.set_axis_off()
+    import matplotlib as mpl
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    bar_ax = fig.add_axes((1 - 0.8 / (panel_size * ncols + 1.0), 0.15, 0.12 / (panel_size * ncols + 1.0), 0.7))
+    fig.colorbar(ScalarMappable(Normalize(*vrange), mpl.colormaps["terrain"]), cax=bar_ax, label="elevation (z units)")
+    fig.text(0.01, 0.015, f"each panel {xmax - xmin:,.4g} x {ymax - ymin:,.4g} (x, y units); hillshade lit from the "
+             "north-west", fontsize=8)
     return fig
 
 
@@ -164,15 +182,15 @@ def los_pairs(terrain, points, V_true, V_test, *, only_changed: bool = False, ti
     return fig
 
 
-def _panels(n: int, width: float, height: float, figsize=None, sharey: bool = True):
-    """A figure of ``n`` panels in a row with fixed margins.
+def _panels(n: int, width: float, height: float, figsize=None, sharey: bool = True, legend: float = 1.5):
+    """A figure of ``n`` panels in a row with fixed margins (``legend`` inches on the right for it).
 
     A layout engine measures every tick label and costs more than the drawing itself;
     these figures have a known shape, so fixed margins serve as well.
     """
-    fig = Figure(figsize=figsize or (width * n, height))
+    fig = Figure(figsize=figsize or (width * n + legend, height))
     w, h = fig.get_size_inches()
-    fig.subplots_adjust(left=0.95 / w, right=1 - 0.15 / w, bottom=0.55 / h, top=1 - 0.35 / h,
+    fig.subplots_adjust(left=0.95 / w, right=1 - (0.15 + legend) / w, bottom=0.55 / h, top=1 - 0.35 / h,
                         wspace=0.3 if not sharey else 0.08)
     return fig, fig.subplots(1, n, squeeze=False, sharey=sharey).ravel()
 
@@ -195,7 +213,8 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
     """Accuracy against terrain size (% of the original samples), per method and relocation.
 
     One panel per relocation; each method is a line through its levels, with the
-    standard deviation over terrains x point sets as a band.
+    standard deviation over terrains x point sets as an error bar (the methods' bars
+    side by side at each size, so that wide ones do not merge into one block).
     """
     from simplifiers import METHODS
 
@@ -206,16 +225,18 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
     fig, axes = _panels(max(1, len(rels)), 4.2, 3.8, figsize)
     for ax, rel in zip(axes, rels):
         sub = data[data["relocation"] == rel]
-        for m in [m for m in METHODS if m in set(sub["method"])]:
+        present = [m for m in METHODS if m in set(sub["method"])] + sorted(set(sub["method"]) - set(METHODS))
+        for k, m in enumerate(present):
             g = sub[sub["method"] == m].groupby("level").agg(
                 size=("size_fraction", "median"), mu=("accuracy", "mean"), sd=("accuracy", "std")
             ).sort_values("size")
             color, marker = _style(m)
-            x = 100 * g["size"].to_numpy()
+            # side by side on the log axis: a few per cent of a size apart, centred on it
+            x = 100 * g["size"].to_numpy() * 1.045 ** (k - (len(present) - 1) / 2)
             mu = 100 * g["mu"].to_numpy()
             sd = 100 * g["sd"].fillna(0).to_numpy()
-            ax.plot(x, mu, marker=marker, color=color, label=m)
-            ax.fill_between(x, mu - sd, mu + sd, color=color, alpha=0.08)
+            ax.errorbar(x, mu, yerr=sd, marker=marker, color=color, label=m, capsize=2, elinewidth=0.8,
+                        markersize=5)
         ax.set_xscale("log")
         sizes = sorted({round(100 * v, 2) for v in sub.groupby("level")["size_fraction"].median()})
         ax.set_xticks(sizes, [f"{v:g}%" for v in sizes])
@@ -224,8 +245,22 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
         ax.set_xlabel("size of S(T) (% of samples of T)")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")
-    axes[-1].legend(fontsize=8, loc="lower right")
+    _legend_outside(axes[-1])
     return fig
+
+
+def _legend_outside(ax) -> None:
+    """The legend to the right of the last panel, where it hides no data."""
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
+
+
+def _log_labels(ax) -> None:
+    """Plain numbers at the 1-2-5 ticks of a log axis, so a range within one decade is labelled too."""
+    from matplotlib.ticker import FuncFormatter, LogLocator
+
+    ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
 
 
 def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Figure:
@@ -249,14 +284,20 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
     fig, (ax1, ax2) = _panels(2, 5.0, 4.0, figsize, sharey=False)
     from simplifiers import METHODS
 
-    for m in [m for m in METHODS if m in g.index.get_level_values(0)]:
+    present = [m for m in METHODS if m in g.index.get_level_values(0)]
+    present += sorted(set(g.index.get_level_values(0)) - set(present))
+    # each method's level labels on its own side of its points, so that methods at the same place do not overprint
+    sides = [(4, 3), (-9, 3), (4, -9), (-9, -9), (6, -3), (-11, -3)]
+    for j, m in enumerate(present):
         color, marker = _style(m)
         for k, (lv, row) in enumerate(g.loc[m].iterrows()):
             for ax, col in ((ax1, "speedup"), (ax2, "memory")):
                 ax.scatter(row["lost"], row[col], color=color, marker=marker, label=m if k == 0 else None)
-                ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, xytext=(3, 3), textcoords="offset points")
-    ax1.set_yscale("log")
-    ax2.set_yscale("log")
+                ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, color=color, xytext=sides[j % len(sides)],
+                            textcoords="offset points")
+    for ax in (ax1, ax2):
+        ax.set_yscale("log")
+        _log_labels(ax)
     ax1.axhline(1.0, color="k", lw=0.5)
     ax2.axhline(1.0, color="k", lw=0.5)
     ax1.set_xlabel("accuracy lost (percentage points)")
@@ -265,7 +306,7 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
     ax2.set_ylabel("memory of S(T) / memory of T")
     ax1.set_title(f"speed gained ({relocation}; labels: level)", fontsize=10)
     ax2.set_title("memory kept", fontsize=10)
-    ax2.legend(fontsize=8)
+    _legend_outside(ax2)
     for ax in (ax1, ax2):
         ax.grid(True, which="both", alpha=0.3)
     return fig
@@ -304,7 +345,7 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
         ax.set_xlabel(f"pairs within this distance ({'cells' if unit == 'cells' else 'm'})")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")
-    axes[-1].legend(fontsize=8, loc="lower left")
+    _legend_outside(axes[-1])
     return fig
 
 
