@@ -105,8 +105,8 @@ def test_compare_report_and_figures_pick_it_up(toy):
     fig = plot.accuracy_vs_size(df)
     labels = [t.get_text() for ax in fig.axes for leg in [ax.get_legend()] if leg for t in leg.get_texts()]
     assert "toy" in labels
-    line = [ln for ax in fig.axes for ln in ax.get_lines() if ln.get_label() == "toy"][0]
-    assert line.get_marker() == "*"
+    bars = [c for ax in fig.axes for c in ax.containers if c.get_label() == "toy"][0]
+    assert bars.lines[0].get_marker() == "*"
 
 
 def test_the_command_line_offers_it(toy, tmp_path, capsys):
