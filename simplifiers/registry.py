@@ -537,7 +537,7 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
                 tin = build(grid, budget, **options)
             elif info.name == "qec":
                 tin, extra = qec_within(grid, build, budget, target, options)
-            else:  # greedy insertion and greedy cuts stop at the error themselves
+            else:  # greedy insertion, greedy cuts and the peers (simplifiers/peers) stop at the error themselves
                 tin = build(grid, budget, max_error=target, **options)
                 extra = _error_note(tin, target, budget)
         except (SimplificationError, TypeError, ValueError, MemoryError):
@@ -563,7 +563,12 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
 
 def _error_note(tin: TIN, target: float, budget: int) -> dict:
     """The attrs of a greedy result simplified to an error (its own ``stopped_by`` says which limit held)."""
-    if tin.attrs.get("stopped_by") == "max_error":
+    search = tin.attrs.get("search")
+    if tin.attrs.get("stopped_by") == "max_error" and isinstance(search, dict) and "errors" in search:
+        # a peer's bisection over its library's parameter (simplifiers/peers/_common.py)
+        note = (f"max_error {target:g}: {tin.n_vertices:,} vertices, the fewest found within it "
+                f"(a search over {search.get('parameter', 'a parameter')})")
+    elif tin.attrs.get("stopped_by") == "max_error":
         note = f"max_error {target:g}: {tin.n_vertices:,} vertices, the first count within it"
     else:
         note = f"max_error {target:g} is not met within the budget of {budget:,} vertices"

@@ -67,7 +67,7 @@ def test_only_plot_imports_matplotlib():
         "import terrainvis as tv, simplifiers\n"
         "from terrainvis import experiment, report, cli, relocation, metrics, io, visibility, deviation\nfrom terrainvis.core import runner\n"
         "g = tv.sample_dem('jacksboro').crop(rows=(0, 40), cols=(0, 40))\n"
-        "for m in simplifiers.available(): simplifiers.simplify(g, m, 1, **({'n_train': 20} if m == 'visopt' else {}))\n"
+        "for m in simplifiers.registry.BUILTIN: simplifiers.simplify(g, m, 1, **({'n_train': 20} if m == 'visopt' else {}))\n"
         "P = tv.sample_points(g, 5)\n"
         "tv.visibility_matrix(g, P); tv.visibility_matrix(g.to_tin(), P)\n"
         "print('matplotlib' in sys.modules)\n"

@@ -11,12 +11,17 @@ from terrainvis import TIN, HeightGrid, synthetic_terrain
 from terrainvis.errors import NodataError, SimplificationError
 
 
-def test_available_lists_the_papers_seven_in_its_order_then_visopt():
-    assert list(available().items()) == [
+def test_available_lists_the_papers_seven_in_its_order_then_visopt_then_the_plugins():
+    listed = list(available().items())
+    assert listed[:8] == [
         ("qec", "irregular"), ("greedy-cuts", "irregular"), ("greedy-insertion", "irregular"),
         ("simple", "regular"), ("gls", "regular"), ("lls", "regular"), ("feature", "regular"),
         ("visopt", "regular"),
     ]
+    assert set(simplifiers.METHODS[m].name for m, _ in listed[:8]) == simplifiers.registry.BUILTIN
+    # then terrainvis's own plugins, the practitioners' simplifiers (entry points: no order promised)
+    assert set(listed[8:]) == {("delatin", "irregular"), ("fqmr", "irregular"), ("fqmr-free", "irregular"),
+                               ("meshopt", "irregular"), ("rtin", "semi-regular"), ("vtk-greedy", "irregular")}
     assert list(simplifiers.METHODS) == list(available())
 
 
@@ -30,7 +35,7 @@ def test_budgets_and_levels():
 def test_unknown_method_lists_available():
     g = synthetic_terrain("hills", size=9)
     with pytest.raises(ValueError, match=r"method must be one of \['qec', 'greedy-cuts', 'greedy-insertion', "
-                                         r"'simple', 'gls', 'lls', 'feature', 'visopt'\] \(see simplifiers.available\(\)\)"):
+                                         r"'simple', 'gls', 'lls', 'feature', 'visopt', .*'rtin'.*\] \(see simplifiers.available\(\)\)"):
         simplify(g, "decimate")
 
 

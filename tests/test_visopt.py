@@ -222,7 +222,8 @@ def test_registered_regular_method_not_in_the_default_list():
 
     methods = next(o for o in _DECLARED if o.name == "methods")
     default = methods.check(None, "methods")
-    assert "visopt" not in default and default == tuple(m for m in simplifiers.METHODS if m != "visopt")
+    assert "visopt" not in default and default == tuple(m for m, i in simplifiers.METHODS.items() if i.default)
+    assert default == tuple(m for m in simplifiers.METHODS if m in simplifiers.registry.BUILTIN and m != "visopt")  # the paper's seven
 
 
 def test_max_error_search():

@@ -356,11 +356,11 @@ def _engines():
 _DECLARED = [
     Option(
         "methods", None, _methods,
-        "simplification methods", "sequence of str or simplifiers.Method", default_text="all registered methods but visopt",
+        "simplification methods", "sequence of str or simplifiers.Method", default_text="the paper's seven (every method declared default)",
         doc=("Names of the registry :data:`simplifiers.METHODS` (in the paper's order, then the methods registered "
              "from outside: :func:`simplifiers.register`, plugins) or :class:`simplifiers.Method` entries, which "
              "are registered under their names if they are not yet; the default is every method whose entry has "
-             "``default=True`` (all built-in ones but ``visopt``)."),
+             "``default=True`` (the paper's seven: every built-in one but ``visopt``; the practitioners' simplifiers of the ``peers`` extra are not default)."),
         cli=Flag(many=True, metavar="M"),
     ),
     Option(
