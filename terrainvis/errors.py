@@ -5,7 +5,10 @@ Every exception subclasses a built-in one, so ``except ValueError`` keeps workin
 
 from __future__ import annotations
 
-__all__ = ["NodataError", "OutsideFootprintError", "SimplificationError", "NotEnoughMemoryError", "OutputError"]
+import signal
+
+__all__ = ["NodataError", "OutsideFootprintError", "SimplificationError", "NotEnoughMemoryError", "OutputError",
+           "Interrupted", "WorkersDied"]
 
 
 class NodataError(ValueError):
@@ -54,3 +57,27 @@ class OutputError(OSError):
 
     def __str__(self) -> str:
         return f"could not write {self.filename}: {self.reason}"
+
+
+class Interrupted(KeyboardInterrupt):
+    """The run was interrupted by SIGINT or SIGTERM; ``signum`` says which."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        self.signum = int(signum)
+        super().__init__(f"interrupted by {signal.Signals(self.signum).name}")
+
+
+class WorkersDied(RuntimeError):
+    """The worker processes died (killed, out of memory, or a script re-imported by spawn without its guard).
+
+    ``cause`` is the pool's own message. ``str()`` gives the advice for a script; the
+    command line, which has no script to guard, says what to do there itself.
+    """
+
+    def __init__(self, cause: str):
+        self.cause = cause
+        super().__init__(
+            "the worker processes died. They are started with 'spawn', which imports your __main__ module "
+            "again: in a script, call compare() under `if __name__ == \"__main__\":`, or pass workers=1 to run in "
+            f"this process. Units finished before the failure are in out_csv if one was given ({cause})"
+        )

@@ -153,7 +153,8 @@ def test_mistakes_end_in_one_line(tmp_path, capsys):
     assert "row 2 (line 3), column x holds 'abc'" in _err(capsys, ["cumulative", dem, "--observers",
                                                                    tmp_path / "bad.csv", "-o", out])
     (tmp_path / "empty.csv").write_text("x,y\n")
-    assert "holds no observer" in _err(capsys, ["cumulative", dem, "--observers", tmp_path / "empty.csv", "-o", out])
+    assert "holds no row after its header" in _err(capsys, ["cumulative", dem, "--observers", tmp_path / "empty.csv",
+                                                           "-o", out])
     neg = _csv(tmp_path / "neg.csv", [(300.0, 400.0), (900.0, 900.0)], height=[1.0, -3.0])
     assert "row 2, column height is -3" in _err(capsys, ["cumulative", dem, "--observers", neg, "-o", out])
     err = _err(capsys, ["cumulative", dem, "--observers", tmp_path / "missing.csv", "-o", out])

@@ -891,6 +891,47 @@ def test_south_up_and_east_to_west_geotiffs(tmp_path):
         np.testing.assert_array_equal(g.ys, [2005.0, 2015.0])
 
 
+@pytest.mark.parametrize("dtype, nodata", [("float32", -9999.0), ("float32", -3.4028234663852886e38),
+                                           ("int16", -32768), ("int16", -99999), ("uint8", None), ("float32", np.nan)])
+@pytest.mark.parametrize("mask_band", [False, True])
+def test_geotiff_nodata_and_masks_read_as_rasterio_masks_them(tmp_path, dtype, nodata, mask_band):
+    # the reference: rasterio's own masked read, flipped to increasing y and x by hand
+    rasterio = _rasterio()
+    from rasterio.transform import Affine
+
+    rng = np.random.default_rng(7)
+    file_rows = rng.integers(1, 200, size=(5, 7)).astype(dtype)
+    holds = nodata is not None and not (np.dtype(dtype).kind == "i" and not -32768 <= nodata <= 32767)
+    if holds:
+        file_rows[1, 2] = file_rows[3, 0] = np.asarray(nodata).astype(dtype)  # samples holding the nodata value
+    path = tmp_path / "d.tif"
+    profile = dict(driver="GTiff", height=5, width=7, count=1, dtype=dtype, crs="EPSG:32633",
+                   transform=Affine(-10, 0, 1070, 0, -10, 2050))  # north-up, columns east to west
+    if holds:  # (GDAL refuses a nodata value the band's type cannot hold)
+        profile["nodata"] = nodata
+    with rasterio.open(path, "w", **profile) as dst:
+        dst.write(file_rows, 1)
+        if mask_band:  # an internal mask: samples valid by value but masked out
+            valid = np.full((5, 7), 255, dtype=np.uint8)
+            valid[0, :3] = 0
+            dst.write_mask(valid)
+    with rasterio.open(path) as src:
+        ref = src.read(1, masked=True)
+    want = np.where(np.ma.getmaskarray(ref), np.nan, np.ma.getdata(ref).astype(np.float64))[::-1, ::-1]
+    if np.nanmax(np.abs(want)) > 1e15:
+        # a mask band overrides the nodata value (GDAL's rule): -3.4e38 is then a height, and refused
+        assert mask_band and nodata == -3.4028234663852886e38
+        with pytest.raises(ValueError, match=r"holds a height of -3\.40282e\+38, beyond"):
+            load_dem(path)
+        return
+    g = load_dem(path)
+    np.testing.assert_array_equal(g.z, want)
+    # nodata: the masked samples, and samples holding NaN (a NaN nodata value, or NaN under a mask band)
+    assert np.isnan(g.z).sum() == (np.ma.getmaskarray(ref) | np.isnan(np.ma.getdata(ref))).sum()
+    assert (np.isnan(g.z).sum() > 0) == (holds or mask_band)
+    assert g.z.flags.c_contiguous and not g.z.flags.writeable
+
+
 def test_asc_prj_is_written_and_a_stale_one_is_reported(tmp_path):
     _rasterio()
     g = _grid_with_nodata()
@@ -950,3 +991,14 @@ def test_save_figure_marks_the_png_and_write_csv_writes_atomically(tmp_path):
     write_csv(pd.DataFrame({"x": [0.5, 1.25], "name": ["a", "b"]}), tmp_path / "t.csv", float_format="%.3f")
     assert (tmp_path / "t.csv").read_text() == "x,name\n0.500,a\n1.250,b\n"
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+
+
+def test_a_nodata_value_the_band_cannot_hold_marks_no_sample():
+    from terrainvis.io._geotiff import _as_stored
+
+    assert _as_stored(-99999.0, np.int16) is None and _as_stored(1.5, np.int16) is None
+    assert _as_stored(300.0, np.uint8) is None and _as_stored(-1.0, np.uint8) is None
+    assert _as_stored(-32768.0, np.int16) == -32768.0
+    assert _as_stored(1e39, np.float32) is None  # beyond float32: inf, no sample
+    assert _as_stored(-3.4028234663852886e38, np.float32) == float(np.float32(-3.4028234663852886e38))
+    assert _as_stored(0.1, np.float32) == float(np.float32(0.1)) != 0.1  # the band's own rounding

@@ -50,19 +50,36 @@ COMMANDS = {"compare": compare, "evaluate": evaluate, "simplify": simplify, "los
             "cumulative": cumulative, "relocate": relocate, "info": info}
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(argv=None) -> argparse.ArgumentParser:
+    """The parser of ``terrainvis``: the command named in ``argv`` with all its flags, the others light.
+
+    A command's flags can need heavy imports (``compare``'s come from the experiment's
+    options, which import pandas and the simplifiers), and a command must not pay for the
+    others': the other commands get a sub-parser with only their ``HELP`` line, which is all
+    ``terrainvis --help`` and an unknown command's message show. ``argv`` None: every
+    command with all its flags (for documentation and tests).
+    """
     p = Parser(prog="terrainvis", description="How much line of sight does terrain simplification cost?")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for command in COMMANDS.values():
-        command.add_parser(sub)
+    wanted = None if argv is None else _command_in(argv)
+    for name, command in COMMANDS.items():
+        if argv is None or name == wanted:
+            command.add_parser(sub)
+        else:
+            sub.add_parser(name, help=command.HELP)
     return p
+
+
+def _command_in(argv) -> str | None:
+    """The command ``argv`` names (its first word: ``terrainvis`` has no option of its own but -h)."""
+    return argv[0] if argv and argv[0] in COMMANDS else None
 
 
 def main(argv=None) -> int:
     """Entry point of the ``terrainvis`` console script."""
     import signal
 
-    from ..core.runner import Interrupted
+    from ..errors import Interrupted
 
     def terminated(signum, frame):
         raise Interrupted(signum)
@@ -72,7 +89,8 @@ def main(argv=None) -> int:
     name = "terrainvis"
     try:
         try:
-            args = _parser().parse_args(argv)
+            argv = sys.argv[1:] if argv is None else list(argv)
+            args = _parser(argv).parse_args(argv)
         except ParseError as exc:
             print(exc, file=sys.stderr)
             return 2
@@ -124,7 +142,7 @@ def _main_thread() -> bool:
 
 def _run(args, name: str) -> int:
     from ..core.fileio import OutputError
-    from ..core.runner import WorkersDied
+    from ..errors import WorkersDied
     from ..errors import NodataError, SimplificationError
 
     try:

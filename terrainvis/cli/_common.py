@@ -121,7 +121,7 @@ def read_terrain(name: str, args=None):
     """One terrain from a bundled name or a DEM file, with --fill / --crop-valid applied."""
     import numpy as np
 
-    from ..experiment.plan import resolve_one
+    from ..io._names import resolve_one
 
     from ..core.synthetic import BUNDLED
 

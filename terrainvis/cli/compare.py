@@ -15,13 +15,17 @@ from ._common import UsageError, add_nodata, dask_client, plural, read_terrain
 QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "n_points": 20, "n_sets": 2, "n_partners": 512}
 
 
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "run the paper's experiment and print its tables"
+
+
 def add_parser(sub) -> None:
     """``terrainvis compare``: the options' flags come from :data:`terrainvis.experiment.options.OPTIONS`."""
     from ..experiment.options import add_flags
     from ..experiment.plan import DEFAULT_TERRAINS
 
     c = sub.add_parser(
-        "compare", help="run the paper's experiment and print its tables",
+        "compare", help=HELP,
         description=(
             "Simplify each terrain with each method and level, relocate random point sets onto the "
             "simplification, and count the line-of-sight verdicts that survive. Defaults reproduce the "

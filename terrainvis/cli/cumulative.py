@@ -25,9 +25,13 @@ from ._common import (
 )
 
 
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "how many observers see each sample of a DEM"
+
+
 def add_parser(sub) -> None:
     c = sub.add_parser(
-        "cumulative", help="how many observers see each sample of a DEM",
+        "cumulative", help=HELP,
         description=(
             "Compute the cumulative viewshed of many observers on a DEM: for every sample, how many observers see it "
             "(each observer's exact viewshed, summed; count > 0 is the area seen by any). Observers come from a CSV "
@@ -77,9 +81,7 @@ def run(args) -> int:
     check_heights(grid, args)
     if suffix in (".tif", ".tiff") and not grid.is_uniform:
         raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
-    table = read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))
-    if not len(table):
-        raise UsageError(f"--observers {args.observers!r} holds no observer (a header and no rows)")
+    table = read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))  # refuses a header alone
     frame = position_frame(grid, args)
     user = table[:, :2]
     xy = frame.to_grid(user)

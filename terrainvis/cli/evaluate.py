@@ -13,6 +13,10 @@ from ._common import UsageError, add_nodata, plural, read_terrain
 _NOT_HERE = ("methods", "levels", "cascade")
 
 
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "measure simplifications made elsewhere (meshes, rasters) as compare measures a method's"
+
+
 def add_parser(sub) -> None:
     from simplifiers import METHODS
 
@@ -20,7 +24,7 @@ def add_parser(sub) -> None:
     from ..experiment.options import add_flags
 
     e = sub.add_parser(
-        "evaluate", help="measure simplifications made elsewhere (meshes, rasters) as compare measures a method's",
+        "evaluate", help=HELP,
         description=(
             "Measure each SIMPLIFIED terrain of DEM on the comparison's measure: the same point sets (by the DEM's "
             "name and --seed), relocations, predicate and columns as terrainvis compare, optionally beside "

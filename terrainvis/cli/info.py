@@ -6,11 +6,13 @@ import argparse
 
 from ._common import add_nodata, add_positions, plural, position_frame, read_surface
 
-from ..core.terrain import TIN
+
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "describe a terrain (bundled name, DEM file or mesh)"
 
 
 def add_parser(sub) -> None:
-    i = sub.add_parser("info", help="describe a terrain (bundled name, DEM file or mesh)")
+    i = sub.add_parser("info", help=HELP)
     i.add_argument("terrain", help="bundled name, DEM file, or a mesh or TIN file (.ply .obj .off .stl .glb .npz)")
     add_nodata(i)
     add_positions(i, frame=False)
@@ -20,6 +22,8 @@ def run(args) -> int:
     import numpy as np
 
     from simplifiers import METHODS, max_level, vertex_budget
+
+    from ..core.terrain import TIN
 
     label, grid = read_surface(args.terrain, args, command="info")
     if isinstance(grid, TIN):

@@ -20,9 +20,13 @@ from ._common import (
 )
 
 
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "check lines of sight on a DEM"
+
+
 def add_parser(sub) -> None:
     los = sub.add_parser(
-        "los", help="check lines of sight on a DEM",
+        "los", help=HELP,
         description=(
             "Print whether the points see each other, and the lowest clearance of the segment (segment height "
             "minus surface height) with where it occurs. Positions are in the DEM's CRS (lon, lat in degrees on a "

@@ -24,6 +24,10 @@ from ._common import (
 )
 
 
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "place points of a DEM on its simplification"
+
+
 def add_parser(sub) -> None:
     from simplifiers import METHODS
 
@@ -31,7 +35,7 @@ def add_parser(sub) -> None:
     from ..relocation.registry import RELOCATIONS, practical_relocations
 
     r = sub.add_parser(
-        "relocate", help="place points of a DEM on its simplification",
+        "relocate", help=HELP,
         description=(
             "Give each point of a CSV (columns x, y, and optionally z: its height on the DEM; else the surface plus "
             "--offset) a height on a simplification of the DEM: a file (--simplified) or the DEM simplified here "

@@ -7,11 +7,15 @@ from pathlib import Path
 from ._common import UsageError, add_nodata, distance_arg, plural, read_terrain, working
 
 
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "simplify a DEM and write the result"
+
+
 def add_parser(sub) -> None:
     from simplifiers import METHODS
 
     s = sub.add_parser(
-        "simplify", help="simplify a DEM and write the result",
+        "simplify", help=HELP,
         description=(
             "Simplify a DEM with one method, to a level or to a target error, and write it. OUT by extension: "
             ".npz for grids and TINs; .tif .asc for grids, and for TINs sampled back at the DEM's samples (same "

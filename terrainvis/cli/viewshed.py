@@ -23,9 +23,13 @@ from ._common import (
 )
 
 
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "which samples of a DEM an observer sees"
+
+
 def add_parser(sub) -> None:
     v = sub.add_parser(
-        "viewshed", help="which samples of a DEM an observer sees",
+        "viewshed", help=HELP,
         description=(
             "Compute the exact viewshed of one observer on a DEM (every sample as a target, on the piecewise-linear "
             "surface) and write it as a GeoTIFF aligned with the DEM (CRS and transform kept; 1 visible, 0 not, "

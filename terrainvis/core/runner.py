@@ -24,33 +24,10 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 
+from ..errors import Interrupted, WorkersDied  # noqa: F401  (defined there: the CLI catches them without numpy)
 from .validate import as_int, describe
 
 __all__ = ["run_units", "Interrupted", "check_client", "check_workers"]
-
-
-class Interrupted(KeyboardInterrupt):
-    """The run was interrupted by SIGINT or SIGTERM; ``signum`` says which."""
-
-    def __init__(self, signum: int = signal.SIGINT):
-        self.signum = int(signum)
-        super().__init__(f"interrupted by {signal.Signals(self.signum).name}")
-
-
-class WorkersDied(RuntimeError):
-    """The worker processes died (killed, out of memory, or a script re-imported by spawn without its guard).
-
-    ``cause`` is the pool's own message. ``str()`` gives the advice for a script; the
-    command line, which has no script to guard, says what to do there itself.
-    """
-
-    def __init__(self, cause: str):
-        self.cause = cause
-        super().__init__(
-            "the worker processes died. They are started with 'spawn', which imports your __main__ module "
-            "again: in a script, call compare() under `if __name__ == \"__main__\":`, or pass workers=1 to run in "
-            f"this process. Units finished before the failure are in out_csv if one was given ({cause})"
-        )
 
 
 def check_workers(workers) -> int | None:

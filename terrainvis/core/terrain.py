@@ -74,7 +74,16 @@ def _check_coords(values, name: str, length: int) -> np.ndarray:
     return np.array(arr, dtype=np.float64, copy=True)
 
 
-def _check_z(z) -> np.ndarray:
+def _check_z(z, owned: bool = False) -> np.ndarray:
+    """``z`` checked, as a fresh C-contiguous float64 array (``owned``: a reader's own fresh
+    float64 buffer, which nobody else holds, is kept instead of copied)."""
+    if owned and isinstance(z, np.ndarray) and z.dtype == np.float64 and z.ndim == 2 and z.flags.c_contiguous \
+            and z.flags.writeable and z.flags.owndata:
+        if z.shape[0] < 2 or z.shape[1] < 2:
+            raise ValueError(f"z must have at least 2x2 samples, got shape {z.shape}")
+        if np.isinf(z).any():
+            raise ValueError(f"z must hold finite heights or NaN for nodata, got {int(np.isinf(z).sum())} infinite value(s)")
+        return z
     if np.ma.isMaskedArray(z):
         # Masked samples are nodata, so NaN (np.asarray would expose the values under the mask).
         arr = as_float_array(np.ma.getdata(z), "z")
@@ -101,12 +110,37 @@ def _check_z(z) -> np.ndarray:
 MAX_HEIGHT = 1e15
 
 
-def _check_heights(z: np.ndarray, name: str) -> None:
-    finite = z[np.isfinite(z)]
-    if finite.size and np.abs(finite).max() > MAX_HEIGHT:
-        worst = finite[np.argmax(np.abs(finite))]
+def _height_range(z: np.ndarray) -> tuple[float, float] | None:
+    """``(lowest, highest)`` height of ``z`` (NaN ignored), None when none is finite.
+
+    One pass each of ``fmin``/``fmax``, which skip NaN without copying ``z`` (a 3601²
+    grid: 20 ms, where masking the finite values first took ten times that).
+    """
+    flat = z.reshape(-1)
+    if flat.size == 0:
+        return None
+    lo, hi = float(np.fmin.reduce(flat)), float(np.fmax.reduce(flat))
+    return None if np.isnan(lo) else (lo, hi)
+
+
+def _check_heights(z: np.ndarray, name: str) -> tuple[float, float] | None:
+    """``z``'s height range (:func:`_height_range`), or ValueError when a height is beyond ``MAX_HEIGHT``."""
+    zr = _height_range(z)
+    if zr is not None and max(-zr[0], zr[1]) > MAX_HEIGHT:
+        worst = zr[0] if -zr[0] > zr[1] else zr[1]
         raise ValueError(f"{name} holds a height of {worst:.6g}, beyond +-{MAX_HEIGHT:g} (z units): no DEM's elevation, "
                          "and float64 arithmetic on it loses the relief; check the file's scale and nodata value")
+    return zr
+
+
+def height_range(terrain) -> tuple[float, float] | None:
+    """``(lowest, highest)`` height of a HeightGrid (NaN ignored) or of a TIN's vertices; None when
+    the grid holds no finite height. Computed when the terrain is made (it checks every height
+    then), so asking costs nothing."""
+    if "z_range" not in terrain._cache:
+        z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
+        terrain._cache["z_range"] = _height_range(z)
+    return terrain._cache["z_range"]
 
 
 def _as_attrs(attrs) -> dict:
@@ -173,7 +207,13 @@ class HeightGrid:
     @classmethod
     def from_coords(cls, z, xs, ys, *, attrs=None) -> "HeightGrid":
         """A rectilinear grid: ``z[r, c]`` at ``(xs[c], ys[r])``, xs and ys strictly increasing."""
-        zz = _check_z(z)
+        return cls._from_coords(z, xs, ys, attrs, owned=False)
+
+    @classmethod
+    def _from_coords(cls, z, xs, ys, attrs, *, owned: bool) -> "HeightGrid":
+        """:meth:`from_coords`; ``owned``: ``z`` is a reader's fresh float64 buffer, adopted without a copy
+        (a 3601² DEM: 100 MB less to copy, and as much less memory at the peak)."""
+        zz = _check_z(z, owned)
         rows, cols = zz.shape
         xx = _check_coords(xs, "xs", cols)
         yy = _check_coords(ys, "ys", rows)
@@ -243,12 +283,12 @@ class HeightGrid:
         return grid_to_dataarray(self, name=name)
 
     def _init(self, z, xs, ys, attrs):
-        _check_heights(z, "z")
+        zr = _check_heights(z, "z")
         self.z = _frozen(z)
         self.xs = _frozen(xs)
         self.ys = _frozen(ys)
         self.attrs = _as_attrs(attrs)
-        self._cache = {}
+        self._cache = {"z_range": zr}
 
     def __reduce__(self):
         # Pickle the data only: cached acceleration structures (pyramid, Embree scene,
@@ -616,7 +656,7 @@ class TIN:
             raise ValueError(f"vertices must hold at least 3 vertices, got {v.shape[0]}")
         if not np.isfinite(v).all():
             raise ValueError(f"vertices must be finite, got {int((~np.isfinite(v)).any(axis=1).sum())} non-finite row(s)")
-        _check_heights(v[:, 2], "vertices")
+        zr = _check_heights(v[:, 2], "vertices")
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3:
             raise ValueError(f"faces must have shape (m, 3), got {f.shape}")
@@ -630,7 +670,7 @@ class TIN:
         dtype = np.int32 if v.shape[0] < 2**31 - 1 else np.int64
         self.faces = _frozen(np.array(f, dtype=dtype, order="C", copy=True))
         self.attrs = _as_attrs(attrs)
-        self._cache = {}
+        self._cache = {"z_range": zr}
 
     def __reduce__(self):
         return (_rebuild_tin, (self.vertices, self.faces, self.attrs))

@@ -23,6 +23,8 @@ _RESAMPLED_TAG = "TERRAINVIS_RESAMPLED"
 
 def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
     rasterio = rasterio_module()
+    from rasterio.enums import MaskFlags
+
     try:
         with contextlib.ExitStack() as stack:
             if _gdal_path(p):
@@ -40,7 +42,11 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
                 raise _UserError(f"band must be in [1, {src.count}] for {p.name!r}, got {b}")
             # the band, its mask (1 byte) and the float64 heights
             _check_read_memory(p.name, (src.height, src.width), np.dtype(src.dtypes[b - 1]).itemsize, extra_per_sample=1)
-            data = src.read(b, masked=True)
+            # a mask beyond the nodata value (a mask band, alpha) needs rasterio's masked read; the
+            # nodata value alone is found below, in the one pass that converts and flips the band
+            plain = all(f in (MaskFlags.all_valid, MaskFlags.nodata) for f in src.mask_flag_enums[b - 1])
+            data = src.read(b, masked=not plain)
+            nodata = src.nodatavals[b - 1] if plain else None
             scale, offset = src.scales[b - 1], src.offsets[b - 1]
             t = src.transform
             file_crs = src.crs
@@ -49,26 +55,31 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
         raise _Corrupt(str(exc)) from exc
     if t.b != 0 or t.d != 0:
         raise _Corrupt(f"rotated rasters are not supported (transform {tuple(t)[:6]})")
-    # Plain arrays, not masked arithmetic (several times slower on large rasters).
-    z = np.asarray(np.ma.getdata(data), dtype=np.float64)  # a fresh buffer from rasterio: changed in place
+    # Plain arrays, not masked arithmetic (several times slower on large rasters). One pass
+    # converts to float64 and turns north-up raster rows (and east-to-west columns) into
+    # increasing y (and x), into a fresh buffer the grid adopts.
+    band = np.ma.getdata(data)
+    rows, cols = band.shape
+    z = np.empty((rows, cols), dtype=np.float64)
+    z[...] = band[::-1 if t.e < 0 else 1, ::-1 if t.a < 0 else 1]
+    if np.ma.isMaskedArray(data):
+        mask = np.ma.getmaskarray(data)[::-1 if t.e < 0 else 1, ::-1 if t.a < 0 else 1]
+        if mask.any():
+            z[mask] = np.nan
+    elif nodata is not None and not np.isnan(nodata):
+        stored = _as_stored(nodata, band.dtype)
+        if stored is not None:
+            z[z == stored] = np.nan
     scale = 1.0 if scale is None else float(scale)
     offset = 0.0 if offset is None else float(offset)
     if scale != 1.0:
         z *= scale
     if offset != 0.0:
         z += offset
-    mask = np.ma.getmaskarray(data)
-    if mask.any():
-        z[mask] = np.nan
-    rows, cols = z.shape
     # Sample centres in native coordinates, made increasing (x east, y north).
     dx, dy = abs(t.a), abs(t.e)
     x0 = t.c + 0.5 * t.a if t.a > 0 else t.c + t.a * (cols - 0.5)
     y0 = t.f + t.e * (rows - 0.5) if t.e < 0 else t.f + 0.5 * t.e
-    if t.e < 0:
-        z = z[::-1]  # north-up raster rows -> increasing y
-    if t.a < 0:
-        z = z[:, ::-1]
     xs = x0 + dx * np.arange(cols, dtype=np.float64)
     ys = y0 + dy * np.arange(rows, dtype=np.float64)
     attrs = {}
@@ -88,7 +99,22 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
     for key in GEOREF_KEYS:
         attrs.pop(key, None)  # the file's own georeferencing decides
     lattice = (t.c if t.a > 0 else t.c + t.a * cols, dx, t.f if t.e < 0 else t.f + t.e * rows, dy)
-    return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy, lattice=lattice)
+    return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy, lattice=lattice, owned=True)
+
+
+def _as_stored(nodata: float, dtype) -> float | None:
+    """The nodata value as the band's type holds it (None when that type cannot hold it: no sample is nodata).
+
+    GDAL reports it as a double; a float32 band compares its own rounding of it, as a
+    masked read does."""
+    dtype = np.dtype(dtype)
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        if nodata != int(nodata) or not info.min <= nodata <= info.max:
+            return None
+    with np.errstate(over="ignore"):
+        value = np.asarray(nodata).astype(dtype)
+    return float(value) if np.isfinite(value) else None
 
 
 #: Rasters with at least this many rows and columns are written in tiles (GDAL's usual 256 x 256).

@@ -14,14 +14,15 @@ from ._common import _UserError
 
 
 def _georeference(z, xs, ys, attrs: dict, file_crs, crs_arg, source: str, *, dlon=None, dlat=None,
-                  lattice=None) -> HeightGrid:
+                  lattice=None, owned: bool = False) -> HeightGrid:
     """A HeightGrid from native sample coordinates (increasing), with its georeferencing attrs.
 
     ``dlon`` / ``dlat`` are the file's own steps (native units); ``lattice`` its cells as
     stored, ``(left, dx, top, dy)`` (the west and north edges, the positive steps), which
     is recorded in ``attrs["native_lattice"]`` so that a grid written back on that lattice
     gets the file's numbers, not their rounding through the terrain's frame
-    (:func:`native_lattice`).
+    (:func:`native_lattice`). ``owned``: ``z`` is the reader's own fresh float64 buffer, which
+    the grid adopts instead of copying.
     """
     if lattice is not None:
         attrs["native_lattice"] = tuple(float(v) for v in lattice)
@@ -30,14 +31,14 @@ def _georeference(z, xs, ys, attrs: dict, file_crs, crs_arg, source: str, *, dlo
     text = file_crs or crs_arg
     if not text:
         warn_if_degrees(xs, ys, source, stacklevel=6)
-        return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+        return HeightGrid._from_coords(z, xs, ys, attrs, owned=owned)
     geographic = crs_is_geographic(text)
     if geographic:
         xs, ys, affine = lonlat_to_local(xs, ys, dlon=dlon, dlat=dlat)
     else:
         affine = IDENTITY
     attrs.update(crs=text, geographic=geographic, xy_to_native=affine)
-    return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+    return HeightGrid._from_coords(z, xs, ys, attrs, owned=owned)
 
 
 def native_lattice(attrs: dict, nx: np.ndarray, ny: np.ndarray) -> tuple[float, float, float, float]:

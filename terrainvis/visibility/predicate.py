@@ -11,7 +11,7 @@ import numpy as np
 
 from ..core.validate import as_nonnegative_finite, as_points, as_positive_finite, describe, height_limit
 from ..errors import OutsideFootprintError
-from ..core.terrain import HeightGrid, as_terrain
+from ..core.terrain import HeightGrid, as_terrain, height_range
 from ..tolerances import CLEARANCE_REL, EXTENT_INSIDE_REL
 
 __all__ = [
@@ -49,9 +49,8 @@ def terrain_scale(terrain) -> float:
     as_terrain(terrain)
     s = terrain._cache.get("visibility_scale")
     if s is None:
-        z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
-        zr = float(np.nanmax(z) - np.nanmin(z)) if np.isfinite(z).any() else 0.0
-        s = max(_extent_diagonal(terrain), zr)
+        zr = height_range(terrain)
+        s = max(_extent_diagonal(terrain), zr[1] - zr[0] if zr is not None else 0.0)
         terrain._cache["visibility_scale"] = s
     return s
 
@@ -146,8 +145,8 @@ def _height_above(value, name: str, terrain) -> float:
     from ..core.validate import as_height
 
     as_nonnegative_finite(value, name, "z units")  # the plain mistakes first, in their own words
-    z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
-    ground = float(np.nanmax(np.abs(z))) if np.isfinite(z).any() else 0.0
+    zr = height_range(terrain)
+    ground = max(-zr[0], zr[1]) if zr is not None else 0.0
     return as_height(value, name, scale=terrain_scale(terrain), ground=ground, minimum=0.0)
 
 

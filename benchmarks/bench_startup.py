@@ -1,0 +1,134 @@
+"""Where a command's time goes, beside the GDAL command it stands next to (issue 28, item 3).
+
+On one DEM (by default a 3601 x 3601 float32 GeoTIFF made here: ``mountains`` at 30 m in
+UTM, the size of an SRTM 1-arc-second tile), the script times, as whole processes and in
+turn (A B A B ...; ratios are taken pair by pair, so a drifting machine cancels out):
+
+* ``terrainvis viewshed DEM --observer X Y -o out.tif`` against
+  ``gdal_viewshed -ox X -oy Y -oz 1.7 -cc 0 DEM out.tif`` (the same observer, a flat earth);
+* ``terrainvis info DEM`` against ``gdalinfo -stats DEM`` (both read every sample);
+* ``terrainvis --help`` against ``gdalinfo --version`` (start-up alone);
+
+and then splits one ``terrainvis viewshed`` into its phases, each timed in a fresh
+process: the interpreter (``python -c pass``), the imports the command makes, loading
+the cached numba kernels (the first call, on a 3 x 3 grid), reading the DEM, the call
+(its per-grid tables included) and writing the GeoTIFF.
+
+Usage::
+
+    python benchmarks/bench_startup.py [--dem DEM.tif] [--repeats 5]
+
+Without ``gdal-bin`` (``apt-get install gdal-bin``) only the terrainvis side runs. The
+machine is shared: read the medians and the ratios, and the load average printed first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+VENV_BIN = Path(sys.executable).parent
+TERRAINVIS = str(VENV_BIN / "terrainvis")
+
+PHASES = r"""
+import sys, time
+t = [time.perf_counter()]
+import numpy as np
+from terrainvis.cli import _common, viewshed as command
+from terrainvis import HeightGrid
+from terrainvis.io import load_dem, write_mask_geotiff
+from terrainvis.visibility import viewshed
+import rasterio
+t.append(time.perf_counter())
+viewshed(HeightGrid(np.zeros((3, 3))), (1.0, 1.0))  # loads the sweep's cached kernels
+t.append(time.perf_counter())
+grid = load_dem(sys.argv[1])
+t.append(time.perf_counter())
+x, y = float(sys.argv[2]), float(sys.argv[3])
+v = viewshed(grid, (x, y), observer_height=1.7)
+t.append(time.perf_counter())
+write_mask_geotiff(grid, v, sys.argv[4])
+t.append(time.perf_counter())
+print(" ".join(f"{b - a:.4f}" for a, b in zip(t, t[1:])))
+"""
+
+
+def _make_dem(path: Path, size: int) -> None:
+    import numpy as np
+
+    import terrainvis as tv
+
+    g = tv.synthetic_terrain("mountains", size=size, seed=1)
+    z = g.z.astype(np.float32).astype(np.float64)
+    tv.save_dem(tv.HeightGrid(z, 30.0, 30.0, (500000.0, 4000000.0), attrs={"crs": "EPSG:32617"}), path,
+                dtype="float32")
+
+
+def _wall(cmd) -> float:
+    t0 = time.perf_counter()
+    subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+    return time.perf_counter() - t0
+
+
+def _paired(name: str, a, b, repeats: int) -> None:
+    _wall(a)  # warm-up: the page cache and numba's cache index, for both
+    if b:
+        _wall(b)
+    ta, tb = [], []
+    for _ in range(repeats):
+        ta.append(_wall(a))
+        if b:
+            tb.append(_wall(b))
+    line = f"{name:<22} terrainvis {statistics.median(ta):6.3f} s"
+    if b:
+        ratios = [x / y for x, y in zip(ta, tb)]
+        line += f"   {Path(b[0]).name} {statistics.median(tb):6.3f} s   ratio {statistics.median(ratios):5.2f}"
+    print(line + f"   (medians of {repeats})", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dem", help="a GeoTIFF DEM (default: a 3601x3601 one made in a temporary folder)")
+    ap.add_argument("--size", type=int, default=3601, help="size of the DEM made when --dem is not given")
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
+    with tempfile.TemporaryDirectory(prefix="tv-startup-") as tmp:
+        tmp = Path(tmp)
+        dem = Path(args.dem) if args.dem else tmp / "dem.tif"
+        if not args.dem:
+            _make_dem(dem, args.size)
+        import rasterio
+
+        with rasterio.open(dem) as src:
+            t, rows, cols = src.transform, src.height, src.width
+        x, y = t.c + t.a * (cols // 2 + 0.5), t.f + t.e * (rows // 2 + 0.5)  # the central sample
+        print(f"DEM {dem.name}: {rows} x {cols}", flush=True)
+        gdal = shutil.which("gdal_viewshed") is not None
+        _paired("viewshed", [TERRAINVIS, "viewshed", str(dem), "--observer", f"{x}", f"{y}", "-o", str(tmp / "a.tif")],
+                ["gdal_viewshed", "-ox", f"{x}", "-oy", f"{y}", "-oz", "1.7", "-cc", "0", str(dem), str(tmp / "b.tif")]
+                if gdal else None, args.repeats)
+        _paired("info", [TERRAINVIS, "info", str(dem)], ["gdalinfo", "-stats", str(dem)] if gdal else None, args.repeats)
+        _paired("--help", [TERRAINVIS, "--help"], ["gdalinfo", "--version"] if gdal else None, args.repeats)
+        names = ["imports", "kernel loading", "reading", "the call", "writing"]
+        runs = []
+        for _ in range(args.repeats):
+            out = subprocess.run([sys.executable, "-c", PHASES, str(dem), f"{x}", f"{y}", str(tmp / "c.tif")],
+                                 capture_output=True, text=True, check=True)
+            runs.append([float(v) for v in out.stdout.split()])
+        bare = statistics.median(_wall([sys.executable, "-c", "pass"]) for _ in range(args.repeats))
+        print(f"terrainvis viewshed, phases (medians of {args.repeats} fresh processes):", flush=True)
+        print(f"  {'interpreter':<16} {bare:6.3f} s")
+        for k, name in enumerate(names):
+            print(f"  {name:<16} {statistics.median(r[k] for r in runs):6.3f} s")
+
+
+if __name__ == "__main__":
+    main()

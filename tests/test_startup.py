@@ -1,0 +1,52 @@
+"""A command imports what it uses and nothing else (issue 28: commands that start as quickly as GIS tools).
+
+Each case runs the command in a fresh interpreter and lists the heavy modules it imported.
+``benchmarks/bench_startup.py`` times the same commands beside GDAL's.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("numpy", "numba", "pandas", "simplifiers", "terrainvis.experiment", "terrainvis.relocation", "matplotlib",
+         "trimesh", "embreex", "pymeshlab", "rasterio", "dask")
+
+
+def _imported(argv) -> set[str]:
+    code = (
+        "import sys\n"
+        "from terrainvis.cli import main\n"
+        f"try:\n    main({argv!r})\nexcept SystemExit:\n    pass\n"
+        f"print('imported:' + ','.join(m for m in {HEAVY!r} if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    line = out.stdout.splitlines()[-1]
+    assert line.startswith("imported:"), out.stdout
+    return set(filter(None, line.removeprefix("imported:").split(",")))
+
+
+def test_help_imports_nothing_heavy():
+    # the command list needs each command's one help line, not its flags
+    assert _imported(["--help"]) == set()
+
+
+def test_a_command_s_help_builds_only_its_own_flags():
+    # compare's flags come from the experiment's options (pandas, the simplifiers); los's do not
+    assert not _imported(["los", "--help"]) & {"pandas", "simplifiers", "terrainvis.experiment", "numba"}
+    assert "terrainvis.experiment" in _imported(["compare", "--help"])
+
+
+@pytest.mark.parametrize("argv", [
+    ["los", "hills", "--from", "300", "400", "--to", "2000", "2000"],
+    ["viewshed", "hills", "--observer", "300", "400", "-o", "{tmp}/v.npz"],
+])
+def test_the_visibility_commands_import_no_experiment(argv, tmp_path):
+    got = _imported([a.format(tmp=tmp_path) for a in argv])
+    assert "numba" in got  # they run the kernels ...
+    # ... and need nothing of the experiment, the simplifiers, the meshes or the figures
+    assert not got & {"pandas", "simplifiers", "terrainvis.experiment", "terrainvis.relocation", "matplotlib",
+                      "trimesh", "embreex", "pymeshlab", "dask"}, got
