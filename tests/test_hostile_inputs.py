@@ -346,3 +346,21 @@ def test_npy_is_refused_before_simplifying_and_a_met_target_is_said_met(tmp_path
     tin = simplifiers.simplify(bundled_terrain("hills"), "greedy-insertion", max_error=0.0)
     assert tin.attrs["max_error"] == 0.0 and tin.attrs["stopped_by"] == "max_error"
     assert tin.attrs["notes"] == ["max_error 0: met with 14,400 vertices (max error 0), the most the budget allows"]
+
+
+def test_a_simplified_terrain_never_finished_leaves_no_temporary_file(tmp_path):
+    # item 20: a worker stopped mid-write (full disk, kill) left '.NAME.XXXXXXXX.npz' in OUT/simplified
+    save = tmp_path / "simplified"
+    save.mkdir()
+    stale = save / ".hills__lls__level1.npz.k2j4x9q1.npz"
+    stale.write_bytes(b"PK\x03\x04 half a file")
+    mine = [save / ".hills__lls__level1.npz.keep", save / ".notes.npz.abcdefgh.npz", save / "hills__lls__level1.npz.bak"]
+    for p in mine:  # the user's own files, named alike but not a save's temporary file
+        p.write_text("mine")
+    df = compare(["hills"], methods=["lls"], levels=[1], n_points=8, n_sets=1, workers=1, repeats=1,
+                 relocations=["identity"], save_dir=save)
+    assert df["error"].isna().all()
+    assert not stale.exists()
+    assert all(p.read_text() == "mine" for p in mine)
+    assert sorted(p.name for p in save.iterdir() if not p.name.startswith(".")) == ["hills__lls__level1.npz",
+                                                                                   "hills__lls__level1.npz.bak"]

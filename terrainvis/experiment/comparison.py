@@ -158,13 +158,43 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
             from ..core.fileio import check_writable_dir
 
             save_dir = str(check_writable_dir(save_dir, "save_dir"))
-        new_rows = _execute(tasks, grids, settings, done, store, save_dir=save_dir, workers=workers, client=client,
-                            progress=progress)
+            _remove_partial_saves(save_dir)  # left by an earlier run that was killed mid-write
+        try:
+            new_rows = _execute(tasks, grids, settings, done, store, save_dir=save_dir, workers=workers,
+                                client=client, progress=progress)
+        finally:
+            if save_dir is not None:  # a worker stopped mid-write (a full disk, a kill) leaves its temporary file
+                _remove_partial_saves(save_dir)
         rows = store.rows() if store is not None else table(new_rows)
         df = order(rows, grids)
         if store is not None:
             store.finish(df)
     return df
+
+
+def _remove_partial_saves(save_dir) -> list[str]:
+    """Remove the temporary files of simplified terrains that were never finished in ``save_dir``.
+
+    A save writes ``.NAME.XXXXXXXX.npz`` beside ``NAME`` (:func:`terrainvis.core.fileio.atomic_path`)
+    and renames it when complete. A worker killed mid-write cannot remove it. Only names
+    of that exact form whose NAME is a simplified terrain's
+    (:func:`~terrainvis.experiment.units.simplified_path`) are removed; the user's own
+    files are left alone. Returns the names removed.
+    """
+    import os
+    import re
+
+    pattern = re.compile(r"^\.(?P<target>[^/]+__[^/]+__level\d+\.npz)\.[A-Za-z0-9_]{6,}\.npz$")
+    removed = []
+    with os.scandir(save_dir) as entries:
+        for entry in entries:
+            if pattern.match(entry.name) and entry.is_file(follow_symlinks=False):
+                try:
+                    os.unlink(entry.path)
+                    removed.append(entry.name)
+                except OSError:
+                    pass
+    return removed
 
 
 def _lock(out_csv):
