@@ -364,3 +364,41 @@ def test_a_simplified_terrain_never_finished_leaves_no_temporary_file(tmp_path):
     assert all(p.read_text() == "mine" for p in mine)
     assert sorted(p.name for p in save.iterdir() if not p.name.startswith(".")) == ["hills__lls__level1.npz",
                                                                                    "hills__lls__level1.npz.bak"]
+
+
+def test_file_names_that_are_not_utf8(tmp_path):
+    # item 19: every command takes, reports and writes them, on a strict UTF-8 output too
+    import os
+    import subprocess
+    import sys
+
+    import pandas as pd
+
+    from terrainvis import load_dem, save_dem
+
+    if sys.platform == "win32" or os.fsencode(os.fsdecode(b"\xff")) != b"\xff":
+        pytest.skip("this file system takes only Unicode names")
+    raw = os.fsencode(tmp_path)
+    dem = raw + b"/dem_\xff.npz"
+    save_dem(bundled_terrain("hills"), os.fsdecode(dem))
+    env = dict(os.environ, PYTHONIOENCODING="utf-8:strict")
+    code = "import sys; from terrainvis.cli import main; sys.exit(main([a for a in sys.argv[1:]]))"
+
+    def run(*args):
+        out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, env=env, cwd=tmp_path,
+                             timeout=300)
+        assert out.returncode == 0, out.stderr.decode(errors="replace")
+        return out.stdout
+
+    assert b"dem_\\xff: 120x120 uniform grid" in run("info", dem)  # the label: the byte as an escape
+    assert b"blocked" in run("los", dem, "--from", "300", "400", "--to", "2000", "2000")
+    png, tif = raw + b"/v_\xfe.png", raw + b"/v_\xfe.tif"
+    out = run("viewshed", dem, "--observer", "300", "400", "-o", tif)
+    assert b"wrote " + tif in out  # the path as the user's own bytes
+    run("viewshed", dem, "--observer", "300", "400", "-o", png)
+    assert os.path.getsize(png) > 1000 and load_dem(os.fsdecode(tif)).shape == (120, 120)
+    folder = raw + b"/out_\xfe"
+    run("compare", "--terrain", dem, "--methods", "lls", "--levels", "1", "--points", "8", "--sets", "1",
+        "--relocations", "identity", "--out", folder)
+    df = pd.read_csv(os.fsdecode(folder + b"/results.csv"))
+    assert set(df["terrain"]) == {"dem_\\xff"} and df["error"].isna().all()

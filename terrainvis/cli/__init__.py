@@ -95,7 +95,7 @@ def main(argv=None) -> int:
             print(exc, file=sys.stderr)
             return 2
         name = f"terrainvis {args.command}"
-        with _one_line_warnings(name):
+        with _one_line_warnings(name), _file_names_print():
             return _run(args, name)
     except BrokenPipeError:  # the reader went away (| head): stop quietly, as Unix tools do
         _stdout_to_devnull()
@@ -132,6 +132,31 @@ def _one_line_warnings(name: str):
     with warnings.catch_warnings():
         warnings.showwarning = show
         yield
+
+
+@contextlib.contextmanager
+def _file_names_print():
+    """stdout and stderr write a file name that is not UTF-8 as its own bytes, as ``ls`` and GDAL do.
+
+    Python decodes such a name with surrogate escapes, which a strict UTF-8 stream refuses
+    (stdout is strict by default). The command would then fail after its work was done,
+    on the line that says where it wrote. The streams' previous error handlers are put
+    back afterwards (``main`` may be called from Python)."""
+    previous = []
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        errors = getattr(stream, "errors", None)
+        if reconfigure is not None and errors == "strict":
+            with contextlib.suppress(Exception):
+                reconfigure(errors="surrogateescape")
+                previous.append((stream, errors))
+    try:
+        yield
+    finally:
+        for stream, errors in previous:
+            with contextlib.suppress(Exception):
+                stream.flush()
+                stream.reconfigure(errors=errors)
 
 
 def _main_thread() -> bool:

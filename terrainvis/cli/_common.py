@@ -160,7 +160,9 @@ def read_surface(name: str, args=None, *, command: str):
                          ("--metric", getattr(args, "metric", False))):
             if on:
                 raise UsageError(f"{flag} works on a grid DEM, and {name!r} is a mesh (a TIN)")
-        return path.stem, _read_tin(path)
+        from ..core.validate import file_label
+
+        return file_label(path.stem), _read_tin(path)
     if suffix in MESH_SUFFIXES and not path.exists():
         raise UsageError(f"mesh file {name!r} does not exist")
     return read_terrain(name, args)
@@ -179,7 +181,9 @@ def _holds_tin(path: Path) -> bool:
 def _read_tin(path: Path):
     from ..experiment.evaluate import _read
 
-    return _read(path, path.stem)
+    from ..core.validate import file_label
+
+    return _read(path, file_label(path.stem))
 
 
 def working(command: str, what: str) -> None:

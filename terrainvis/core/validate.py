@@ -7,6 +7,22 @@ import numpy as np
 from ..tolerances import CLEARANCE_REL
 
 
+def file_label(text: str) -> str:
+    """A name made from a file name, as text every output can hold.
+
+    A file name that is not valid UTF-8 arrives with surrogate escapes (``\\udcff`` for the
+    byte 0xff), which no UTF-8 file, CSV or figure can store. Its bytes become ``\\xff``
+    escapes instead: ``dem_\\xff``, readable and the same every run.
+
+    >>> file_label("hills")
+    'hills'
+    >>> import os
+    >>> file_label(os.fsdecode(b"dem_\\xff"))
+    'dem_\\\\xff'
+    """
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
 def describe(value) -> str:
     """A short description of ``value`` for error messages."""
     if isinstance(value, np.ndarray):

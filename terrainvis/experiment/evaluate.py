@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from ..core.terrain import TIN, HeightGrid
-from ..core.validate import choice, describe
+from ..core.validate import choice, describe, file_label
 
 __all__ = ["evaluate", "as_simplified", "MESH_SUFFIXES", "RASTER_SUFFIXES"]
 
@@ -136,7 +136,7 @@ def _named(simplified, name, taken=()) -> list[tuple[str, object]]:
     for i, (label, s) in enumerate(items):
         if label is None:
             if isinstance(s, (str, Path)):
-                label = Path(s).stem
+                label = file_label(Path(s).stem)
             else:
                 label = str(getattr(s, "attrs", {}).get("method") or "simplified")
         if label in taken:

@@ -10,7 +10,7 @@ import warnings
 from pathlib import Path
 
 from ..core.terrain import HeightGrid
-from ..core.validate import describe
+from ..core.validate import describe, file_label
 
 __all__ = ["JACKSBORO_WINDOW", "resolve_one"]
 
@@ -52,7 +52,7 @@ def resolve_one(name, t, i):
                 "name (a local file always wins; rename or move it to use the bundled one)",
                 UserWarning, stacklevel=3,
             )
-        return name or (path.stem if path.suffix else path.name), grid
+        return name or file_label(path.stem if path.suffix else path.name), grid
     if text in BUNDLED:
         return name or text, bundled_terrain(text)
     if text == "jacksboro":
