@@ -175,3 +175,29 @@ def test_an_interrupt_swallowed_inside_a_unit_still_stops_a_serial_run():
         run_units([(i, (i,)) for i in range(3)], unit, on_result=lambda key, result: saved.append(result), workers=1)
     assert saved == ["unit 0"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the run's handler is gone
+
+
+def test_an_interrupt_that_c_code_swallows_still_ends_the_command():
+    # issue 31 item 17: a Ctrl-C landing in one of llvmlite's ctypes callbacks was printed as
+    # "Exception ignored on calling ctypes callback" and the command went on to exit 0
+    import numba
+
+    from terrainvis.core.interrupt import call, kept_interrupts, raise_pending
+
+    @numba.njit(nogil=True)
+    def one(stop):
+        return 1
+
+    with kept_interrupts():
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # the handler runs here
+        except KeyboardInterrupt:
+            pass  # swallowed, as a ctypes callback does
+        with pytest.raises(KeyboardInterrupt):
+            call(one, work=1)  # the next kernel call raises it again
+        with pytest.raises(KeyboardInterrupt):
+            raise_pending()  # and so does the CLI when the command returns
+    raise_pending()  # outside the block nothing is pending
+    assert call(one, work=1) == 1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is put back

@@ -79,24 +79,25 @@ def main(argv=None) -> int:
     """Entry point of the ``terrainvis`` console script."""
     import signal
 
+    from ..core.interrupt import kept_interrupts, raise_pending
     from ..errors import Interrupted
 
-    def terminated(signum, frame):
-        raise Interrupted(signum)
-
-    # SIGTERM ends the command like Ctrl-C does (cleanly, with a message), from the start
-    previous = signal.signal(signal.SIGTERM, terminated) if _main_thread() else None
     name = "terrainvis"
+    # SIGTERM ends the command like Ctrl-C does (cleanly, with a message), from the start;
+    # an interrupt that C code swallowed still ends it (kept_interrupts)
     try:
-        try:
-            argv = sys.argv[1:] if argv is None else list(argv)
-            args = _parser(argv).parse_args(argv)
-        except ParseError as exc:
-            print(exc, file=sys.stderr)
-            return 2
-        name = f"terrainvis {args.command}"
-        with _one_line_warnings(name), _file_names_print():
-            return _run(args, name)
+        with kept_interrupts():
+            try:
+                argv = sys.argv[1:] if argv is None else list(argv)
+                args = _parser(argv).parse_args(argv)
+            except ParseError as exc:
+                print(exc, file=sys.stderr)
+                return 2
+            name = f"terrainvis {args.command}"
+            with _one_line_warnings(name), _file_names_print():
+                status = _run(args, name)
+                raise_pending()  # swallowed where no kernel came after it: the run is still not a success
+                return status
     except BrokenPipeError:  # the reader went away (| head): stop quietly, as Unix tools do
         _stdout_to_devnull()
         return 128 + signal.SIGPIPE
@@ -107,9 +108,6 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"{name}: interrupted", file=sys.stderr)
         return 130
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
 
 
 def _stdout_to_devnull() -> None:
@@ -157,12 +155,6 @@ def _file_names_print():
             with contextlib.suppress(Exception):
                 stream.flush()
                 stream.reconfigure(errors=errors)
-
-
-def _main_thread() -> bool:
-    import threading
-
-    return threading.current_thread() is threading.main_thread()
 
 
 def _run(args, name: str) -> int:

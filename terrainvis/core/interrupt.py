@@ -60,9 +60,8 @@ import signal
 import sys
 import threading
 
-import numpy as np
-
-__all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library"]
+__all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library",
+           "kept_interrupts", "raise_pending"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
@@ -72,8 +71,62 @@ THREAD_MIN_WORK = 1 << 18
 _JOIN_STEP = 0.25
 
 
-def new_flag() -> np.ndarray:
+#: The signals that :func:`kept_interrupts`' handlers received, first first (empty outside the CLI).
+_pending: list[int] = []
+
+
+@contextlib.contextmanager
+def kept_interrupts():
+    """SIGINT and SIGTERM end the block, even when C code swallows the exception they raise.
+
+    The handlers raise as Python's own do (``KeyboardInterrupt`` for SIGINT,
+    :class:`terrainvis.errors.Interrupted` for SIGTERM), and they also note the signal. A
+    Ctrl-C that lands while llvmlite runs one of its ctypes callbacks (when numba loads
+    or compiles a kernel) raises inside the callback: ctypes prints "Exception ignored on
+    calling ctypes callback function" and the run went on to the end, exit status 0.
+    The note survives: the next :func:`call` raises it again (:func:`raise_pending`), and
+    the CLI checks it when the command returns. Only the main thread can install
+    handlers; elsewhere the block runs as it is. Used by :func:`terrainvis.cli.main`.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        _pending.append(signum)
+        _raise(signum)
+
+    previous = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(ValueError, OSError, TypeError):
+            previous[sig] = signal.signal(sig, handler)
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            with contextlib.suppress(ValueError, OSError, TypeError):
+                signal.signal(sig, old)
+        _pending.clear()
+
+
+def _raise(signum: int):
+    from ..errors import Interrupted
+
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise Interrupted(signum)
+
+
+def raise_pending() -> None:
+    """Raise the first interrupt :func:`kept_interrupts` noted, if any (a no-op outside it)."""
+    if _pending:
+        _raise(_pending[0])
+
+
+def new_flag():
     """A fresh stop flag: a ``(1,)`` int64 array holding 0 (go on)."""
+    import numpy as np  # here: the CLI imports this module before it knows it needs numpy
+
     return np.zeros(1, dtype=np.int64)
 
 
@@ -111,6 +164,7 @@ def call(kernel, *args, work: int):
         :class:`terrainvis.core.runner.Interrupted`), after the kernel has returned; or the
         kernel's own exception.
     """
+    raise_pending()  # an interrupt swallowed by C code since the last call (see kept_interrupts)
     stop = new_flag()
     if work < THREAD_MIN_WORK or threading.current_thread() is not threading.main_thread():
         return kernel(*args, stop)
