@@ -74,7 +74,7 @@ import time
 
 import numpy as np
 
-from terrainvis.core.interrupt import import_library
+from terrainvis.core.interrupt import call_library, import_library
 from terrainvis.core.memory import release_freed_memory
 from terrainvis.core.mesh import boundary_edges
 from terrainvis.core.validate import as_int, describe
@@ -348,7 +348,8 @@ def _pymeshlab_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: i
     unit = _longest_edge(vertices, faces) or 1.0
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=vertices / unit, face_matrix=np.asarray(faces, dtype=np.int32)))
-    ms.meshing_decimation_quadric_edge_collapse(
+    call_library(
+        ms.meshing_decimation_quadric_edge_collapse, what="pymeshlab's quadric edge collapse",
         targetfacenum=int(target_faces), targetperc=0.0, preserveboundary=bool(keep_border), autoclean=True,
         selected=False,
         **settings,
@@ -379,8 +380,10 @@ def _fast_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int, s
     asked = faces.shape[0] - int(target_faces)
     unit = 1.0
     for attempt in range(_FAST_RESCALES + 1):
-        v, f = fast_simplification.simplify(
+        v, f = call_library(
+            fast_simplification.simplify,
             np.ascontiguousarray(vertices / unit if attempt else vertices, dtype=np.float64), faces,
+            what="fast-simplification's edge collapse",
             target_count=int(target_faces), agg=float(settings["agg"]), preserve_border=bool(keep_border),
         )
         if faces.shape[0] - f.shape[0] >= asked / 2 or attempt == _FAST_RESCALES:

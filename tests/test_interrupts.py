@@ -201,3 +201,31 @@ def test_an_interrupt_that_c_code_swallows_still_ends_the_command():
     raise_pending()  # outside the block nothing is pending
     assert call(one, work=1) == 1
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler is put back
+
+
+def test_a_library_call_that_cannot_stop_says_so_at_once_and_is_waited_for(capsys):
+    # issue 31 item 17: QEC (pymeshlab) took 28-80 s to stop without a word
+    import threading
+
+    from terrainvis.core.interrupt import call_library
+
+    done = []
+
+    def slow(seconds, *, tag):  # releases the GIL, as pymeshlab does
+        time.sleep(seconds)
+        done.append(tag)
+        return tag
+
+    assert call_library(slow, 0.01, tag="a", what="x") == "a"
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))
+    second = threading.Timer(0.8, os.kill, (os.getpid(), signal.SIGINT))
+    t0 = time.perf_counter()
+    timer.start()
+    second.start()
+    with pytest.raises(KeyboardInterrupt):
+        call_library(slow, 2.0, tag="b", what="the slow library")
+    waited = time.perf_counter() - t0
+    assert done == ["a", "b"] and waited >= 2.0  # the call was not abandoned
+    err = capsys.readouterr().err.splitlines()
+    note = "terrainvis: stopping once the slow library returns: it cannot be interrupted, and a process must not exit while it runs"
+    assert err == [note, note]  # at once, and again for the second Ctrl-C

@@ -13,11 +13,12 @@ This module is the one mechanism every long kernel uses instead:
 2. The Python wrapper runs it with :func:`call` (``call(kernel, *args, work=n)``), which
    appends a fresh flag. Above :data:`THREAD_MIN_WORK` units of work, and only in the
    main thread (the only one that receives signals), :func:`call` runs the kernel in a
-   helper thread (the kernels are ``nogil``) while the main thread waits in short
-   joins, where Python runs its signal handlers. When the wait raises (the
+   helper thread (the kernels are ``nogil``) while the main thread waits on an event in
+   short steps, where Python runs its signal handlers. When the wait raises (the
    ``KeyboardInterrupt`` of SIGINT, the :class:`terrainvis.core.runner.Interrupted` that the
    CLI's SIGTERM handler raises, or anything else), :func:`call` sets the flag, waits
-   for the kernel to return and re-raises the same exception. The result is boxed in
+   for the kernel to return (at most :data:`_STOP_GRACE` seconds: a kernel that does not
+   see its flag in time finishes in its daemon thread) and re-raises the same exception. The result is boxed in
    the helper thread, where no signal handler runs, so an interrupt can no longer land
    inside numba's boxing.
 3. Small calls run directly in the calling thread: starting a thread costs about
@@ -61,7 +62,7 @@ import sys
 import threading
 
 __all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library",
-           "kept_interrupts", "raise_pending"]
+           "kept_interrupts", "raise_pending", "call_library"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
@@ -69,6 +70,9 @@ THREAD_MIN_WORK = 1 << 18
 
 #: Seconds between two wakes of the waiting main thread (signals wake it at once anyway).
 _JOIN_STEP = 0.25
+
+#: Seconds an interrupted caller waits for a kernel to see its stop flag before it raises anyway.
+_STOP_GRACE = 1.0
 
 
 #: The signals that :func:`kept_interrupts`' handlers received, first first (empty outside the CLI).
@@ -168,34 +172,92 @@ def call(kernel, *args, work: int):
     stop = new_flag()
     if work < THREAD_MIN_WORK or threading.current_thread() is not threading.main_thread():
         return kernel(*args, stop)
-    box = {}
-
-    def target():
-        try:
-            box["value"] = kernel(*args, stop)
-        except BaseException as exc:  # handed to the caller's thread below
-            box["error"] = exc
-
-    thread = threading.Thread(target=target, name="terrainvis-kernel", daemon=True)
+    job = _Job(kernel, *args, stop)
     try:
-        thread.start()
-        while thread.is_alive():
-            thread.join(_JOIN_STEP)
+        job.wait()
     except BaseException:
         stop[0] = 1
-        _join_after_stop(thread)
+        # a kernel returns within a second of its flag; one that does not (a flag read that
+        # the compiler moved out of a parallel loop) is left to finish in its daemon thread,
+        # which is safe for numba code (it touches only its own arrays), unlike a C++ library
+        job.wait_through(limit=_STOP_GRACE)
         raise
-    if "error" in box:
-        raise box["error"]
-    return box["value"]
+    return job.result()
 
 
-def _join_after_stop(thread: threading.Thread) -> None:
-    """Wait for a stopped kernel to return; a second interrupt meanwhile is not lost but ends the wait."""
-    if thread.ident is None:  # never started
-        return
-    while thread.is_alive():
-        thread.join(_JOIN_STEP)
+def call_library(fn, *args, what: str, **kwargs):
+    """``fn(*args, **kwargs)``, a library's call that takes no stop flag, with an interrupt answered at once.
+
+    In the main thread the call runs in a helper thread (pymeshlab and fast-simplification
+    release the GIL) and the main thread waits on an event in short steps. An interrupt meanwhile is
+    answered at once on stderr, saying that the stop waits for ``what`` to return and
+    why (leaving a C++ library running while the process exits was seen to abort on a
+    corrupted heap); the call is then waited for, further interrupts repeat the note, and
+    the first is raised. Elsewhere the call runs as it is.
+    """
+    raise_pending()
+    if threading.current_thread() is not threading.main_thread():
+        return fn(*args, **kwargs)
+    job = _Job(fn, *args, **kwargs)
+    try:
+        job.wait()
+    except BaseException:
+        note = (f"terrainvis: stopping once {what} returns: it cannot be interrupted, and a process must not "
+                "exit while it runs")
+        print(note, file=sys.stderr, flush=True)
+        job.wait_through(lambda: print(note, file=sys.stderr, flush=True))
+        raise
+    return job.result()
+
+
+class _Job:
+    """``fn(*args, **kwargs)`` started in a daemon helper thread, its result or exception boxed there.
+
+    Waiting uses an Event, not ``Thread.join``: in Python 3.11 a join that an interrupt
+    cuts short marks a thread that is still running as stopped (the bpo-45274 fix
+    releases its state lock), so later joins return at once and the caller would stop
+    waiting for a kernel or a library that still works.
+    """
+
+    def __init__(self, fn, *args, **kwargs):
+        self._box = {}
+        self._done = threading.Event()
+
+        def target():
+            try:
+                self._box["value"] = fn(*args, **kwargs)
+            except BaseException as exc:  # handed to the caller's thread
+                self._box["error"] = exc
+            finally:
+                self._done.set()
+
+        threading.Thread(target=target, name="terrainvis-call", daemon=True).start()
+
+    def wait(self) -> None:
+        """Until the call returns; an interrupt (a signal handler's exception) ends the wait."""
+        while not self._done.wait(_JOIN_STEP):
+            pass
+
+    def wait_through(self, on_interrupt=None, limit: float | None = None) -> None:
+        """Until the call returns (or ``limit`` seconds), whatever interrupts meanwhile (each calls ``on_interrupt``)."""
+        import math
+        import time
+
+        end = math.inf if limit is None else time.monotonic() + limit
+        while True:
+            try:
+                while not self._done.wait(max(0.0, min(_JOIN_STEP, end - time.monotonic()))):
+                    if time.monotonic() >= end:
+                        return
+                return
+            except BaseException:
+                if on_interrupt is not None:
+                    on_interrupt()
+
+    def result(self):
+        if "error" in self._box:
+            raise self._box["error"]
+        return self._box["value"]
 
 
 @contextlib.contextmanager
