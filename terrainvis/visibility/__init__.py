@@ -89,6 +89,7 @@ from .predicate import (
     terrain_scale,
     trim_length,
 )
+from .field_of_view import FieldOfView, field_of_view, field_of_view_mask
 from .profile import clearance_profile, lowest_point
 from .sweep import viewshed
 
@@ -113,6 +114,9 @@ __all__ = [
     "embree_tolerance",
     "viewshed",
     "cumulative_viewshed",
+    "FieldOfView",
+    "field_of_view",
+    "field_of_view_mask",
     "lowest_point",
     "clearance_profile",
 ]
