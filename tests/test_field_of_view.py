@@ -332,3 +332,19 @@ def test_command_line_mistakes_are_one_line_naming_the_flag(tmp_path, capsys, co
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and message in err
     assert not (tmp_path / "v.npz").exists()
+
+
+def test_the_png_draws_the_field_apart(tmp_path):
+    pytest.importorskip("matplotlib")
+    from terrainvis.experiment import plot
+
+    obs = (480.0, 480.0)
+    fov = field_of_view(azimuth=(300, 60), max_distance=400.0)
+    field = field_of_view_mask(HILLS, obs, fov)
+    vis = viewshed(HILLS, obs, azimuth=(300, 60), max_distance=400.0)
+    fig = plot.viewshed(HILLS, vis, observer=obs, field=field)
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    share = 100 * vis[field].mean()
+    assert labels == [f"visible ({share:.1f} % of the field)", "hidden", "outside the field of view"]
+    with pytest.raises(ValueError, match=r"field must have the terrain's shape \(33, 33\), got \(3, 3\)"):
+        plot.viewshed(HILLS, vis, field=np.ones((3, 3), bool))

@@ -72,26 +72,40 @@ def run(args) -> int:
     seconds = time.perf_counter() - t0
     valid = np.isfinite(grid.z)
     n_vis = int(vis[valid].sum())
-    _write_viewshed(grid, vis, out, suffix, args, label, observer)
+    field = _field(grid, observer, fov, args)
+    _write_viewshed(grid, vis, out, suffix, args, label, observer, field)
     print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
     print(f"  {earth_text(args)}")
-    if fov.limited:
+    inside = ""
+    if field is not None:
+        n_in = int((field & valid).sum())
         print(f"  field of view: {fov.describe()}")
+        inside = f"; {plural(n_in, 'sample')} in the field of view, {100 * n_vis / max(n_in, 1):.2f} % of them visible"
     print(f"  visible {n_vis:,} of {plural(int(valid.sum()), 'sample')} "
-          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %), {seconds:.2f} s")
+          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %{inside}), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
 
 
-def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer) -> None:
-    """The viewshed by OUT's suffix; ``observer`` in the grid's own frame."""
+def _field(grid, observer, fov, args):
+    """The samples inside the field of view (None without limits)."""
+    from ..visibility import field_of_view_mask
+
+    if not fov.limited:
+        return None
+    return field_of_view_mask(grid, observer, fov, observer_height=args.height, target_height=args.target_height,
+                              curvature=args.curvature, earth_radius=args.earth_radius)
+
+
+def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer, field) -> None:
+    """The viewshed by OUT's suffix; ``observer`` in the grid's own frame; a .png shows the field of view."""
     import numpy as np
 
     if suffix == ".png":
         from ..experiment import plot
         from ..io import save_figure
 
-        save_figure(plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed"), out)
+        save_figure(plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed", field=field), out)
         return
     if suffix == ".npz":
         from ..io import save_terrain

@@ -349,7 +349,8 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     return fig
 
 
-def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None = None, figsize=(6, 5)) -> Figure:
+def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None = None, figsize=(6, 5),
+             field=None) -> Figure:
     """A viewshed drawn over the terrain's hillshade.
 
     Parameters
@@ -362,6 +363,10 @@ def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None =
     observer : (x, y), optional
         Marked with a star.
     title : str, optional
+    field : (rows, cols) bool, optional
+        The viewshed's field of view (:func:`terrainvis.visibility.field_of_view_mask`):
+        samples outside it are drawn apart from the hidden ones, and the visible share is
+        of the samples inside it.
     """
     as_terrain(terrain)
     if not isinstance(terrain, HeightGrid):
@@ -369,19 +374,27 @@ def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None =
     vis = np.asarray(visible, dtype=bool)
     if vis.shape != terrain.shape:
         raise ValueError(f"visible must have the terrain's shape {terrain.shape}, got {vis.shape}")
+    inside = np.ones(terrain.shape, dtype=bool) if field is None else np.asarray(field, dtype=bool)
+    if inside.shape != terrain.shape:
+        raise ValueError(f"field must have the terrain's shape {terrain.shape}, got {inside.shape}")
     from matplotlib.patches import Patch
 
     fig = Figure(figsize=figsize, layout="constrained")
     ax = fig.add_subplot()
     _draw_terrain(ax, terrain, wireframe=False, title=title or "viewshed")
     xmin, xmax, ymin, ymax = terrain.extent
-    valid = np.isfinite(terrain.z)
+    valid = np.isfinite(terrain.z) & inside
     rgba = np.zeros(terrain.shape + (4,))
     rgba[valid & vis] = (1.0, 0.83, 0.0, 0.55)  # visible: yellow
     rgba[valid & ~vis] = (0.05, 0.05, 0.15, 0.55)  # hidden: dark
+    rgba[np.isfinite(terrain.z) & ~inside] = (0.95, 0.95, 0.95, 0.6)  # outside the field of view: pale
     ax.imshow(rgba, origin="lower", extent=(xmin, xmax, ymin, ymax), interpolation="nearest")
-    handles = [Patch(color=(1.0, 0.83, 0.0, 0.8), label=f"visible ({100 * vis[valid].mean():.1f} %)"),
+    share = 100 * vis[valid].mean() if valid.any() else 0.0
+    handles = [Patch(color=(1.0, 0.83, 0.0, 0.8), label=f"visible ({share:.1f} %"
+                     + (" of the field)" if field is not None else ")")),
                Patch(color=(0.05, 0.05, 0.15, 0.8), label="hidden")]
+    if field is not None:
+        handles.append(Patch(facecolor=(0.95, 0.95, 0.95, 0.9), edgecolor="0.5", label="outside the field of view"))
     if observer is not None:
         ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
     ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
