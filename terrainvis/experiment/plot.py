@@ -461,3 +461,51 @@ def cumulative_viewshed(terrain: HeightGrid, counts, *, observers=None, title: s
     ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
     return fig
 
+
+
+def fresnel_profile(result, a, b, *, title: str | None = None, figsize=(7.5, 3.8)) -> Figure:
+    """A radio path's profile: the terrain, the sight line and its first Fresnel zone.
+
+    Parameters
+    ----------
+    result : terrainvis.visibility.FresnelClearance
+        :func:`terrainvis.visibility.fresnel_clearance`'s result, computed with
+        ``profile=True``.
+    a, b : (3,) array_like
+        The path's ends (the antennas), as given to it.
+    title : str, optional
+
+    The terrain is drawn raised by the earth's bulge (what the sight line must clear), from
+    the exact breakpoints of the result's profile; dashed lines bound the first Fresnel
+    zone (the sight line +- r1), the dotted one is 60 % of it below the line, and the worst
+    place is marked.
+    """
+    prof = getattr(result, "profile", None)
+    if prof is None:
+        raise ValueError("result must come from fresnel_clearance(..., profile=True), got one without a profile")
+    ends = as_points(np.vstack([np.asarray(a, float).reshape(1, -1), np.asarray(b, float).reshape(1, -1)]), "a, b", 3)
+    t, d = prof["t"], prof["distance"]
+    line = ends[0, 2] + t * (ends[1, 2] - ends[0, 2])
+    ground = line - prof["clearance"]
+    r1 = prof["radius"]
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    base = float(np.min(ground) - 0.1 * (np.max(line + r1) - np.min(ground)))
+    ax.fill_between(d, base, ground, color=(0.55, 0.45, 0.3), alpha=0.6, label="terrain (+ earth bulge)")
+    ax.plot([d[0], d[-1]], [line[0], line[-1]], color="k", lw=1.2, label="sight line")
+    ax.plot(d, line - r1, "b--", lw=1.0, label="first Fresnel zone")
+    ax.plot(d, line + r1, "b--", lw=1.0)
+    ax.plot(d, line - 0.6 * r1, "b:", lw=1.0, label="60 % of the zone")
+    worst_z = ends[0, 2] + result.t * (ends[1, 2] - ends[0, 2]) - result.clearance
+    verdict = "clear" if result.clear_60 else "not clear"
+    ax.plot([result.distance], [worst_z], "o", color="red", markeredgecolor="k",
+            label=f"worst: {result.fraction:.2f} r1 at {result.distance:,.0f} (60 % {verdict})")
+    ax.set_xlim(d[0], d[-1])
+    ax.set_ylim(bottom=base)
+    ax.set_xlabel("distance from the first antenna (m)")
+    ax.set_ylabel("height (m)")
+    freq = result.frequency
+    ax.set_title(title or f"first Fresnel zone at {freq / 1e6:g} MHz", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8, framealpha=0.9)
+    return fig

@@ -90,6 +90,7 @@ from .predicate import (
     trim_length,
 )
 from .field_of_view import FieldOfView, field_of_view, field_of_view_mask
+from .fresnel import FresnelClearance, fresnel_clearance, fresnel_radius
 from .profile import clearance_profile, lowest_point
 from .sweep import viewshed
 
@@ -117,6 +118,9 @@ __all__ = [
     "FieldOfView",
     "field_of_view",
     "field_of_view_mask",
+    "FresnelClearance",
+    "fresnel_clearance",
+    "fresnel_radius",
     "lowest_point",
     "clearance_profile",
 ]
