@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from terrainvis import HeightGrid, bundled_terrain, cumulative_viewshed, synthetic_terrain, viewshed
 from terrainvis.cli import main
@@ -348,3 +350,35 @@ def test_the_png_draws_the_field_apart(tmp_path):
     assert labels == [f"visible ({share:.1f} % of the field)", "hidden", "outside the field of view"]
     with pytest.raises(ValueError, match=r"field must have the terrain's shape \(33, 33\), got \(3, 3\)"):
         plot.viewshed(HILLS, vis, field=np.ones((3, 3), bool))
+
+
+_angle = st.floats(0.0, 360.0, allow_nan=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(start=_angle, end=_angle, ox=st.floats(0.0, 4.0), oy=st.floats(0.0, 4.0))
+def test_a_range_and_its_complement_cover_the_circle_and_meet_on_their_rays(start, end, ox, oy):
+    """(start, end) and (end, start) together hold every sample, and share only the samples on the
+    two boundary rays, to rounding (1e-9 degrees), and the observer's own sample."""
+    if (end - start) % 360.0 == 0.0:
+        return  # refused ranges are tested above
+    obs = (ox, oy)
+    one = field_of_view_mask(FLAT, obs, field_of_view(azimuth=(start, end)))
+    other = field_of_view_mask(FLAT, obs, field_of_view(azimuth=(end, start)))
+    assert (one | other).all()
+    X, Y = np.meshgrid(FLAT.xs, FLAT.ys)
+    az = np.degrees(np.arctan2(X - ox, Y - oy)) % 360.0
+    def off(limit):
+        gap = np.abs(az - limit % 360.0) % 360.0
+        return np.minimum(gap, 360.0 - gap)
+
+    on_a_ray = (off(start) < 1e-9) | (off(end) < 1e-9) | ((X == ox) & (Y == oy))
+    on_a_ray[_nearest(FLAT, obs)] = True
+    assert not (one & other & ~on_a_ray).any()
+
+
+def test_field_of_view_mask_checks_its_input():
+    with pytest.raises(TypeError, match="fov must be a FieldOfView"):
+        field_of_view_mask(FLAT, CENTRE, {"azimuth": (0, 90)})
+    with pytest.raises(ValueError, match="observer must be a finite pair"):
+        field_of_view_mask(FLAT, (1.0, float("nan")), field_of_view(azimuth=(0, 90)))

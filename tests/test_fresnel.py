@@ -226,3 +226,16 @@ def test_profile_figure_marks_the_worst_place():
     assert labels[-1] == "worst: 4.00 r1 at 200 (60 % clear)"  # the hand-worked case above
     with pytest.raises(ValueError, match="profile=True"):
         plot.fresnel_profile(fresnel_clearance(g, a, b, F_01), a, b)
+
+
+def test_the_grids_tin_gives_the_same_answer():
+    g = bundled_terrain("mesas").crop(slice(30, 60), slice(40, 80))
+    a = np.r_[g.xs[2] + 7.0, g.ys[3] + 4.0, 0.0]
+    b = np.r_[g.xs[37] - 3.0, g.ys[26] + 1.0, 0.0]
+    a[2] = g.height_at([a[:2]])[0] + 12.0
+    b[2] = g.height_at([b[:2]])[0] + 25.0
+    for curvature in (0.0, 1.0):
+        on_grid = fresnel_clearance(g, a, b, 4e8, curvature=curvature, earth_radius=10_000.0)
+        on_tin = fresnel_clearance(g.to_tin(), a, b, 4e8, curvature=curvature, earth_radius=10_000.0)
+        assert on_tin.fraction == pytest.approx(on_grid.fraction, rel=1e-9, abs=1e-12)
+        assert on_tin.distance == pytest.approx(on_grid.distance, rel=1e-6)

@@ -175,11 +175,12 @@ def _pair_text(value) -> str:
 
 # ----------------------------------------------------------------- geometry
 def azimuth_degrees(dx, dy) -> np.ndarray:
-    """Azimuth of the direction (dx, dy), degrees clockwise from +y (north), in [0, 360].
+    """Azimuth of the direction (dx, dy), degrees clockwise from +y (north), in [0, 360).
 
     ``atan2(dx, dy)`` in degrees, negative ones turned by 360; exact on the axes and on
-    the diagonals of a uniform grid (0, 45, 90, ...). A direction rounding onto north from
-    its west side can come out as 360.
+    the diagonals of a uniform grid (0, 45, 90, ...). A direction just west of north whose
+    turned azimuth rounds to 360 is given the largest double below 360, so that it stays
+    west of north.
 
     Examples
     --------
@@ -187,7 +188,8 @@ def azimuth_degrees(dx, dy) -> np.ndarray:
     [0.0, 90.0, 180.0, 270.0, 135.0]
     """
     a = np.degrees(np.arctan2(np.asarray(dx, np.float64), np.asarray(dy, np.float64)))
-    return np.where(a < 0.0, a + 360.0, a)
+    a = np.where(a < 0.0, a + 360.0, a)
+    return np.where(a >= 360.0, np.nextafter(360.0, 0.0), a)
 
 
 def elevation_degrees(d, dz, kc: float = 0.0) -> np.ndarray:
@@ -234,8 +236,16 @@ def field_of_view_mask(
         every limit; the sample nearest the observer is True (exempt, see the module
         docstring).
     """
+    if not isinstance(fov, FieldOfView):
+        raise TypeError(f"fov must be a FieldOfView (from field_of_view(...)), got {describe(fov)}")
+    if at is not None and not isinstance(at, HeightGrid):
+        raise TypeError(f"at must be a terrainvis.HeightGrid (the grid of target samples) or None, got {describe(at)}")
+    if at is None and not isinstance(terrain, HeightGrid):
+        raise ValueError("at is required for a TIN: pass the HeightGrid whose samples are the targets")
     grid = terrain if at is None else at
     obs = np.asarray(observer, dtype=np.float64).ravel()
+    if obs.size not in (2, 3) or not np.isfinite(obs).all():
+        raise ValueError(f"observer must be a finite pair (x, y) or an eye (x, y, z), got {describe(observer)}")
     dx = grid.xs[None, :] - obs[0]
     dy = grid.ys[:, None] - obs[1]
     inside = np.ones(grid.shape, dtype=bool)
