@@ -1,8 +1,7 @@
 """Field-of-view limits of a viewshed: azimuth, vertical angle and distance from the observer.
 
-A field of view says which targets an observer looks at, as ArcGIS's Viewshed 2 does with
-its horizontal start and end angles, its upper and lower vertical angles and its inner and
-outer radii. Whether a target lies in the field is pure geometry of the eye and the target;
+A field of view says which targets an observer looks at, as ArcGIS's observer parameters
+do (AZIMUTH1/AZIMUTH2, VERT1/VERT2, RADIUS1/RADIUS2 of Viewshed 2). Whether a target lies in the field is pure geometry of the eye and the target;
 whether a target inside the field is visible does not depend on the limits (terrain outside
 the field still blocks the sight lines that cross it). So the limits are applied exactly as
 a mask on the viewshed's targets: :func:`field_of_view_mask` computes it, and
@@ -20,8 +19,8 @@ and the eye E = (x_E, y_E, z_E) (``dx = x - x_E``, ``dy = y - y_E``, ``d = hypot
   inclusive; a range with ``start > end`` wraps through north ((300, 60) is the 120
   degrees around north); ``(0, 360)`` is the full circle. A range of zero width
   (``start == end`` modulo 360, other than (0, 360)) is refused: it would hold only the
-  targets exactly on one ray, an empty field in practice (ArcGIS's exploratory viewshed
-  likewise requires a horizontal angle > 0).
+  targets exactly on one ray, an empty field in practice (the viewshed analysis of Esri's
+  ArcGIS Maps SDK likewise requires a horizontal angle > 0).
 * **vertical** ``(low, high)``, degrees in [-90, 90] with ``low <= high``: the elevation
   angle of T seen from E, ``atan2(z_T - c d**2 / (2 R) - z_E, d)`` with c the curvature
   coefficient and R the earth radius, i.e. the angle of the target lowered by the earth's
@@ -41,8 +40,11 @@ meridians. A rectilinear grid is treated the same way (its y axis is north).
 
 References
 ----------
-Esri, "How Viewshed 2 works", ArcGIS Pro documentation (horizontal start and end angles,
-vertical upper and lower angles, inner and outer radii).
+Esri, "How Viewshed 2 works", ArcGIS Pro documentation (the Spatial Analyst tool whose
+observer parameters these limits follow).
+
+Esri, ArcGIS Maps SDK for Kotlin, class ``Viewshed`` (``horizontalAngle`` must be
+greater than zero and at most 360 degrees).
 """
 
 from __future__ import annotations
