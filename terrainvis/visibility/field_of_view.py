@@ -248,9 +248,26 @@ def field_of_view_mask(
     obs = np.asarray(observer, dtype=np.float64).ravel()
     if obs.size not in (2, 3) or not np.isfinite(obs).all():
         raise ValueError(f"observer must be a finite pair (x, y) or an eye (x, y, z), got {describe(observer)}")
-    dx = grid.xs[None, :] - obs[0]
-    dy = grid.ys[:, None] - obs[1]
-    inside = np.ones(grid.shape, dtype=bool)
+    heights = (float(observer_height), float(target_height), curvature_coefficient(curvature, earth_radius))
+    inside = _inside(terrain, grid, obs, fov, np.arange(grid.size), heights).reshape(grid.shape)
+    inside[_nearest(grid, obs)] = True
+    return inside
+
+
+def _nearest(grid: HeightGrid, obs: np.ndarray) -> tuple[int, int]:
+    """The sample nearest the observer, as the viewshed finds it: the nearest y and the nearest x."""
+    return int(np.argmin(np.abs(grid.ys - obs[1]))), int(np.argmin(np.abs(grid.xs - obs[0])))
+
+
+def _inside(terrain, grid: HeightGrid, obs: np.ndarray, fov: FieldOfView, idx: np.ndarray, heights) -> np.ndarray:
+    """Whether each target ``idx`` (flat indices into ``grid``) lies inside every limit of ``fov``.
+
+    ``heights`` is ``(observer_height, target_height, kc)``, kc the curvature coefficient.
+    """
+    r, c = np.divmod(idx, grid.shape[1])
+    dx = grid.xs[c] - obs[0]
+    dy = grid.ys[r] - obs[1]
+    inside = np.ones(idx.size, dtype=bool)
     d2 = dx * dx + dy * dy
     if fov.min_distance is not None:
         inside &= d2 >= fov.min_distance * fov.min_distance
@@ -259,11 +276,11 @@ def field_of_view_mask(
     if not fov.full_circle:
         inside &= _in_azimuth(azimuth_degrees(dx, dy), *fov.azimuth)
     if fov.vertical is not None:
-        ez = obs[2] if obs.size == 3 else _ground(terrain, float(obs[0]), float(obs[1])) + float(observer_height)
-        zt = _target_surface(terrain, grid) + float(target_height)
-        angle = elevation_degrees(np.sqrt(d2), zt - ez, curvature_coefficient(curvature, earth_radius))
+        h_o, h_t, kc = heights
+        ez = obs[2] if obs.size == 3 else _ground(terrain, float(obs[0]), float(obs[1])) + h_o
+        zt = _target_surface(terrain, grid).ravel()[idx] + h_t
+        angle = elevation_degrees(np.sqrt(d2), zt - ez, kc)
         inside &= (angle >= fov.vertical[0]) & (angle <= fov.vertical[1])
-    inside[int(np.argmin(np.abs(grid.ys - obs[1]))), int(np.argmin(np.abs(grid.xs - obs[0])))] = True
     return inside
 
 
@@ -292,6 +309,15 @@ def apply_field_of_view(visible: np.ndarray, terrain, observer, fov: FieldOfView
     """
     if not fov.limited:
         return visible
-    mask = field_of_view_mask(terrain, observer, fov, **viewshed_options)
-    return visible & mask
+    grid = terrain if viewshed_options.get("at") is None else viewshed_options["at"]
+    obs = np.asarray(observer, dtype=np.float64).ravel()
+    heights = (float(viewshed_options.get("observer_height", 1.7)), float(viewshed_options.get("target_height", 0.0)),
+               curvature_coefficient(viewshed_options.get("curvature", 0.0),
+                                     viewshed_options.get("earth_radius", EARTH_RADIUS)))
+    idx = np.flatnonzero(visible)  # only the visible targets can change: the mask is computed for them alone
+    out = np.zeros_like(visible)
+    out.ravel()[idx[_inside(terrain, grid, obs, fov, idx, heights)]] = True
+    near = _nearest(grid, obs)
+    out[near] = visible[near]
+    return out
 
