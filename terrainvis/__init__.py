@@ -33,6 +33,7 @@ _API = {
     "visibility_matrix": "terrainvis.visibility",
     "viewshed": "terrainvis.visibility",
     "cumulative_viewshed": "terrainvis.visibility",
+    "fresnel_clearance": "terrainvis.visibility",
     "relocate": "terrainvis.relocation",
     "agreement": "terrainvis.core.metrics",
     "vertical_errors": "terrainvis.core.deviation",

@@ -59,6 +59,32 @@ def add_max_distance(p, help_text: str) -> None:
     p.add_argument("--max-distance", type=distance_arg, default=None, help=help_text)
 
 
+def add_field_of_view(p) -> None:
+    """``--azimuth``, ``--vertical`` and ``--min-distance``: a field of view, beside ``--max-distance``."""
+    p.add_argument("--azimuth", nargs=2, type=number_arg, default=None, metavar=("START", "END"),
+                   help="field of view: only samples whose direction from the observer lies from START to END, "
+                        "degrees clockwise from north (the grid's +y axis), each in [0, 360], both inclusive; "
+                        "START > END wraps through north (300 60); 0 360 is the full circle")
+    p.add_argument("--vertical", nargs=2, type=number_arg, default=None, metavar=("LOW", "HIGH"),
+                   help="field of view: only samples whose elevation angle from the eye (the target height "
+                        "included, lowered by the earth's curvature) lies from LOW to HIGH degrees, each in "
+                        "[-90, 90], LOW <= HIGH")
+    p.add_argument("--min-distance", type=distance_arg, default=None,
+                   help="field of view: only samples at least this horizontal distance from the observer")
+
+
+def field_of_view_args(args):
+    """The field of view of ``--azimuth``, ``--vertical``, ``--min-distance`` and ``--max-distance``,
+    checked before anything is computed (a mistake names its flag)."""
+    from ..visibility.field_of_view import CLI_NAMES, field_of_view
+
+    try:
+        return field_of_view(azimuth=args.azimuth, vertical=args.vertical, min_distance=args.min_distance,
+                             max_distance=args.max_distance, names=CLI_NAMES)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(str(exc)) from None
+
+
 def add_nodata(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--fill", choices=["nearest", "linear"], default=None,

@@ -9,6 +9,7 @@ from pathlib import Path
 from ._common import (
     UsageError,
     add_earth,
+    add_field_of_view,
     add_max_distance,
     add_nodata,
     add_positions,
@@ -16,6 +17,7 @@ from ._common import (
     check_heights,
     dask_client,
     earth_text,
+    field_of_view_args,
     height_arg,
     outside_message,
     plural,
@@ -51,6 +53,7 @@ def add_parser(sub) -> None:
                    help="eye height above the surface, >= 0, for observers without a height column (default 1.7)")
     add_target_height(c)
     add_max_distance(c, "each observer sees only the samples within this distance")
+    add_field_of_view(c)
     c.add_argument("--workers", type=workers_arg, default=None,
                    help="local worker processes (default 1: in this process, each viewshed on every core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler "
@@ -77,6 +80,7 @@ def run(args) -> int:
     check_output_file(out, "-o", inputs=inputs)
     if png is not None:
         check_output_file(png, "--png", inputs=inputs + [str(out)])
+    fov = field_of_view_args(args)
     label, grid = read_terrain(args.dem, args)
     check_heights(grid, args)
     if suffix in (".tif", ".tiff") and not grid.is_uniform:
@@ -100,7 +104,8 @@ def run(args) -> int:
         t0 = time.perf_counter()
         counts = cumulative_viewshed(grid, xy, observer_height=heights, target_height=args.target_height,
                                      max_distance=args.max_distance, curvature=args.curvature,
-                                     earth_radius=args.earth_radius, workers=args.workers, client=client,
+                                     earth_radius=args.earth_radius, azimuth=fov.azimuth, vertical=fov.vertical,
+                                     min_distance=fov.min_distance, workers=args.workers, client=client,
                                      progress=True)
         seconds = time.perf_counter() - t0
     finally:
@@ -117,7 +122,7 @@ def run(args) -> int:
     else:
         where = "in this process" if (args.workers or 1) == 1 else "on " + plural(args.workers, "worker")
     print(f"{label}: {plural(len(xy), 'observer')}, eyes {heights_text(heights)} above the surface, target "
-          f"{args.target_height:g}" + (f", within {args.max_distance:g}" if args.max_distance is not None else ""))
+          f"{args.target_height:g}" + (f", {fov.describe()}" if fov.limited else ""))
     print(f"  {earth_text(args)}")
     print(f"  seen by any {int((seen > 0).sum()):,} of {plural(n_valid, 'sample')} ({100 * (seen > 0).mean():.2f} %), "
           f"by all {100 * (seen == len(xy)).mean():.2f} %, most observers on one sample {int(seen.max()):,}; "

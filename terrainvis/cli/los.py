@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 from ._common import (
     UsageError,
     add_earth,
@@ -44,6 +46,12 @@ def add_parser(sub) -> None:
     add_target_height(los)
     los.add_argument("--end-radius", type=distance_arg, default=0.0,
                      help="ignore the surface within this distance of each end (default 0)")
+    los.add_argument("--fresnel", type=frequency_arg, default=None, metavar="FREQUENCY",
+                     help="a radio link at FREQUENCY in Hz (2.4e9 for 2.4 GHz): also report the worst clearance of "
+                          "the first Fresnel zone along the path, as a fraction of its radius, where it occurs, and "
+                          "whether at least 60 %% of the zone is clear (x, y, z in metres)")
+    los.add_argument("--png", metavar="PNG", help="with --fresnel and one pair: draw the path's profile (terrain, sight "
+                                                  "line, first Fresnel zone) into this .png")
     add_earth(los)
     add_nodata(los)
     add_positions(los)
@@ -55,6 +63,7 @@ def run(args) -> int:
     from ..visibility import line_of_sight, min_clearance
     from ..visibility.profile import lowest_point
 
+    png = _check_png(args)
     label, grid = read_surface(args.dem, args, command="los")
     check_heights(grid, args)
     if args.pairs:
@@ -92,7 +101,61 @@ def run(args) -> int:
                  f" at {frame.point(frame.from_grid([low['x'], low['y']]))}, {low['distance']:.6g} from the observer")
         print(f"  {frame.point(user1[k])} -> {frame.point(user2[k])}: {verdict}; lowest clearance "
               f"{clear[k]:.4g}{where}")
+        if args.fresnel is not None:
+            print("    " + _fresnel_text(grid, a[k], b[k], frame, args, png))
+    if png is not None:
+        print(f"  wrote {png}")
     return 0
+
+
+def _check_png(args):
+    """``--png``: with --fresnel and one pair, a .png that may be written."""
+    if args.png is None:
+        return None
+    from pathlib import Path
+
+    from ..core.fileio import check_output_file
+
+    png = Path(args.png)
+    if args.fresnel is None or args.pairs:
+        raise UsageError("--png draws the profile of one radio path: give it with --fresnel, --from and --to")
+    if png.suffix.lower() != ".png":
+        raise UsageError(f"--png must end in .png, got {png.name!r}")
+    check_output_file(png, "--png", inputs=[args.dem])
+    return png
+
+
+def _fresnel_text(grid, a, b, frame, args, png=None) -> str:
+    """The first Fresnel zone's worst clearance along a -> b, in one line (its profile drawn into ``png``)."""
+    from ..visibility.fresnel import fresnel_clearance
+
+    r = fresnel_clearance(grid, a, b, args.fresnel, curvature=args.curvature, earth_radius=args.earth_radius,
+                          profile=png is not None)
+    if png is not None:
+        from ..experiment import plot
+        from ..io import save_figure
+
+        save_figure(plot.fresnel_profile(r, a, b), png)
+    verdict = "at least 60 % of the zone clear" if r.clear_60 else "less than 60 % of the zone clear"
+    return (f"first Fresnel zone at {frequency_text(r.frequency)} (wavelength {r.wavelength:.4g}): worst clearance "
+            f"{r.fraction:.4g} of its radius ({r.clearance:.4g} of {r.radius:.4g}) at "
+            f"{frame.point(frame.from_grid([r.x, r.y]))}, {r.distance:.6g} from the observer; {verdict}")
+
+
+def frequency_arg(text: str) -> float:
+    """A radio frequency in Hz: finite and > 0."""
+    value = number_arg(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a frequency > 0 in Hz (2.4e9 for 2.4 GHz), got {text!r}")
+    return value
+
+
+def frequency_text(hz: float) -> str:
+    """A frequency with its unit: 2.4 GHz, 868 MHz, 50 Hz."""
+    for unit, scale in (("GHz", 1e9), ("MHz", 1e6), ("kHz", 1e3)):
+        if hz >= scale:
+            return f"{hz / scale:g} {unit}"
+    return f"{hz:g} Hz"
 
 
 def _read_pairs(path: str):

@@ -8,12 +8,14 @@ from pathlib import Path
 from ._common import (
     UsageError,
     add_earth,
+    add_field_of_view,
     add_max_distance,
     add_nodata,
     add_positions,
     add_target_height,
     check_heights,
     earth_text,
+    field_of_view_args,
     height_arg,
     number_arg,
     outside_message,
@@ -42,6 +44,7 @@ def add_parser(sub) -> None:
     v.add_argument("--height", type=height_arg, default=1.7, help="eye height above the surface, >= 0 (default 1.7)")
     add_target_height(v)
     add_max_distance(v, "only samples within this distance")
+    add_field_of_view(v)
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
     add_earth(v)
     add_nodata(v)
@@ -59,6 +62,7 @@ def run(args) -> int:
     if suffix not in (".tif", ".tiff", ".npz", ".png"):
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
     check_output_file(out, "-o", inputs=[args.dem])
+    fov = field_of_view_args(args)
     label, grid = read_terrain(args.dem, args)
     check_heights(grid, args)
     frame = position_frame(grid, args)
@@ -67,28 +71,45 @@ def run(args) -> int:
         raise UsageError(f"--observer {frame.point(args.observer)} {outside_message(frame, args.observer)}")
     t0 = time.perf_counter()
     vis = viewshed(grid, observer, observer_height=args.height, target_height=args.target_height,
-                   max_distance=args.max_distance, curvature=args.curvature, earth_radius=args.earth_radius)
+                   max_distance=args.max_distance, curvature=args.curvature, earth_radius=args.earth_radius,
+                   azimuth=fov.azimuth, vertical=fov.vertical, min_distance=fov.min_distance)
     seconds = time.perf_counter() - t0
     valid = np.isfinite(grid.z)
     n_vis = int(vis[valid].sum())
-    _write_viewshed(grid, vis, out, suffix, args, label, observer)
+    field = _field(grid, observer, fov, args)
+    _write_viewshed(grid, vis, out, suffix, args, label, observer, field)
     print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
     print(f"  {earth_text(args)}")
+    inside = ""
+    if field is not None:
+        n_in = int((field & valid).sum())
+        print(f"  field of view: {fov.describe()}")
+        inside = f"; {plural(n_in, 'sample')} in the field of view, {100 * n_vis / max(n_in, 1):.2f} % of them visible"
     print(f"  visible {n_vis:,} of {plural(int(valid.sum()), 'sample')} "
-          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %), {seconds:.2f} s")
+          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %{inside}), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
 
 
-def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer) -> None:
-    """The viewshed by OUT's suffix; ``observer`` in the grid's own frame."""
+def _field(grid, observer, fov, args):
+    """The samples inside the field of view (None without limits)."""
+    from ..visibility import field_of_view_mask
+
+    if not fov.limited:
+        return None
+    return field_of_view_mask(grid, observer, fov, observer_height=args.height, target_height=args.target_height,
+                              curvature=args.curvature, earth_radius=args.earth_radius)
+
+
+def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer, field) -> None:
+    """The viewshed by OUT's suffix; ``observer`` in the grid's own frame; a .png shows the field of view."""
     import numpy as np
 
     if suffix == ".png":
         from ..experiment import plot
         from ..io import save_figure
 
-        save_figure(plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed"), out)
+        save_figure(plot.viewshed(grid, vis, observer=observer, title=f"{label}: viewshed", field=field), out)
         return
     if suffix == ".npz":
         from ..io import save_terrain
@@ -101,9 +122,18 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observe
         attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in observer],
                  "viewshed_observer_native": [float(v) for v in position_frame(grid, None).from_grid(observer)],
                  "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height),
-                 "viewshed_curvature": float(args.curvature), "viewshed_earth_radius": float(args.earth_radius)}
+                 "viewshed_curvature": float(args.curvature), "viewshed_earth_radius": float(args.earth_radius),
+                 **_field_of_view_attrs(args)}
         save_terrain(HeightGrid.from_coords(z, grid.xs, grid.ys, attrs=attrs), out)
         return
     from ..io import write_mask_geotiff
 
     write_mask_geotiff(grid, vis, out, nodata_mask=~np.isfinite(grid.z))
+
+
+def _field_of_view_attrs(args) -> dict:
+    """The field-of-view flags that were given, for the .npz's attrs."""
+    given = {"azimuth": args.azimuth, "vertical": args.vertical, "min_distance": args.min_distance,
+             "max_distance": args.max_distance}
+    return {f"viewshed_{k}": (list(map(float, v)) if isinstance(v, list) else float(v))
+            for k, v in given.items() if v is not None}

@@ -349,7 +349,8 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     return fig
 
 
-def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None = None, figsize=(6, 5)) -> Figure:
+def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None = None, figsize=(6, 5),
+             field=None) -> Figure:
     """A viewshed drawn over the terrain's hillshade.
 
     Parameters
@@ -362,6 +363,10 @@ def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None =
     observer : (x, y), optional
         Marked with a star.
     title : str, optional
+    field : (rows, cols) bool, optional
+        The viewshed's field of view (:func:`terrainvis.visibility.field_of_view_mask`):
+        samples outside it are drawn apart from the hidden ones, and the visible share is
+        of the samples inside it.
     """
     as_terrain(terrain)
     if not isinstance(terrain, HeightGrid):
@@ -369,19 +374,27 @@ def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None =
     vis = np.asarray(visible, dtype=bool)
     if vis.shape != terrain.shape:
         raise ValueError(f"visible must have the terrain's shape {terrain.shape}, got {vis.shape}")
+    inside = np.ones(terrain.shape, dtype=bool) if field is None else np.asarray(field, dtype=bool)
+    if inside.shape != terrain.shape:
+        raise ValueError(f"field must have the terrain's shape {terrain.shape}, got {inside.shape}")
     from matplotlib.patches import Patch
 
     fig = Figure(figsize=figsize, layout="constrained")
     ax = fig.add_subplot()
     _draw_terrain(ax, terrain, wireframe=False, title=title or "viewshed")
     xmin, xmax, ymin, ymax = terrain.extent
-    valid = np.isfinite(terrain.z)
+    valid = np.isfinite(terrain.z) & inside
     rgba = np.zeros(terrain.shape + (4,))
     rgba[valid & vis] = (1.0, 0.83, 0.0, 0.55)  # visible: yellow
     rgba[valid & ~vis] = (0.05, 0.05, 0.15, 0.55)  # hidden: dark
+    rgba[np.isfinite(terrain.z) & ~inside] = (0.95, 0.95, 0.95, 0.6)  # outside the field of view: pale
     ax.imshow(rgba, origin="lower", extent=(xmin, xmax, ymin, ymax), interpolation="nearest")
-    handles = [Patch(color=(1.0, 0.83, 0.0, 0.8), label=f"visible ({100 * vis[valid].mean():.1f} %)"),
+    share = 100 * vis[valid].mean() if valid.any() else 0.0
+    handles = [Patch(color=(1.0, 0.83, 0.0, 0.8), label=f"visible ({share:.1f} %"
+                     + (" of the field)" if field is not None else ")")),
                Patch(color=(0.05, 0.05, 0.15, 0.8), label="hidden")]
+    if field is not None:
+        handles.append(Patch(facecolor=(0.95, 0.95, 0.95, 0.9), edgecolor="0.5", label="outside the field of view"))
     if observer is not None:
         ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
     ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
@@ -448,3 +461,51 @@ def cumulative_viewshed(terrain: HeightGrid, counts, *, observers=None, title: s
     ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
     return fig
 
+
+
+def fresnel_profile(result, a, b, *, title: str | None = None, figsize=(7.5, 3.8)) -> Figure:
+    """A radio path's profile: the terrain, the sight line and its first Fresnel zone.
+
+    Parameters
+    ----------
+    result : terrainvis.visibility.FresnelClearance
+        :func:`terrainvis.visibility.fresnel_clearance`'s result, computed with
+        ``profile=True``.
+    a, b : (3,) array_like
+        The path's ends (the antennas), as given to it.
+    title : str, optional
+
+    The terrain is drawn raised by the earth's bulge (what the sight line must clear), from
+    the exact breakpoints of the result's profile; dashed lines bound the first Fresnel
+    zone (the sight line +- r1), the dotted one is 60 % of it below the line, and the worst
+    place is marked.
+    """
+    prof = getattr(result, "profile", None)
+    if prof is None:
+        raise ValueError("result must come from fresnel_clearance(..., profile=True), got one without a profile")
+    ends = as_points(np.vstack([np.asarray(a, float).reshape(1, -1), np.asarray(b, float).reshape(1, -1)]), "a, b", 3)
+    t, d = prof["t"], prof["distance"]
+    line = ends[0, 2] + t * (ends[1, 2] - ends[0, 2])
+    ground = line - prof["clearance"]
+    r1 = prof["radius"]
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    base = float(np.min(ground) - 0.1 * (np.max(line + r1) - np.min(ground)))
+    ax.fill_between(d, base, ground, color=(0.55, 0.45, 0.3), alpha=0.6, label="terrain (+ earth bulge)")
+    ax.plot([d[0], d[-1]], [line[0], line[-1]], color="k", lw=1.2, label="sight line")
+    ax.plot(d, line - r1, "b--", lw=1.0, label="first Fresnel zone")
+    ax.plot(d, line + r1, "b--", lw=1.0)
+    ax.plot(d, line - 0.6 * r1, "b:", lw=1.0, label="60 % of the zone")
+    worst_z = ends[0, 2] + result.t * (ends[1, 2] - ends[0, 2]) - result.clearance
+    verdict = "clear" if result.clear_60 else "not clear"
+    ax.plot([result.distance], [worst_z], "o", color="red", markeredgecolor="k",
+            label=f"worst: {result.fraction:.2f} r1 at {result.distance:,.0f} (60 % {verdict})")
+    ax.set_xlim(d[0], d[-1])
+    ax.set_ylim(bottom=base)
+    ax.set_xlabel("distance from the first antenna (m)")
+    ax.set_ylabel("height (m)")
+    freq = result.frequency
+    ax.set_title(title or f"first Fresnel zone at {freq / 1e6:g} MHz", fontsize=10)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8, framealpha=0.9)
+    return fig

@@ -89,6 +89,8 @@ from .predicate import (
     terrain_scale,
     trim_length,
 )
+from .field_of_view import FieldOfView, field_of_view, field_of_view_mask
+from .fresnel import FresnelClearance, fresnel_clearance, fresnel_radius
 from .profile import clearance_profile, lowest_point
 from .sweep import viewshed
 
@@ -113,6 +115,12 @@ __all__ = [
     "embree_tolerance",
     "viewshed",
     "cumulative_viewshed",
+    "FieldOfView",
+    "field_of_view",
+    "field_of_view_mask",
+    "FresnelClearance",
+    "fresnel_clearance",
+    "fresnel_radius",
     "lowest_point",
     "clearance_profile",
 ]

@@ -32,6 +32,7 @@ from ..core.validate import as_float_array, as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
 from .engines import choose
+from .field_of_view import field_of_view
 from .predicate import EARTH_RADIUS, _height_above, curvature_coefficient
 from .sweep import _check_overlap, _surface_at, viewshed
 
@@ -57,6 +58,9 @@ def cumulative_viewshed(
     engine: str = "auto",
     curvature: float = 0.0,
     earth_radius: float = EARTH_RADIUS,
+    azimuth=None,
+    vertical=None,
+    min_distance=None,
     workers: int | None = None,
     client=None,
     progress: bool = False,
@@ -88,6 +92,12 @@ def cumulative_viewshed(
         geometric, 0.85714 standard refraction).
     earth_radius : float, default 6378137.0
         Radius of the earth in the terrain's x/y units.
+    azimuth, vertical, min_distance : optional
+        A field of view, the same for every observer, as in :func:`terrainvis.viewshed`:
+        each observer counts only the samples inside its field (``azimuth`` (start, end)
+        degrees clockwise from north, ``vertical`` (low, high) elevation angles in degrees,
+        ``min_distance`` beside ``max_distance``); samples outside it get nothing from
+        that observer.
     workers : int, optional
         Local worker processes. By default (and with 1) the observers' viewsheds run in
         this process, each sweep on every core: on this project's 2-core machine that
@@ -106,7 +116,10 @@ def cumulative_viewshed(
     (rows, cols) uint16, or uint32 when K > 65535
         ``out[r, c]``: how many observers see the target above sample (r, c) of ``at``
         (or of the terrain), each by :func:`terrainvis.viewshed` with the same options.
-        ``out > 0`` is the area seen by at least one observer. Nodata samples are 0.
+        ``out > 0`` is the area seen by at least one observer. Nodata samples are 0, and
+        an observer adds nothing outside its field of view (``azimuth``, ``vertical``,
+        ``min_distance``, ``max_distance``; its own nearest sample excepted, as in
+        :func:`terrainvis.viewshed`).
 
     Raises
     ------
@@ -145,6 +158,8 @@ def cumulative_viewshed(
     k = obs.shape[0]
     heights = _as_heights(observer_height, k, terrain)
     options = _options(terrain, target_height, max_distance, at, engine, curvature, earth_radius)
+    fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance, max_distance=max_distance)
+    options.update(azimuth=fov.azimuth, vertical=fov.vertical, min_distance=fov.min_distance)
     workers = check_workers(workers)
     client = check_client(client)
     if workers is None:

@@ -78,6 +78,7 @@ from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
 from . import _sweep_kernels as _vk
 from .engines import Predicate, choose
+from .field_of_view import apply_field_of_view, field_of_view
 from .predicate import EARTH_RADIUS, _check_heights, _height_above, clearance_tolerance, curvature_coefficient, trim_length
 
 __all__ = ["viewshed"]
@@ -109,6 +110,9 @@ def viewshed(
     engine: str = "auto",
     curvature: float = 0.0,
     earth_radius: float = EARTH_RADIUS,
+    azimuth=None,
+    vertical=None,
+    min_distance=None,
 ) -> np.ndarray:
     """Which samples of a grid are visible from an observer.
 
@@ -149,6 +153,17 @@ def viewshed(
     earth_radius : float, default 6378137.0
         Radius of the earth in the terrain's x/y units (WGS84's semi-major axis in
         metres, as GDAL takes it).
+    azimuth : (2,) sequence of float, optional
+        Field of view: ``(start, end)`` in degrees clockwise from north (the grid's +y
+        axis), each in [0, 360], inclusive; ``start > end`` wraps through north, e.g.
+        ``(300, 60)``; ``(0, 360)`` is the full circle; ``start == end`` is refused.
+    vertical : (2,) sequence of float, optional
+        Field of view: ``(low, high)`` elevation angles in degrees (in [-90, 90], low <=
+        high, inclusive) of each target seen from the eye, the target standing
+        ``target_height`` above the surface and lowered by the earth's drop
+        ``curvature * d**2 / (2 R)``.
+    min_distance : float, optional
+        Field of view: samples nearer than this horizontal distance are False.
 
     Returns
     -------
@@ -158,10 +173,13 @@ def viewshed(
         :func:`~terrainvis.visibility.trim_length` and the tolerance
         :func:`~terrainvis.visibility.clearance_tolerance` of ``terrain``, as in
         :func:`~terrainvis.visibility.line_of_sight`. Nodata samples (of ``at``, or where
-        the surface under test is absent) are False, and samples beyond ``max_distance``
-        are False, but for the sample nearest the observer (the ground it stands on),
-        which gets the pair engine's verdict at any distance (with earth curvature an
-        eye on the ground may not see it).
+        the surface under test is absent) are False, and samples outside the field of
+        view (beyond ``max_distance``, nearer than ``min_distance``, outside ``azimuth``
+        or ``vertical``: :mod:`terrainvis.visibility.field_of_view`) are False, but for
+        the sample nearest the observer (the ground it stands on), which gets the pair
+        engine's verdict whatever the limits (with earth curvature an eye on the ground
+        may not see it). Inside the field of view every verdict is the one without
+        limits: terrain outside the field still blocks.
 
     Raises
     ------
@@ -207,11 +225,13 @@ def viewshed(
            [1, 1, 1, 0, 0],
            [1, 1, 1, 0, 0]])
     """
+    fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance, max_distance=max_distance)
     out, _ = _viewshed(
         terrain, observer, observer_height=observer_height, target_height=target_height,
         max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
     )
-    return out
+    return apply_field_of_view(out, terrain, observer, fov, at=at, observer_height=observer_height,
+                               target_height=target_height, curvature=curvature, earth_radius=earth_radius)
 
 
 def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_distance=None, at=None,
