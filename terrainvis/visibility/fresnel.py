@@ -27,9 +27,11 @@ derivative vanishes: ``g' u = g u' / 2`` with ``u = t (1 - t)``, which expands t
 
     2 B t**3 - 3 B t**2 - (2 alpha + beta - B) t + alpha = 0
 
-(on a flat earth the single root ``t = alpha / (2 alpha + beta)``). Its real roots inside
-the piece are found in closed form (numpy's companion-matrix eigenvalues, then Newton
-steps on the cubic), and the ratio is evaluated at them and at the piece's ends. The
+(on a flat earth the single root ``t = alpha / (2 alpha + beta)``). Its own turning points
+cut the piece into at most three parts on which the cubic is monotone; a part whose ends
+differ in sign holds one root, found by bisection to the last bit (eigenvalues of the
+companion matrix lose their precision when the curvature term is tiny). The ratio is
+evaluated at those roots and at the piece's ends. The
 interval is the line-of-sight predicate's: the trim of :func:`~terrainvis.visibility.trim_length`
 at both ends (an antenna standing on the ground makes r1 and the clearance vanish
 together there).
