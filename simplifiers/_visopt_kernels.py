@@ -4,7 +4,7 @@ Kernels loop and never validate; :mod:`simplifiers.visopt` checks the input, mov
 coordinates to the coarse grid's local origin and passes plain arrays.
 
 The coarse surface S is the grid's triangulated surface (cell (r, c) split along its
-diagonal from (r, c) to (r + 1, c + 1), as :func:`terrainvis.visibility._kernels._cell_height`
+diagonal from (r, c) to (r + 1, c + 1), as :func:`terrainvis.core.surface.plane_uv`
 does). Its height anywhere is a weighted sum of three coarse heights, so every quantity
 below is linear in each coarse height.
 
@@ -35,22 +35,12 @@ import numba as nb
 import numpy as np
 
 from terrainvis.relocation._threshold_kernels import interval
+from terrainvis.core.surface import locate
 from terrainvis.tolerances import VERTEX_WEIGHT_ZERO
 
 _INF = np.inf
 #: Below this magnitude a breakpoint's coefficient of the vertex height counts as zero.
 _ALPHA_EPS = VERTEX_WEIGHT_ZERO
-
-
-@nb.njit(cache=True, nogil=True)
-def _locate(v, x):
-    """Index i in [0, len(v) - 2] with v[i] <= x < v[i + 1] (clamped)."""
-    i = np.searchsorted(v, x, side="right") - 1
-    if i < 0:
-        i = 0
-    if i > v.shape[0] - 2:
-        i = v.shape[0] - 2
-    return i
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -104,8 +94,8 @@ def _track(xs, ys, ax, ay, bx, by, u0, u1, start, record, bu, btri, ba, bb):
     dy = by - ay
     ncx = xs.shape[0] - 1
     ncy = ys.shape[0] - 1
-    c = _locate(xs, ax + u0 * dx)
-    r = _locate(ys, ay + u0 * dy)
+    c = locate(xs, xs, 0, xs.shape[0] - 1, False, ax + u0 * dx)
+    r = locate(ys, ys, 0, ys.shape[0] - 1, False, ay + u0 * dy)
     # on a grid line while moving backwards, the cell ahead is the one behind the line
     if dx < 0.0 and ax + u0 * dx <= xs[c] and c > 0:
         c -= 1
@@ -220,8 +210,8 @@ def barycentric(xs, ys, px, py, ev, ew):
     """Vertices and weights of the coarse surface under each position (px[i], py[i])."""
     ncx = xs.shape[0] - 1
     for i in nb.prange(px.shape[0]):
-        c = _locate(xs, px[i])
-        r = _locate(ys, py[i])
+        c = locate(xs, xs, 0, xs.shape[0] - 1, False, px[i])
+        r = locate(ys, ys, 0, ys.shape[0] - 1, False, py[i])
         a, b = _local(xs, ys, r, c, px[i], py[i])
         tri = 2 * (r * ncx + c) + (0 if a >= b else 1)
         v3 = np.empty(3, np.int64)
@@ -421,9 +411,9 @@ def local_radius(zf, xf, yf, c, xs, ys, out, stop):
     for r_ in range(yf.shape[0]):
         if stop[0] != 0:
             return
-        r = _locate(ys, yf[r_])
+        r = locate(ys, ys, 0, ys.shape[0] - 1, False, yf[r_])
         for c_ in range(xf.shape[0]):
-            cc = _locate(xs, xf[c_])
+            cc = locate(xs, xs, 0, xs.shape[0] - 1, False, xf[c_])
             a, b = _local(xs, ys, r, cc, xf[c_], yf[r_])
             tri = 2 * (r * ncx + cc) + (0 if a >= b else 1)
             _corners(tri, a, b, ncx, vv, ww)

@@ -54,13 +54,12 @@ engine will give there.
 
 from __future__ import annotations
 
-from collections import namedtuple
-
 import numba as nb
 import numpy as np
 
-from ..tolerances import TRACK_EDGE_SLACK, TRACK_FACE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
-from ..visibility._kernels import WalkGrid, WalkStack, _cell_height, _locate, new_stack
+from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
+from ..core.surface import SurfaceGrid, SurfaceTin, cell_height, face_at, face_height, line_height, locate
+from ..visibility._kernels import WalkStack, new_stack
 from ..visibility._sweep_kernels import _borrow
 
 _INF = np.inf
@@ -98,10 +97,10 @@ def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
     breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under curvature,
     inside its pieces."""
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    h1 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy)
+    h1 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy)
     best = _value(h1, a1, qz, tol, bulge)
     if with_a0 or bulge > 0.0:
-        h0 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a0 * dx, qy + a0 * dy)
+        h0 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + a0 * dx, qy + a0 * dy)
         if with_a0:
             v = _value(h0, a0, qz, tol, bulge)
             if v > best:
@@ -112,7 +111,7 @@ def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
         t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
         if t > a0 and t < a1:
             td = t
-            hd = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+            hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
             v = _value(hd, td, qz, tol, bulge)
             if v > best:
                 best = v
@@ -130,7 +129,7 @@ def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
 def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
     """Max of :func:`_value` over the track q + u d, u in [u0, u1] (u0 > 0): the threshold less qz.
 
-    ``g`` is the grid engine's :data:`~terrainvis.visibility._kernels.WalkGrid` (local
+    ``g`` is the grid engine's :data:`~terrainvis.core.surface.SurfaceGrid` (local
     coordinates), ``st`` a scratch stack (:func:`~terrainvis.visibility._kernels.new_stack`).
     The descent visits children nearest to q first, so that the large values near q
     are found before the far nodes they prune.
@@ -179,9 +178,9 @@ def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
                 s1 = tx
                 if L >= 2:  # probe the surface where the track crosses the mid line
                     yy = qy + tx * dy
-                    r = _locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
+                    r = locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
                     v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
-                    e = _value(z[r, cm] + v * (z[r + 1, cm] - z[r, cm]), tx, qz, tol, bulge)
+                    e = _value(line_height(z, r, cm, True, v), tx, qz, tol, bulge)
                     if e > best:
                         best = e
         if splity and dy != 0.0:
@@ -189,9 +188,9 @@ def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
             if ty > a0 and ty < a1:
                 if L >= 2:
                     xx = qx + ty * dx
-                    c = _locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
+                    c = locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
                     u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
-                    e = _value(z[rm, c] + u * (z[rm, c + 1] - z[rm, c]), ty, qz, tol, bulge)
+                    e = _value(line_height(z, rm, c, False, u), ty, qz, tol, bulge)
                     if e > best:
                         best = e
                 if ty < s1:
@@ -249,8 +248,8 @@ def grid_dda_max_slope(z, xs, ys, ixw, iyw, uniform, qx, qy, qz, dx, dy, u0, u1,
     thresholds bit for bit (docs/relocation.md, "Cost")."""
     ncx = xs.shape[0] - 1
     ncy = ys.shape[0] - 1
-    c = _locate(xs, ixw, 0, ncx, uniform, qx + u0 * dx)
-    r = _locate(ys, iyw, 0, ncy, uniform, qy + u0 * dy)
+    c = locate(xs, ixw, 0, ncx, uniform, qx + u0 * dx)
+    r = locate(ys, iyw, 0, ncy, uniform, qy + u0 * dy)
     # on a grid line while moving backwards, the cell ahead is the one behind the line
     if dx < 0.0 and qx + u0 * dx <= xs[c] and c > 0:
         c -= 1
@@ -275,11 +274,11 @@ def grid_dda_max_slope(z, xs, ys, ixw, iyw, uniform, qx, qy, qz, dx, dy, u0, u1,
         if b < a:
             b = a
         # the cell's part [a, b] of the track: its breakpoints a (first cell only), the diagonal, b
-        h1 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + b * dx, qy + b * dy)
+        h1 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + b * dx, qy + b * dy)
         v = _value(h1, b, qz, tol, bulge)
         h0 = 0.0
         if first or curved:
-            h0 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a * dx, qy + a * dy)
+            h0 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + a * dx, qy + a * dy)
             if first:
                 v0 = _value(h0, a, qz, tol, bulge)
                 if v0 > v:
@@ -291,7 +290,7 @@ def grid_dda_max_slope(z, xs, ys, ixw, iyw, uniform, qx, qy, qz, dx, dy, u0, u1,
             t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
             if t > a and t < b:
                 td = t
-                hd = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+                hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
                 vd = _value(hd, td, qz, tol, bulge)
                 if vd > v:
                     v = vd
@@ -355,54 +354,9 @@ def grid_threshold(g, st, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
 
 
 # --------------------------------------------------------------------------- TIN
-#: A TIN as the threshold walk reads it, in local coordinates: vertices ``vx``, ``vy``,
-#: ``vz`` (n,) float64; ``faces`` (m, 3) int64, counter-clockwise; ``nbr`` (m, 3) int64, the
-#: face across edge (faces[f, e], faces[f, (e + 1) % 3]) or -1 on the boundary; the face
-#: buckets ``starts``, ``items`` (``TIN._buckets``) of ``nbx`` x ``nby`` buckets of ``bw`` x ``bh``.
-TinWalk = namedtuple("TinWalk", ["vx", "vy", "vz", "faces", "nbr", "starts", "items", "bw", "bh", "nbx", "nby"])
-
-
-@nb.njit(cache=True, nogil=True)
-def _face_at(w, x, y):
-    """A face of the TIN containing (x, y) (with a tiny tolerance), or -1."""
-    c = min(max(int(np.floor(x / w.bw)), 0), w.nbx - 1)
-    r = min(max(int(np.floor(y / w.bh)), 0), w.nby - 1)
-    b = r * w.nbx + c
-    best = -1
-    best_l = -_INF
-    for k in range(w.starts[b], w.starts[b + 1]):
-        f = w.items[k]
-        i0 = w.faces[f, 0]
-        i1 = w.faces[f, 1]
-        i2 = w.faces[f, 2]
-        x0 = w.vx[i0]
-        y0 = w.vy[i0]
-        det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
-        if det == 0.0:
-            continue
-        l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
-        l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
-        low = min(1.0 - l1 - l2, l1, l2)
-        if low > best_l:  # the face the point is deepest inside (robust on shared edges)
-            best_l = low
-            best = f
-    if best_l < -TRACK_FACE_SLACK:
-        return -1
-    return best
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _plane(w, f, x, y):
-    """The height of face f's plane at (x, y)."""
-    i0 = w.faces[f, 0]
-    i1 = w.faces[f, 1]
-    i2 = w.faces[f, 2]
-    x0 = w.vx[i0]
-    y0 = w.vy[i0]
-    det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
-    l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
-    l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
-    return (1.0 - l1 - l2) * w.vz[i0] + l1 * w.vz[i1] + l2 * w.vz[i2]
+#: The TIN as the threshold walk reads it: the core's :data:`~terrainvis.core.surface.SurfaceTin`
+#: in local coordinates (the bucket grid's corner at the origin), faces counter-clockwise,
+#: with the neighbours ``nbr`` across each edge.
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -441,7 +395,7 @@ def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
     that position of the track: (face, u'), or (-1, u1)."""
     step = TRACK_PROBE_REL * (u1 - u) + TRACK_STEP_MIN
     while u + step < u1:
-        g = _face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
+        g = face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
         if g >= 0 and g != f:
             return g, u + step
         step *= 10.0
@@ -450,7 +404,7 @@ def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
 
 @nb.njit(cache=True, nogil=True)
 def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
-    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN (:data:`TinWalk`).
+    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN (:data:`~terrainvis.core.surface.SurfaceTin`).
 
     Walks from face to face across the edges the track crosses, so the breakpoints come
     in order (the pieces between them are where the value can peak under curvature).
@@ -460,10 +414,10 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
     dx = px - qx
     dy = py - qy
     u = u0
-    f = _face_at(w, qx + u * dx, qy + u * dy)
+    f = face_at(w, qx + u * dx, qy + u * dy)
     if f < 0:
         return _INF  # the start is outside the TIN: not a valid query
-    su = _plane(w, f, qx + u * dx, qy + u * dy)
+    su = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u * dx, qy + u * dy)
     best = _value(su, u, qz, tol, bulge)
     if dx == 0.0 and dy == 0.0:  # a vertical segment: one ground point
         return max(best, _value(su, u1, qz, tol, bulge))
@@ -478,13 +432,13 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
             # could otherwise hand the walk back and forth); the piece skipped is ~1e-9 long
             f = g
             u = ug
-            su = _plane(w, f, qx + u * dx, qy + u * dy)
+            su = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u * dx, qy + u * dy)
             v = _value(su, u, qz, tol, bulge)
             if v > best:
                 best = v
             continue
         if ue >= u1:
-            s1 = _plane(w, f, qx + u1 * dx, qy + u1 * dy)
+            s1 = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u1 * dx, qy + u1 * dy)
             v = max(_value(s1, u1, qz, tol, bulge), _piece_max(u, su, u1, s1, qz, tol, bulge))
             return max(best, v)
         v = max(_value(se, ue, qz, tol, bulge), _piece_max(u, su, ue, se, qz, tol, bulge))
@@ -494,7 +448,7 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
         su = se
         g = w.nbr[f, e]
         if g < 0:
-            g = _face_at(w, qx + (u + TRACK_PROBE_REL) * dx, qy + (u + TRACK_PROBE_REL) * dy)
+            g = face_at(w, qx + (u + TRACK_PROBE_REL) * dx, qy + (u + TRACK_PROBE_REL) * dy)
             if g < 0:
                 return best
         f = g
@@ -627,8 +581,8 @@ def best_height_kept(thr, vis, lthr, lvis, weight, zref, margin, min_gain):
 def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
     # views without reference counts (the caller keeps the arrays alive): every walk
     # would otherwise count references to each array of g and st (5-19 % of the row)
-    g = WalkGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), _borrow(g.pyr),
-                 _borrow(g.off), _borrow(g.nxl), g.uniform, g.ltop)
+    g = SurfaceGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
+                    _borrow(g.pyr), _borrow(g.off), _borrow(g.nxl), g.ltop, _borrow(g.cmax), _borrow(g.rmax))
     st = WalkStack(_borrow(st.level), _borrow(st.row), _borrow(st.col), _borrow(st.t))
     for k in range(q.shape[0]):
         if k == skip:
@@ -640,8 +594,8 @@ def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
 @nb.njit(cache=True, nogil=True)
 def _tin_row(tin, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
     # as in _grid_row (6-20 % of the row)
-    tin = TinWalk(_borrow(tin.vx), _borrow(tin.vy), _borrow(tin.vz), _borrow(tin.faces), _borrow(tin.nbr),
-                  _borrow(tin.starts), _borrow(tin.items), tin.bw, tin.bh, tin.nbx, tin.nby)
+    tin = SurfaceTin(_borrow(tin.vx), _borrow(tin.vy), _borrow(tin.vz), _borrow(tin.faces), _borrow(tin.nbr),
+                     _borrow(tin.starts), _borrow(tin.items), tin.x0, tin.y0, tin.bw, tin.bh, tin.nbx, tin.nby)
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
@@ -667,7 +621,7 @@ def grid_heights(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, m
 
 @nb.njit(cache=True, nogil=True, parallel=True)
 def tin_heights(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
-    """:func:`grid_heights` on a TIN (a :data:`TinWalk`)."""
+    """:func:`grid_heights` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
@@ -722,7 +676,7 @@ def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, s
 
 @nb.njit(cache=True, nogil=True)
 def tin_sweep(tin, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
-    """:func:`grid_sweep` on a TIN (a :data:`TinWalk`)."""
+    """:func:`grid_sweep` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     thr = np.empty(q.shape[0])
     for j in range(order.shape[0]):
         if stop[0] != 0:

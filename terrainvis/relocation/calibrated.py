@@ -78,6 +78,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _threshold_kernels as _ck
+from ..core.surface import SurfaceTin
 from ..core.validate import as_int, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid
@@ -190,7 +191,7 @@ class _Surface:
 
 
 def _tin_walk(tin: TIN):
-    """The TIN as the threshold walk reads it (:data:`~terrainvis.relocation._threshold_kernels.TinWalk`,
+    """The TIN as the threshold walk reads it (:data:`~terrainvis.core.surface.SurfaceTin`,
     local coordinates) and its origin (cached on the TIN)."""
     cached = tin._cache.get("calibration_walk")
     if cached is not None:
@@ -208,9 +209,9 @@ def _tin_walk(tin: TIN):
     found = key[order][pos] == twin
     nbr = np.where(found, order[pos] // 3, -1).reshape(-1, 3).astype(np.int64)
     v = tin.vertices
-    walk = _ck.TinWalk(
+    walk = SurfaceTin(
         np.ascontiguousarray(v[:, 0] - bk.x0), np.ascontiguousarray(v[:, 1] - bk.y0), np.ascontiguousarray(v[:, 2]),
-        faces, nbr, bk.starts, bk.items, float(bk.bw), float(bk.bh), int(bk.nbx), int(bk.nby),
+        faces, nbr, bk.starts, bk.items, 0.0, 0.0, float(bk.bw), float(bk.bh), int(bk.nbx), int(bk.nby),
     )
     out = (float(bk.x0), float(bk.y0), walk)
     tin._cache["calibration_walk"] = out

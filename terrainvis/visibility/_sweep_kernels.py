@@ -51,7 +51,9 @@ Kernel arguments
 The kernels read their state through named tuples built by
 :mod:`terrainvis.visibility.sweep` (no function takes more than about ten arguments):
 
-* :data:`SweepGrid` the surface (heights, local coordinate vectors, inverse widths,
+* :data:`~terrainvis.core.surface.SurfaceGrid` the surface (the core's grid record:
+  heights, NaN being nodata, local coordinate vectors from the grid's first sample,
+  inverse widths, the strip maxima ``cmax``/``rmax`` of :func:`strip_max`,
   ``uniform``, ``has_nan``);
 * :data:`Eye` the eye's cell ``(re, ce)`` and position ``(ex, ey, ez)``;
 * :data:`Rules` the predicate's numbers and the bounds' margins (target height, trim,
@@ -90,7 +92,9 @@ from ..tolerances import (
     WEDGE_BOUNDARY_SLACK,
 )
 
-from ._kernels import _canonical, _locate, curved_min, interval_start
+from ..core.surface import SurfaceGrid, cell_height, line_height, tri_height
+from ..core.surface import locate as _locate
+from ._kernels import _canonical, curved_min, interval_start
 
 _INF = np.inf
 
@@ -110,13 +114,6 @@ _PEPS = PSEUDO_ANGLE_SLACK
 #: Slack on clipping parameters along an edge.
 _LEPS = EDGE_CLIP_SLACK
 
-#: The surface, in local coordinates (origin at the grid's first sample): ``z`` (rows,
-#: cols) float64 heights (NaN = nodata); ``xs`` (cols,), ``ys`` (rows,) float64
-#: coordinates; ``ixw`` (cols - 1,), ``iyw`` (rows - 1,) inverse cell widths; ``uniform``
-#: (both spacings uniform) and ``has_nan`` (the grid holds nodata), bools; ``cmax``
-#: (segments, cols) and ``rmax`` (rows, segments) the largest height of each column's and
-#: each row's aligned runs of SEG cells (:func:`strip_max`).
-SweepGrid = namedtuple("SweepGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan", "cmax", "rmax"])
 #: The eye: its cell ``(re, ce)`` (ints) and its position ``(ex, ey, ez)`` (local coordinates).
 Eye = namedtuple("Eye", ["re", "ce", "ex", "ey", "ez"])
 #: The predicate's numbers and the bounds' margins (floats): ``ht`` target height above
@@ -240,23 +237,14 @@ def _tri_present(z, r, c, upper):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _tri_height(g, r, c, upper, x, y):
-    """Height of the plane of one triangle of cell (r, c) at (x, y) (the same formulas as
-    the pair engine's ``_cell_height``, without its clamping)."""
-    z = g.z
-    u = (x - g.xs[c]) * g.ixw[c]
-    v = (y - g.ys[r]) * g.iyw[r]
-    z00 = z[r, c]
-    z11 = z[r + 1, c + 1]
-    if not upper:
-        z01 = z[r, c + 1]
-        return z00 + u * (z01 - z00) + v * (z11 - z01)
-    z10 = z[r + 1, c]
-    return z00 + v * (z10 - z00) + u * (z11 - z10)
+    """Height of the plane of one triangle of cell (r, c) at (x, y) (the core's
+    :func:`~terrainvis.core.surface.tri_height`: the pair engine's cell height, not clamped)."""
+    return tri_height(g.z, g.xs, g.ys, g.ixw, g.iyw, r, c, upper, x, y)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def surface_height(g, x, y):
-    """Height of the surface of the :data:`SweepGrid` ``g`` at (x, y) (local
+    """Height of the surface of the :data:`~terrainvis.core.surface.SurfaceGrid` ``g`` at (x, y) (local
     coordinates), NaN on an absent triangle."""
     c = locate(g.xs, g.ixw, g.uniform, x)
     r = locate(g.ys, g.iyw, g.uniform, y)
@@ -285,9 +273,9 @@ def _edge_clear(g, kind, r, c, ray, t):
     y = ey + t * dy
     if kind == 0:
         v = (y - g.ys[r]) * g.iyw[r]
-        return ez + t * dz - (z[r, c] + v * (z[r + 1, c] - z[r, c]))
+        return ez + t * dz - line_height(z, r, c, True, v)
     u = (x - g.xs[c]) * g.ixw[c]
-    return ez + t * dz - (z[r, c] + u * (z[r, c + 1] - z[r, c]))
+    return ez + t * dz - line_height(z, r, c, False, u)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -384,7 +372,7 @@ def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def walk_min(g, ray, t0, t1, stop, bulge):
-    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceGrid` ``g``
     (:func:`_walk_edges` on a grid without nodata, :func:`_walk_cells` otherwise)."""
     if g.has_nan:
         return _walk_cells(g, ray, t0, t1, stop, bulge)
@@ -421,7 +409,7 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
     idx = 1.0 / dx if dx != 0.0 else 0.0
     idy = 1.0 / dy if dy != 0.0 else 0.0
     t = t0
-    fa = ez + t * dz - _cell_z(z, xs, ys, ixw, iyw, r, c, x, y)
+    fa = ez + t * dz - cell_height(z, xs, ys, ixw, iyw, r, c, x, y)
     best = fa if bulge == 0.0 else fa - bulge * t * (1.0 - t)
     if best < stop:
         return best
@@ -459,15 +447,15 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
         if tn >= t1:
             xn = ex + t1 * dx
             yn = ey + t1 * dy
-            fn = ez + t1 * dz - _cell_z(z, xs, ys, ixw, iyw, r, c, xn, yn)
+            fn = ez + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, xn, yn)
         elif tx <= ty:
             cn = c + 1 if dx > 0.0 else c
             v = min(max((ey + tn * dy - ys[r]) * iyw[r], 0.0), 1.0)
-            fn = ez + tn * dz - (z[r, cn] + v * (z[r + 1, cn] - z[r, cn]))
+            fn = ez + tn * dz - line_height(z, r, cn, True, v)
         else:
             rn = r + 1 if dy > 0.0 else r
             u = min(max((ex + tn * dx - xs[c]) * ixw[c], 0.0), 1.0)
-            fn = ez + tn * dz - (z[rn, c] + u * (z[rn, c + 1] - z[rn, c]))
+            fn = ez + tn * dz - line_height(z, rn, c, False, u)
         e = fn if bulge == 0.0 else curved_min(fa, fn, t, tn, bulge)
         if e < best:
             best = e
@@ -486,23 +474,9 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
     return best
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _cell_z(z, xs, ys, ixw, iyw, r, c, x, y):
-    """Height of cell (r, c)'s surface at (x, y), clamped into the cell (as the pair engine)."""
-    u = min(max((x - xs[c]) * ixw[c], 0.0), 1.0)
-    v = min(max((y - ys[r]) * iyw[r], 0.0), 1.0)
-    z00 = z[r, c]
-    z11 = z[r + 1, c + 1]
-    if u >= v:
-        z01 = z[r, c + 1]
-        return z00 + u * (z01 - z00) + v * (z11 - z01)
-    z10 = z[r + 1, c]
-    return z00 + v * (z10 - z00) + u * (z11 - z10)
-
-
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _walk_cells(g, ray, t0, t1, stop, bulge):
-    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``.
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceGrid` ``g``.
 
     ``ray`` is ``(ex, ey, ez, dx, dy, dz)`` in local coordinates. The ground track is
     walked cell by cell; in each cell the clearance is evaluated at the entry, the exit
@@ -1743,8 +1717,8 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     hidden_own = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
     ranges_own = np.zeros((3, 2), dtype=np.int64)
     counts_own = np.zeros(5, dtype=np.int64)
-    g = SweepGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
-                  _borrow(g.cmax), _borrow(g.rmax))
+    g = SurfaceGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
+                    _borrow(g.pyr), _borrow(g.off), _borrow(g.nxl), g.ltop, _borrow(g.cmax), _borrow(g.rmax))
     tg = Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
                  _borrow(tg.torder), _borrow(tg.tcode))
     w = Wedges(_borrow(w_own.ubp), _borrow(w_own.ubold), _borrow(w_own.lb), _borrow(w_own.hist),
