@@ -11,7 +11,7 @@ below is linear in each coarse height.
 Breakpoints
 -----------
 The sight line of a training pair (i, j) is tested over the parameter interval
-``[u0, u1]`` of the LOS engines (:func:`terrainvis.relocation._threshold_kernels.interval`: the
+``[u0, u1]`` of the LOS engines (:func:`terrainvis.visibility.thresholds.interval`: the
 trim). Inside one triangle the clearance is linear in the parameter, so the pair sees
 exactly when the clearance is >= ``-tol`` at every *breakpoint*: the ends of the
 interval, every crossing of a grid line and of a cell diagonal. Each breakpoint is
@@ -34,7 +34,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from terrainvis.relocation._threshold_kernels import interval
+from terrainvis.visibility.thresholds import interval
 from terrainvis.core.surface import locate
 from terrainvis.tolerances import VERTEX_WEIGHT_ZERO
 

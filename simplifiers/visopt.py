@@ -16,7 +16,7 @@ The method
    a. *Calibrate* the training points on S jointly, as the calibrated relocation
       calibrates its partners: Gauss-Seidel sweeps in which each point takes its best
       height against the others' T verdicts at their current heights
-      (:func:`terrainvis.relocation._threshold_kernels.grid_sweep`: exact thresholds, sorted;
+      (:func:`terrainvis.visibility.thresholds.gauss_seidel`: exact thresholds, sorted;
       3 sweeps in the first round, 1 afterwards).
    b. One sweep of exact *coordinate descent* over the coarse heights: each coarse
       height in turn (random order) takes the value that maximises the number of
@@ -216,11 +216,10 @@ def optimize(grid: HeightGrid, level: int, *, n_train: int = N_TRAIN, rounds: in
                                                                    max_breakpoints)
     if level == 0:
         return grid.copy_with(), {"history": [], "pairs": 0, "pairs_kept": 0, "breakpoints": 0}
-    from terrainvis.relocation import _threshold_kernels as _ck
     from terrainvis.core.interrupt import call
-    from terrainvis.relocation.calibrated import MARGIN_REL, _Surface
     from terrainvis.core.sampling import sample_points
     from terrainvis.visibility import clearance_tolerance, terrain_scale, visibility_matrix
+    from terrainvis.visibility.thresholds import MARGIN_REL, ThresholdSurface, gauss_seidel
 
     from . import _visopt_kernels as _vk
 
@@ -251,12 +250,11 @@ def optimize(grid: HeightGrid, level: int, *, n_train: int = N_TRAIN, rounds: in
     history = []
     for r in range(rounds):
         S = HeightGrid.from_coords(c.reshape(S0.shape).copy(), S0.xs, S0.ys)
-        surf = _Surface(S)
+        surf = ThresholdSurface(S)
         q = surf.local(np.column_stack([W[:, :2], z]))
         for _ in range(FIRST_SWEEPS if r == 0 else LATER_SWEEPS):
             order = order_rng.permutation(n_train).astype(np.int64)
-            call(_ck.grid_sweep, surf.data, q, order, vt_full, surf.delta, 0.0, surf.tol, 0.0, surf.margin, 1,
-                 work=n_train * n_train)
+            gauss_seidel(surf, q, order, vt_full, end_radius=0.0, kc=0.0, min_gain=1)
         z = q[:, 2].copy()
         d = z - surface_at(c)
         a0 = float((pairs.visible(c, z, tol) == vt).mean()) if vt.size else 1.0

@@ -25,7 +25,8 @@ Records
 -------
 :data:`SurfaceGrid` and :data:`SurfaceTin` are the grid and the TIN as every kernel
 family reads them (named tuples of arrays and scalars); a family leaves the arrays it
-does not use empty.
+does not use empty. A kernel that calls a walk many times first rebuilds the record from
+views without reference counts (:func:`borrow_grid`, :func:`borrow_tin`, :func:`borrow`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,10 @@ from collections import namedtuple
 
 import numba as nb
 import numpy as np
+from numba.core import cgutils
+from numba.core import types as nbtypes
+from numba.extending import intrinsic
+from numba.np.arrayobj import make_array
 
 from ..tolerances import TRACK_FACE_SLACK
 
@@ -76,6 +81,50 @@ def no_strips():
 def no_neighbours():
     """The empty ``nbr`` of a :data:`SurfaceTin`."""
     return np.empty((0, 3), dtype=np.int64)
+
+
+# --------------------------------------------------------------------------- borrowed arrays
+@intrinsic
+def borrow(typingctx, arr):
+    """A view of ``arr`` without its reference count (no meminfo): valid while ``arr`` is.
+
+    Numba counts references to every array a function receives or binds, with atomic
+    operations on the array's shared counter; in large kernels its pruning pass leaves
+    most of them, so each call of a walk paid about twenty atomic increments and
+    decrements (both threads bouncing the same counters). Views from this function have
+    no counter: their increments and decrements are a test of a null pointer. A kernel
+    makes them once (per sector, per row), from arrays that stay alive until it returns.
+    """
+    if not isinstance(arr, nbtypes.Array):
+        return None
+
+    def codegen(context, builder, sig, args):
+        src = make_array(arr)(context, builder, value=args[0])
+        dst = make_array(arr)(context, builder)
+        dst.data = src.data
+        dst.shape = src.shape
+        dst.strides = src.strides
+        dst.itemsize = src.itemsize
+        dst.nitems = src.nitems
+        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+        dst.parent = cgutils.get_null_value(dst.parent.type)
+        return dst._getvalue()
+
+    return arr(arr), codegen
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def borrow_grid(g):
+    """The :data:`SurfaceGrid` ``g`` with every array :func:`borrow` ed (valid while ``g``'s arrays are)."""
+    return SurfaceGrid(borrow(g.z), borrow(g.xs), borrow(g.ys), borrow(g.ixw), borrow(g.iyw), g.uniform, g.has_nan,
+                       borrow(g.pyr), borrow(g.off), borrow(g.nxl), g.ltop, borrow(g.cmax), borrow(g.rmax))
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def borrow_tin(t):
+    """The :data:`SurfaceTin` ``t`` with every array :func:`borrow` ed (valid while ``t``'s arrays are)."""
+    return SurfaceTin(borrow(t.vx), borrow(t.vy), borrow(t.vz), borrow(t.faces), borrow(t.nbr), borrow(t.starts),
+                      borrow(t.items), t.x0, t.y0, t.bw, t.bh, t.nbx, t.nby)
 
 
 # --------------------------------------------------------------------------- grid

@@ -76,10 +76,6 @@ from collections import namedtuple
 
 import numba as nb
 import numpy as np
-from numba.core import cgutils
-from numba.core import types as nbtypes
-from numba.extending import intrinsic
-from numba.np.arrayobj import make_array
 
 from ..tolerances import (
     DIAGONAL_SLACK,
@@ -92,7 +88,7 @@ from ..tolerances import (
     WEDGE_BOUNDARY_SLACK,
 )
 
-from ..core.surface import SurfaceGrid, cell_height, line_height, tri_height
+from ..core.surface import borrow, borrow_grid, cell_height, line_height, tri_height
 from ..core.surface import locate as _locate
 from ._kernels import _canonical, curved_min, interval_start
 
@@ -141,37 +137,6 @@ Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "tor
 #: and ``grp`` (groups, nfin + 2) those of the old blocks (older than the previous one) of
 #: each group of GROUP blocks. Each row is at the wedge resolution of its rings' level.
 Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads", "grp"])
-
-
-# --------------------------------------------------------------------------- borrowed arrays
-@intrinsic
-def _borrow(typingctx, arr):
-    """A view of ``arr`` without its reference count (no meminfo): valid while ``arr`` is.
-
-    Numba counts references to every array a function receives or binds, with atomic
-    operations on the array's shared counter; in functions as large as the sweep's its
-    pruning pass leaves most of them, so each call of a walk or of a ring's helpers paid
-    about twenty atomic increments and decrements (38 % of a viewshed's time, both threads
-    bouncing the same counters). Views from this function have no counter: their
-    increments and decrements are a test of a null pointer. :func:`_sector` makes them
-    once per sector, from arrays that stay alive until it returns.
-    """
-    if not isinstance(arr, nbtypes.Array):
-        return None
-
-    def codegen(context, builder, sig, args):
-        src = make_array(arr)(context, builder, value=args[0])
-        dst = make_array(arr)(context, builder)
-        dst.data = src.data
-        dst.shape = src.shape
-        dst.strides = src.strides
-        dst.itemsize = src.itemsize
-        dst.nitems = src.nitems
-        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
-        dst.parent = cgutils.get_null_value(dst.parent.type)
-        return dst._getvalue()
-
-    return arr(arr), codegen
 
 
 # --------------------------------------------------------------------------- geometry
@@ -1700,7 +1665,7 @@ def _keep_alive(owners):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _sector(g, eye, rules, lay, tg, s, stats, stop):
     """The sweep of one sector (see :func:`sweep`), on views of its inputs and of its work
-    arrays without reference counts (:func:`_borrow`)."""
+    arrays without reference counts (:func:`~terrainvis.core.surface.borrow`)."""
     nsec, b0, r1, jnear, jstop = lay
     nfin = (b0 << _level(jstop, r1)) // nsec
     blen = max(g.ys.shape[0], g.xs.shape[0]) + 2
@@ -1717,17 +1682,16 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     hidden_own = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
     ranges_own = np.zeros((3, 2), dtype=np.int64)
     counts_own = np.zeros(5, dtype=np.int64)
-    g = SurfaceGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
-                    _borrow(g.pyr), _borrow(g.off), _borrow(g.nxl), g.ltop, _borrow(g.cmax), _borrow(g.rmax))
-    tg = Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
-                 _borrow(tg.torder), _borrow(tg.tcode))
-    w = Wedges(_borrow(w_own.ubp), _borrow(w_own.ubold), _borrow(w_own.lb), _borrow(w_own.hist),
-               _borrow(w_own.quads), _borrow(w_own.grp))
-    tmp = _borrow(tmp_own)
-    buf = _borrow(buf_own)
-    hidden = _borrow(hidden_own)
-    ranges = _borrow(ranges_own)
-    counts = _borrow(counts_own)
+    g = borrow_grid(g)
+    tg = Targets(tg.own, borrow(tg.code), borrow(tg.tx), borrow(tg.ty), borrow(tg.tz), borrow(tg.tstart),
+                 borrow(tg.torder), borrow(tg.tcode))
+    w = Wedges(borrow(w_own.ubp), borrow(w_own.ubold), borrow(w_own.lb), borrow(w_own.hist),
+               borrow(w_own.quads), borrow(w_own.grp))
+    tmp = borrow(tmp_own)
+    buf = borrow(buf_own)
+    hidden = borrow(hidden_own)
+    ranges = borrow(ranges_own)
+    counts = borrow(counts_own)
     xs, ys, z = g.xs, g.ys, g.z
     ntg = tg.tx.shape[0]
     nr = ys.shape[0]

@@ -1,7 +1,8 @@
-"""Numba loops of the calibrated relocation (:mod:`terrainvis.relocation.calibrated`).
+"""Numba loops of the threshold engine (:mod:`terrainvis.visibility.thresholds`).
 
-Kernels loop and never validate; :mod:`terrainvis.relocation.calibrated` checks the input, moves
-coordinates to the terrain's local origin and passes plain arrays.
+Kernels loop and never validate; :mod:`terrainvis.visibility.thresholds` builds their
+state, and its callers (:mod:`terrainvis.relocation.calibrated`, :mod:`simplifiers.visopt`)
+check the input, move coordinates to the terrain's local origin and pass plain arrays.
 
 Thresholds
 ----------
@@ -26,6 +27,17 @@ the segment must clear the surface raised by ``kc d1 d2 = B u (1 - u)`` with
 ``A / u + beta + B (1 - u)`` with ``A < 0`` is concave and can peak inside the piece,
 at ``u* = sqrt(-A / B)``: :func:`_piece_max` checks it.
 
+Kernel arguments
+----------------
+The kernels read the surface as the core's :data:`~terrainvis.core.surface.SurfaceGrid`
+(with the pair engine's pyramid) or :data:`~terrainvis.core.surface.SurfaceTin` (with
+the faces' neighbours ``nbr``), in local coordinates; the predicate and the choice of a
+height as :data:`Rules`; one track as a :data:`Track`; the neighbours of the points as
+:data:`Neighbours`; a point as the 3-tuple ``(x, y, z)``. No function takes more than
+twelve positional arguments (``tests/test_visibility_layout.py``).
+
+The walks
+---------
 * :func:`grid_max_slope` walks a HeightGrid with the visibility engine's min/max
   pyramid: a node whose maximum height ``H`` gives
   ``(H - tol - qz) / u <= best`` over its parameter range cannot raise the threshold
@@ -57,15 +69,29 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from collections import namedtuple
+
+from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height, line_height, locate
 from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
-from ..core.surface import SurfaceGrid, SurfaceTin, cell_height, face_at, face_height, line_height, locate
-from ..visibility._kernels import WalkStack, new_stack
-from ..visibility._sweep_kernels import _borrow
+from ._kernels import WalkStack, new_stack
 
 _INF = np.inf
 #: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
 #: would compile the row loop once more for the literal).
 _NO_SKIP = np.int64(-1)
+
+#: The predicate and the choice of a height: the trim ``delta``, the ``end_radius``, the
+#: clearance tolerance ``tol``, the curvature coefficient ``kc`` (``curvature / (2 R)``,
+#: 0: flat), the height ``margin`` kept from thresholds and the least gain ``min_gain``
+#: (an int) that moves a point (:func:`best_height_kept`).
+Rules = namedtuple("Rules", ["delta", "end_radius", "tol", "kc", "margin", "min_gain"])
+#: The neighbours of each point p[i] (:func:`best_height_kept`): their thresholds
+#: ``lthr`` (n, L) float64, T's verdicts ``lvis`` (n, L) int8 and the ``weight`` of one.
+Neighbours = namedtuple("Neighbours", ["lthr", "lvis", "weight"])
+#: One track seen from the target q = (``qx``, ``qy``) at height ``qz``: the direction
+#: (``dx``, ``dy``) = p - q, the tested interval [``u0``, ``u1``], the clearance tolerance
+#: ``tol`` and the ``bulge`` ``kc (dx**2 + dy**2)`` of earth curvature (0: flat).
+Track = namedtuple("Track", ["qx", "qy", "qz", "dx", "dy", "u0", "u1", "tol", "bulge"])
 
 
 # --------------------------------------------------------------------------- grid
@@ -92,11 +118,12 @@ def _piece_max(ua, ha, ub, hb, qz, tol, bulge):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
-    """Max of :func:`_value` over cell (r, c)'s part [a0, a1] of the track: at its
-    breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under curvature,
-    inside its pieces."""
+def _leaf(g, r, c, tr, a0, a1, with_a0):
+    """Max of :func:`_value` over cell (r, c)'s part [a0, a1] of the :data:`Track` ``tr``: at
+    its breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under
+    curvature, inside its pieces."""
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
+    qx, qy, qz, dx, dy, tol, bulge = tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, tr.tol, tr.bulge
     h1 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy)
     best = _value(h1, a1, qz, tol, bulge)
     if with_a0 or bulge > 0.0:
@@ -126,17 +153,20 @@ def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
-    """Max of :func:`_value` over the track q + u d, u in [u0, u1] (u0 > 0): the threshold less qz.
+def grid_max_slope(g, tr, st):
+    """Max of :func:`_value` over the :data:`Track` ``tr``, q + u d for u in [u0, u1] (u0 > 0):
+    the threshold less qz.
 
     ``g`` is the grid engine's :data:`~terrainvis.core.surface.SurfaceGrid` (local
-    coordinates), ``st`` a scratch stack (:func:`~terrainvis.visibility._kernels.new_stack`).
+    coordinates, with its pyramid), ``st`` a scratch stack
+    (:func:`~terrainvis.visibility._kernels.new_stack`).
     The descent visits children nearest to q first, so that the large values near q
     are found before the far nodes they prune.
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
     pyr, off, nxl, uniform, ltop = g.pyr, g.off, g.nxl, g.uniform, g.ltop
     sL, sR, sC, sT = st.level, st.row, st.col, st.t
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
     ncx = xs.shape[0] - 1
     ncy = ys.shape[0] - 1
     best = -_INF
@@ -155,7 +185,7 @@ def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
         a0 = sT[2 * sp]
         a1 = sT[2 * sp + 1]
         if L == 0:
-            v = _leaf(g, R, C, qx, qy, qz, dx, dy, a0, a1, a0 != last, tol, bulge)
+            v = _leaf(g, R, C, tr, a0, a1, a0 != last)
             last = a1
             if v > best:
                 best = v
@@ -239,13 +269,16 @@ DDA_MAX_LEVELS = 7
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_dda_max_slope(z, xs, ys, ixw, iyw, uniform, qx, qy, qz, dx, dy, u0, u1, tol, bulge):
-    """:func:`grid_max_slope` by visiting every cell the track crosses (small grids).
+def grid_dda_max_slope(g, tr):
+    """:func:`grid_max_slope` by visiting every cell the track crosses (small grids; ``g``'s
+    pyramid is not read).
 
     Each cell's part of the track is evaluated as :func:`_leaf` does, written out here:
     calling the inlined :func:`_leaf` (or a function taking the grid's arrays) at every
     cell made this walk 3 times slower on the default experiment's grids, for the same
     thresholds bit for bit (docs/relocation.md, "Cost")."""
+    z, xs, ys, ixw, iyw, uniform = g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
     ncx = xs.shape[0] - 1
     ncy = ys.shape[0] - 1
     c = locate(xs, ixw, 0, ncx, uniform, qx + u0 * dx)
@@ -337,20 +370,21 @@ def interval(px, py, pz, qx, qy, qz, delta, end_radius):
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_threshold(g, st, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
-    """The threshold height of p at (px, py) for the target (qx, qy, qz); ``pz`` (a height
-    near the answer) only sets the trim; ``kc`` the curvature coefficient (0: flat).
-    ``-inf`` when the segment is not tested."""
-    u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
+def grid_threshold(g, st, p, q, rules):
+    """The threshold height of the point p = (px, py, pz) for the target q = (qx, qy, qz)
+    under the :data:`Rules` ``rules``; ``pz`` (a height near the answer) only sets the
+    trim. ``-inf`` when the segment is not tested."""
+    px, py, pz = p
+    qx, qy, qz = q
+    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
     if u0 < 0.0:
         return -_INF
     dx = px - qx
     dy = py - qy
-    bulge = kc * (dx * dx + dy * dy)
+    tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy))
     if g.ltop <= DDA_MAX_LEVELS:
-        return qz + grid_dda_max_slope(g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform, qx, qy, qz, dx, dy, u0, u1, tol,
-                                       bulge)
-    return qz + grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st)
+        return qz + grid_dda_max_slope(g, tr)
+    return qz + grid_max_slope(g, tr, st)
 
 
 # --------------------------------------------------------------------------- TIN
@@ -403,16 +437,16 @@ def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
-    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN (:data:`~terrainvis.core.surface.SurfaceTin`).
+def tin_max_slope(w, tr):
+    """Max of :func:`_value` over the :data:`Track` ``tr`` (q -> p, u in [u0, u1]) on a TIN
+    (:data:`~terrainvis.core.surface.SurfaceTin` with its neighbours).
 
     Walks from face to face across the edges the track crosses, so the breakpoints come
     in order (the pieces between them are where the value can peak under curvature).
     Where the walk cannot go on (through a vertex into the wrong face, across a hole), it
     locates the next face a step further along the track.
     """
-    dx = px - qx
-    dy = py - qy
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
     u = u0
     f = face_at(w, qx + u * dx, qy + u * dy)
     if f < 0:
@@ -456,14 +490,15 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_threshold(w, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
-    """The threshold height of p at (px, py) for the target (qx, qy, qz) on a TIN; see
-    :func:`grid_threshold`."""
-    u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
+def tin_threshold(w, p, q, rules):
+    """The threshold height of the point p for the target q on a TIN; see :func:`grid_threshold`."""
+    px, py, pz = p
+    qx, qy, qz = q
+    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
     if u0 < 0.0:
         return -_INF
-    bulge = kc * ((px - qx) ** 2 + (py - qy) ** 2)
-    return qz + tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge)
+    bulge = rules.kc * ((px - qx) ** 2 + (py - qy) ** 2)
+    return qz + tin_max_slope(w, Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge))
 
 
 # --------------------------------------------------------------------------- best heights
@@ -578,62 +613,75 @@ def best_height_kept(thr, vis, lthr, lvis, weight, zref, margin, min_gain):
 
 # --------------------------------------------------------------------------- loops
 @nb.njit(cache=True, nogil=True)
-def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
+def _grid_row(g, st, p, q, rules, skip, out):
+    """``out[k]`` = the threshold of the point p = (x, y, z) for the target q[k] (-inf for
+    k = ``skip``) on the grid ``g``."""
     # views without reference counts (the caller keeps the arrays alive): every walk
     # would otherwise count references to each array of g and st (5-19 % of the row)
-    g = SurfaceGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
-                    _borrow(g.pyr), _borrow(g.off), _borrow(g.nxl), g.ltop, _borrow(g.cmax), _borrow(g.rmax))
-    st = WalkStack(_borrow(st.level), _borrow(st.row), _borrow(st.col), _borrow(st.t))
+    g = borrow_grid(g)
+    st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
         else:
-            out[k] = grid_threshold(g, st, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
+            out[k] = grid_threshold(g, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
 
 
 @nb.njit(cache=True, nogil=True)
-def _tin_row(tin, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
-    # as in _grid_row (6-20 % of the row)
-    tin = SurfaceTin(_borrow(tin.vx), _borrow(tin.vy), _borrow(tin.vz), _borrow(tin.faces), _borrow(tin.nbr),
-                     _borrow(tin.starts), _borrow(tin.items), tin.x0, tin.y0, tin.bw, tin.bh, tin.nbx, tin.nby)
+def _tin_row(tin, p, q, rules, skip, out):
+    """:func:`_grid_row` on a TIN."""
+    tin = borrow_tin(tin)  # as in _grid_row (6-20 % of the row)
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
         else:
-            out[k] = tin_threshold(tin, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
+            out[k] = tin_threshold(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_row(g, p, q, rules, skip, out):
+    """:func:`_grid_row` with a stack of its own (one row, called from Python)."""
+    _grid_row(g, new_stack(g.ltop), p, q, rules, skip, out)
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_row(tin, p, q, rules, skip, out):
+    """:func:`_tin_row` (one row, called from Python)."""
+    _tin_row(tin, p, q, rules, skip, out)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_heights(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+def grid_heights(g, p, q, vis, near, rules, out, score, stop):
     """Best height of each point p[i] = (x, y, reference height) against the partners q
     (x, y, height on the surface), whose verdicts on T are ``vis[i]``, keeping its
-    agreement with its neighbours (thresholds ``lthr[i]``, verdicts ``lvis[i]``:
-    :func:`best_height_kept`; parallel over points)."""
+    agreement with its :data:`Neighbours` ``near`` (thresholds ``near.lthr[i]``, verdicts
+    ``near.lvis[i]``: :func:`best_height_kept`; parallel over points)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
             continue
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _grid_row(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+def tin_heights(tin, p, q, vis, near, rules, out, score, stop):
     """:func:`grid_heights` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
             continue
         thr = np.empty(q.shape[0])
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_heights_serial(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
-                        stop):
+def grid_heights_serial(g, p, q, vis, near, rules, out, score, stop):
     """:func:`grid_heights` in the calling thread (the same heights): with one thread a
     ``prange`` loop gains nothing and costs a parfor compilation (see "Compile time")."""
     st = new_stack(g.ltop)
@@ -641,24 +689,25 @@ def grid_heights_serial(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol
     for i in range(p.shape[0]):
         if stop[0] != 0:
             return
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _grid_row(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_heights_serial(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
-                       stop):
+def tin_heights_serial(tin, p, q, vis, near, rules, out, score, stop):
     """:func:`tin_heights` in the calling thread (see :func:`grid_heights_serial`)."""
     thr = np.empty(q.shape[0])
     for i in range(p.shape[0]):
         if stop[0] != 0:
             return
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
+def grid_sweep(g, q, order, vis, rules, stop):
     """One Gauss-Seidel sweep: each partner q[order[j]] in turn takes its best height
     (column 2 of ``q``, updated in place) against the others at their current heights.
 
@@ -670,17 +719,17 @@ def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, s
         if stop[0] != 0:
             return
         i = order[j]
-        _grid_row(g, st, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)
+        _grid_row(g, st, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_sweep(tin, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
+def tin_sweep(tin, q, order, vis, rules, stop):
     """:func:`grid_sweep` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     thr = np.empty(q.shape[0])
     for j in range(order.shape[0]):
         if stop[0] != 0:
             return
         i = order[j]
-        _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)
+        _tin_row(tin, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
