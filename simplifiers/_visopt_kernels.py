@@ -31,16 +31,27 @@ their verdict on T over ``c[v]`` exactly, by sorting the interval ends.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba as nb
 import numpy as np
 
 from terrainvis.visibility.thresholds import interval
-from terrainvis.core.surface import locate
+from terrainvis.core.surface import borrow, locate
 from terrainvis.tolerances import VERTEX_WEIGHT_ZERO
 
 _INF = np.inf
 #: Below this magnitude a breakpoint's coefficient of the vertex height counts as zero.
 _ALPHA_EPS = VERTEX_WEIGHT_ZERO
+
+#: The kept training pairs (i = ``ii[k]``, j = ``jj[k]``) on a coarse grid of ``ncx``
+#: columns of cells: pair k's breakpoints are ``ptr[k]:ptr[k + 1]`` of ``bu`` (parameter),
+#: ``btri`` (triangle), ``ba``, ``bb`` (local coordinates) (see "Breakpoints"), and
+#: ``items[vptr[v]:vptr[v + 1]]`` are the pairs touching coarse vertex v (:func:`incidence`).
+Tracks = namedtuple("Tracks", ["ncx", "ii", "jj", "ptr", "bu", "btri", "ba", "bb", "vptr", "items"])
+#: The points riding on the surface (see "Coordinate descent"): ``d`` (n,) their heights
+#: above it, ``ev`` (n, 3) int64 and ``ew`` (n, 3) the vertices and weights under them.
+Riders = namedtuple("Riders", ["d", "ev", "ew"])
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -223,8 +234,9 @@ def barycentric(xs, ys, px, py, ev, ew):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def pair_visible(c, z, ncx, ii, jj, ptr, bu, btri, ba, bb, tol, out, stop):
-    """Verdict on the coarse surface ``c`` of each stored pair, the points at heights ``z``."""
+def pair_visible(c, z, tk, tol, out, stop):
+    """Verdict on the coarse surface ``c`` of each pair of the :data:`Tracks` ``tk``, the points at heights ``z``."""
+    ncx, ii, jj, ptr, bu, btri, ba, bb = tk.ncx, tk.ii, tk.jj, tk.ptr, tk.bu, tk.btri, tk.ba, tk.bb
     for k in nb.prange(ii.shape[0]):
         if stop[0] != 0:
             continue
@@ -252,9 +264,12 @@ def _weight_of(v, ev, ew, i):
 
 
 @nb.njit(cache=True, nogil=True)
-def vertex_intervals(v, c, d, ev, ew, ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items, tol, lo, hi):
-    """For each pair touching vertex v (``items[vptr[v]:vptr[v + 1]]``): the closed interval
-    [lo, hi] of ``c[v]`` in which it sees (lo > hi: it never does), the points riding on the surface."""
+def vertex_intervals(v, c, rd, tk, tol, lo, hi):
+    """For each pair of the :data:`Tracks` ``tk`` touching vertex v (``items[vptr[v]:vptr[v + 1]]``):
+    the closed interval [lo, hi] of ``c[v]`` in which it sees (lo > hi: it never does), the
+    points riding on the surface (:data:`Riders` ``rd``)."""
+    d, ev, ew = rd.d, rd.ev, rd.ew
+    ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items = tk
     vv = np.empty(3, np.int64)
     ww = np.empty(3)
     m = 0
@@ -374,9 +389,16 @@ def best_value(lo, hi, vis, m, cur, bmin, bmax, margin, pos, dl):
 
 
 @nb.njit(cache=True, nogil=True)
-def c_sweep(c, cref, rad, d, ev, ew, vt, ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items, tol, margin, order, stop):
+def c_sweep(c, cref, rad, rd, vt, tk, tol, margin, order, stop):
     """One sweep of exact coordinate descent over the coarse heights in ``order`` (in place);
-    vertex v moves within ``cref[v] +- rad[v]``. Returns the count of heights changed."""
+    vertex v moves within ``cref[v] +- rad[v]``; the pairs (:data:`Tracks` ``tk``, verdicts
+    on T ``vt``) of the points riding on the surface (:data:`Riders` ``rd``). Returns the
+    count of heights changed."""
+    # views without reference counts for the per-vertex calls (the caller keeps the arrays alive)
+    rd = Riders(borrow(rd.d), borrow(rd.ev), borrow(rd.ew))
+    tk = Tracks(tk.ncx, borrow(tk.ii), borrow(tk.jj), borrow(tk.ptr), borrow(tk.bu), borrow(tk.btri), borrow(tk.ba),
+                borrow(tk.bb), borrow(tk.vptr), borrow(tk.items))
+    vptr, items = tk.vptr, tk.items
     mx = 0
     for v in range(vptr.shape[0] - 1):
         mx = max(mx, vptr[v + 1] - vptr[v])
@@ -391,7 +413,7 @@ def c_sweep(c, cref, rad, d, ev, ew, vt, ncx, ii, jj, ptr, bu, btri, ba, bb, vpt
             return changed
         if rad[v] <= 0.0 or vptr[v + 1] == vptr[v]:
             continue
-        m = vertex_intervals(v, c, d, ev, ew, ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items, tol, lo, hi)
+        m = vertex_intervals(v, c, rd, tk, tol, lo, hi)
         for s in range(m):
             vis[s] = vt[items[vptr[v] + s]]
         x, _ = best_value(lo, hi, vis, m, c[v], cref[v] - rad[v], cref[v] + rad[v], margin, pos, dl)

@@ -186,6 +186,8 @@ class _Pairs:
              work=nb_)
         self.vptr, self.items = call(_vk.incidence, S0.size, self.ncx, self.ptr, self.btri, self.ba, self.bb,
                                      work=nb_)
+        self.tracks = _vk.Tracks(self.ncx, self.ii, self.jj, self.ptr, self.bu, self.btri, self.ba, self.bb, self.vptr,
+                                 self.items)
 
     @property
     def n_breakpoints(self) -> int:
@@ -198,8 +200,7 @@ class _Pairs:
         from . import _visopt_kernels as _vk
 
         out = np.empty(self.ii.size, dtype=bool)
-        call(_vk.pair_visible, c, z, self.ncx, self.ii, self.jj, self.ptr, self.bu, self.btri, self.ba, self.bb, tol,
-             out, work=self.n_breakpoints)
+        call(_vk.pair_visible, c, z, self.tracks, tol, out, work=self.n_breakpoints)
         return out
 
 
@@ -259,8 +260,7 @@ def optimize(grid: HeightGrid, level: int, *, n_train: int = N_TRAIN, rounds: in
         d = z - surface_at(c)
         a0 = float((pairs.visible(c, z, tol) == vt).mean()) if vt.size else 1.0
         order = order_rng.permutation(S0.size).astype(np.int64)
-        changed = call(_vk.c_sweep, c, cref, rad, d, ev, ew, vt, pairs.ncx, pairs.ii, pairs.jj, pairs.ptr, pairs.bu,
-                       pairs.btri, pairs.ba, pairs.bb, pairs.vptr, pairs.items, tol, margin, order,
+        changed = call(_vk.c_sweep, c, cref, rad, _vk.Riders(d, ev, ew), vt, pairs.tracks, tol, margin, order,
                        work=pairs.n_breakpoints)
         z = d + surface_at(c)
         a1 = float((pairs.visible(c, z, tol) == vt).mean()) if vt.size else 1.0

@@ -163,8 +163,8 @@ d = np.zeros(1200)
 rad = np.full(S0.size, 50.0)
 order = np.arange(S0.size, dtype=np.int64)
 def work():
-    call(vk.c_sweep, c0.copy(), c0, rad, d, ev, ew, vt, pairs.ncx, pairs.ii, pairs.jj, pairs.ptr, pairs.bu,
-         pairs.btri, pairs.ba, pairs.bb, pairs.vptr, pairs.items, 1e-6, 1e-6, order, work=pairs.n_breakpoints)
+    call(vk.c_sweep, c0.copy(), c0, rad, vk.Riders(d, ev, ew), vt, pairs.tracks, 1e-6, 1e-6, order,
+         work=pairs.n_breakpoints)
 """, False),
 }
 

@@ -67,11 +67,15 @@ def build_buckets(vx, vy, faces, x0, y0, bw, bh, nbx, nby):
 
 
 @nb.njit(cache=True, nogil=True)
-def locate_heights(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, qx, qy, out, rel_eps, stop):
-    """Height of the TIN at each query point (NaN outside the footprint).
+def locate_heights(tin, qx, qy, out, rel_eps, stop):
+    """Height of the TIN (a :data:`~terrainvis.core.surface.SurfaceTin` in world coordinates,
+    ``nbr`` not read) at each query point (NaN outside the footprint): the first face of the
+    point's bucket that holds it within the barycentric slack ``rel_eps``.
 
     ``stop`` is the stop flag (:mod:`terrainvis.core.interrupt`), read every 4096 points.
     """
+    vx, vy, vz, faces, starts, items = tin.vx, tin.vy, tin.vz, tin.faces, tin.starts, tin.items
+    x0, y0, bw, bh, nbx, nby = tin.x0, tin.y0, tin.bw, tin.bh, tin.nbx, tin.nby
     for i in range(qx.shape[0]):
         if i % 4096 == 0 and stop[0] != 0:
             return

@@ -686,12 +686,12 @@ class TIN:
             return out
         bk = self._buckets()
         v = self.vertices
-        call(
-            _kernels.locate_heights,
-            np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
-            self.faces, bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, BARYCENTRIC_SLACK, work=pts.shape[0],
+        tin = surface.SurfaceTin(
+            np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]), self.faces,
+            surface.no_neighbours(), bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
         )
+        call(_kernels.locate_heights, tin, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out,
+             BARYCENTRIC_SLACK, work=pts.shape[0])
         return out
 
     def from_native(self, xy) -> np.ndarray:
