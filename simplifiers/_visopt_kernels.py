@@ -37,6 +37,7 @@ import numba as nb
 import numpy as np
 
 from terrainvis.visibility.thresholds import interval
+from terrainvis.visibility.walk import cell_diagonal, cells_next, cells_start
 from terrainvis.core.surface import borrow, locate
 from terrainvis.tolerances import VERTEX_WEIGHT_ZERO
 
@@ -98,63 +99,41 @@ def _put(xs, ys, ncx, r, c, x, y, u, n, record, bu, btri, ba, bb):
 
 
 @nb.njit(cache=True, nogil=True)
-def _track(xs, ys, ax, ay, bx, by, u0, u1, start, record, bu, btri, ba, bb):
-    """Breakpoints of the ground track a -> b over [u0, u1] (written from ``start`` when
-    ``record``); returns their count."""
+def _track(axes, ax, ay, bx, by, u0, u1, start, record, out):
+    """Breakpoints of the ground track a -> b over [u0, u1] on the grid ``axes = (xs, ys,
+    ixw, iyw)`` (:func:`terrainvis.visibility.walk.cells_start`: the walk every LOS engine
+    takes), written from ``start`` into ``out = (bu, btri, ba, bb)`` when ``record``;
+    returns their count."""
+    xs, ys, ixw, iyw = axes
+    bu, btri, ba, bb = out
     dx = bx - ax
     dy = by - ay
+    track = (ax, ay, dx, dy)
     ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
-    c = locate(xs, xs, 0, xs.shape[0] - 1, False, ax + u0 * dx)
-    r = locate(ys, ys, 0, ys.shape[0] - 1, False, ay + u0 * dy)
-    # on a grid line while moving backwards, the cell ahead is the one behind the line
-    if dx < 0.0 and ax + u0 * dx <= xs[c] and c > 0:
-        c -= 1
-    if dy < 0.0 and ay + u0 * dy <= ys[r] and r > 0:
-        r -= 1
+    cur = cells_start(xs, ys, ixw, iyw, False, track, u0, u1)
     n = start
-    _put(xs, ys, ncx, r, c, ax + u0 * dx, ay + u0 * dy, u0, n, record, bu, btri, ba, bb)
+    _put(xs, ys, ncx, cur.r, cur.c, ax + u0 * dx, ay + u0 * dy, u0, n, record, bu, btri, ba, bb)
     n += 1
-    u = u0
     while True:
-        ux = _INF
-        if dx > 0.0:
-            ux = (xs[c + 1] - ax) / dx
-        elif dx < 0.0:
-            ux = (xs[c] - ax) / dx
-        uy = _INF
-        if dy > 0.0:
-            uy = (ys[r + 1] - ay) / dy
-        elif dy < 0.0:
-            uy = (ys[r] - ay) / dy
-        ue = min(ux, uy, u1)
-        if ue < u:
-            ue = u
-        iw = 1.0 / (xs[c + 1] - xs[c])
-        ih = 1.0 / (ys[r + 1] - ys[r])
-        den = dx * iw - dy * ih
-        if den != 0.0:
-            td = ((ay - ys[r]) * ih - (ax - xs[c]) * iw) / den
-            if td > u and td < ue:
-                _put(xs, ys, ncx, r, c, ax + td * dx, ay + td * dy, td, n, record, bu, btri, ba, bb)
-                n += 1
+        r, c, u, ue = cur.r, cur.c, cur.t, cur.tn
+        td = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
+        if td > u and td < ue:
+            _put(xs, ys, ncx, r, c, ax + td * dx, ay + td * dy, td, n, record, bu, btri, ba, bb)
+            n += 1
         _put(xs, ys, ncx, r, c, ax + ue * dx, ay + ue * dy, ue, n, record, bu, btri, ba, bb)
         n += 1
         if ue >= u1:
             break
-        u = ue
-        if ux <= ue:
-            c += 1 if dx > 0.0 else -1
-        if uy <= ue:
-            r += 1 if dy > 0.0 else -1
-        if c < 0 or c >= ncx or r < 0 or r >= ncy:
+        cur = cells_next(xs, ys, cur, track, u1)
+        if cur.r < 0:
             break
     return n - start
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def track_counts(xs, ys, p, ii, jj, delta, counts, stop):
-    """Breakpoints of each pair (ii[k], jj[k]) of the points p (x, y, z) (0: never tested)."""
+def track_counts(axes, p, ii, jj, delta, counts, stop):
+    """Breakpoints of each pair (ii[k], jj[k]) of the points p (x, y, z) (0: never tested)
+    on the grid ``axes = (xs, ys, ixw, iyw)``."""
     m = ii.shape[0]
     du = np.empty(0, np.float32)
     dt = np.empty(0, np.int32)
@@ -168,12 +147,13 @@ def track_counts(xs, ys, p, ii, jj, delta, counts, stop):
         if u0 < 0.0:
             counts[k] = 0
         else:
-            counts[k] = _track(xs, ys, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, 0, False, du, dt, du, du)
+            counts[k] = _track(axes, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, 0, False, (du, dt, du, du))
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def track_fill(xs, ys, p, ii, jj, delta, ptr, bu, btri, ba, bb, stop):
-    """Write the breakpoints of each pair from ``ptr[k]`` (counts from :func:`track_counts`)."""
+def track_fill(axes, p, ii, jj, delta, ptr, out, stop):
+    """Write the breakpoints of each pair into ``out = (bu, btri, ba, bb)`` from ``ptr[k]``
+    (counts from :func:`track_counts`)."""
     m = ii.shape[0]
     for k in nb.prange(m):
         if stop[0] != 0 or ptr[k + 1] == ptr[k]:
@@ -181,7 +161,7 @@ def track_fill(xs, ys, p, ii, jj, delta, ptr, bu, btri, ba, bb, stop):
         i = ii[k]
         j = jj[k]
         u0, u1 = interval(p[j, 0], p[j, 1], p[j, 2], p[i, 0], p[i, 1], p[i, 2], delta, 0.0)
-        _track(xs, ys, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, ptr[k], True, bu, btri, ba, bb)
+        _track(axes, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, ptr[k], True, out)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -160,13 +160,14 @@ class _Pairs:
         self.xs = np.ascontiguousarray(S0.xs - S0.xs[0])
         self.ys = np.ascontiguousarray(S0.ys - S0.ys[0])
         self.ncx = self.xs.size - 1
+        self.axes = (self.xs, self.ys, 1.0 / np.diff(self.xs), 1.0 / np.diff(self.ys))
         ii, jj = np.triu_indices(n, 1)
         ii = ii.astype(np.int64)
         jj = jj.astype(np.int64)
         self.n_pairs_all = ii.size
         delta = float(trim_length(S0))
         counts = np.empty(ii.size, dtype=np.int64)
-        call(_vk.track_counts, self.xs, self.ys, p, ii, jj, delta, counts, work=ii.size * 8)
+        call(_vk.track_counts, self.axes, p, ii, jj, delta, counts, work=ii.size * 8)
         total = int(counts.sum())
         work = counts.astype(np.float64) ** 2
         if total > budget or work.sum() > MAX_WORK:  # a random subset of the pairs that fits both budgets
@@ -182,8 +183,7 @@ class _Pairs:
         self.btri = np.empty(nb_, dtype=np.int32)
         self.ba = np.empty(nb_)
         self.bb = np.empty(nb_)
-        call(_vk.track_fill, self.xs, self.ys, p, ii, jj, delta, self.ptr, self.bu, self.btri, self.ba, self.bb,
-             work=nb_)
+        call(_vk.track_fill, self.axes, p, ii, jj, delta, self.ptr, (self.bu, self.btri, self.ba, self.bb), work=nb_)
         self.vptr, self.items = call(_vk.incidence, S0.size, self.ncx, self.ptr, self.btri, self.ba, self.bb,
                                      work=nb_)
         self.tracks = _vk.Tracks(self.ncx, self.ii, self.jj, self.ptr, self.bu, self.btri, self.ba, self.bb, self.vptr,

@@ -64,7 +64,8 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from ..core.surface import barycentric, cell_height, line_height, locate, weighted
+from ..core.surface import barycentric, cell_height, weighted
+from .walk import cell_diagonal, mid_height, node_pop, node_push, node_root, node_split
 
 _INF = np.inf
 
@@ -195,27 +196,23 @@ def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
     ax, ay, az, dx, dy, dz = seg
-    den = dx * ixw[c] - dy * iyw[r]
+    td = cell_diagonal(xs, ys, ixw, iyw, r, c, (ax, ay, dx, dy))
     if bulge > 0.0:
         f0 = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
         f1 = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
-        if den != 0.0:
-            td = ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
-            if td > t0 and td < t1:
-                fd = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
-                return min(curved_min(f0, fd, t0, td, bulge), curved_min(fd, f1, td, t1, bulge))
+        if td > t0 and td < t1:
+            fd = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+            return min(curved_min(f0, fd, t0, td, bulge), curved_min(fd, f1, td, t1, bulge))
         return curved_min(f0, f1, t0, t1, bulge)
     m = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
     if with_t0:
         e = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
         if e < m:
             m = e
-    if den != 0.0:
-        td = ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
-        if td > t0 and td < t1:
-            e = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
-            if e < m:
-                m = e
+    if td > t0 and td < t1:
+        e = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+        if e < m:
+            m = e
     return m
 
 
@@ -258,26 +255,15 @@ def segment_min(g, seg, t0, t1, los, tol, bulge, st):
     bulge's largest (skip test) or smallest (block test) value over its interval.
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    pyr, off, nxl, uniform, ltop = g.pyr, g.off, g.nxl, g.uniform, g.ltop
-    sL, sR, sC, sT = st.level, st.row, st.col, st.t
+    pyr, off, nxl, uniform = g.pyr, g.off, g.nxl, g.uniform
     ax, ay, az, dx, dy, dz = seg
-    ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
+    track = (ax, ay, dx, dy)
     best = _INF
-    sL[0] = ltop
-    sR[0] = 0
-    sC[0] = 0
-    sT[0] = t0
-    sT[1] = t1
-    sp = 1
+    stk = (st.level, st.row, st.col, st.t)
+    sp = node_root(stk, g.ltop, t0, t1)
     last_t = -_INF
     while sp > 0:
-        sp -= 1
-        L = sL[sp]
-        R = sR[sp]
-        C = sC[sp]
-        a0 = sT[2 * sp]
-        a1 = sT[2 * sp + 1]
+        sp, L, R, C, a0, a1 = node_pop(stk, sp)
         if L == 0:
             m = _cell_min(g, R, C, seg, a0, a1, a0 != last_t, bulge)
             last_t = a1
@@ -306,80 +292,29 @@ def segment_min(g, seg, t0, t1, los, tol, bulge, st):
                 hi = max(za0, za1)
                 if hi - pyr[k] < -tol:
                     return hi - pyr[k]
-        half = 1 << (L - 1)
-        cm = (C << L) + half
-        rm = (R << L) + half
-        splitx = cm < ncx
-        splity = rm < ncy
-        # crossing parameters of the two mid lines inside (a0, a1)
-        s1 = _INF
-        s2 = _INF
-        if splitx and dx != 0.0:
-            tx = (xs[cm] - ax) / dx
-            if tx > a0 and tx < a1:
-                s1 = tx
-                if L >= 2:
-                    yy = ay + tx * dy
-                    r = locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
-                    v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
-                    e = az + tx * dz - line_height(z, r, cm, True, v)
-                    if bulge > 0.0:
-                        e -= bulge * tx * (1.0 - tx)
-                    if e < best:
-                        best = e
-                        if los and best < -tol:
-                            return best
-        if splity and dy != 0.0:
-            ty = (ys[rm] - ay) / dy
-            if ty > a0 and ty < a1:
-                if L >= 2:
-                    xx = ax + ty * dx
-                    c = locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
-                    u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
-                    e = az + ty * dz - line_height(z, rm, c, False, u)
-                    if bulge > 0.0:
-                        e -= bulge * ty * (1.0 - ty)
-                    if e < best:
-                        best = e
-                        if los and best < -tol:
-                            return best
-                if ty < s1:
-                    s2 = s1
-                    s1 = ty
-                else:
-                    s2 = ty
-        # boundaries a0 < s1 < s2 < a1 (missing ones are inf); push far-first
-        nb_ = 1
-        if s1 < _INF:
-            nb_ = 2
-            if s2 < _INF:
-                nb_ = 3
-        for q in range(nb_ - 1, -1, -1):
-            if q == 0:
-                b0 = a0
-            elif q == 1:
-                b0 = s1
-            else:
-                b0 = s2
-            if q == nb_ - 1:
-                b1 = a1
-            elif q == 0:
-                b1 = s1
-            else:
-                b1 = s2
-            tm = 0.5 * (b0 + b1)
-            cc = 2 * C
-            rr = 2 * R
-            if splitx and ax + tm * dx >= xs[cm]:
-                cc += 1
-            if splity and ay + tm * dy >= ys[rm]:
-                rr += 1
-            sL[sp] = L - 1
-            sR[sp] = rr
-            sC[sp] = cc
-            sT[2 * sp] = b0
-            sT[2 * sp + 1] = b1
-            sp += 1
+        node = (L, R, C, a0, a1)
+        split = node_split(xs, ys, node, track)
+        cm, rm, tx, ty = split
+        if L >= 2:
+            # probe the clearance where the track crosses the mid lines (the surface is
+            # linear along a grid line)
+            if tx < _INF:
+                e = az + tx * dz - mid_height(z, xs, ys, ixw, iyw, uniform, node, True, cm, ay + tx * dy)
+                if bulge > 0.0:
+                    e -= bulge * tx * (1.0 - tx)
+                if e < best:
+                    best = e
+                    if los and best < -tol:
+                        return best
+            if ty < _INF:
+                e = az + ty * dz - mid_height(z, xs, ys, ixw, iyw, uniform, node, False, rm, ax + ty * dx)
+                if bulge > 0.0:
+                    e -= bulge * ty * (1.0 - ty)
+                if e < best:
+                    best = e
+                    if los and best < -tol:
+                        return best
+        sp = node_push(stk, sp, xs, ys, node, split, track)
     return best
 
 

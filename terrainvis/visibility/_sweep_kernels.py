@@ -91,6 +91,7 @@ from ..tolerances import (
 from ..core.surface import borrow, borrow_grid, cell_height, line_height, tri_height
 from ..core.surface import locate as _locate
 from ._kernels import _canonical, curved_min, interval_start
+from .walk import cell_diagonal, cells_next, cells_start
 
 _INF = np.inf
 
@@ -285,11 +286,9 @@ def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
     xs, ys, ixw, iyw = g.xs, g.ys, g.ixw, g.iyw
     ex, ey, ez, dx, dy, dz = ray
     td = _INF
-    den = dx * ixw[c] - dy * iyw[r]
-    if den != 0.0:
-        t = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
-        if t > ta and t < tb:
-            td = t
+    t = cell_diagonal(xs, ys, ixw, iyw, r, c, (ex, ey, dx, dy))
+    if t > ta and t < tb:
+        td = t
     if not g.has_nan and bulge == 0.0:
         tm = 0.5 * (ta + tb) if td == _INF else 0.5 * (ta + td)
         u = (ex + tm * dx - xs[c]) * ixw[c]
@@ -359,61 +358,33 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
         return _INF
     xs, ys, ixw, iyw, z = g.xs, g.ys, g.ixw, g.iyw, g.z
     ex, ey, ez, dx, dy, dz = ray
-    nr = ys.shape[0]
-    nc = xs.shape[0]
-    x = ex + t0 * dx
-    y = ey + t0 * dy
-    c = locate(xs, ixw, g.uniform, x)
-    r = locate(ys, iyw, g.uniform, y)
-    if dx < 0.0 and c > 0 and x <= xs[c]:
-        c -= 1
-    if dy < 0.0 and r > 0 and y <= ys[r]:
-        r -= 1
-    sx = 1 if dx > 0.0 else -1
-    sy = 1 if dy > 0.0 else -1
-    idx = 1.0 / dx if dx != 0.0 else 0.0
-    idy = 1.0 / dy if dy != 0.0 else 0.0
+    track = (ex, ey, dx, dy)
+    cur = cells_start(xs, ys, ixw, iyw, g.uniform, track, t0, t1)
     t = t0
-    fa = ez + t * dz - cell_height(z, xs, ys, ixw, iyw, r, c, x, y)
+    fa = ez + t * dz - cell_height(z, xs, ys, ixw, iyw, cur.r, cur.c, ex + t * dx, ey + t * dy)
     best = fa if bulge == 0.0 else fa - bulge * t * (1.0 - t)
     if best < stop:
         return best
     while True:
-        tx = _INF
-        ty = _INF
-        if dx > 0.0:
-            tx = (xs[c + 1] - ex) * idx
-        elif dx < 0.0:
-            tx = (xs[c] - ex) * idx
-        if dy > 0.0:
-            ty = (ys[r + 1] - ey) * idy
-        elif dy < 0.0:
-            ty = (ys[r] - ey) * idy
-        tn = min(tx, ty, t1)
-        if tn < t:
-            tn = t
+        r, c, tn = cur.r, cur.c, cur.tn
         # the diagonal (r, c)-(r+1, c+1) inside (t, tn)
-        den = dx * ixw[c] - dy * iyw[r]
-        if den != 0.0:
-            td = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
-            if td > t and td < tn:
-                u = (ex + td * dx - xs[c]) * ixw[c]
-                fd = ez + td * dz - (z[r, c] + u * (z[r + 1, c + 1] - z[r, c]))
-                e = fd if bulge == 0.0 else curved_min(fa, fd, t, td, bulge)
-                if e < best:
-                    best = e
-                    if best < stop:
-                        return best
-                fa = fd
-                t = td
+        td = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
+        if td > t and td < tn:
+            u = (ex + td * dx - xs[c]) * ixw[c]
+            fd = ez + td * dz - (z[r, c] + u * (z[r + 1, c + 1] - z[r, c]))
+            e = fd if bulge == 0.0 else curved_min(fa, fd, t, td, bulge)
+            if e < best:
+                best = e
+                if best < stop:
+                    return best
+            fa = fd
+            t = td
         # where the track leaves the cell (or the interval ends). Which line it crosses
         # is told by tx <= ty, not by tn == tx: rounding can put a start on a grid line a
         # hair inside the cell it leaves, and tn is then raised from tx (or ty) to t
         if tn >= t1:
-            xn = ex + t1 * dx
-            yn = ey + t1 * dy
-            fn = ez + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, xn, yn)
-        elif tx <= ty:
+            fn = ez + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ex + t1 * dx, ey + t1 * dy)
+        elif cur.tx <= cur.ty:
             cn = c + 1 if dx > 0.0 else c
             v = min(max((ey + tn * dy - ys[r]) * iyw[r], 0.0), 1.0)
             fn = ez + tn * dz - line_height(z, r, cn, True, v)
@@ -428,11 +399,8 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
                 return best
         if tn >= t1:
             break
-        if tx <= tn:
-            c += sx
-        if ty <= tn:
-            r += sy
-        if c < 0 or c > nc - 2 or r < 0 or r > nr - 2:
+        cur = cells_next(xs, ys, cur, track, t1)
+        if cur.r < 0:
             break
         fa = fn
         t = tn
@@ -453,50 +421,22 @@ def _walk_cells(g, ray, t0, t1, stop, bulge):
     """
     if t1 < t0:
         return _INF
-    xs, ys = g.xs, g.ys
     ex, ey, ez, dx, dy, dz = ray
-    nr = ys.shape[0]
-    nc = xs.shape[0]
-    x = ex + t0 * dx
-    y = ey + t0 * dy
-    c = locate(xs, g.ixw, g.uniform, x)
-    r = locate(ys, g.iyw, g.uniform, y)
-    if dx < 0.0 and c > 0 and x <= xs[c]:
-        c -= 1
-    if dy < 0.0 and r > 0 and y <= ys[r]:
-        r -= 1
-    t = t0
+    cur = cells_start(g.xs, g.ys, g.ixw, g.iyw, g.uniform, (ex, ey, dx, dy), t0, t1)
     best = _INF
     first = True
     while True:
-        tx = _INF
-        ty = _INF
-        if dx > 0.0:
-            tx = (xs[c + 1] - ex) / dx
-        elif dx < 0.0:
-            tx = (xs[c] - ex) / dx
-        if dy > 0.0:
-            ty = (ys[r + 1] - ey) / dy
-        elif dy < 0.0:
-            ty = (ys[r] - ey) / dy
-        tn = min(tx, ty, t1)
-        if tn < t:
-            tn = t
-        m = _cell_piece(g, r, c, ray, t, tn, first or g.has_nan, bulge)
+        m = _cell_piece(g, cur.r, cur.c, ray, cur.t, cur.tn, first or g.has_nan, bulge)
         first = False
         if m < best:
             best = m
             if best < stop:
                 return best
-        if tn >= t1:
+        if cur.tn >= t1:
             break
-        if tx <= tn:
-            c += 1 if dx > 0.0 else -1
-        if ty <= tn:
-            r += 1 if dy > 0.0 else -1
-        if c < 0 or c > nc - 2 or r < 0 or r > nr - 2:
+        cur = cells_next(g.xs, g.ys, cur, (ex, ey, dx, dy), t1)
+        if cur.r < 0:
             break
-        t = tn
     return best
 
 

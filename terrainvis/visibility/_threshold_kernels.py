@@ -71,9 +71,10 @@ import numpy as np
 
 from collections import namedtuple
 
-from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height, line_height, locate
+from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height
 from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
 from ._kernels import WalkStack, new_stack
+from .walk import cell_diagonal, cells_next, cells_start, mid_height, node_pop, node_push, node_root, node_split
 
 _INF = np.inf
 #: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
@@ -133,15 +134,13 @@ def _leaf(g, r, c, tr, a0, a1, with_a0):
             if v > best:
                 best = v
     td = -1.0
-    den = dx * ixw[c] - dy * iyw[r]
-    if den != 0.0:
-        t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
-        if t > a0 and t < a1:
-            td = t
-            hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
-            v = _value(hd, td, qz, tol, bulge)
-            if v > best:
-                best = v
+    t = cell_diagonal(xs, ys, ixw, iyw, r, c, (qx, qy, dx, dy))
+    if t > a0 and t < a1:
+        td = t
+        hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+        v = _value(hd, td, qz, tol, bulge)
+        if v > best:
+            best = v
     if bulge > 0.0:
         if td > 0.0:
             v = max(_piece_max(a0, h0, td, hd, qz, tol, bulge), _piece_max(td, hd, a1, h1, qz, tol, bulge))
@@ -164,26 +163,15 @@ def grid_max_slope(g, tr, st):
     are found before the far nodes they prune.
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    pyr, off, nxl, uniform, ltop = g.pyr, g.off, g.nxl, g.uniform, g.ltop
-    sL, sR, sC, sT = st.level, st.row, st.col, st.t
+    pyr, off, nxl, uniform = g.pyr, g.off, g.nxl, g.uniform
     qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
-    ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
+    track = (qx, qy, dx, dy)
     best = -_INF
-    sL[0] = ltop
-    sR[0] = 0
-    sC[0] = 0
-    sT[0] = u0
-    sT[1] = u1
-    sp = 1
+    stk = (st.level, st.row, st.col, st.t)
+    sp = node_root(stk, g.ltop, u0, u1)
     last = -_INF
     while sp > 0:
-        sp -= 1
-        L = sL[sp]
-        R = sR[sp]
-        C = sC[sp]
-        a0 = sT[2 * sp]
-        a1 = sT[2 * sp + 1]
+        sp, L, R, C, a0, a1 = node_pop(stk, sp)
         if L == 0:
             v = _leaf(g, R, C, tr, a0, a1, a0 != last)
             last = a1
@@ -195,70 +183,19 @@ def grid_max_slope(g, tr, st):
         bound = (num / a0 if num > 0.0 else num / a1) + bulge * (1.0 - a0)
         if bound <= best:
             continue
-        half = 1 << (L - 1)
-        cm = (C << L) + half
-        rm = (R << L) + half
-        splitx = cm < ncx
-        splity = rm < ncy
-        s1 = _INF
-        s2 = _INF
-        if splitx and dx != 0.0:
-            tx = (xs[cm] - qx) / dx
-            if tx > a0 and tx < a1:
-                s1 = tx
-                if L >= 2:  # probe the surface where the track crosses the mid line
-                    yy = qy + tx * dy
-                    r = locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
-                    v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
-                    e = _value(line_height(z, r, cm, True, v), tx, qz, tol, bulge)
-                    if e > best:
-                        best = e
-        if splity and dy != 0.0:
-            ty = (ys[rm] - qy) / dy
-            if ty > a0 and ty < a1:
-                if L >= 2:
-                    xx = qx + ty * dx
-                    c = locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
-                    u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
-                    e = _value(line_height(z, rm, c, False, u), ty, qz, tol, bulge)
-                    if e > best:
-                        best = e
-                if ty < s1:
-                    s2 = s1
-                    s1 = ty
-                else:
-                    s2 = ty
-        nb_ = 1
-        if s1 < _INF:
-            nb_ = 2
-            if s2 < _INF:
-                nb_ = 3
-        for j in range(nb_ - 1, -1, -1):  # far pieces first on the stack: near ones pop first
-            if j == 0:
-                b0 = a0
-            elif j == 1:
-                b0 = s1
-            else:
-                b0 = s2
-            if j == nb_ - 1:
-                b1 = a1
-            elif j == 0:
-                b1 = s1
-            else:
-                b1 = s2
-            tm = 0.5 * (b0 + b1)
-            cc = 2 * C
-            rr = 2 * R
-            if splitx and qx + tm * dx >= xs[cm]:
-                cc += 1
-            if splity and qy + tm * dy >= ys[rm]:
-                rr += 1
-            sL[sp] = L - 1
-            sR[sp] = rr
-            sC[sp] = cc
-            sT[2 * sp] = b0
-            sT[2 * sp + 1] = b1
-            sp += 1
+        node = (L, R, C, a0, a1)
+        split = node_split(xs, ys, node, track)
+        cm, rm, tx, ty = split
+        if L >= 2:  # probe the surface where the track crosses the mid lines
+            if tx < _INF:
+                e = _value(mid_height(z, xs, ys, ixw, iyw, uniform, node, True, cm, qy + tx * dy), tx, qz, tol, bulge)
+                if e > best:
+                    best = e
+            if ty < _INF:
+                e = _value(mid_height(z, xs, ys, ixw, iyw, uniform, node, False, rm, qx + ty * dx), ty, qz, tol, bulge)
+                if e > best:
+                    best = e
+        sp = node_push(stk, sp, xs, ys, node, split, track)  # near pieces pop first
     return best
 
 
@@ -279,33 +216,13 @@ def grid_dda_max_slope(g, tr):
     thresholds bit for bit (docs/relocation.md, "Cost")."""
     z, xs, ys, ixw, iyw, uniform = g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform
     qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
-    ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
-    c = locate(xs, ixw, 0, ncx, uniform, qx + u0 * dx)
-    r = locate(ys, iyw, 0, ncy, uniform, qy + u0 * dy)
-    # on a grid line while moving backwards, the cell ahead is the one behind the line
-    if dx < 0.0 and qx + u0 * dx <= xs[c] and c > 0:
-        c -= 1
-    if dy < 0.0 and qy + u0 * dy <= ys[r] and r > 0:
-        r -= 1
+    track = (qx, qy, dx, dy)
     curved = bulge > 0.0
     best = -_INF
-    a = u0
     first = True
+    cur = cells_start(xs, ys, ixw, iyw, uniform, track, u0, u1)
     while True:
-        ux = _INF
-        if dx > 0.0:
-            ux = (xs[c + 1] - qx) / dx
-        elif dx < 0.0:
-            ux = (xs[c] - qx) / dx
-        uy = _INF
-        if dy > 0.0:
-            uy = (ys[r + 1] - qy) / dy
-        elif dy < 0.0:
-            uy = (ys[r] - qy) / dy
-        b = min(ux, uy, u1)
-        if b < a:
-            b = a
+        r, c, a, b = cur.r, cur.c, cur.t, cur.tn
         # the cell's part [a, b] of the track: its breakpoints a (first cell only), the diagonal, b
         h1 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + b * dx, qy + b * dy)
         v = _value(h1, b, qz, tol, bulge)
@@ -318,15 +235,13 @@ def grid_dda_max_slope(g, tr):
                     v = v0
         td = -1.0
         hd = 0.0
-        den = dx * ixw[c] - dy * iyw[r]
-        if den != 0.0:
-            t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
-            if t > a and t < b:
-                td = t
-                hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
-                vd = _value(hd, td, qz, tol, bulge)
-                if vd > v:
-                    v = vd
+        t = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
+        if t > a and t < b:
+            td = t
+            hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+            vd = _value(hd, td, qz, tol, bulge)
+            if vd > v:
+                v = vd
         if curved:
             if td > 0.0:
                 vp = max(_piece_max(a, h0, td, hd, qz, tol, bulge), _piece_max(td, hd, b, h1, qz, tol, bulge))
@@ -339,12 +254,8 @@ def grid_dda_max_slope(g, tr):
             best = v
         if b >= u1:
             break
-        a = b
-        if ux <= b:
-            c += 1 if dx > 0.0 else -1
-        if uy <= b:
-            r += 1 if dy > 0.0 else -1
-        if c < 0 or c >= ncx or r < 0 or r >= ncy:
+        cur = cells_next(xs, ys, cur, track, u1)
+        if cur.r < 0:
             break
     return best
 
