@@ -34,8 +34,12 @@ track leaves the grid). A consumer's loop::
         if cur.r < 0:
             break
 
-The functions are inlined at numba IR level (``inline="always"``), so the cursor lives
-in registers: no call, no allocation.
+The helpers are plain numba functions compiled without numba's runtime (``_nrt=False``:
+they allocate nothing), which LLVM inlines into the consumers' loops: no allocation and
+no reference count. Inlined at numba IR level instead (``inline="always"``), each step
+bound the grid's arrays to the helper's parameters anew, with a reference-count
+increment and decrement per array, and the walks were slower than the copies they
+replace.
 
 The pyramid descent
 -------------------
@@ -59,6 +63,9 @@ import numpy as np
 from ..core.surface import line_height, locate
 
 _INF = np.inf
+#: The walk's helpers allocate nothing and are compiled without numba's runtime (no
+#: reference counts on the arrays they take), as plain calls that LLVM inlines.
+_STEP = {"cache": True, "nogil": True, "_nrt": False}
 
 #: The cell-by-cell cursor: the cell ``(r, c)`` (``r`` = -1: the track left the grid), its
 #: piece ``[t, tn]`` of the track, and the parameters ``tx``, ``ty`` at which the track
@@ -67,7 +74,7 @@ Cells = namedtuple("Cells", ["r", "c", "t", "tn", "tx", "ty"])
 
 
 # --------------------------------------------------------------------------- cells
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def _piece(xs, ys, r, c, seg, t, t1):
     """The cursor on cell (r, c) entered at t."""
     ax, ay, dx, dy = seg
@@ -87,7 +94,7 @@ def _piece(xs, ys, r, c, seg, t, t1):
     return Cells(r, c, t, tn, tx, ty)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def cells_start(xs, ys, ixw, iyw, uniform, seg, t0, t1):
     """The cursor on the cell of the track ``seg`` at t0 (on a grid line while the track
     moves backwards, the cell behind the line: the one it enters), over [t0, t1]."""
@@ -103,7 +110,7 @@ def cells_start(xs, ys, ixw, iyw, uniform, seg, t0, t1):
     return _piece(xs, ys, r, c, seg, t0, t1)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def cells_next(xs, ys, cur, seg, t1):
     """The cursor on the cell after ``cur`` (across the grid lines the track crosses at
     ``cur.tn``, both at a corner), or with ``r`` = -1 when the track leaves the grid."""
@@ -120,7 +127,7 @@ def cells_next(xs, ys, cur, seg, t1):
     return _piece(xs, ys, r, c, seg, cur.tn, t1)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def cell_diagonal(xs, ys, ixw, iyw, r, c, seg):
     """The parameter at which the track crosses the diagonal of cell (r, c) (its line from
     (r, c) to (r + 1, c + 1)), or -inf when the track runs parallel to it."""
@@ -132,7 +139,7 @@ def cell_diagonal(xs, ys, ixw, iyw, r, c, seg):
 
 
 # --------------------------------------------------------------------------- pyramid
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def node_pop(stk, sp):
     """The node on top of the stack ``stk = (level, row, col, t)`` (the arrays of a
     :data:`~terrainvis.visibility._kernels.WalkStack`) of ``sp`` entries: (sp - 1, level,
@@ -142,7 +149,7 @@ def node_pop(stk, sp):
     return sp, sL[sp], sR[sp], sC[sp], sT[2 * sp], sT[2 * sp + 1]
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def node_root(stk, ltop, t0, t1):
     """Push the root (level ``ltop``) over [t0, t1] on the empty stack ``stk``; returns its size, 1."""
     sL, sR, sC, sT = stk
@@ -154,7 +161,7 @@ def node_root(stk, ltop, t0, t1):
     return 1
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def node_split(xs, ys, node, seg):
     """Where the track crosses the mid lines of ``node = (L, R, C, a0, a1)`` (L >= 1) inside
     (a0, a1): ``(cm, rm, tx, ty)``, the mid column and row and their crossing parameters
@@ -177,7 +184,7 @@ def node_split(xs, ys, node, seg):
     return cm, rm, tx, ty
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def mid_height(z, xs, ys, ixw, iyw, uniform, node, vertical, m, w):
     """The surface height on a mid line of ``node`` at the coordinate ``w`` along it: the
     vertical line x = xs[m] (``vertical``; w a y) or the horizontal line y = ys[m]."""
@@ -191,7 +198,7 @@ def mid_height(z, xs, ys, ixw, iyw, uniform, node, vertical, m, w):
     return line_height(z, m, c, False, u)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(**_STEP)
 def node_push(stk, sp, xs, ys, node, split, seg):
     """Push the children of ``node`` cut at the crossings ``split = (cm, rm, tx, ty)``
     (:func:`node_split`) far-first, so that the nearest pops first; returns the new size."""
