@@ -56,6 +56,7 @@ run time. Only :func:`greedy_cuts_front` and the rarely called growth helpers al
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numba as nb
 import numpy as np
@@ -95,6 +96,13 @@ OVER_BUDGET = 3
 INTERRUPTED = 4
 
 _HOT = {"cache": True, "nogil": True, "_nrt": False}  # helpers that allocate nothing
+
+#: The samples as the fallback reads them: ``occ``, the flat heights ``zf``, ``eps``, the
+#: plane-space coordinates ``gx``, ``gy``, ``index_space`` and ``cols`` (see "Data structures").
+Samples = namedtuple("Samples", ["occ", "zf", "eps", "gx", "gy", "index_space", "cols"])
+#: The front as the fallback reads it: ``nodes``, the bucket lists ``pool``, ``bhead``
+#: (``nbx`` buckets a row) and ``scr`` (see "Data structures").
+Front = namedtuple("Front", ["nodes", "pool", "bhead", "nbx", "scr"])
 
 #: 0 as an int64 (not a literal): numba compiles a callee again for every literal argument.
 _ZERO = np.int64(0)
@@ -709,9 +717,10 @@ def _sift_down(key, ids, i, m):
 
 
 @nb.njit(**_HOT)
-def _split(na, r0, r1, c0, c1, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr, counts,
-           cand_key, cand_id):
-    """Step 3, edge splitting (fallback) on the edge of node ``na``, in the window rows r0..r1, cols c0..c1.
+def _split(na, window, sm, fr, counts, cand):
+    """Step 3, edge splitting (fallback) on the edge of node ``na``, in the window
+    ``(r0, r1, c0, c1)`` (rows r0..r1, cols c0..c1), on the :data:`Samples` ``sm`` and the
+    :data:`Front` ``fr``, with the candidate buffers ``cand = (cand_key, cand_id)``.
 
     Candidates are the free samples and front vertices left of the edge in the window,
     tried in order of the circumcircle through the edge's ends
@@ -719,6 +728,10 @@ def _split(na, r0, r1, c0, c1, occ, zf, eps, gx, gy, index_space, cols, nodes, p
     binary min-heap. Returns the apex (its node in ``scr[S_APEX_NODE]``) or -1. The
     candidate buffers must hold the window's samples.
     """
+    r0, r1, c0, c1 = window
+    occ, zf, eps, gx, gy, index_space, cols = sm
+    nodes, pool, bhead, nbx, scr = fr
+    cand_key, cand_id = cand
     ia = nodes[na, VERT]
     ib = nodes[nodes[na, NXT], VERT]
     xa = gx[ia % cols]
@@ -898,8 +911,8 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
                 if span > cand_key.shape[0]:
                     cand_key = _grow(cand_key, span)
                     cand_id = _grow(cand_id, span)
-                apex = _split(na, r0, r1, c0, c1, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx,
-                              scr, counts, cand_key, cand_id)
+                apex = _split(na, (r0, r1, c0, c1), Samples(occ, zf, eps, gx, gy, index_space, cols),
+                              Front(nodes, pool, bhead, nbx, scr), counts, (cand_key, cand_id))
                 if apex >= 0 or w >= max_window or (c0 == 0 and r0 == 0 and c1 == cols - 1 and r1 == rows - 1):
                     break
                 w *= 2

@@ -4,14 +4,14 @@ Kernels loop and never validate; :mod:`simplifiers.visopt` checks the input, mov
 coordinates to the coarse grid's local origin and passes plain arrays.
 
 The coarse surface S is the grid's triangulated surface (cell (r, c) split along its
-diagonal from (r, c) to (r + 1, c + 1), as :func:`terrainvis.visibility._kernels._cell_height`
+diagonal from (r, c) to (r + 1, c + 1), as :func:`terrainvis.core.surface.plane_uv`
 does). Its height anywhere is a weighted sum of three coarse heights, so every quantity
 below is linear in each coarse height.
 
 Breakpoints
 -----------
 The sight line of a training pair (i, j) is tested over the parameter interval
-``[u0, u1]`` of the LOS engines (:func:`terrainvis.relocation._threshold_kernels.interval`: the
+``[u0, u1]`` of the LOS engines (:func:`terrainvis.visibility.thresholds.interval`: the
 trim). Inside one triangle the clearance is linear in the parameter, so the pair sees
 exactly when the clearance is >= ``-tol`` at every *breakpoint*: the ends of the
 interval, every crossing of a grid line and of a cell diagonal. Each breakpoint is
@@ -31,26 +31,28 @@ their verdict on T over ``c[v]`` exactly, by sorting the interval ends.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba as nb
 import numpy as np
 
-from terrainvis.relocation._threshold_kernels import interval
+from terrainvis.visibility.thresholds import interval
+from terrainvis.visibility.walk import cell_diagonal, cells_next, cells_start
+from terrainvis.core.surface import borrow, locate
 from terrainvis.tolerances import VERTEX_WEIGHT_ZERO
 
 _INF = np.inf
 #: Below this magnitude a breakpoint's coefficient of the vertex height counts as zero.
 _ALPHA_EPS = VERTEX_WEIGHT_ZERO
 
-
-@nb.njit(cache=True, nogil=True)
-def _locate(v, x):
-    """Index i in [0, len(v) - 2] with v[i] <= x < v[i + 1] (clamped)."""
-    i = np.searchsorted(v, x, side="right") - 1
-    if i < 0:
-        i = 0
-    if i > v.shape[0] - 2:
-        i = v.shape[0] - 2
-    return i
+#: The kept training pairs (i = ``ii[k]``, j = ``jj[k]``) on a coarse grid of ``ncx``
+#: columns of cells: pair k's breakpoints are ``ptr[k]:ptr[k + 1]`` of ``bu`` (parameter),
+#: ``btri`` (triangle), ``ba``, ``bb`` (local coordinates) (see "Breakpoints"), and
+#: ``items[vptr[v]:vptr[v + 1]]`` are the pairs touching coarse vertex v (:func:`incidence`).
+Tracks = namedtuple("Tracks", ["ncx", "ii", "jj", "ptr", "bu", "btri", "ba", "bb", "vptr", "items"])
+#: The points riding on the surface (see "Coordinate descent"): ``d`` (n,) their heights
+#: above it, ``ev`` (n, 3) int64 and ``ew`` (n, 3) the vertices and weights under them.
+Riders = namedtuple("Riders", ["d", "ev", "ew"])
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -97,63 +99,41 @@ def _put(xs, ys, ncx, r, c, x, y, u, n, record, bu, btri, ba, bb):
 
 
 @nb.njit(cache=True, nogil=True)
-def _track(xs, ys, ax, ay, bx, by, u0, u1, start, record, bu, btri, ba, bb):
-    """Breakpoints of the ground track a -> b over [u0, u1] (written from ``start`` when
-    ``record``); returns their count."""
+def _track(axes, ax, ay, bx, by, u0, u1, start, record, out):
+    """Breakpoints of the ground track a -> b over [u0, u1] on the grid ``axes = (xs, ys,
+    ixw, iyw)`` (:func:`terrainvis.visibility.walk.cells_start`: the walk every LOS engine
+    takes), written from ``start`` into ``out = (bu, btri, ba, bb)`` when ``record``;
+    returns their count."""
+    xs, ys, ixw, iyw = axes
+    bu, btri, ba, bb = out
     dx = bx - ax
     dy = by - ay
+    track = (ax, ay, dx, dy)
     ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
-    c = _locate(xs, ax + u0 * dx)
-    r = _locate(ys, ay + u0 * dy)
-    # on a grid line while moving backwards, the cell ahead is the one behind the line
-    if dx < 0.0 and ax + u0 * dx <= xs[c] and c > 0:
-        c -= 1
-    if dy < 0.0 and ay + u0 * dy <= ys[r] and r > 0:
-        r -= 1
+    cur = cells_start(xs, ys, ixw, iyw, False, track, u0, u1)
     n = start
-    _put(xs, ys, ncx, r, c, ax + u0 * dx, ay + u0 * dy, u0, n, record, bu, btri, ba, bb)
+    _put(xs, ys, ncx, cur.r, cur.c, ax + u0 * dx, ay + u0 * dy, u0, n, record, bu, btri, ba, bb)
     n += 1
-    u = u0
     while True:
-        ux = _INF
-        if dx > 0.0:
-            ux = (xs[c + 1] - ax) / dx
-        elif dx < 0.0:
-            ux = (xs[c] - ax) / dx
-        uy = _INF
-        if dy > 0.0:
-            uy = (ys[r + 1] - ay) / dy
-        elif dy < 0.0:
-            uy = (ys[r] - ay) / dy
-        ue = min(ux, uy, u1)
-        if ue < u:
-            ue = u
-        iw = 1.0 / (xs[c + 1] - xs[c])
-        ih = 1.0 / (ys[r + 1] - ys[r])
-        den = dx * iw - dy * ih
-        if den != 0.0:
-            td = ((ay - ys[r]) * ih - (ax - xs[c]) * iw) / den
-            if td > u and td < ue:
-                _put(xs, ys, ncx, r, c, ax + td * dx, ay + td * dy, td, n, record, bu, btri, ba, bb)
-                n += 1
+        r, c, u, ue = cur.r, cur.c, cur.t, cur.tn
+        td = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
+        if td > u and td < ue:
+            _put(xs, ys, ncx, r, c, ax + td * dx, ay + td * dy, td, n, record, bu, btri, ba, bb)
+            n += 1
         _put(xs, ys, ncx, r, c, ax + ue * dx, ay + ue * dy, ue, n, record, bu, btri, ba, bb)
         n += 1
         if ue >= u1:
             break
-        u = ue
-        if ux <= ue:
-            c += 1 if dx > 0.0 else -1
-        if uy <= ue:
-            r += 1 if dy > 0.0 else -1
-        if c < 0 or c >= ncx or r < 0 or r >= ncy:
+        cur = cells_next(xs, ys, cur, track, u1)
+        if cur.r < 0:
             break
     return n - start
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def track_counts(xs, ys, p, ii, jj, delta, counts, stop):
-    """Breakpoints of each pair (ii[k], jj[k]) of the points p (x, y, z) (0: never tested)."""
+def track_counts(axes, p, ii, jj, delta, counts, stop):
+    """Breakpoints of each pair (ii[k], jj[k]) of the points p (x, y, z) (0: never tested)
+    on the grid ``axes = (xs, ys, ixw, iyw)``."""
     m = ii.shape[0]
     du = np.empty(0, np.float32)
     dt = np.empty(0, np.int32)
@@ -167,12 +147,13 @@ def track_counts(xs, ys, p, ii, jj, delta, counts, stop):
         if u0 < 0.0:
             counts[k] = 0
         else:
-            counts[k] = _track(xs, ys, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, 0, False, du, dt, du, du)
+            counts[k] = _track(axes, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, 0, False, (du, dt, du, du))
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def track_fill(xs, ys, p, ii, jj, delta, ptr, bu, btri, ba, bb, stop):
-    """Write the breakpoints of each pair from ``ptr[k]`` (counts from :func:`track_counts`)."""
+def track_fill(axes, p, ii, jj, delta, ptr, out, stop):
+    """Write the breakpoints of each pair into ``out = (bu, btri, ba, bb)`` from ``ptr[k]``
+    (counts from :func:`track_counts`)."""
     m = ii.shape[0]
     for k in nb.prange(m):
         if stop[0] != 0 or ptr[k + 1] == ptr[k]:
@@ -180,7 +161,7 @@ def track_fill(xs, ys, p, ii, jj, delta, ptr, bu, btri, ba, bb, stop):
         i = ii[k]
         j = jj[k]
         u0, u1 = interval(p[j, 0], p[j, 1], p[j, 2], p[i, 0], p[i, 1], p[i, 2], delta, 0.0)
-        _track(xs, ys, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, ptr[k], True, bu, btri, ba, bb)
+        _track(axes, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, ptr[k], True, out)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -220,8 +201,8 @@ def barycentric(xs, ys, px, py, ev, ew):
     """Vertices and weights of the coarse surface under each position (px[i], py[i])."""
     ncx = xs.shape[0] - 1
     for i in nb.prange(px.shape[0]):
-        c = _locate(xs, px[i])
-        r = _locate(ys, py[i])
+        c = locate(xs, xs, 0, xs.shape[0] - 1, False, px[i])
+        r = locate(ys, ys, 0, ys.shape[0] - 1, False, py[i])
         a, b = _local(xs, ys, r, c, px[i], py[i])
         tri = 2 * (r * ncx + c) + (0 if a >= b else 1)
         v3 = np.empty(3, np.int64)
@@ -233,8 +214,9 @@ def barycentric(xs, ys, px, py, ev, ew):
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def pair_visible(c, z, ncx, ii, jj, ptr, bu, btri, ba, bb, tol, out, stop):
-    """Verdict on the coarse surface ``c`` of each stored pair, the points at heights ``z``."""
+def pair_visible(c, z, tk, tol, out, stop):
+    """Verdict on the coarse surface ``c`` of each pair of the :data:`Tracks` ``tk``, the points at heights ``z``."""
+    ncx, ii, jj, ptr, bu, btri, ba, bb = tk.ncx, tk.ii, tk.jj, tk.ptr, tk.bu, tk.btri, tk.ba, tk.bb
     for k in nb.prange(ii.shape[0]):
         if stop[0] != 0:
             continue
@@ -262,9 +244,12 @@ def _weight_of(v, ev, ew, i):
 
 
 @nb.njit(cache=True, nogil=True)
-def vertex_intervals(v, c, d, ev, ew, ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items, tol, lo, hi):
-    """For each pair touching vertex v (``items[vptr[v]:vptr[v + 1]]``): the closed interval
-    [lo, hi] of ``c[v]`` in which it sees (lo > hi: it never does), the points riding on the surface."""
+def vertex_intervals(v, c, rd, tk, tol, lo, hi):
+    """For each pair of the :data:`Tracks` ``tk`` touching vertex v (``items[vptr[v]:vptr[v + 1]]``):
+    the closed interval [lo, hi] of ``c[v]`` in which it sees (lo > hi: it never does), the
+    points riding on the surface (:data:`Riders` ``rd``)."""
+    d, ev, ew = rd.d, rd.ev, rd.ew
+    ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items = tk
     vv = np.empty(3, np.int64)
     ww = np.empty(3)
     m = 0
@@ -384,9 +369,16 @@ def best_value(lo, hi, vis, m, cur, bmin, bmax, margin, pos, dl):
 
 
 @nb.njit(cache=True, nogil=True)
-def c_sweep(c, cref, rad, d, ev, ew, vt, ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items, tol, margin, order, stop):
+def c_sweep(c, cref, rad, rd, vt, tk, tol, margin, order, stop):
     """One sweep of exact coordinate descent over the coarse heights in ``order`` (in place);
-    vertex v moves within ``cref[v] +- rad[v]``. Returns the count of heights changed."""
+    vertex v moves within ``cref[v] +- rad[v]``; the pairs (:data:`Tracks` ``tk``, verdicts
+    on T ``vt``) of the points riding on the surface (:data:`Riders` ``rd``). Returns the
+    count of heights changed."""
+    # views without reference counts for the per-vertex calls (the caller keeps the arrays alive)
+    rd = Riders(borrow(rd.d), borrow(rd.ev), borrow(rd.ew))
+    tk = Tracks(tk.ncx, borrow(tk.ii), borrow(tk.jj), borrow(tk.ptr), borrow(tk.bu), borrow(tk.btri), borrow(tk.ba),
+                borrow(tk.bb), borrow(tk.vptr), borrow(tk.items))
+    vptr, items = tk.vptr, tk.items
     mx = 0
     for v in range(vptr.shape[0] - 1):
         mx = max(mx, vptr[v + 1] - vptr[v])
@@ -401,7 +393,7 @@ def c_sweep(c, cref, rad, d, ev, ew, vt, ncx, ii, jj, ptr, bu, btri, ba, bb, vpt
             return changed
         if rad[v] <= 0.0 or vptr[v + 1] == vptr[v]:
             continue
-        m = vertex_intervals(v, c, d, ev, ew, ncx, ii, jj, ptr, bu, btri, ba, bb, vptr, items, tol, lo, hi)
+        m = vertex_intervals(v, c, rd, tk, tol, lo, hi)
         for s in range(m):
             vis[s] = vt[items[vptr[v] + s]]
         x, _ = best_value(lo, hi, vis, m, c[v], cref[v] - rad[v], cref[v] + rad[v], margin, pos, dl)
@@ -421,9 +413,9 @@ def local_radius(zf, xf, yf, c, xs, ys, out, stop):
     for r_ in range(yf.shape[0]):
         if stop[0] != 0:
             return
-        r = _locate(ys, yf[r_])
+        r = locate(ys, ys, 0, ys.shape[0] - 1, False, yf[r_])
         for c_ in range(xf.shape[0]):
-            cc = _locate(xs, xf[c_])
+            cc = locate(xs, xs, 0, xs.shape[0] - 1, False, xf[c_])
             a, b = _local(xs, ys, r, cc, xf[c_], yf[r_])
             tri = 2 * (r * ncx + cc) + (0 if a >= b else 1)
             _corners(tri, a, b, ncx, vv, ww)

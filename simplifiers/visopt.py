@@ -16,7 +16,7 @@ The method
    a. *Calibrate* the training points on S jointly, as the calibrated relocation
       calibrates its partners: Gauss-Seidel sweeps in which each point takes its best
       height against the others' T verdicts at their current heights
-      (:func:`terrainvis.relocation._threshold_kernels.grid_sweep`: exact thresholds, sorted;
+      (:func:`terrainvis.visibility.thresholds.gauss_seidel`: exact thresholds, sorted;
       3 sweeps in the first round, 1 afterwards).
    b. One sweep of exact *coordinate descent* over the coarse heights: each coarse
       height in turn (random order) takes the value that maximises the number of
@@ -160,13 +160,14 @@ class _Pairs:
         self.xs = np.ascontiguousarray(S0.xs - S0.xs[0])
         self.ys = np.ascontiguousarray(S0.ys - S0.ys[0])
         self.ncx = self.xs.size - 1
+        self.axes = (self.xs, self.ys, 1.0 / np.diff(self.xs), 1.0 / np.diff(self.ys))
         ii, jj = np.triu_indices(n, 1)
         ii = ii.astype(np.int64)
         jj = jj.astype(np.int64)
         self.n_pairs_all = ii.size
         delta = float(trim_length(S0))
         counts = np.empty(ii.size, dtype=np.int64)
-        call(_vk.track_counts, self.xs, self.ys, p, ii, jj, delta, counts, work=ii.size * 8)
+        call(_vk.track_counts, self.axes, p, ii, jj, delta, counts, work=ii.size * 8)
         total = int(counts.sum())
         work = counts.astype(np.float64) ** 2
         if total > budget or work.sum() > MAX_WORK:  # a random subset of the pairs that fits both budgets
@@ -182,10 +183,11 @@ class _Pairs:
         self.btri = np.empty(nb_, dtype=np.int32)
         self.ba = np.empty(nb_)
         self.bb = np.empty(nb_)
-        call(_vk.track_fill, self.xs, self.ys, p, ii, jj, delta, self.ptr, self.bu, self.btri, self.ba, self.bb,
-             work=nb_)
+        call(_vk.track_fill, self.axes, p, ii, jj, delta, self.ptr, (self.bu, self.btri, self.ba, self.bb), work=nb_)
         self.vptr, self.items = call(_vk.incidence, S0.size, self.ncx, self.ptr, self.btri, self.ba, self.bb,
                                      work=nb_)
+        self.tracks = _vk.Tracks(self.ncx, self.ii, self.jj, self.ptr, self.bu, self.btri, self.ba, self.bb, self.vptr,
+                                 self.items)
 
     @property
     def n_breakpoints(self) -> int:
@@ -198,8 +200,7 @@ class _Pairs:
         from . import _visopt_kernels as _vk
 
         out = np.empty(self.ii.size, dtype=bool)
-        call(_vk.pair_visible, c, z, self.ncx, self.ii, self.jj, self.ptr, self.bu, self.btri, self.ba, self.bb, tol,
-             out, work=self.n_breakpoints)
+        call(_vk.pair_visible, c, z, self.tracks, tol, out, work=self.n_breakpoints)
         return out
 
 
@@ -216,11 +217,10 @@ def optimize(grid: HeightGrid, level: int, *, n_train: int = N_TRAIN, rounds: in
                                                                    max_breakpoints)
     if level == 0:
         return grid.copy_with(), {"history": [], "pairs": 0, "pairs_kept": 0, "breakpoints": 0}
-    from terrainvis.relocation import _threshold_kernels as _ck
     from terrainvis.core.interrupt import call
-    from terrainvis.relocation.calibrated import MARGIN_REL, _Surface
     from terrainvis.core.sampling import sample_points
     from terrainvis.visibility import clearance_tolerance, terrain_scale, visibility_matrix
+    from terrainvis.visibility.thresholds import MARGIN_REL, ThresholdSurface, gauss_seidel
 
     from . import _visopt_kernels as _vk
 
@@ -251,18 +251,16 @@ def optimize(grid: HeightGrid, level: int, *, n_train: int = N_TRAIN, rounds: in
     history = []
     for r in range(rounds):
         S = HeightGrid.from_coords(c.reshape(S0.shape).copy(), S0.xs, S0.ys)
-        surf = _Surface(S)
+        surf = ThresholdSurface(S)
         q = surf.local(np.column_stack([W[:, :2], z]))
         for _ in range(FIRST_SWEEPS if r == 0 else LATER_SWEEPS):
             order = order_rng.permutation(n_train).astype(np.int64)
-            call(_ck.grid_sweep, surf.data, q, order, vt_full, surf.delta, 0.0, surf.tol, 0.0, surf.margin, 1,
-                 work=n_train * n_train)
+            gauss_seidel(surf, q, order, vt_full, end_radius=0.0, kc=0.0, min_gain=1)
         z = q[:, 2].copy()
         d = z - surface_at(c)
         a0 = float((pairs.visible(c, z, tol) == vt).mean()) if vt.size else 1.0
         order = order_rng.permutation(S0.size).astype(np.int64)
-        changed = call(_vk.c_sweep, c, cref, rad, d, ev, ew, vt, pairs.ncx, pairs.ii, pairs.jj, pairs.ptr, pairs.bu,
-                       pairs.btri, pairs.ba, pairs.bb, pairs.vptr, pairs.items, tol, margin, order,
+        changed = call(_vk.c_sweep, c, cref, rad, _vk.Riders(d, ev, ew), vt, pairs.tracks, tol, margin, order,
                        work=pairs.n_breakpoints)
         z = d + surface_at(c)
         a1 = float((pairs.visible(c, z, tol) == vt).mean()) if vt.size else 1.0

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 import simplifiers
 import terrainvis as tv
-from terrainvis.relocation import _threshold_kernels as ck
+from terrainvis.visibility import _threshold_kernels as ck
+from terrainvis.visibility import thresholds
 from terrainvis.relocation import calibrated as cal
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.terrain import TIN, HeightGrid
@@ -30,17 +31,11 @@ def _random_grid(seed, rows=9, cols=11, rectilinear=False):
 
 def _thresholds(surface, p, q, kc=0.0):
     """(n, m) thresholds of the points p (x, y, reference height) for the targets q, through the kernels."""
-    surf = cal._Surface(surface)
+    surf = thresholds.ThresholdSurface(surface)
     pl, ql = surf.local(p), surf.local(q)
     out = np.empty((p.shape[0], q.shape[0]))
-    if surf.grid:
-        stack = ck.new_stack(surf.ltop)
-        for i in range(p.shape[0]):
-            ck._grid_row(surf.data, stack, pl[i, 0], pl[i, 1], pl[i, 2], ql, surf.delta, 0.0, surf.tol, kc, -1,
-                         out[i])
-    else:
-        for i in range(p.shape[0]):
-            ck._tin_row(surf.data, pl[i, 0], pl[i, 1], pl[i, 2], ql, surf.delta, 0.0, surf.tol, kc, -1, out[i])
+    for i in range(p.shape[0]):
+        thresholds.threshold_row(surf, pl[i], ql, kc=kc, out=out[i])
     return out
 
 
@@ -134,7 +129,7 @@ def test_the_pyramid_walk_equals_the_cell_walk():
     from terrainvis.core.synthetic import synthetic_terrain
 
     grid = synthetic_terrain("rough", size=300, seed=4)
-    surf = cal._Surface(grid)
+    surf = thresholds.ThresholdSurface(grid)
     assert surf.ltop > ck.DDA_MAX_LEVELS
     rng = np.random.default_rng(0)
     p = surf.local(np.column_stack([_inside(grid, 300, rng), np.zeros(300)]))
@@ -144,10 +139,9 @@ def test_the_pyramid_walk_equals_the_cell_walk():
     for k in range(300):
         dx, dy = p[k, 0] - q[k, 0], p[k, 1] - q[k, 1]
         bulge = (k % 2) * 1e-7 * (dx * dx + dy * dy)  # every other track under a strong curvature
-        a = ck.grid_max_slope(surf.data, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge, stack)
-        g = surf.data
-        b = ck.grid_dda_max_slope(g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform, q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6,
-                                  1 - 1e-6, surf.tol, bulge)
+        tr = ck.Track(q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge)
+        a = ck.grid_max_slope(surf.data, tr, stack)
+        b = ck.grid_dda_max_slope(surf.data, tr)
         assert a == pytest.approx(b, rel=1e-12, abs=1e-12)
 
 
@@ -308,7 +302,7 @@ def test_the_agreement_it_counts_is_the_exact_engines(hills, method):
     z = cal.calibrated_heights(P, S, T, n_partners=144, sweeps=2, neighbours=False)  # the partners alone
     vis = cal._verdicts_on_original(T, P, np.column_stack([part.xy, part.z_original]), {})
     q = np.column_stack([part.xy, part.z_simplified])
-    surf = cal._Surface(S)
+    surf = thresholds.ThresholdSurface(S)
     thr = _thresholds(S, np.column_stack([P[:, :2], S.height_at(P[:, :2])]), q)
     tol = tv.visibility.clearance_tolerance(S)
     for i in range(P.shape[0]):

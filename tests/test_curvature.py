@@ -461,13 +461,15 @@ def _wedges(x, y, bsz):
 def _cell_case(z, X0, Y0, w, h, ez, kc):
     """The far-cell bound of one cell (corner heights z (2, 2), lower-left corner (X0, Y0)
     relative to the eye) as the sweep computes it (no rounding terms): (ub, lb, glo, bsz)."""
+    from terrainvis.core.surface import SurfaceGrid, no_pyramid
     from terrainvis.visibility import _sweep_kernels as vk
 
     xs, ys = np.array([X0, X0 + w]), np.array([Y0, Y0 + h])
     zz = np.asarray(z, float)
     cmax, rmax = np.empty((1, 2)), np.empty((2, 1))
     vk.strip_max(zz, cmax, rmax)
-    g = vk.SweepGrid(zz, xs, ys, 1.0 / np.diff(xs), 1.0 / np.diff(ys), False, False, cmax, rmax)
+    pyr, off, nxl, ltop = no_pyramid()
+    g = SurfaceGrid(zz, xs, ys, 1.0 / np.diff(xs), 1.0 / np.diff(ys), False, False, pyr, off, nxl, ltop, cmax, rmax)
     eye = vk.Eye(0, 0, 0.0, 0.0, ez)
     vals = [vk._sample_val(g, eye, r, c, 0, kc) for r, c in ((0, 0), (0, 1), (1, 0), (1, 1))]
     dring = np.hypot(max(X0, 0.0), 0.0 if Y0 <= 0.0 <= Y0 + h else min(abs(Y0), abs(Y0 + h)))

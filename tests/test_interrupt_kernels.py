@@ -122,18 +122,19 @@ def work():
     # the calibrated relocation's best heights of many points (parallel over points)
     "calibrated-points": ("""
 import simplifiers
-from terrainvis.relocation import calibrated as calibration, _threshold_kernels as ck
+from terrainvis.visibility import thresholds, _threshold_kernels as ck
 from terrainvis.core.interrupt import call
 def setup(size, n):
     g = tv.synthetic_terrain("mountains", size=size)
     S = simplifiers.simplify(g, "lls", 1)
-    surf = calibration._Surface(S)
+    surf = thresholds.ThresholdSurface(S)
     q = surf.local(tv.sample_points(S, 512, seed=1))
     p = surf.local(tv.sample_points(S, n, seed=2))
     vis = np.random.default_rng(0).random((n, 512)) < 0.3
     out, score = np.empty(n), np.empty(n, dtype=np.int64)
     lthr, lvis = np.full((n, 48), -np.inf), np.ones((n, 48), dtype=np.int8)  # neighbours seen at any height
-    return (surf.data, p, q, vis, lthr, lvis, 0.5, surf.delta, 0.0, surf.tol, 0.0, surf.margin, 1, out, score), n * 512
+    near = ck.Neighbours(lthr, lvis, 0.5)
+    return (surf.data, p, q, vis, near, surf.rules(), out, score), n * 512
 def warm():
     args, work_ = setup(65, 4)
     call(ck.grid_heights, *args, work=work_)
@@ -162,8 +163,8 @@ d = np.zeros(1200)
 rad = np.full(S0.size, 50.0)
 order = np.arange(S0.size, dtype=np.int64)
 def work():
-    call(vk.c_sweep, c0.copy(), c0, rad, d, ev, ew, vt, pairs.ncx, pairs.ii, pairs.jj, pairs.ptr, pairs.bu,
-         pairs.btri, pairs.ba, pairs.bb, pairs.vptr, pairs.items, 1e-6, 1e-6, order, work=pairs.n_breakpoints)
+    call(vk.c_sweep, c0.copy(), c0, rad, vk.Riders(d, ev, ew), vt, pairs.tracks, 1e-6, 1e-6, order,
+         work=pairs.n_breakpoints)
 """, False),
 }
 

@@ -1,7 +1,7 @@
 """The numba kernels give back every array they allocate (numba's NRT allocation counters).
 
 The viewshed's sweep and the calibrated relocation's threshold rows hand their arrays to
-the walks as views without reference counts (``terrainvis.visibility._sweep_kernels._borrow``,
+the walks as views without reference counts (``terrainvis.core.surface.borrow``,
 built from numba internals): a numba release that treated those views differently could
 leak or free the arrays. The counters
 of numba's runtime (on with ``NUMBA_NRT_STATS=1``, read before and after repeated calls)

@@ -66,8 +66,7 @@ def test_descent_step_is_the_best_value_of_a_brute_force_scan(descent_case, v):
     margin = MARGIN_REL * terrain_scale(S0)
     mx = int(np.diff(pairs.vptr).max())
     lo, hi, vis = np.empty(mx), np.empty(mx), np.empty(mx, dtype=bool)
-    m = vk.vertex_intervals(v, c, d, ev, ew, pairs.ncx, pairs.ii, pairs.jj, pairs.ptr, pairs.bu, pairs.btri, pairs.ba,
-                            pairs.bb, pairs.vptr, pairs.items, tol, lo, hi)
+    m = vk.vertex_intervals(v, c, vk.Riders(d, ev, ew), pairs.tracks, tol, lo, hi)
     touching = pairs.items[pairs.vptr[v]:pairs.vptr[v + 1]]
     vis[:m] = vt[touching]
     R = 30.0

@@ -9,6 +9,7 @@ import numba as nb
 import numpy as np
 
 from ..tolerances import BUCKET_SLACK, RASTER_BOX_REL  # frozen into the kernels when they compile
+from .surface import barycentric, plane_uv, weighted
 
 
 @nb.njit(cache=True, nogil=True)
@@ -18,21 +19,13 @@ def _tri_z_at(vx, vy, vz, i0, i1, i2, x, y, rel_eps):
     ``rel_eps`` widens the triangle by a relative barycentric tolerance so that points
     on a shared edge are found by either neighbour.
     """
-    x0 = vx[i0]
-    y0 = vy[i0]
-    x1 = vx[i1]
-    y1 = vy[i1]
-    x2 = vx[i2]
-    y2 = vy[i2]
-    det = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    det, l1, l2 = barycentric(vx, vy, i0, i1, i2, x, y)
     if det == 0.0:
         return np.nan
-    l1 = ((x - x0) * (y2 - y0) - (x2 - x0) * (y - y0)) / det
-    l2 = ((x1 - x0) * (y - y0) - (x - x0) * (y1 - y0)) / det
     l0 = 1.0 - l1 - l2
     if l0 < -rel_eps or l1 < -rel_eps or l2 < -rel_eps:
         return np.nan
-    return l0 * vz[i0] + l1 * vz[i1] + l2 * vz[i2]
+    return weighted(vz, i0, i1, i2, l1, l2)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -74,11 +67,15 @@ def build_buckets(vx, vy, faces, x0, y0, bw, bh, nbx, nby):
 
 
 @nb.njit(cache=True, nogil=True)
-def locate_heights(vx, vy, vz, faces, starts, items, x0, y0, bw, bh, nbx, nby, qx, qy, out, rel_eps, stop):
-    """Height of the TIN at each query point (NaN outside the footprint).
+def locate_heights(tin, qx, qy, out, rel_eps, stop):
+    """Height of the TIN (a :data:`~terrainvis.core.surface.SurfaceTin` in world coordinates,
+    ``nbr`` not read) at each query point (NaN outside the footprint): the first face of the
+    point's bucket that holds it within the barycentric slack ``rel_eps``.
 
     ``stop`` is the stop flag (:mod:`terrainvis.core.interrupt`), read every 4096 points.
     """
+    vx, vy, vz, faces, starts, items = tin.vx, tin.vy, tin.vz, tin.faces, tin.starts, tin.items
+    x0, y0, bw, bh, nbx, nby = tin.x0, tin.y0, tin.bw, tin.bh, tin.nbx, tin.nby
     for i in range(qx.shape[0]):
         if i % 4096 == 0 and stop[0] != 0:
             return
@@ -203,10 +200,4 @@ def grid_on_grid(xs, ys, z, qx, qy, out, stop):
             x = qx[j]
             if not (x >= xs[0] and x <= xs[nc - 1]):
                 continue
-            c = cidx[j]
-            u = uu[j]
-            z00 = z[r, c]
-            if u >= v:
-                out[i, j] = z00 + u * (z[r, c + 1] - z00) + v * (z[r + 1, c + 1] - z[r, c + 1])
-            else:
-                out[i, j] = z00 + v * (z[r + 1, c] - z00) + u * (z[r + 1, c + 1] - z[r + 1, c])
+            out[i, j] = plane_uv(z, r, cidx[j], uu[j], v)

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _kernels
+from . import _kernels, surface
 from ._georef import uniform_step
 from .interrupt import call
 from .mesh import footprint_matches, signed_area2
@@ -427,26 +427,8 @@ class HeightGrid:
         out = np.full(pts.shape[0], np.nan)
         if pts.shape[0] == 0:
             return out
-        x = pts[:, 0]
-        y = pts[:, 1]
-        xs, ys, z = self.xs, self.ys, self.z
-        inside = (x >= xs[0]) & (x <= xs[-1]) & (y >= ys[0]) & (y <= ys[-1])
-        x = x[inside]
-        y = y[inside]
-        c = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, xs.size - 2)
-        r = np.clip(np.searchsorted(ys, y, side="right") - 1, 0, ys.size - 2)
-        u = (x - xs[c]) / (xs[c + 1] - xs[c])
-        v = (y - ys[r]) / (ys[r + 1] - ys[r])
-        z00 = z[r, c]
-        z01 = z[r, c + 1]
-        z10 = z[r + 1, c]
-        z11 = z[r + 1, c + 1]
-        lower = u >= v
-        out[inside] = np.where(
-            lower,
-            z00 + u * (z01 - z00) + v * (z11 - z01),
-            z00 + v * (z10 - z00) + u * (z11 - z10),
-        )
+        call(surface.heights_at, self.z, self.xs, self.ys,
+             np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, work=out.size)
         return out
 
     def height_on_grid(self, xs, ys) -> np.ndarray:
@@ -769,12 +751,12 @@ class TIN:
             return out
         bk = self._buckets()
         v = self.vertices
-        call(
-            _kernels.locate_heights,
-            np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
-            self.faces, bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
-            np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, BARYCENTRIC_SLACK, work=pts.shape[0],
+        tin = surface.SurfaceTin(
+            np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]), self.faces,
+            surface.no_neighbours(), bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
         )
+        call(_kernels.locate_heights, tin, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out,
+             BARYCENTRIC_SLACK, work=pts.shape[0])
         return out
 
     def from_native(self, xy) -> np.ndarray:

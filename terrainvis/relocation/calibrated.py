@@ -34,7 +34,7 @@ computed once per (T, S(T), setting) and cached on S(T).
 The best height
 ---------------
 Seeing a partner is monotone in the point's height: for each partner there is an exact
-*threshold* above which the point sees it on S(T) (:mod:`terrainvis.relocation._threshold_kernels`
+*threshold* above which the point sees it on S(T) (:mod:`terrainvis.visibility.thresholds`
 computes it at the breakpoints the LOS engines test, with their trim, tolerance and end
 radius). The agreement with T's verdicts is then a step function of the height, and its
 maximum is found exactly by sorting the thresholds. Among the optimal heights the one
@@ -56,7 +56,7 @@ the point, so the point sees the neighbour exactly when its height is at least i
 reference height minus the segment's least clearance there (and the tolerance): a
 threshold again (:func:`_neighbour_thresholds`, from the exact
 :func:`terrainvis.min_clearance`). The best height maximises the partners' agreement plus
-a weight times the neighbours' (:func:`terrainvis.relocation._threshold_kernels.best_height_kept`):
+a weight times the neighbours' (:func:`terrainvis.visibility.thresholds.best_height_kept`):
 :data:`NEIGHBOUR_WEIGHT` (0.5) against 512 partners, scaled with the number of partners
 (2 against the default 2,048) so that the neighbours keep their share of the agreement
 (:func:`neighbour_weight`). The neighbours depend on the point alone.
@@ -77,13 +77,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _threshold_kernels as _ck
 from ..core.validate import as_int, describe
 from ..errors import OutsideFootprintError
-from ..core.terrain import TIN, HeightGrid
+from ..core.terrain import HeightGrid
 from ..tolerances import THRESHOLD_MARGIN_REL
 from ..visibility import EARTH_RADIUS, curvature_coefficient
-from ..visibility._kernels import new_stack
+from ..visibility.thresholds import ThresholdSurface, best_height, best_heights, gauss_seidel, threshold_row
 
 __all__ = ["calibrated_heights", "best_responses", "neighbour_weight", "Partners", "partners", "N_PARTNERS",
            "CORE_PARTNERS", "SWEEPS", "MIN_GAIN"]
@@ -157,64 +156,6 @@ def _fingerprint(grid: HeightGrid) -> str:
             h.update(np.ascontiguousarray(a).tobytes())
         fp = grid._cache["fingerprint"] = h.hexdigest()[:16]
     return fp
-
-
-# ----------------------------------------------------------------------- the surface
-class _Surface:
-    """S(T) as the threshold kernels read it (grid walk or TIN edge buckets), local coordinates."""
-
-    def __init__(self, terrain):
-        from ..visibility import clearance_tolerance, terrain_scale, trim_length
-
-        self.terrain = terrain
-        self.grid = isinstance(terrain, HeightGrid)
-        self.delta = float(trim_length(terrain))
-        self.tol = float(clearance_tolerance(terrain))
-        self.margin = MARGIN_REL * float(terrain_scale(terrain))
-        if self.grid:
-            from ..visibility.grid import _walk_grid, grid_accel
-
-            acc = grid_accel(terrain)
-            self.x0, self.y0 = acc.x0, acc.y0
-            self.data = _walk_grid(terrain, acc)
-            self.ltop = acc.ltop
-        else:
-            self.x0, self.y0, self.data = _tin_walk(terrain)
-            self.ltop = 0
-
-    def local(self, xy: np.ndarray) -> np.ndarray:
-        out = np.array(xy, dtype=np.float64, copy=True)
-        out[:, 0] -= self.x0
-        out[:, 1] -= self.y0
-        return out
-
-
-def _tin_walk(tin: TIN):
-    """The TIN as the threshold walk reads it (:data:`~terrainvis.relocation._threshold_kernels.TinWalk`,
-    local coordinates) and its origin (cached on the TIN)."""
-    cached = tin._cache.get("calibration_walk")
-    if cached is not None:
-        return cached
-    from ..core.mesh import edge_keys, half_edges
-
-    bk = tin._buckets()
-    faces = np.ascontiguousarray(tin.faces, dtype=np.int64)
-    he = half_edges(faces)  # (3m, 2): edge e of face f is row 3 f + e
-    key = edge_keys(he, tin.n_vertices, directed=True)
-    twin = edge_keys(he[:, ::-1], tin.n_vertices, directed=True)
-    order = np.argsort(key)
-    pos = np.searchsorted(key[order], twin)
-    pos = np.minimum(pos, key.size - 1)
-    found = key[order][pos] == twin
-    nbr = np.where(found, order[pos] // 3, -1).reshape(-1, 3).astype(np.int64)
-    v = tin.vertices
-    walk = _ck.TinWalk(
-        np.ascontiguousarray(v[:, 0] - bk.x0), np.ascontiguousarray(v[:, 1] - bk.y0), np.ascontiguousarray(v[:, 2]),
-        faces, nbr, bk.starts, bk.items, float(bk.bw), float(bk.bh), int(bk.nbx), int(bk.nby),
-    )
-    out = (float(bk.x0), float(bk.y0), walk)
-    tin._cache["calibration_walk"] = out
-    return out
 
 
 # ----------------------------------------------------------------------- partners
@@ -323,8 +264,6 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
 def _core(original: HeightGrid, simplified, height: float, move: bool, k: int, sweeps: int, seed: int,
           end_radius: float, curve: dict, min_gain: int) -> Partners:
     """The core partners: ``k`` stratified positions, calibrated jointly by Gauss-Seidel sweeps (``move``)."""
-    from ..core.interrupt import call
-
     kc = curvature_coefficient(**curve)
     xy = _positions(original, simplified, k, seed)
     z_t = original.height_at(xy) + height
@@ -337,18 +276,13 @@ def _core(original: HeightGrid, simplified, height: float, move: bool, k: int, s
         at = np.column_stack([xy, z_t])
         visible = _cached(("matrix",) + _key(original, curve, at),
                           lambda: visibility_matrix(original, at, engine="grid", **curve))
-        surf = _Surface(simplified)
+        surf = ThresholdSurface(simplified)
         q = surf.local(np.column_stack([xy, z_s]))
         order_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
         n = xy.shape[0]
         for _ in range(sweeps):
             order = order_rng.permutation(n).astype(np.int64)
-            if surf.grid:
-                call(_ck.grid_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc,
-                     surf.margin, min_gain, work=n * n)
-            else:
-                call(_ck.tin_sweep, surf.data, q, order, visible, surf.delta, end_radius, surf.tol, kc, surf.margin,
-                     min_gain, work=n * n)
+            gauss_seidel(surf, q, order, visible, end_radius=end_radius, kc=kc, min_gain=min_gain)
         z_s = q[:, 2].copy()
     return Partners(xy, z_t, z_s, ground, visible)
 
@@ -410,13 +344,11 @@ def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, of
     """The best height on S(T) of each point ``pts`` (n, 3; ``offset`` above T) against the
     partners ``part``, counting its neighbours (standing ``height`` above the surfaces,
     ``offset`` by default) when ``neighbours``."""
-    from ..core.interrupt import call, for_threads
-
     height = float(offset if height is None else height)
     kc = curvature_coefficient(**curve)
     n = pts.shape[0]
     vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]), curve)
-    surf = _Surface(simplified)
+    surf = ThresholdSurface(simplified)
     ground = simplified.height_at(pts[:, :2])
     p = surf.local(np.column_stack([pts[:, :2], ground + offset]))
     q = surf.local(np.column_stack([part.xy, part.z_simplified]))
@@ -426,16 +358,9 @@ def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, of
                                      surf.tol, end_radius, curve)
     else:
         lthr, near_vis = np.zeros((n, 0)), np.zeros((n, 0), dtype=np.int8)
-    out = np.empty(n)
-    score = np.empty(n, dtype=np.int64)
-    work = n * part.xy.shape[0]
-    if surf.grid:
-        kernel = for_threads(_ck.grid_heights, _ck.grid_heights_serial)
-    else:
-        kernel = for_threads(_ck.tin_heights, _ck.tin_heights_serial)
     weight = float(neighbour_weight(q.shape[0]))
-    call(kernel, surf.data, p, q, vis, lthr, near_vis, weight, surf.delta, end_radius, surf.tol, kc, surf.margin,
-         min_gain, out, score, work=work)
+    out, _ = best_heights(surf, p, q, vis, neighbour_thresholds=lthr, neighbour_verdicts=near_vis, weight=weight,
+                          end_radius=end_radius, kc=kc, min_gain=min_gain)
     return out
 
 
@@ -447,25 +372,21 @@ def best_responses(points: np.ndarray, simplified, verdicts: np.ndarray, counted
     Each point in turn (in order) takes the height on ``simplified`` that maximises the
     number of its ``counted`` pairs whose verdict there agrees with ``verdicts`` (n, n),
     the others standing at their current heights: the thresholds of the calibrated
-    relocation, sorted (:func:`terrainvis.relocation._threshold_kernels.best_height`; the height
+    relocation, sorted (:func:`terrainvis.visibility.thresholds.best_height`; the height
     nearest its current one, moved only for a gain). So no step lowers the agreement of
     the counted pairs. Returns the new (n,) heights and whether any moved.
     """
     kc = curvature_coefficient(curvature, earth_radius)
-    surf = _Surface(simplified)
+    surf = ThresholdSurface(simplified)
     q = surf.local(np.asarray(points, dtype=np.float64))
     n = q.shape[0]
     thr = np.empty(n)
     moved = False
-    st = new_stack(surf.ltop) if surf.grid else None
     for i in range(n):
-        if surf.grid:
-            _ck._grid_row(surf.data, st, q[i, 0], q[i, 1], q[i, 2], q, surf.delta, end_radius, surf.tol, kc, i, thr)
-        else:
-            _ck._tin_row(surf.data, q[i, 0], q[i, 1], q[i, 2], q, surf.delta, end_radius, surf.tol, kc, i, thr)
+        threshold_row(surf, q[i], q, skip=i, end_radius=end_radius, kc=kc, out=thr)
         ignore = ~counted[i]
         row = np.where(ignore, -np.inf, thr)  # a pair that does not count is seen, and agrees, at any height
-        z, _ = _ck.best_height(row, verdicts[i] | ignore, q[i, 2], surf.margin, 1)
+        z, _ = best_height(row, verdicts[i] | ignore, q[i, 2], surf.margin, 1)
         if z != q[i, 2]:
             q[i, 2] = z
             moved = True

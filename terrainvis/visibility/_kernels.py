@@ -5,8 +5,9 @@ check their input, shift coordinates to a local origin and pass plain arrays.
 
 Kernel arguments
 ----------------
-The grid walk reads one grid through a :data:`WalkGrid` (a named tuple of its arrays and
-two scalars, built by ``terrainvis.visibility.grid``), keeps its descent on a
+The grid walk reads one grid through a :data:`~terrainvis.core.surface.SurfaceGrid` (the
+core's named tuple of a grid's arrays, with the min/max pyramid of "Pyramid layout",
+built by ``terrainvis.visibility.grid``), keeps its descent on a
 :data:`WalkStack` (scratch arrays, one per thread, from :func:`new_stack`) and takes a
 segment as the 6-tuple ``seg = (ax, ay, az, dx, dy, dz)``, the points ``a + t * d``.
 The per-cell and per-pair functions (``_cell_min``, :func:`segment_min`, ``_pair_min``)
@@ -15,7 +16,9 @@ separate calls they cost 1-4 % of the LOS throughput against the earlier kernels
 took two dozen positional arrays (every call updates the reference counts of the named
 tuples' arrays); inlined, ``line_of_sight`` is 9-17 % faster than with those kernels,
 with the same bits (docs/visibility.md, "Performance"). The TIN clipper reads its mesh
-and bucket grid through a :data:`TinMesh`.
+and bucket grid through a :data:`~terrainvis.core.surface.SurfaceTin` (local coordinates:
+the bucket grid's corner at the origin). The surface itself (the cell height, ``locate``,
+the triangle plane) is :mod:`terrainvis.core.surface`'s.
 
 Compile time
 ------------
@@ -61,15 +64,10 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-_INF = np.inf
+from ..core.surface import barycentric, cell_height, weighted
+from .walk import cell_diagonal, mid_height, node_pop, node_push, node_root, node_split
 
-#: One grid as the walk reads it, all in local coordinates (origin at ``xs[0], ys[0]``):
-#: ``z`` (rows, cols) float64 heights; ``xs`` (cols,) and ``ys`` (rows,) float64
-#: coordinates; ``ixw`` (cols - 1,) and ``iyw`` (rows - 1,) float64 inverse cell widths;
-#: ``pyr`` (k,) float32 min/max pyramid with ``off`` and ``nxl`` (ltop + 1,) int64 level
-#: tables (see "Pyramid layout"); ``uniform`` (bool) true when both spacings are uniform;
-#: ``ltop`` (int) the root level.
-WalkGrid = namedtuple("WalkGrid", ["z", "xs", "ys", "ixw", "iyw", "pyr", "off", "nxl", "uniform", "ltop"])
+_INF = np.inf
 
 #: Scratch stack of the pyramid descent: per entry the node's ``level``, ``row`` and
 #: ``col`` ((ns,) int64 each) and its parameter interval ``t`` ((2 ns,) float64).
@@ -145,31 +143,6 @@ def build_pyramid(z, pyr, off, nxl, nyl, ltop):
 
 
 # --------------------------------------------------------------------------- grid walk
-@nb.njit(cache=True, nogil=True)
-def _cell_height(z, xs, ys, ixw, iyw, r, c, x, y):
-    """Height of cell (r, c)'s surface at (x, y) (local coordinates clamped into the cell).
-
-    ``ixw[c] = 1 / (xs[c+1] - xs[c])`` and ``iyw[r] = 1 / (ys[r+1] - ys[r])``.
-    """
-    u = (x - xs[c]) * ixw[c]
-    v = (y - ys[r]) * iyw[r]
-    if u < 0.0:
-        u = 0.0
-    elif u > 1.0:
-        u = 1.0
-    if v < 0.0:
-        v = 0.0
-    elif v > 1.0:
-        v = 1.0
-    z00 = z[r, c]
-    z11 = z[r + 1, c + 1]
-    if u >= v:
-        z01 = z[r, c + 1]
-        return z00 + u * (z01 - z00) + v * (z11 - z01)
-    z10 = z[r + 1, c]
-    return z00 + v * (z10 - z00) + u * (z11 - z10)
-
-
 @nb.njit(cache=True, nogil=True, inline="always")
 def _vertex_min(fa, fb, ta, tb, bulge):
     """Curved clearance at the interior minimum of one piece, or inf when it has none there.
@@ -223,59 +196,24 @@ def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
     ax, ay, az, dx, dy, dz = seg
-    den = dx * ixw[c] - dy * iyw[r]
+    td = cell_diagonal(xs, ys, ixw, iyw, r, c, (ax, ay, dx, dy))
     if bulge > 0.0:
-        f0 = az + t0 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
-        f1 = az + t1 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
-        if den != 0.0:
-            td = ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
-            if td > t0 and td < t1:
-                fd = az + td * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
-                return min(curved_min(f0, fd, t0, td, bulge), curved_min(fd, f1, td, t1, bulge))
+        f0 = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
+        f1 = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
+        if td > t0 and td < t1:
+            fd = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+            return min(curved_min(f0, fd, t0, td, bulge), curved_min(fd, f1, td, t1, bulge))
         return curved_min(f0, f1, t0, t1, bulge)
-    m = az + t1 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
+    m = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
     if with_t0:
-        e = az + t0 * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
+        e = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
         if e < m:
             m = e
-    if den != 0.0:
-        td = ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
-        if td > t0 and td < t1:
-            e = az + td * dz - _cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
-            if e < m:
-                m = e
+    if td > t0 and td < t1:
+        e = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+        if e < m:
+            m = e
     return m
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _locate(v, iw, lo, hi, uniform, x):
-    """Index i in [lo, hi) with v[i] <= x < v[i+1] (clamped), v local coordinates from 0."""
-    if uniform:
-        # a guess from the first spacing, corrected against the coordinates below
-        i = int(x * iw[0])
-        if i < lo:
-            i = lo
-        elif i > hi - 1:
-            i = hi - 1
-        while i > lo and v[i] > x:
-            i -= 1
-        while i < hi - 1 and v[i + 1] <= x:
-            i += 1
-    else:
-        a = lo
-        b = hi
-        while b - a > 1:
-            mid = (a + b) >> 1
-            if v[mid] <= x:
-                a = mid
-            else:
-                b = mid
-        i = a
-    if i < lo:
-        i = lo
-    elif i > hi - 1:
-        i = hi - 1
-    return i
 
 
 @nb.njit(cache=True, nogil=True)
@@ -298,7 +236,7 @@ def new_stack(ltop):
 def segment_min(g, seg, t0, t1, los, tol, bulge, st):
     """Minimum clearance of the segment ``seg`` = (ax, ay, az, dx, dy, dz), i.e. a + t*d, over [t0, t1].
 
-    ``g`` is a :data:`WalkGrid`, ``st`` a :data:`WalkStack` (see :func:`new_stack`).
+    ``g`` is a :data:`~terrainvis.core.surface.SurfaceGrid`, ``st`` a :data:`WalkStack` (see :func:`new_stack`).
     With ``los`` False the result is the exact minimum (nodes that cannot lower the
     current best are skipped). With ``los`` True the walk stops as soon as the
     clearance is known to drop below ``-tol`` and skips every node whose lower bound is
@@ -317,26 +255,15 @@ def segment_min(g, seg, t0, t1, los, tol, bulge, st):
     bulge's largest (skip test) or smallest (block test) value over its interval.
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    pyr, off, nxl, uniform, ltop = g.pyr, g.off, g.nxl, g.uniform, g.ltop
-    sL, sR, sC, sT = st.level, st.row, st.col, st.t
+    pyr, off, nxl, uniform = g.pyr, g.off, g.nxl, g.uniform
     ax, ay, az, dx, dy, dz = seg
-    ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
+    track = (ax, ay, dx, dy)
     best = _INF
-    sL[0] = ltop
-    sR[0] = 0
-    sC[0] = 0
-    sT[0] = t0
-    sT[1] = t1
-    sp = 1
+    stk = (st.level, st.row, st.col, st.t)
+    sp = node_root(stk, g.ltop, t0, t1)
     last_t = -_INF
     while sp > 0:
-        sp -= 1
-        L = sL[sp]
-        R = sR[sp]
-        C = sC[sp]
-        a0 = sT[2 * sp]
-        a1 = sT[2 * sp + 1]
+        sp, L, R, C, a0, a1 = node_pop(stk, sp)
         if L == 0:
             m = _cell_min(g, R, C, seg, a0, a1, a0 != last_t, bulge)
             last_t = a1
@@ -365,80 +292,29 @@ def segment_min(g, seg, t0, t1, los, tol, bulge, st):
                 hi = max(za0, za1)
                 if hi - pyr[k] < -tol:
                     return hi - pyr[k]
-        half = 1 << (L - 1)
-        cm = (C << L) + half
-        rm = (R << L) + half
-        splitx = cm < ncx
-        splity = rm < ncy
-        # crossing parameters of the two mid lines inside (a0, a1)
-        s1 = _INF
-        s2 = _INF
-        if splitx and dx != 0.0:
-            tx = (xs[cm] - ax) / dx
-            if tx > a0 and tx < a1:
-                s1 = tx
-                if L >= 2:
-                    yy = ay + tx * dy
-                    r = _locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
-                    v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
-                    e = az + tx * dz - (z[r, cm] + v * (z[r + 1, cm] - z[r, cm]))
-                    if bulge > 0.0:
-                        e -= bulge * tx * (1.0 - tx)
-                    if e < best:
-                        best = e
-                        if los and best < -tol:
-                            return best
-        if splity and dy != 0.0:
-            ty = (ys[rm] - ay) / dy
-            if ty > a0 and ty < a1:
-                if L >= 2:
-                    xx = ax + ty * dx
-                    c = _locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
-                    u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
-                    e = az + ty * dz - (z[rm, c] + u * (z[rm, c + 1] - z[rm, c]))
-                    if bulge > 0.0:
-                        e -= bulge * ty * (1.0 - ty)
-                    if e < best:
-                        best = e
-                        if los and best < -tol:
-                            return best
-                if ty < s1:
-                    s2 = s1
-                    s1 = ty
-                else:
-                    s2 = ty
-        # boundaries a0 < s1 < s2 < a1 (missing ones are inf); push far-first
-        nb_ = 1
-        if s1 < _INF:
-            nb_ = 2
-            if s2 < _INF:
-                nb_ = 3
-        for q in range(nb_ - 1, -1, -1):
-            if q == 0:
-                b0 = a0
-            elif q == 1:
-                b0 = s1
-            else:
-                b0 = s2
-            if q == nb_ - 1:
-                b1 = a1
-            elif q == 0:
-                b1 = s1
-            else:
-                b1 = s2
-            tm = 0.5 * (b0 + b1)
-            cc = 2 * C
-            rr = 2 * R
-            if splitx and ax + tm * dx >= xs[cm]:
-                cc += 1
-            if splity and ay + tm * dy >= ys[rm]:
-                rr += 1
-            sL[sp] = L - 1
-            sR[sp] = rr
-            sC[sp] = cc
-            sT[2 * sp] = b0
-            sT[2 * sp + 1] = b1
-            sp += 1
+        node = (L, R, C, a0, a1)
+        split = node_split(xs, ys, node, track)
+        cm, rm, tx, ty = split
+        if L >= 2:
+            # probe the clearance where the track crosses the mid lines (the surface is
+            # linear along a grid line)
+            if tx < _INF:
+                e = az + tx * dz - mid_height(z, xs, ys, ixw, iyw, uniform, node, True, cm, ay + tx * dy)
+                if bulge > 0.0:
+                    e -= bulge * tx * (1.0 - tx)
+                if e < best:
+                    best = e
+                    if los and best < -tol:
+                        return best
+            if ty < _INF:
+                e = az + ty * dz - mid_height(z, xs, ys, ixw, iyw, uniform, node, False, rm, ax + ty * dx)
+                if bulge > 0.0:
+                    e -= bulge * ty * (1.0 - ty)
+                if e < best:
+                    best = e
+                    if los and best < -tol:
+                        return best
+        sp = node_push(stk, sp, xs, ys, node, split, track)
     return best
 
 
@@ -503,7 +379,7 @@ PAIR_CHUNK = 512
 def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop):
     """The parallel pair loops of the grid walk: segments or a visibility matrix (see "Compile time").
 
-    ``g`` is a :data:`WalkGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
+    ``g`` is a :data:`~terrainvis.core.surface.SurfaceGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
     ``kc`` the curvature coefficient over twice the earth's radius (0: flat). ``stop`` is
     the stop flag of :mod:`terrainvis.core.interrupt`, read at the start of every iteration
     (an iteration with it set does nothing; the partial result is then never used).
@@ -556,14 +432,6 @@ def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop
 
 
 # --------------------------------------------------------------------------- TIN
-#: A TIN as the clip kernel reads it, in local coordinates (origin at the bucket grid's
-#: corner): ``vx``, ``vy``, ``vz`` (n,) float64 vertex coordinates; ``faces`` (f, 3)
-#: vertex indices; the uniform bucket grid of ``TIN._buckets()``: ``starts``
-#: (nbx * nby + 1,) and ``items`` the faces of each bucket (CSR), ``x0``, ``y0`` its
-#: corner, ``bw``, ``bh`` its bucket sizes, ``nbx``, ``nby`` its buckets per row and column.
-TinMesh = namedtuple("TinMesh", ["vx", "vy", "vz", "faces", "starts", "items", "x0", "y0", "bw", "bh", "nbx", "nby"])
-
-
 @nb.njit(cache=True, nogil=True)
 def _face_clip_min(mesh, f, seg, t0, t1, eps, bulge):
     """Min clearance of the segment over the part of [t0, t1] whose ground track is in face f
@@ -623,11 +491,8 @@ def _face_clip_min(mesh, f, seg, t0, t1, eps, bulge):
     f_lo = _INF
     for q in range(2):
         t = lo if q == 0 else hi
-        x = ax + t * dx
-        y = ay + t * dy
-        l1 = ((x - x0) * (y2 - y0) - (x2 - x0) * (y - y0)) / det
-        l2 = ((x1 - x0) * (y - y0) - (x - x0) * (y1 - y0)) / det
-        zs = (1.0 - l1 - l2) * vz[i0] + l1 * vz[i1] + l2 * vz[i2]
+        _, l1, l2 = barycentric(vx, vy, i0, i1, i2, ax + t * dx, ay + t * dy)
+        zs = weighted(vz, i0, i1, i2, l1, l2)
         c = az + t * dz - zs
         if q == 0:
             f_lo = c
@@ -640,7 +505,7 @@ def _face_clip_min(mesh, f, seg, t0, t1, eps, bulge):
 
 @nb.njit(cache=True, nogil=True)
 def _tin_segment_min(mesh, seg, t0, t1, eps, bulge):
-    """Exact minimum clearance of the segment ``seg`` over [t0, t1] on the :data:`TinMesh`.
+    """Exact minimum clearance of the segment ``seg`` over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceTin`.
 
     The buckets whose rows and columns the ground track passes through (plus one bucket
     of margin) are visited; every face in them is clipped against the track and the
@@ -699,7 +564,7 @@ def _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc):
 def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out, stop):
     """Exact minimum clearance of each segment over a TIN (clip against every face crossed).
 
-    ``mesh`` is a :data:`TinMesh`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
+    ``mesh`` is a :data:`~terrainvis.core.surface.SurfaceTin`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
     ``kc`` the curvature coefficient over twice the earth's radius (0: flat). The segment
     is tested over the interval of :func:`interval_start` (see :func:`_tin_segment_min`).
     Segments not started once the stop flag ``stop`` is set are skipped

@@ -51,7 +51,9 @@ Kernel arguments
 The kernels read their state through named tuples built by
 :mod:`terrainvis.visibility.sweep` (no function takes more than about ten arguments):
 
-* :data:`SweepGrid` the surface (heights, local coordinate vectors, inverse widths,
+* :data:`~terrainvis.core.surface.SurfaceGrid` the surface (the core's grid record:
+  heights, NaN being nodata, local coordinate vectors from the grid's first sample,
+  inverse widths, the strip maxima ``cmax``/``rmax`` of :func:`strip_max`,
   ``uniform``, ``has_nan``);
 * :data:`Eye` the eye's cell ``(re, ce)`` and position ``(ex, ey, ez)``;
 * :data:`Rules` the predicate's numbers and the bounds' margins (target height, trim,
@@ -74,10 +76,6 @@ from collections import namedtuple
 
 import numba as nb
 import numpy as np
-from numba.core import cgutils
-from numba.core import types as nbtypes
-from numba.extending import intrinsic
-from numba.np.arrayobj import make_array
 
 from ..tolerances import (
     DIAGONAL_SLACK,
@@ -90,7 +88,10 @@ from ..tolerances import (
     WEDGE_BOUNDARY_SLACK,
 )
 
-from ._kernels import _canonical, _locate, curved_min, interval_start
+from ..core.surface import borrow, borrow_grid, cell_height, line_height, tri_height
+from ..core.surface import locate as _locate
+from ._kernels import _canonical, curved_min, interval_start
+from .walk import cell_diagonal, cells_next, cells_start
 
 _INF = np.inf
 
@@ -110,13 +111,6 @@ _PEPS = PSEUDO_ANGLE_SLACK
 #: Slack on clipping parameters along an edge.
 _LEPS = EDGE_CLIP_SLACK
 
-#: The surface, in local coordinates (origin at the grid's first sample): ``z`` (rows,
-#: cols) float64 heights (NaN = nodata); ``xs`` (cols,), ``ys`` (rows,) float64
-#: coordinates; ``ixw`` (cols - 1,), ``iyw`` (rows - 1,) inverse cell widths; ``uniform``
-#: (both spacings uniform) and ``has_nan`` (the grid holds nodata), bools; ``cmax``
-#: (segments, cols) and ``rmax`` (rows, segments) the largest height of each column's and
-#: each row's aligned runs of SEG cells (:func:`strip_max`).
-SweepGrid = namedtuple("SweepGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan", "cmax", "rmax"])
 #: The eye: its cell ``(re, ce)`` (ints) and its position ``(ex, ey, ez)`` (local coordinates).
 Eye = namedtuple("Eye", ["re", "ce", "ex", "ey", "ez"])
 #: The predicate's numbers and the bounds' margins (floats): ``ht`` target height above
@@ -144,37 +138,6 @@ Targets = namedtuple("Targets", ["own", "code", "tx", "ty", "tz", "tstart", "tor
 #: and ``grp`` (groups, nfin + 2) those of the old blocks (older than the previous one) of
 #: each group of GROUP blocks. Each row is at the wedge resolution of its rings' level.
 Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads", "grp"])
-
-
-# --------------------------------------------------------------------------- borrowed arrays
-@intrinsic
-def _borrow(typingctx, arr):
-    """A view of ``arr`` without its reference count (no meminfo): valid while ``arr`` is.
-
-    Numba counts references to every array a function receives or binds, with atomic
-    operations on the array's shared counter; in functions as large as the sweep's its
-    pruning pass leaves most of them, so each call of a walk or of a ring's helpers paid
-    about twenty atomic increments and decrements (38 % of a viewshed's time, both threads
-    bouncing the same counters). Views from this function have no counter: their
-    increments and decrements are a test of a null pointer. :func:`_sector` makes them
-    once per sector, from arrays that stay alive until it returns.
-    """
-    if not isinstance(arr, nbtypes.Array):
-        return None
-
-    def codegen(context, builder, sig, args):
-        src = make_array(arr)(context, builder, value=args[0])
-        dst = make_array(arr)(context, builder)
-        dst.data = src.data
-        dst.shape = src.shape
-        dst.strides = src.strides
-        dst.itemsize = src.itemsize
-        dst.nitems = src.nitems
-        dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
-        dst.parent = cgutils.get_null_value(dst.parent.type)
-        return dst._getvalue()
-
-    return arr(arr), codegen
 
 
 # --------------------------------------------------------------------------- geometry
@@ -240,23 +203,14 @@ def _tri_present(z, r, c, upper):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _tri_height(g, r, c, upper, x, y):
-    """Height of the plane of one triangle of cell (r, c) at (x, y) (the same formulas as
-    the pair engine's ``_cell_height``, without its clamping)."""
-    z = g.z
-    u = (x - g.xs[c]) * g.ixw[c]
-    v = (y - g.ys[r]) * g.iyw[r]
-    z00 = z[r, c]
-    z11 = z[r + 1, c + 1]
-    if not upper:
-        z01 = z[r, c + 1]
-        return z00 + u * (z01 - z00) + v * (z11 - z01)
-    z10 = z[r + 1, c]
-    return z00 + v * (z10 - z00) + u * (z11 - z10)
+    """Height of the plane of one triangle of cell (r, c) at (x, y) (the core's
+    :func:`~terrainvis.core.surface.tri_height`: the pair engine's cell height, not clamped)."""
+    return tri_height(g.z, g.xs, g.ys, g.ixw, g.iyw, r, c, upper, x, y)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def surface_height(g, x, y):
-    """Height of the surface of the :data:`SweepGrid` ``g`` at (x, y) (local
+    """Height of the surface of the :data:`~terrainvis.core.surface.SurfaceGrid` ``g`` at (x, y) (local
     coordinates), NaN on an absent triangle."""
     c = locate(g.xs, g.ixw, g.uniform, x)
     r = locate(g.ys, g.iyw, g.uniform, y)
@@ -285,9 +239,9 @@ def _edge_clear(g, kind, r, c, ray, t):
     y = ey + t * dy
     if kind == 0:
         v = (y - g.ys[r]) * g.iyw[r]
-        return ez + t * dz - (z[r, c] + v * (z[r + 1, c] - z[r, c]))
+        return ez + t * dz - line_height(z, r, c, True, v)
     u = (x - g.xs[c]) * g.ixw[c]
-    return ez + t * dz - (z[r, c] + u * (z[r, c + 1] - z[r, c]))
+    return ez + t * dz - line_height(z, r, c, False, u)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -332,11 +286,9 @@ def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
     xs, ys, ixw, iyw = g.xs, g.ys, g.ixw, g.iyw
     ex, ey, ez, dx, dy, dz = ray
     td = _INF
-    den = dx * ixw[c] - dy * iyw[r]
-    if den != 0.0:
-        t = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
-        if t > ta and t < tb:
-            td = t
+    t = cell_diagonal(xs, ys, ixw, iyw, r, c, (ex, ey, dx, dy))
+    if t > ta and t < tb:
+        td = t
     if not g.has_nan and bulge == 0.0:
         tm = 0.5 * (ta + tb) if td == _INF else 0.5 * (ta + td)
         u = (ex + tm * dx - xs[c]) * ixw[c]
@@ -384,7 +336,7 @@ def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def walk_min(g, ray, t0, t1, stop, bulge):
-    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceGrid` ``g``
     (:func:`_walk_edges` on a grid without nodata, :func:`_walk_cells` otherwise)."""
     if g.has_nan:
         return _walk_cells(g, ray, t0, t1, stop, bulge)
@@ -406,68 +358,40 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
         return _INF
     xs, ys, ixw, iyw, z = g.xs, g.ys, g.ixw, g.iyw, g.z
     ex, ey, ez, dx, dy, dz = ray
-    nr = ys.shape[0]
-    nc = xs.shape[0]
-    x = ex + t0 * dx
-    y = ey + t0 * dy
-    c = locate(xs, ixw, g.uniform, x)
-    r = locate(ys, iyw, g.uniform, y)
-    if dx < 0.0 and c > 0 and x <= xs[c]:
-        c -= 1
-    if dy < 0.0 and r > 0 and y <= ys[r]:
-        r -= 1
-    sx = 1 if dx > 0.0 else -1
-    sy = 1 if dy > 0.0 else -1
-    idx = 1.0 / dx if dx != 0.0 else 0.0
-    idy = 1.0 / dy if dy != 0.0 else 0.0
+    track = (ex, ey, dx, dy)
+    cur = cells_start(xs, ys, ixw, iyw, g.uniform, track, t0, t1)
     t = t0
-    fa = ez + t * dz - _cell_z(z, xs, ys, ixw, iyw, r, c, x, y)
+    fa = ez + t * dz - cell_height(z, xs, ys, ixw, iyw, cur.r, cur.c, ex + t * dx, ey + t * dy)
     best = fa if bulge == 0.0 else fa - bulge * t * (1.0 - t)
     if best < stop:
         return best
     while True:
-        tx = _INF
-        ty = _INF
-        if dx > 0.0:
-            tx = (xs[c + 1] - ex) * idx
-        elif dx < 0.0:
-            tx = (xs[c] - ex) * idx
-        if dy > 0.0:
-            ty = (ys[r + 1] - ey) * idy
-        elif dy < 0.0:
-            ty = (ys[r] - ey) * idy
-        tn = min(tx, ty, t1)
-        if tn < t:
-            tn = t
+        r, c, tn = cur.r, cur.c, cur.tn
         # the diagonal (r, c)-(r+1, c+1) inside (t, tn)
-        den = dx * ixw[c] - dy * iyw[r]
-        if den != 0.0:
-            td = ((ey - ys[r]) * iyw[r] - (ex - xs[c]) * ixw[c]) / den
-            if td > t and td < tn:
-                u = (ex + td * dx - xs[c]) * ixw[c]
-                fd = ez + td * dz - (z[r, c] + u * (z[r + 1, c + 1] - z[r, c]))
-                e = fd if bulge == 0.0 else curved_min(fa, fd, t, td, bulge)
-                if e < best:
-                    best = e
-                    if best < stop:
-                        return best
-                fa = fd
-                t = td
+        td = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
+        if td > t and td < tn:
+            u = (ex + td * dx - xs[c]) * ixw[c]
+            fd = ez + td * dz - (z[r, c] + u * (z[r + 1, c + 1] - z[r, c]))
+            e = fd if bulge == 0.0 else curved_min(fa, fd, t, td, bulge)
+            if e < best:
+                best = e
+                if best < stop:
+                    return best
+            fa = fd
+            t = td
         # where the track leaves the cell (or the interval ends). Which line it crosses
         # is told by tx <= ty, not by tn == tx: rounding can put a start on a grid line a
         # hair inside the cell it leaves, and tn is then raised from tx (or ty) to t
         if tn >= t1:
-            xn = ex + t1 * dx
-            yn = ey + t1 * dy
-            fn = ez + t1 * dz - _cell_z(z, xs, ys, ixw, iyw, r, c, xn, yn)
-        elif tx <= ty:
+            fn = ez + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ex + t1 * dx, ey + t1 * dy)
+        elif cur.tx <= cur.ty:
             cn = c + 1 if dx > 0.0 else c
             v = min(max((ey + tn * dy - ys[r]) * iyw[r], 0.0), 1.0)
-            fn = ez + tn * dz - (z[r, cn] + v * (z[r + 1, cn] - z[r, cn]))
+            fn = ez + tn * dz - line_height(z, r, cn, True, v)
         else:
             rn = r + 1 if dy > 0.0 else r
             u = min(max((ex + tn * dx - xs[c]) * ixw[c], 0.0), 1.0)
-            fn = ez + tn * dz - (z[rn, c] + u * (z[rn, c + 1] - z[rn, c]))
+            fn = ez + tn * dz - line_height(z, rn, c, False, u)
         e = fn if bulge == 0.0 else curved_min(fa, fn, t, tn, bulge)
         if e < best:
             best = e
@@ -475,34 +399,17 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
                 return best
         if tn >= t1:
             break
-        if tx <= tn:
-            c += sx
-        if ty <= tn:
-            r += sy
-        if c < 0 or c > nc - 2 or r < 0 or r > nr - 2:
+        cur = cells_next(xs, ys, cur, track, t1)
+        if cur.r < 0:
             break
         fa = fn
         t = tn
     return best
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _cell_z(z, xs, ys, ixw, iyw, r, c, x, y):
-    """Height of cell (r, c)'s surface at (x, y), clamped into the cell (as the pair engine)."""
-    u = min(max((x - xs[c]) * ixw[c], 0.0), 1.0)
-    v = min(max((y - ys[r]) * iyw[r], 0.0), 1.0)
-    z00 = z[r, c]
-    z11 = z[r + 1, c + 1]
-    if u >= v:
-        z01 = z[r, c + 1]
-        return z00 + u * (z01 - z00) + v * (z11 - z01)
-    z10 = z[r + 1, c]
-    return z00 + v * (z10 - z00) + u * (z11 - z10)
-
-
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _walk_cells(g, ray, t0, t1, stop, bulge):
-    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`SweepGrid` ``g``.
+    """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceGrid` ``g``.
 
     ``ray`` is ``(ex, ey, ez, dx, dy, dz)`` in local coordinates. The ground track is
     walked cell by cell; in each cell the clearance is evaluated at the entry, the exit
@@ -514,50 +421,22 @@ def _walk_cells(g, ray, t0, t1, stop, bulge):
     """
     if t1 < t0:
         return _INF
-    xs, ys = g.xs, g.ys
     ex, ey, ez, dx, dy, dz = ray
-    nr = ys.shape[0]
-    nc = xs.shape[0]
-    x = ex + t0 * dx
-    y = ey + t0 * dy
-    c = locate(xs, g.ixw, g.uniform, x)
-    r = locate(ys, g.iyw, g.uniform, y)
-    if dx < 0.0 and c > 0 and x <= xs[c]:
-        c -= 1
-    if dy < 0.0 and r > 0 and y <= ys[r]:
-        r -= 1
-    t = t0
+    cur = cells_start(g.xs, g.ys, g.ixw, g.iyw, g.uniform, (ex, ey, dx, dy), t0, t1)
     best = _INF
     first = True
     while True:
-        tx = _INF
-        ty = _INF
-        if dx > 0.0:
-            tx = (xs[c + 1] - ex) / dx
-        elif dx < 0.0:
-            tx = (xs[c] - ex) / dx
-        if dy > 0.0:
-            ty = (ys[r + 1] - ey) / dy
-        elif dy < 0.0:
-            ty = (ys[r] - ey) / dy
-        tn = min(tx, ty, t1)
-        if tn < t:
-            tn = t
-        m = _cell_piece(g, r, c, ray, t, tn, first or g.has_nan, bulge)
+        m = _cell_piece(g, cur.r, cur.c, ray, cur.t, cur.tn, first or g.has_nan, bulge)
         first = False
         if m < best:
             best = m
             if best < stop:
                 return best
-        if tn >= t1:
+        if cur.tn >= t1:
             break
-        if tx <= tn:
-            c += 1 if dx > 0.0 else -1
-        if ty <= tn:
-            r += 1 if dy > 0.0 else -1
-        if c < 0 or c > nc - 2 or r < 0 or r > nr - 2:
+        cur = cells_next(g.xs, g.ys, cur, (ex, ey, dx, dy), t1)
+        if cur.r < 0:
             break
-        t = tn
     return best
 
 
@@ -1726,7 +1605,7 @@ def _keep_alive(owners):
 @nb.njit(cache=True, nogil=True, error_model="numpy")
 def _sector(g, eye, rules, lay, tg, s, stats, stop):
     """The sweep of one sector (see :func:`sweep`), on views of its inputs and of its work
-    arrays without reference counts (:func:`_borrow`)."""
+    arrays without reference counts (:func:`~terrainvis.core.surface.borrow`)."""
     nsec, b0, r1, jnear, jstop = lay
     nfin = (b0 << _level(jstop, r1)) // nsec
     blen = max(g.ys.shape[0], g.xs.shape[0]) + 2
@@ -1743,17 +1622,16 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     hidden_own = np.zeros((2, blen // SEG + 3), dtype=np.bool_)
     ranges_own = np.zeros((3, 2), dtype=np.int64)
     counts_own = np.zeros(5, dtype=np.int64)
-    g = SweepGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), g.uniform, g.has_nan,
-                  _borrow(g.cmax), _borrow(g.rmax))
-    tg = Targets(tg.own, _borrow(tg.code), _borrow(tg.tx), _borrow(tg.ty), _borrow(tg.tz), _borrow(tg.tstart),
-                 _borrow(tg.torder), _borrow(tg.tcode))
-    w = Wedges(_borrow(w_own.ubp), _borrow(w_own.ubold), _borrow(w_own.lb), _borrow(w_own.hist),
-               _borrow(w_own.quads), _borrow(w_own.grp))
-    tmp = _borrow(tmp_own)
-    buf = _borrow(buf_own)
-    hidden = _borrow(hidden_own)
-    ranges = _borrow(ranges_own)
-    counts = _borrow(counts_own)
+    g = borrow_grid(g)
+    tg = Targets(tg.own, borrow(tg.code), borrow(tg.tx), borrow(tg.ty), borrow(tg.tz), borrow(tg.tstart),
+                 borrow(tg.torder), borrow(tg.tcode))
+    w = Wedges(borrow(w_own.ubp), borrow(w_own.ubold), borrow(w_own.lb), borrow(w_own.hist),
+               borrow(w_own.quads), borrow(w_own.grp))
+    tmp = borrow(tmp_own)
+    buf = borrow(buf_own)
+    hidden = borrow(hidden_own)
+    ranges = borrow(ranges_own)
+    counts = borrow(counts_own)
     xs, ys, z = g.xs, g.ys, g.z
     ntg = tg.tx.shape[0]
     nr = ys.shape[0]

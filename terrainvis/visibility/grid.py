@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.interrupt import call
+from ..core.surface import SurfaceGrid, no_strips
 from ..tolerances import DIVISOR_FLOOR
 from . import _kernels
 
@@ -145,9 +146,11 @@ def _local(points: np.ndarray, acc: GridAccel) -> np.ndarray:
     return out
 
 
-def _walk_grid(grid, acc: GridAccel) -> _kernels.WalkGrid:
-    """The arrays the kernels read, grouped (no copies)."""
-    return _kernels.WalkGrid(grid.z, acc.xs, acc.ys, acc.ixw, acc.iyw, acc.pyr, acc.off, acc.nxl, acc.uniform, acc.ltop)
+def _walk_grid(grid, acc: GridAccel) -> SurfaceGrid:
+    """The arrays the kernels read, grouped (no copies; no strip maxima)."""
+    cmax, rmax = no_strips()
+    return SurfaceGrid(grid.z, acc.xs, acc.ys, acc.ixw, acc.iyw, acc.uniform, bool(grid.n_nodata > 0), acc.pyr, acc.off,
+                       acc.nxl, acc.ltop, cmax, rmax)
 
 
 def grid_clearance(

@@ -73,6 +73,7 @@ import numpy as np
 
 from ..tolerances import EXTENT_INSIDE_REL, TRIM_MARGIN_REL
 from ..core.interrupt import call
+from ..core.surface import SurfaceGrid, no_pyramid
 from ..core.validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
@@ -366,11 +367,12 @@ def _local_axes(grid: HeightGrid):
     return acc
 
 
-def _sweep_grid(grid: HeightGrid) -> _vk.SweepGrid:
-    """The grid as the sweep kernels read it (local coordinates; no copies of the heights)."""
+def _sweep_grid(grid: HeightGrid) -> SurfaceGrid:
+    """The grid as the sweep kernels read it (local coordinates; no copies of the heights; no pyramid)."""
     xs, ys, ixw, iyw, uniform = _local_axes(grid)
     cmax, rmax = _strip_max(grid)
-    return _vk.SweepGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0), cmax, rmax)
+    pyr, off, nxl, ltop = no_pyramid()
+    return SurfaceGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0), pyr, off, nxl, ltop, cmax, rmax)
 
 
 def _strip_max(grid: HeightGrid):

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from ..core.interrupt import call, for_threads
+from ..core.surface import SurfaceTin, no_neighbours
 from ..tolerances import TIN_ON_EDGE_REL
 
 from . import _kernels
@@ -53,7 +54,8 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0, kc: float
     lb[:, 0] -= x0
     la[:, 1] -= y0
     lb[:, 1] -= y0
-    mesh = _kernels.TinMesh(vx, vy, vz, tin.faces, bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx, bk.nby)
+    mesh = SurfaceTin(vx, vy, vz, tin.faces, no_neighbours(), bk.starts, bk.items, 0.0, 0.0, bk.bw, bk.bh, bk.nbx,
+                      bk.nby)
     # through the interrupt helper: Ctrl-C stops the kernel within a segment (work: the
     # faces a segment across the TIN crosses, about the square root of their number, each)
     call(for_threads(_kernels.tin_pairs, _kernels.tin_pairs_serial), mesh, la, lb, float(delta), float(end_radius), eps,

@@ -1,7 +1,8 @@
-"""Numba loops of the calibrated relocation (:mod:`terrainvis.relocation.calibrated`).
+"""Numba loops of the threshold engine (:mod:`terrainvis.visibility.thresholds`).
 
-Kernels loop and never validate; :mod:`terrainvis.relocation.calibrated` checks the input, moves
-coordinates to the terrain's local origin and passes plain arrays.
+Kernels loop and never validate; :mod:`terrainvis.visibility.thresholds` builds their
+state, and its callers (:mod:`terrainvis.relocation.calibrated`, :mod:`simplifiers.visopt`)
+check the input, move coordinates to the terrain's local origin and pass plain arrays.
 
 Thresholds
 ----------
@@ -26,6 +27,17 @@ the segment must clear the surface raised by ``kc d1 d2 = B u (1 - u)`` with
 ``A / u + beta + B (1 - u)`` with ``A < 0`` is concave and can peak inside the piece,
 at ``u* = sqrt(-A / B)``: :func:`_piece_max` checks it.
 
+Kernel arguments
+----------------
+The kernels read the surface as the core's :data:`~terrainvis.core.surface.SurfaceGrid`
+(with the pair engine's pyramid) or :data:`~terrainvis.core.surface.SurfaceTin` (with
+the faces' neighbours ``nbr``), in local coordinates; the predicate and the choice of a
+height as :data:`Rules`; one track as a :data:`Track`; the neighbours of the points as
+:data:`Neighbours`; a point as the 3-tuple ``(x, y, z)``. No function takes more than
+twelve positional arguments (``tests/test_visibility_layout.py``).
+
+The walks
+---------
 * :func:`grid_max_slope` walks a HeightGrid with the visibility engine's min/max
   pyramid: a node whose maximum height ``H`` gives
   ``(H - tol - qz) / u <= best`` over its parameter range cannot raise the threshold
@@ -54,19 +66,33 @@ engine will give there.
 
 from __future__ import annotations
 
-from collections import namedtuple
-
 import numba as nb
 import numpy as np
 
-from ..tolerances import TRACK_EDGE_SLACK, TRACK_FACE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
-from ..visibility._kernels import WalkGrid, WalkStack, _cell_height, _locate, new_stack
-from ..visibility._sweep_kernels import _borrow
+from collections import namedtuple
+
+from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height
+from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
+from ._kernels import WalkStack, new_stack
+from .walk import cell_diagonal, cells_next, cells_start, mid_height, node_pop, node_push, node_root, node_split
 
 _INF = np.inf
 #: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
 #: would compile the row loop once more for the literal).
 _NO_SKIP = np.int64(-1)
+
+#: The predicate and the choice of a height: the trim ``delta``, the ``end_radius``, the
+#: clearance tolerance ``tol``, the curvature coefficient ``kc`` (``curvature / (2 R)``,
+#: 0: flat), the height ``margin`` kept from thresholds and the least gain ``min_gain``
+#: (an int) that moves a point (:func:`best_height_kept`).
+Rules = namedtuple("Rules", ["delta", "end_radius", "tol", "kc", "margin", "min_gain"])
+#: The neighbours of each point p[i] (:func:`best_height_kept`): their thresholds
+#: ``lthr`` (n, L) float64, T's verdicts ``lvis`` (n, L) int8 and the ``weight`` of one.
+Neighbours = namedtuple("Neighbours", ["lthr", "lvis", "weight"])
+#: One track seen from the target q = (``qx``, ``qy``) at height ``qz``: the direction
+#: (``dx``, ``dy``) = p - q, the tested interval [``u0``, ``u1``], the clearance tolerance
+#: ``tol`` and the ``bulge`` ``kc (dx**2 + dy**2)`` of earth curvature (0: flat).
+Track = namedtuple("Track", ["qx", "qy", "qz", "dx", "dy", "u0", "u1", "tol", "bulge"])
 
 
 # --------------------------------------------------------------------------- grid
@@ -93,29 +119,28 @@ def _piece_max(ua, ha, ub, hb, qz, tol, bulge):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
-    """Max of :func:`_value` over cell (r, c)'s part [a0, a1] of the track: at its
-    breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under curvature,
-    inside its pieces."""
+def _leaf(g, r, c, tr, a0, a1, with_a0):
+    """Max of :func:`_value` over cell (r, c)'s part [a0, a1] of the :data:`Track` ``tr``: at
+    its breakpoints (a0 unless ``with_a0`` is False, the diagonal, a1) and, under
+    curvature, inside its pieces."""
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    h1 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy)
+    qx, qy, qz, dx, dy, tol, bulge = tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, tr.tol, tr.bulge
+    h1 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + a1 * dx, qy + a1 * dy)
     best = _value(h1, a1, qz, tol, bulge)
     if with_a0 or bulge > 0.0:
-        h0 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a0 * dx, qy + a0 * dy)
+        h0 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + a0 * dx, qy + a0 * dy)
         if with_a0:
             v = _value(h0, a0, qz, tol, bulge)
             if v > best:
                 best = v
     td = -1.0
-    den = dx * ixw[c] - dy * iyw[r]
-    if den != 0.0:
-        t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
-        if t > a0 and t < a1:
-            td = t
-            hd = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
-            v = _value(hd, td, qz, tol, bulge)
-            if v > best:
-                best = v
+    t = cell_diagonal(xs, ys, ixw, iyw, r, c, (qx, qy, dx, dy))
+    if t > a0 and t < a1:
+        td = t
+        hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+        v = _value(hd, td, qz, tol, bulge)
+        if v > best:
+            best = v
     if bulge > 0.0:
         if td > 0.0:
             v = max(_piece_max(a0, h0, td, hd, qz, tol, bulge), _piece_max(td, hd, a1, h1, qz, tol, bulge))
@@ -127,36 +152,28 @@ def _leaf(g, r, c, qx, qy, qz, dx, dy, a0, a1, with_a0, tol, bulge):
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
-    """Max of :func:`_value` over the track q + u d, u in [u0, u1] (u0 > 0): the threshold less qz.
+def grid_max_slope(g, tr, st):
+    """Max of :func:`_value` over the :data:`Track` ``tr``, q + u d for u in [u0, u1] (u0 > 0):
+    the threshold less qz.
 
-    ``g`` is the grid engine's :data:`~terrainvis.visibility._kernels.WalkGrid` (local
-    coordinates), ``st`` a scratch stack (:func:`~terrainvis.visibility._kernels.new_stack`).
+    ``g`` is the grid engine's :data:`~terrainvis.core.surface.SurfaceGrid` (local
+    coordinates, with its pyramid), ``st`` a scratch stack
+    (:func:`~terrainvis.visibility._kernels.new_stack`).
     The descent visits children nearest to q first, so that the large values near q
     are found before the far nodes they prune.
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    pyr, off, nxl, uniform, ltop = g.pyr, g.off, g.nxl, g.uniform, g.ltop
-    sL, sR, sC, sT = st.level, st.row, st.col, st.t
-    ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
+    pyr, off, nxl, uniform = g.pyr, g.off, g.nxl, g.uniform
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
+    track = (qx, qy, dx, dy)
     best = -_INF
-    sL[0] = ltop
-    sR[0] = 0
-    sC[0] = 0
-    sT[0] = u0
-    sT[1] = u1
-    sp = 1
+    stk = (st.level, st.row, st.col, st.t)
+    sp = node_root(stk, g.ltop, u0, u1)
     last = -_INF
     while sp > 0:
-        sp -= 1
-        L = sL[sp]
-        R = sR[sp]
-        C = sC[sp]
-        a0 = sT[2 * sp]
-        a1 = sT[2 * sp + 1]
+        sp, L, R, C, a0, a1 = node_pop(stk, sp)
         if L == 0:
-            v = _leaf(g, R, C, qx, qy, qz, dx, dy, a0, a1, a0 != last, tol, bulge)
+            v = _leaf(g, R, C, tr, a0, a1, a0 != last)
             last = a1
             if v > best:
                 best = v
@@ -166,70 +183,19 @@ def grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st):
         bound = (num / a0 if num > 0.0 else num / a1) + bulge * (1.0 - a0)
         if bound <= best:
             continue
-        half = 1 << (L - 1)
-        cm = (C << L) + half
-        rm = (R << L) + half
-        splitx = cm < ncx
-        splity = rm < ncy
-        s1 = _INF
-        s2 = _INF
-        if splitx and dx != 0.0:
-            tx = (xs[cm] - qx) / dx
-            if tx > a0 and tx < a1:
-                s1 = tx
-                if L >= 2:  # probe the surface where the track crosses the mid line
-                    yy = qy + tx * dy
-                    r = _locate(ys, iyw, R << L, min((R + 1) << L, ncy), uniform, yy)
-                    v = min(max((yy - ys[r]) * iyw[r], 0.0), 1.0)
-                    e = _value(z[r, cm] + v * (z[r + 1, cm] - z[r, cm]), tx, qz, tol, bulge)
-                    if e > best:
-                        best = e
-        if splity and dy != 0.0:
-            ty = (ys[rm] - qy) / dy
-            if ty > a0 and ty < a1:
-                if L >= 2:
-                    xx = qx + ty * dx
-                    c = _locate(xs, ixw, C << L, min((C + 1) << L, ncx), uniform, xx)
-                    u = min(max((xx - xs[c]) * ixw[c], 0.0), 1.0)
-                    e = _value(z[rm, c] + u * (z[rm, c + 1] - z[rm, c]), ty, qz, tol, bulge)
-                    if e > best:
-                        best = e
-                if ty < s1:
-                    s2 = s1
-                    s1 = ty
-                else:
-                    s2 = ty
-        nb_ = 1
-        if s1 < _INF:
-            nb_ = 2
-            if s2 < _INF:
-                nb_ = 3
-        for j in range(nb_ - 1, -1, -1):  # far pieces first on the stack: near ones pop first
-            if j == 0:
-                b0 = a0
-            elif j == 1:
-                b0 = s1
-            else:
-                b0 = s2
-            if j == nb_ - 1:
-                b1 = a1
-            elif j == 0:
-                b1 = s1
-            else:
-                b1 = s2
-            tm = 0.5 * (b0 + b1)
-            cc = 2 * C
-            rr = 2 * R
-            if splitx and qx + tm * dx >= xs[cm]:
-                cc += 1
-            if splity and qy + tm * dy >= ys[rm]:
-                rr += 1
-            sL[sp] = L - 1
-            sR[sp] = rr
-            sC[sp] = cc
-            sT[2 * sp] = b0
-            sT[2 * sp + 1] = b1
-            sp += 1
+        node = (L, R, C, a0, a1)
+        split = node_split(xs, ys, node, track)
+        cm, rm, tx, ty = split
+        if L >= 2:  # probe the surface where the track crosses the mid lines
+            if tx < _INF:
+                e = _value(mid_height(z, xs, ys, ixw, iyw, uniform, node, True, cm, qy + tx * dy), tx, qz, tol, bulge)
+                if e > best:
+                    best = e
+            if ty < _INF:
+                e = _value(mid_height(z, xs, ys, ixw, iyw, uniform, node, False, rm, qx + ty * dx), ty, qz, tol, bulge)
+                if e > best:
+                    best = e
+        sp = node_push(stk, sp, xs, ys, node, split, track)  # near pieces pop first
     return best
 
 
@@ -240,61 +206,42 @@ DDA_MAX_LEVELS = 7
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_dda_max_slope(z, xs, ys, ixw, iyw, uniform, qx, qy, qz, dx, dy, u0, u1, tol, bulge):
-    """:func:`grid_max_slope` by visiting every cell the track crosses (small grids).
+def grid_dda_max_slope(g, tr):
+    """:func:`grid_max_slope` by visiting every cell the track crosses (small grids; ``g``'s
+    pyramid is not read).
 
     Each cell's part of the track is evaluated as :func:`_leaf` does, written out here:
     calling the inlined :func:`_leaf` (or a function taking the grid's arrays) at every
     cell made this walk 3 times slower on the default experiment's grids, for the same
     thresholds bit for bit (docs/relocation.md, "Cost")."""
-    ncx = xs.shape[0] - 1
-    ncy = ys.shape[0] - 1
-    c = _locate(xs, ixw, 0, ncx, uniform, qx + u0 * dx)
-    r = _locate(ys, iyw, 0, ncy, uniform, qy + u0 * dy)
-    # on a grid line while moving backwards, the cell ahead is the one behind the line
-    if dx < 0.0 and qx + u0 * dx <= xs[c] and c > 0:
-        c -= 1
-    if dy < 0.0 and qy + u0 * dy <= ys[r] and r > 0:
-        r -= 1
+    z, xs, ys, ixw, iyw, uniform = g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
+    track = (qx, qy, dx, dy)
     curved = bulge > 0.0
     best = -_INF
-    a = u0
     first = True
+    cur = cells_start(xs, ys, ixw, iyw, uniform, track, u0, u1)
     while True:
-        ux = _INF
-        if dx > 0.0:
-            ux = (xs[c + 1] - qx) / dx
-        elif dx < 0.0:
-            ux = (xs[c] - qx) / dx
-        uy = _INF
-        if dy > 0.0:
-            uy = (ys[r + 1] - qy) / dy
-        elif dy < 0.0:
-            uy = (ys[r] - qy) / dy
-        b = min(ux, uy, u1)
-        if b < a:
-            b = a
+        r, c, a, b = cur.r, cur.c, cur.t, cur.tn
         # the cell's part [a, b] of the track: its breakpoints a (first cell only), the diagonal, b
-        h1 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + b * dx, qy + b * dy)
+        h1 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + b * dx, qy + b * dy)
         v = _value(h1, b, qz, tol, bulge)
         h0 = 0.0
         if first or curved:
-            h0 = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + a * dx, qy + a * dy)
+            h0 = cell_height(z, xs, ys, ixw, iyw, r, c, qx + a * dx, qy + a * dy)
             if first:
                 v0 = _value(h0, a, qz, tol, bulge)
                 if v0 > v:
                     v = v0
         td = -1.0
         hd = 0.0
-        den = dx * ixw[c] - dy * iyw[r]
-        if den != 0.0:
-            t = ((qy - ys[r]) * iyw[r] - (qx - xs[c]) * ixw[c]) / den
-            if t > a and t < b:
-                td = t
-                hd = _cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
-                vd = _value(hd, td, qz, tol, bulge)
-                if vd > v:
-                    v = vd
+        t = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
+        if t > a and t < b:
+            td = t
+            hd = cell_height(z, xs, ys, ixw, iyw, r, c, qx + td * dx, qy + td * dy)
+            vd = _value(hd, td, qz, tol, bulge)
+            if vd > v:
+                v = vd
         if curved:
             if td > 0.0:
                 vp = max(_piece_max(a, h0, td, hd, qz, tol, bulge), _piece_max(td, hd, b, h1, qz, tol, bulge))
@@ -307,12 +254,8 @@ def grid_dda_max_slope(z, xs, ys, ixw, iyw, uniform, qx, qy, qz, dx, dy, u0, u1,
             best = v
         if b >= u1:
             break
-        a = b
-        if ux <= b:
-            c += 1 if dx > 0.0 else -1
-        if uy <= b:
-            r += 1 if dy > 0.0 else -1
-        if c < 0 or c >= ncx or r < 0 or r >= ncy:
+        cur = cells_next(xs, ys, cur, track, u1)
+        if cur.r < 0:
             break
     return best
 
@@ -338,71 +281,27 @@ def interval(px, py, pz, qx, qy, qz, delta, end_radius):
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_threshold(g, st, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
-    """The threshold height of p at (px, py) for the target (qx, qy, qz); ``pz`` (a height
-    near the answer) only sets the trim; ``kc`` the curvature coefficient (0: flat).
-    ``-inf`` when the segment is not tested."""
-    u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
+def grid_threshold(g, st, p, q, rules):
+    """The threshold height of the point p = (px, py, pz) for the target q = (qx, qy, qz)
+    under the :data:`Rules` ``rules``; ``pz`` (a height near the answer) only sets the
+    trim. ``-inf`` when the segment is not tested."""
+    px, py, pz = p
+    qx, qy, qz = q
+    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
     if u0 < 0.0:
         return -_INF
     dx = px - qx
     dy = py - qy
-    bulge = kc * (dx * dx + dy * dy)
+    tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy))
     if g.ltop <= DDA_MAX_LEVELS:
-        return qz + grid_dda_max_slope(g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform, qx, qy, qz, dx, dy, u0, u1, tol,
-                                       bulge)
-    return qz + grid_max_slope(g, qx, qy, qz, dx, dy, u0, u1, tol, bulge, st)
+        return qz + grid_dda_max_slope(g, tr)
+    return qz + grid_max_slope(g, tr, st)
 
 
 # --------------------------------------------------------------------------- TIN
-#: A TIN as the threshold walk reads it, in local coordinates: vertices ``vx``, ``vy``,
-#: ``vz`` (n,) float64; ``faces`` (m, 3) int64, counter-clockwise; ``nbr`` (m, 3) int64, the
-#: face across edge (faces[f, e], faces[f, (e + 1) % 3]) or -1 on the boundary; the face
-#: buckets ``starts``, ``items`` (``TIN._buckets``) of ``nbx`` x ``nby`` buckets of ``bw`` x ``bh``.
-TinWalk = namedtuple("TinWalk", ["vx", "vy", "vz", "faces", "nbr", "starts", "items", "bw", "bh", "nbx", "nby"])
-
-
-@nb.njit(cache=True, nogil=True)
-def _face_at(w, x, y):
-    """A face of the TIN containing (x, y) (with a tiny tolerance), or -1."""
-    c = min(max(int(np.floor(x / w.bw)), 0), w.nbx - 1)
-    r = min(max(int(np.floor(y / w.bh)), 0), w.nby - 1)
-    b = r * w.nbx + c
-    best = -1
-    best_l = -_INF
-    for k in range(w.starts[b], w.starts[b + 1]):
-        f = w.items[k]
-        i0 = w.faces[f, 0]
-        i1 = w.faces[f, 1]
-        i2 = w.faces[f, 2]
-        x0 = w.vx[i0]
-        y0 = w.vy[i0]
-        det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
-        if det == 0.0:
-            continue
-        l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
-        l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
-        low = min(1.0 - l1 - l2, l1, l2)
-        if low > best_l:  # the face the point is deepest inside (robust on shared edges)
-            best_l = low
-            best = f
-    if best_l < -TRACK_FACE_SLACK:
-        return -1
-    return best
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _plane(w, f, x, y):
-    """The height of face f's plane at (x, y)."""
-    i0 = w.faces[f, 0]
-    i1 = w.faces[f, 1]
-    i2 = w.faces[f, 2]
-    x0 = w.vx[i0]
-    y0 = w.vy[i0]
-    det = (w.vx[i1] - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (w.vy[i1] - y0)
-    l1 = ((x - x0) * (w.vy[i2] - y0) - (w.vx[i2] - x0) * (y - y0)) / det
-    l2 = ((w.vx[i1] - x0) * (y - y0) - (x - x0) * (w.vy[i1] - y0)) / det
-    return (1.0 - l1 - l2) * w.vz[i0] + l1 * w.vz[i1] + l2 * w.vz[i2]
+#: The TIN as the threshold walk reads it: the core's :data:`~terrainvis.core.surface.SurfaceTin`
+#: in local coordinates (the bucket grid's corner at the origin), faces counter-clockwise,
+#: with the neighbours ``nbr`` across each edge.
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -441,7 +340,7 @@ def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
     that position of the track: (face, u'), or (-1, u1)."""
     step = TRACK_PROBE_REL * (u1 - u) + TRACK_STEP_MIN
     while u + step < u1:
-        g = _face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
+        g = face_at(w, qx + (u + step) * dx, qy + (u + step) * dy)
         if g >= 0 and g != f:
             return g, u + step
         step *= 10.0
@@ -449,23 +348,24 @@ def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
-    """Max of :func:`_value` over the track q -> p, u in [u0, u1], on a TIN (:data:`TinWalk`).
+def tin_max_slope(w, tr):
+    """Max of :func:`_value` over the :data:`Track` ``tr`` (q -> p, u in [u0, u1]) on a TIN
+    (:data:`~terrainvis.core.surface.SurfaceTin` with its neighbours).
 
     Walks from face to face across the edges the track crosses, so the breakpoints come
     in order (the pieces between them are where the value can peak under curvature).
     Where the walk cannot go on (through a vertex into the wrong face, across a hole), it
     locates the next face a step further along the track.
     """
-    dx = px - qx
-    dy = py - qy
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
     u = u0
-    f = _face_at(w, qx + u * dx, qy + u * dy)
+    f = face_at(w, qx + u * dx, qy + u * dy)
     if f < 0:
         return _INF  # the start is outside the TIN: not a valid query
-    su = _plane(w, f, qx + u * dx, qy + u * dy)
+    su = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u * dx, qy + u * dy)
     best = _value(su, u, qz, tol, bulge)
-    if dx == 0.0 and dy == 0.0:  # a vertical segment: one ground point
+    if dx * dx + dy * dy == 0.0:  # a vertical segment: one ground point (as interval() sees it: a
+        # subnormal offset squares to 0 and is too short for the walk to step across)
         return max(best, _value(su, u1, qz, tol, bulge))
     nf = w.faces.shape[0]
     for _ in range(4 * nf + 16):
@@ -478,13 +378,13 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
             # could otherwise hand the walk back and forth); the piece skipped is ~1e-9 long
             f = g
             u = ug
-            su = _plane(w, f, qx + u * dx, qy + u * dy)
+            su = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u * dx, qy + u * dy)
             v = _value(su, u, qz, tol, bulge)
             if v > best:
                 best = v
             continue
         if ue >= u1:
-            s1 = _plane(w, f, qx + u1 * dx, qy + u1 * dy)
+            s1 = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u1 * dx, qy + u1 * dy)
             v = max(_value(s1, u1, qz, tol, bulge), _piece_max(u, su, u1, s1, qz, tol, bulge))
             return max(best, v)
         v = max(_value(se, ue, qz, tol, bulge), _piece_max(u, su, ue, se, qz, tol, bulge))
@@ -494,7 +394,7 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
         su = se
         g = w.nbr[f, e]
         if g < 0:
-            g = _face_at(w, qx + (u + TRACK_PROBE_REL) * dx, qy + (u + TRACK_PROBE_REL) * dy)
+            g = face_at(w, qx + (u + TRACK_PROBE_REL) * dx, qy + (u + TRACK_PROBE_REL) * dy)
             if g < 0:
                 return best
         f = g
@@ -502,14 +402,15 @@ def tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge):
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_threshold(w, px, py, pz, qx, qy, qz, delta, end_radius, tol, kc):
-    """The threshold height of p at (px, py) for the target (qx, qy, qz) on a TIN; see
-    :func:`grid_threshold`."""
-    u0, u1 = interval(px, py, pz, qx, qy, qz, delta, end_radius)
+def tin_threshold(w, p, q, rules):
+    """The threshold height of the point p for the target q on a TIN; see :func:`grid_threshold`."""
+    px, py, pz = p
+    qx, qy, qz = q
+    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
     if u0 < 0.0:
         return -_INF
-    bulge = kc * ((px - qx) ** 2 + (py - qy) ** 2)
-    return qz + tin_max_slope(w, qx, qy, qz, px, py, u0, u1, tol, bulge)
+    bulge = rules.kc * ((px - qx) ** 2 + (py - qy) ** 2)
+    return qz + tin_max_slope(w, Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge))
 
 
 # --------------------------------------------------------------------------- best heights
@@ -624,62 +525,75 @@ def best_height_kept(thr, vis, lthr, lvis, weight, zref, margin, min_gain):
 
 # --------------------------------------------------------------------------- loops
 @nb.njit(cache=True, nogil=True)
-def _grid_row(g, st, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
+def _grid_row(g, st, p, q, rules, skip, out):
+    """``out[k]`` = the threshold of the point p = (x, y, z) for the target q[k] (-inf for
+    k = ``skip``) on the grid ``g``."""
     # views without reference counts (the caller keeps the arrays alive): every walk
     # would otherwise count references to each array of g and st (5-19 % of the row)
-    g = WalkGrid(_borrow(g.z), _borrow(g.xs), _borrow(g.ys), _borrow(g.ixw), _borrow(g.iyw), _borrow(g.pyr),
-                 _borrow(g.off), _borrow(g.nxl), g.uniform, g.ltop)
-    st = WalkStack(_borrow(st.level), _borrow(st.row), _borrow(st.col), _borrow(st.t))
+    g = borrow_grid(g)
+    st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
         else:
-            out[k] = grid_threshold(g, st, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
+            out[k] = grid_threshold(g, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
 
 
 @nb.njit(cache=True, nogil=True)
-def _tin_row(tin, px, py, pz, q, delta, end_radius, tol, kc, skip, out):
-    # as in _grid_row (6-20 % of the row)
-    tin = TinWalk(_borrow(tin.vx), _borrow(tin.vy), _borrow(tin.vz), _borrow(tin.faces), _borrow(tin.nbr),
-                  _borrow(tin.starts), _borrow(tin.items), tin.bw, tin.bh, tin.nbx, tin.nby)
+def _tin_row(tin, p, q, rules, skip, out):
+    """:func:`_grid_row` on a TIN."""
+    tin = borrow_tin(tin)  # as in _grid_row (6-20 % of the row)
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
         else:
-            out[k] = tin_threshold(tin, px, py, pz, q[k, 0], q[k, 1], q[k, 2], delta, end_radius, tol, kc)
+            out[k] = tin_threshold(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_row(g, p, q, rules, skip, out):
+    """:func:`_grid_row` with a stack of its own (one row, called from Python)."""
+    _grid_row(g, new_stack(g.ltop), p, q, rules, skip, out)
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_row(tin, p, q, rules, skip, out):
+    """:func:`_tin_row` (one row, called from Python)."""
+    _tin_row(tin, p, q, rules, skip, out)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def grid_heights(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
+def grid_heights(g, p, q, vis, near, rules, out, score, stop):
     """Best height of each point p[i] = (x, y, reference height) against the partners q
     (x, y, height on the surface), whose verdicts on T are ``vis[i]``, keeping its
-    agreement with its neighbours (thresholds ``lthr[i]``, verdicts ``lvis[i]``:
-    :func:`best_height_kept`; parallel over points)."""
+    agreement with its :data:`Neighbours` ``near`` (thresholds ``near.lthr[i]``, verdicts
+    ``near.lvis[i]``: :func:`best_height_kept`; parallel over points)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
             continue
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _grid_row(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score, stop):
-    """:func:`grid_heights` on a TIN (a :data:`TinWalk`)."""
+def tin_heights(tin, p, q, vis, near, rules, out, score, stop):
+    """:func:`grid_heights` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     n = p.shape[0]
     for i in nb.prange(n):
         if stop[0] != 0:
             continue
         thr = np.empty(q.shape[0])
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_heights_serial(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
-                        stop):
+def grid_heights_serial(g, p, q, vis, near, rules, out, score, stop):
     """:func:`grid_heights` in the calling thread (the same heights): with one thread a
     ``prange`` loop gains nothing and costs a parfor compilation (see "Compile time")."""
     st = new_stack(g.ltop)
@@ -687,24 +601,25 @@ def grid_heights_serial(g, p, q, vis, lthr, lvis, weight, delta, end_radius, tol
     for i in range(p.shape[0]):
         if stop[0] != 0:
             return
-        _grid_row(g, st, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _grid_row(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_heights_serial(tin, p, q, vis, lthr, lvis, weight, delta, end_radius, tol, kc, margin, min_gain, out, score,
-                       stop):
+def tin_heights_serial(tin, p, q, vis, near, rules, out, score, stop):
     """:func:`tin_heights` in the calling thread (see :func:`grid_heights_serial`)."""
     thr = np.empty(q.shape[0])
     for i in range(p.shape[0]):
         if stop[0] != 0:
             return
-        _tin_row(tin, p[i, 0], p[i, 1], p[i, 2], q, delta, end_radius, tol, kc, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], lthr[i], lvis[i], weight, p[i, 2], margin, min_gain)
+        _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
+        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
+                                            rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
+def grid_sweep(g, q, order, vis, rules, stop):
     """One Gauss-Seidel sweep: each partner q[order[j]] in turn takes its best height
     (column 2 of ``q``, updated in place) against the others at their current heights.
 
@@ -716,17 +631,17 @@ def grid_sweep(g, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, s
         if stop[0] != 0:
             return
         i = order[j]
-        _grid_row(g, st, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)
+        _grid_row(g, st, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_sweep(tin, q, order, vis, delta, end_radius, tol, kc, margin, min_gain, stop):
-    """:func:`grid_sweep` on a TIN (a :data:`TinWalk`)."""
+def tin_sweep(tin, q, order, vis, rules, stop):
+    """:func:`grid_sweep` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     thr = np.empty(q.shape[0])
     for j in range(order.shape[0]):
         if stop[0] != 0:
             return
         i = order[j]
-        _tin_row(tin, q[i, 0], q[i, 1], q[i, 2], q, delta, end_radius, tol, kc, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], margin, min_gain)
+        _tin_row(tin, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
+        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
