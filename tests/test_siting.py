@@ -248,3 +248,20 @@ def test_memory_is_checked_before_the_viewsheds(hills, monkeypatch):
     monkeypatch.setattr(memory, "available_memory", lambda: 10_000)
     with pytest.raises(NotEnoughMemoryError, match=r"siting among 100 candidates on 33x33 samples \(13,700 bytes"):
         site_observers(hills, _random_candidates(hills, 100, 0), 3, workers=1)
+
+
+def test_siting_figure_draws_the_curve_of_the_result(hills):
+    from terrainvis.experiment import plot
+
+    cands = candidate_grid(hills, 8)
+    result = site_observers(hills, cands, 3, workers=1)
+    fig = plot.siting(hills, result, candidates=cands)
+    curve = fig.axes[1]
+    covered = next(ln for ln in curve.get_lines() if ln.get_label() == "covered")
+    np.testing.assert_allclose(covered.get_ydata(), 100 * np.r_[0.0, result.table["covered_share"]], rtol=1e-12)
+    assert [round(p.get_height(), 9) for p in curve.patches] == [
+        round(100 * g / result.total_area, 9) for g in result.table["gain_area"]]
+    labels = [t.get_text() for t in fig.axes[0].texts]
+    assert labels == ["1", "2", "3"]
+    with pytest.raises(TypeError, match="result must be a SitingResult"):
+        plot.siting(hills, object())

@@ -5,10 +5,11 @@ that maximise the area seen by at least one of them, each candidate's viewshed e
 (:func:`terrainvis.viewshed`). This is maximum coverage, NP-hard in general; the greedy
 algorithm (take the candidate that adds the most area, k times) covers at least
 ``1 - (1 - 1/k)**k > 1 - 1/e`` (63.2 %) of the optimum, because covered area is a monotone
-submodular function of the chosen set (Nemhauser, Wolsey & Fisher 1978). Franklin and
-Vogt used this greedy choice over exact-enough viewsheds to site observers on DEMs.
+submodular function of the chosen set (Nemhauser, Wolsey & Fisher 1978). Franklin's
+observer siting (2002; Franklin & Vogt 2004) chooses observers on DEMs with this greedy
+step, over tentative observers picked by an approximate visibility index.
 
-Lazy evaluation (Minoux 1978; "CELF", Leskovec et al. 2007) gives the same choices with
+Lazy evaluation (Minoux 1978; "CELF" in later work) gives the same choices with
 far fewer evaluations: a candidate's gain can only shrink as others are chosen, so the
 gains computed earlier are upper bounds; a max-heap holds them, and the candidate on top
 is re-evaluated against the current coverage: if its fresh gain is still on top it is
@@ -29,12 +30,16 @@ maximizing submodular set functions - I", Mathematical Programming 14, 265-294, 
 doi:10.1007/BF01588971.
 
 M. Minoux, "Accelerated greedy algorithms for maximizing submodular set functions",
-Optimization Techniques, LNCIS 7, 234-243, 1978, doi:10.1007/BFb0006528.
+Optimization Techniques (Lecture Notes in Control and Information Sciences 7),
+Springer, 1978 (DOI not checked).
+
+W. R. Franklin, "Siting observers on terrain", in D. Richardson, P. van Oosterom (eds.),
+Advances in Spatial Data Handling: 10th International Symposium on Spatial Data
+Handling, Springer, 2002, 109-120 (DOI not checked).
 
 W. R. Franklin, C. Vogt, "Multiple observer siting on terrain with intervisibility or
-lo-res data", XXth Congress, International Society for Photogrammetry and Remote
-Sensing, Istanbul, 2004 (no DOI); W. R. Franklin, "Siting observers on terrain",
-Advances in Spatial Data Handling (SDH 2002), 109-120, doi:10.1007/978-3-642-56094-1_9.
+lo-res data", XXth Congress of the International Society for Photogrammetry and Remote
+Sensing, Istanbul, 2004 (no DOI).
 """
 
 from __future__ import annotations
@@ -167,7 +172,7 @@ def site_observers(
     area plus the k largest gains of the candidates left bounds the optimum from above
     (the heap's stale gains are upper bounds of the gains, so they serve); ``bound`` is
     the least such bound, and ``covered_area / bound`` the fraction of the optimum this
-    run is known to reach.
+    run is known to reach. It is at most ``total_area``.
 
     **Ties** go to the lowest candidate index; the lazy evaluation then chooses exactly
     the sequence of the plain greedy. On a rectilinear grid the gains are sums of
@@ -181,10 +186,11 @@ def site_observers(
     doi:10.1007/BF01588971.
 
     M. Minoux, "Accelerated greedy algorithms for maximizing submodular set functions",
-    Optimization Techniques, LNCIS 7, 234-243, 1978, doi:10.1007/BFb0006528.
+    Optimization Techniques (Lecture Notes in Control and Information Sciences 7),
+    Springer, 1978.
 
-    W. R. Franklin, "Siting observers on terrain", Advances in Spatial Data Handling
-    (SDH 2002), 109-120, doi:10.1007/978-3-642-56094-1_9.
+    W. R. Franklin, "Siting observers on terrain", Advances in Spatial Data Handling:
+    10th International Symposium on Spatial Data Handling, Springer, 2002, 109-120.
 
     Examples
     --------
@@ -229,7 +235,7 @@ def site_observers(
     table = _table(run, chosen, packed, grid, weights)
     cell = None if weights is not None else grid.dx * grid.dy
     total = float(sample_areas(grid)[np.isfinite(grid.z)].sum())
-    bound = bound * cell if cell is not None else bound
+    bound = min(bound * cell if cell is not None else bound, total)  # nothing covers more than every valid sample
     table["covered_share"] = table["covered_area"] / total if total > 0 else 0.0
     seconds = {"viewsheds": t1 - t0, "greedy": time.perf_counter() - t1}
     return SitingResult(np.asarray(chosen, dtype=np.int64), table, covered_mask, total, float(bound), evaluations,
