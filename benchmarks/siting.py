@@ -20,6 +20,7 @@ Example::
     python benchmarks/siting.py                              # 1024², 1,000 candidates, k = 10, 3 runs
     python benchmarks/siting.py --size 512 --candidates 200 --repeats 1
     python benchmarks/siting.py --plain --curvature 0.85714
+    python benchmarks/siting.py --threads 1                  # one numba thread (a loaded machine)
 """
 
 from __future__ import annotations
@@ -73,11 +74,16 @@ def main() -> None:
     p.add_argument("--curvature", type=float, default=0.0)
     p.add_argument("--max-distance", type=float, default=None)
     p.add_argument("--workers", type=int, default=None, help="as site_observers(workers=...) (default 1: here)")
+    p.add_argument("--threads", type=int, default=None,
+                   help="numba threads of this process (default: numba's, every core); on a loaded machine one "
+                        "thread can beat two (parallel regions wait for a core)")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--plain", action="store_true", help="also time the plain greedy on the same viewsheds")
     p.add_argument("--seed", type=int, default=1)
     args = p.parse_args()
 
+    if args.threads is not None:
+        numba.set_num_threads(args.threads)
     grid = synthetic_terrain(args.kind, args.size, seed=args.seed)
     cands = _candidates(grid, args.candidates, args.seed)
     opts = dict(observer_height=args.observer_height, curvature=args.curvature, max_distance=args.max_distance,

@@ -285,7 +285,7 @@ def test_network_figure_draws_the_visible_pairs(hills):
     ax = fig.axes[0]
     segments = ax.collections[0].get_segments()
     assert len(segments) == int(net["visible"].sum())
-    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
     assert legend == [f"see each other ({int(net['visible'].sum())} of 21 pairs)", "7 observers"]
     with pytest.raises(TypeError, match="network must be the DataFrame"):
         plot.observer_network(hills, net[["i", "j"]])

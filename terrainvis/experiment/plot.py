@@ -493,8 +493,12 @@ def siting(terrain: HeightGrid, result, *, candidates=None, title: str | None = 
     for n, (x, y) in enumerate(table[["x", "y"]].to_numpy(), 1):
         ax.plot([x], [y], marker="o", markersize=11, color="red", markeredgecolor="k", markeredgewidth=0.6)
         ax.annotate(str(n), (x, y), ha="center", va="center", fontsize=6.5, color="white", fontweight="bold")
-    handles = [Patch(color=(0.05, 0.05, 0.15, 0.8), label=f"seen by none ({100 * (1 - share[-1]):.1f} %)")]
-    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], linestyle="none", marker="o", markersize=9, color="red", markeredgecolor="k",
+                      label="chosen observers, numbered in order"),
+               Patch(color=(0.05, 0.05, 0.15, 0.8), label=f"seen by none of them ({100 * (1 - share[-1]):.1f} %)")]
+    fig.legend(handles=handles, loc="outside lower left", ncols=2, fontsize=8, frameon=False)
     k = np.arange(len(share) + 1)
     curve.bar(k[1:], 100 * table["gain_area"].to_numpy() / result.total_area, color="0.75", label="added by each")
     curve.plot(k, 100 * np.r_[0.0, share], marker="o", color="C3", label="covered")
@@ -506,13 +510,13 @@ def siting(terrain: HeightGrid, result, *, candidates=None, title: str | None = 
     from matplotlib.ticker import MaxNLocator
 
     curve.xaxis.set_major_locator(MaxNLocator(integer=True))
-    curve.legend(loc="lower right", fontsize=8)
+    curve.legend(loc="center right", fontsize=8)
     curve.set_title("covered area after each choice", fontsize=9)
     return fig
 
 
 def observer_network(terrain: HeightGrid, network, *, frequency=None, title: str | None = None,
-                     figsize=(6.5, 5)) -> Figure:
+                     figsize=(6.5, 6)) -> Figure:
     """The intervisibility network drawn over the terrain, optionally over the visibility frequency.
 
     Parameters
@@ -548,7 +552,7 @@ def observer_network(terrain: HeightGrid, network, *, frequency=None, title: str
         image = ax.imshow(np.ma.masked_invalid(f), origin="lower", extent=terrain.extent, interpolation="nearest",
                           cmap="magma", vmin=0.0, vmax=max(float(np.nanmax(f)) if np.isfinite(f).any() else 1.0, 1e-3),
                           alpha=0.6)
-        fig.colorbar(image, ax=ax, shrink=0.8, label="share of the observers that see the sample")
+        fig.colorbar(image, ax=ax, shrink=0.8, location="bottom", label="share of the observers that see the sample")
     seen = network[network["visible"].to_numpy(dtype=bool)]
     segments = np.stack([seen[["x_i", "y_i"]].to_numpy(), seen[["x_j", "y_j"]].to_numpy()], axis=1)
     clearance = np.minimum(seen["clearance"].to_numpy(dtype=np.float64), np.finfo(np.float64).max)
@@ -563,5 +567,5 @@ def observer_network(terrain: HeightGrid, network, *, frequency=None, title: str
     handles = [Line2D([], [], color="C2", label=f"see each other ({len(seen):,} of {len(network):,} pairs)"),
                Line2D([], [], linestyle="none", marker="o", color="cyan", markeredgecolor="k",
                       label=f"{len(ends):,} observers")]
-    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    fig.legend(handles=handles, loc="outside upper center", ncols=2, fontsize=8, frameon=False)
     return fig
