@@ -13,6 +13,7 @@
 * ``terrainvis viewshed DEM --observer X Y -o viewshed.tif`` writes an observer's viewshed.
 * ``terrainvis cumulative DEM --observers OBS.csv -o counts.tif`` counts the observers that
   see each sample (a cumulative viewshed).
+* ``terrainvis site DEM --grid STEP -k K`` chooses K observers that together see the most.
 * ``terrainvis relocate DEM --points CSV ...`` places points on a simplification.
 * ``terrainvis info DEM`` describes a terrain.
 
@@ -38,7 +39,7 @@ import argparse
 import contextlib
 import sys
 
-from . import compare, cumulative, evaluate, info, los, relocate, simplify, viewshed
+from . import compare, cumulative, evaluate, info, los, relocate, simplify, site, viewshed
 from ._common import ParseError, Parser
 
 __all__ = ["main"]
@@ -47,7 +48,7 @@ __all__ = ["main"]
 #: The commands, in the order ``terrainvis --help`` lists them: each module declares its
 #: sub-parser (``add_parser(sub)``) and runs it (``run(args) -> exit status``).
 COMMANDS = {"compare": compare, "evaluate": evaluate, "simplify": simplify, "los": los, "viewshed": viewshed,
-            "cumulative": cumulative, "relocate": relocate, "info": info}
+            "cumulative": cumulative, "site": site, "relocate": relocate, "info": info}
 
 
 def _parser(argv=None) -> argparse.ArgumentParser:

@@ -58,6 +58,12 @@ def add_parser(sub) -> None:
                    help="local worker processes (default 1: in this process, each viewshed on every core)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler "
                                                                         "(needs the dask extra)")
+    c.add_argument("--network", metavar="FILE",
+                   help="also write the intervisibility network among the observers (every pair, whether eye sees "
+                        "eye and the sight line's exact clearance): .csv, or .gpkg (GeoPackage lines in the DEM's CRS)")
+    c.add_argument("--observers-out", metavar="NPZ",
+                   help="also write which observers see each sample (the observer sets, packed bits) to this .npz "
+                        "(terrainvis.ObserverSets.load reads it)")
     add_earth(c)
     add_nodata(c)
     add_positions(c)
@@ -67,7 +73,7 @@ def run(args) -> int:
     import numpy as np
 
     from ..core.fileio import check_output_file
-    from ..visibility import cumulative_viewshed
+    from ..visibility import cumulative_viewshed, observer_sets
 
     out = Path(args.output)
     suffix = out.suffix.lower()
@@ -81,8 +87,11 @@ def run(args) -> int:
     if png is not None:
         check_output_file(png, "--png", inputs=inputs + [str(out)])
     fov = field_of_view_args(args)
+    extra = _check_extra_outputs(args, inputs + [str(out)] + ([str(png)] if png is not None else []))
     label, grid = read_terrain(args.dem, args)
     check_heights(grid, args)
+    if "network" in extra:
+        grid.require_finite("--network (the pair engine's exact clearance)")  # before the viewsheds run
     if suffix in (".tif", ".tiff") and not grid.is_uniform:
         raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
     table = read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))  # refuses a header alone
@@ -102,11 +111,12 @@ def run(args) -> int:
     client = dask_client(args.scheduler) if args.scheduler else None
     try:
         t0 = time.perf_counter()
-        counts = cumulative_viewshed(grid, xy, observer_height=heights, target_height=args.target_height,
-                                     max_distance=args.max_distance, curvature=args.curvature,
-                                     earth_radius=args.earth_radius, azimuth=fov.azimuth, vertical=fov.vertical,
-                                     min_distance=fov.min_distance, workers=args.workers, client=client,
-                                     progress=True)
+        many = observer_sets if "sets" in extra else cumulative_viewshed
+        result = many(grid, xy, observer_height=heights, target_height=args.target_height,
+                      max_distance=args.max_distance, curvature=args.curvature,
+                      earth_radius=args.earth_radius, azimuth=fov.azimuth, vertical=fov.vertical,
+                      min_distance=fov.min_distance, workers=args.workers, client=client, progress=True)
+        counts = result.count() if "sets" in extra else result
         seconds = time.perf_counter() - t0
     finally:
         if client is not None:
@@ -114,6 +124,8 @@ def run(args) -> int:
     _write_counts(grid, counts, out, suffix, args, len(xy))
     if png is not None:
         _write_counts_png(grid, counts, xy, png, label)
+    written = [out] + ([png] if png is not None else [])
+    network = _write_extra(grid, xy, heights, args, result, extra, written)
     valid = np.isfinite(grid.z)
     n_valid = max(int(valid.sum()), 1)
     seen = counts[valid]
@@ -127,8 +139,77 @@ def run(args) -> int:
     print(f"  seen by any {int((seen > 0).sum()):,} of {plural(n_valid, 'sample')} ({100 * (seen > 0).mean():.2f} %), "
           f"by all {100 * (seen == len(xy)).mean():.2f} %, most observers on one sample {int(seen.max()):,}; "
           f"{seconds:.1f} s {where} ({len(xy) / seconds:.1f} observers/s)")
-    print(f"  wrote {out}" + (f" and {png}" if png is not None else ""))
+    if network is not None:
+        n_seen = int(network["visible"].sum())
+        print(f"  network: {n_seen:,} of {plural(len(network), 'pair')} of observers see each other"
+              + (f", median clearance of those {network['clearance'][network['visible']].median():.4g}"
+                 if n_seen else ""))
+    print("  wrote " + ", ".join(str(p) for p in written[:-1]) + (" and " if len(written) > 1 else "")
+          + str(written[-1]))
     return 0
+
+
+def _write_extra(grid, xy, heights, args, result, extra: dict, written: list):
+    """``--observers-out`` (``result`` holds the sets then) and ``--network``; the network, or None."""
+    if "sets" in extra:
+        result.save(extra["sets"])
+        written.append(extra["sets"])
+    if "network" not in extra:
+        return None
+    network = _write_network(grid, xy, heights, args, position_frame(grid, args), extra["network"])
+    written.append(extra["network"])
+    return network
+
+
+def _check_extra_outputs(args, taken) -> dict:
+    """``--network`` and ``--observers-out``: their suffixes, and writable, before anything runs."""
+    from ..core.fileio import check_output_file
+
+    extra = {}
+    if args.network:
+        path = Path(args.network)
+        if path.suffix.lower() not in (".csv", ".gpkg"):
+            raise UsageError(f"--network must end in .csv or .gpkg, got {path.name!r}")
+        check_output_file(path, "--network", inputs=taken)
+        extra["network"] = path
+        taken = taken + [str(path)]
+    if args.observers_out:
+        path = Path(args.observers_out)
+        if path.suffix.lower() != ".npz":
+            raise UsageError(f"--observers-out must end in .npz, got {path.name!r}")
+        check_output_file(path, "--observers-out", inputs=taken)
+        extra["sets"] = path
+    return extra
+
+
+def _write_network(grid, xy, heights, args, frame, path: Path):
+    """The intervisibility network as CSV (with WKT lines) or GeoPackage, positions in the observers' frame."""
+    import numpy as np
+
+    from ..visibility import intervisibility_network
+
+    net = intervisibility_network(grid, xy, observer_height=heights, curvature=args.curvature,
+                                  earth_radius=args.earth_radius)
+    out = net.copy()
+    for end in ("i", "j"):
+        native = frame.from_grid(net[[f"x_{end}", f"y_{end}"]].to_numpy())
+        out[f"x_{end}"], out[f"y_{end}"] = native[:, 0], native[:, 1]
+    lines = np.stack([out[["x_i", "y_i"]].to_numpy(), out[["x_j", "y_j"]].to_numpy()], axis=1)
+    if path.suffix.lower() == ".gpkg":
+        from ..core._georef import position_crs
+        from ..io import write_geopackage_lines
+
+        # the frame's CRS: the native one, or in --frame local the grid's own when it is the native one
+        local_metres = bool(grid.attrs.get("geographic") or grid.attrs.get("source_crs"))
+        crs = position_crs(grid.attrs) if frame.frame == "native" or not local_metres else None
+        write_geopackage_lines(path, lines, out, table="intervisibility", crs=crs,
+                               description="terrainvis cumulative --network: every pair of observers")
+    else:
+        from ..io import write_csv
+
+        out["wkt"] = [f"LINESTRING ({float(a[0])!r} {float(a[1])!r}, {float(b[0])!r} {float(b[1])!r})" for a, b in lines]
+        write_csv(out, path)
+    return net
 
 
 def _write_counts(grid, counts, out: Path, suffix: str, args, k: int) -> None:

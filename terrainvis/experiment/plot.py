@@ -18,7 +18,7 @@ from ..core.terrain import TIN, HeightGrid, as_terrain
 
 __all__ = [
     "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance", "viewshed",
-    "cumulative_viewshed",
+    "cumulative_viewshed", "siting", "observer_network",
 ]
 
 
@@ -508,4 +508,125 @@ def fresnel_profile(result, a, b, *, title: str | None = None, figsize=(7.5, 3.8
     ax.set_title(title or f"first Fresnel zone at {freq / 1e6:g} MHz", fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8, framealpha=0.9)
+    return fig
+
+
+def siting(terrain: HeightGrid, result, *, candidates=None, title: str | None = None, figsize=(11, 4.6)) -> Figure:
+    """Observer siting: the chosen observers and their coverage on the map, and the covered-area curve.
+
+    Parameters
+    ----------
+    terrain : HeightGrid
+        The grid whose samples the siting covered.
+    result : terrainvis.visibility.SitingResult
+        :func:`terrainvis.site_observers`'s result.
+    candidates : (K, 2) array_like, optional
+        All the candidates' (x, y), drawn as small dots.
+    title : str, optional
+
+    The left panel darkens the samples no chosen observer sees and numbers the observers
+    in the order chosen; the right one draws the share of the area covered after each
+    choice (the curve), what each choice added (bars), and the run's upper bound on what
+    the best k candidates could cover.
+    """
+    as_terrain(terrain)
+    if not isinstance(terrain, HeightGrid):
+        raise TypeError(f"terrain must be the HeightGrid the siting covered, got {describe(terrain)}")
+    table = getattr(result, "table", None)
+    if table is None or not {"x", "y", "gain_area", "covered_area"} <= set(table.columns):
+        raise TypeError(f"result must be a SitingResult (terrainvis.site_observers), got {describe(result)}")
+    covered = np.asarray(result.covered, dtype=bool)
+    if covered.shape != terrain.shape:
+        raise ValueError(f"result.covered must have the terrain's shape {terrain.shape}, got {covered.shape}")
+    from matplotlib.patches import Patch
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax, curve = fig.subplots(1, 2, width_ratios=(1.15, 1))
+    _draw_terrain(ax, terrain, wireframe=False, title=title or "observer siting")
+    valid = np.isfinite(terrain.z)
+    dark = np.zeros(terrain.shape + (4,))
+    dark[valid & ~covered] = (0.05, 0.05, 0.15, 0.6)
+    ax.imshow(dark, origin="lower", extent=terrain.extent, interpolation="nearest")
+    if candidates is not None:
+        c = as_points(candidates, "candidates", 2)
+        ax.plot(c[:, 0], c[:, 1], linestyle="none", marker=".", markersize=2.5, color="0.85", alpha=0.8)
+    share = table["covered_area"].to_numpy() / result.total_area
+    for n, (x, y) in enumerate(table[["x", "y"]].to_numpy(), 1):
+        ax.plot([x], [y], marker="o", markersize=11, color="red", markeredgecolor="k", markeredgewidth=0.6)
+        ax.annotate(str(n), (x, y), ha="center", va="center", fontsize=6.5, color="white", fontweight="bold")
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], linestyle="none", marker="o", markersize=9, color="red", markeredgecolor="k",
+                      label="chosen observers, numbered in order"),
+               Patch(color=(0.05, 0.05, 0.15, 0.8), label=f"seen by none of them ({100 * (1 - share[-1]):.1f} %)")]
+    fig.legend(handles=handles, loc="outside lower left", ncols=2, fontsize=8, frameon=False)
+    k = np.arange(len(share) + 1)
+    curve.bar(k[1:], 100 * table["gain_area"].to_numpy() / result.total_area, color="0.75", label="added by each")
+    curve.plot(k, 100 * np.r_[0.0, share], marker="o", color="C3", label="covered")
+    curve.axhline(100 * result.bound / result.total_area, color="k", linestyle="--", linewidth=0.8,
+                  label=f"at most, with {len(share)} (bound)")
+    curve.set_xlabel("observers chosen")
+    curve.set_ylabel("share of the area (%)")
+    curve.set_ylim(0, 105)
+    from matplotlib.ticker import MaxNLocator
+
+    curve.xaxis.set_major_locator(MaxNLocator(integer=True))
+    curve.legend(loc="center right", fontsize=8)
+    curve.set_title("covered area after each choice", fontsize=9)
+    return fig
+
+
+def observer_network(terrain: HeightGrid, network, *, frequency=None, title: str | None = None,
+                     figsize=(6.5, 6)) -> Figure:
+    """The intervisibility network drawn over the terrain, optionally over the visibility frequency.
+
+    Parameters
+    ----------
+    terrain : HeightGrid
+    network : pandas.DataFrame
+        :func:`terrainvis.intervisibility_network`'s result (columns ``i``, ``j``,
+        ``x_i``, ``y_i``, ``x_j``, ``y_j``, ``clearance``, ``visible``).
+    frequency : (rows, cols) array_like of float, optional
+        The share of the observers that see each sample (``ObserverSets.frequency()``),
+        drawn in colour (NaN left clear).
+    title : str, optional
+
+    Pairs that see each other are joined by a line coloured by the clearance of their
+    sight line; blocked pairs are not drawn (the legend counts them).
+    """
+    as_terrain(terrain)
+    if not isinstance(terrain, HeightGrid):
+        raise TypeError(f"terrain must be a HeightGrid, got {describe(terrain)}")
+    needed = {"i", "j", "x_i", "y_i", "x_j", "y_j", "clearance", "visible"}
+    if not isinstance(network, pd.DataFrame) or not needed <= set(network.columns):
+        raise TypeError(f"network must be the DataFrame of terrainvis.intervisibility_network, got {describe(network)}")
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title or "intervisibility network")
+    if frequency is not None:
+        f = np.asarray(frequency, dtype=np.float64)
+        if f.shape != terrain.shape:
+            raise ValueError(f"frequency must have the terrain's shape {terrain.shape}, got {f.shape}")
+        image = ax.imshow(np.ma.masked_invalid(f), origin="lower", extent=terrain.extent, interpolation="nearest",
+                          cmap="magma", vmin=0.0, vmax=max(float(np.nanmax(f)) if np.isfinite(f).any() else 1.0, 1e-3),
+                          alpha=0.6)
+        fig.colorbar(image, ax=ax, shrink=0.8, location="bottom", label="share of the observers that see the sample")
+    seen = network[network["visible"].to_numpy(dtype=bool)]
+    segments = np.stack([seen[["x_i", "y_i"]].to_numpy(), seen[["x_j", "y_j"]].to_numpy()], axis=1)
+    clearance = np.minimum(seen["clearance"].to_numpy(dtype=np.float64), np.finfo(np.float64).max)
+    lines = LineCollection(segments.reshape(-1, 2, 2), array=clearance, cmap="viridis", linewidths=1.4)
+    ax.add_collection(lines)
+    if len(seen):
+        fig.colorbar(lines, ax=ax, shrink=0.8, label="clearance of the sight line")
+    ends = pd.concat([network[["i", "x_i", "y_i"]].set_axis(["n", "x", "y"], axis=1),
+                      network[["j", "x_j", "y_j"]].set_axis(["n", "x", "y"], axis=1)]).drop_duplicates("n")
+    ax.plot(ends["x"], ends["y"], linestyle="none", marker="o", markersize=5, color="cyan", markeredgecolor="k",
+            markeredgewidth=0.5)
+    handles = [Line2D([], [], color="C2", label=f"see each other ({len(seen):,} of {len(network):,} pairs)"),
+               Line2D([], [], linestyle="none", marker="o", color="cyan", markeredgecolor="k",
+                      label=f"{len(ends):,} observers")]
+    fig.legend(handles=handles, loc="outside upper center", ncols=2, fontsize=8, frameon=False)
     return fig

@@ -136,6 +136,8 @@ from ._common import (
     _UserError,
 )
 from ._geotiff import _read_tif, _write_tif, write_geotiff, write_mask_geotiff
+from ._gpkg import read_lines as read_geopackage_lines
+from ._gpkg import write_lines as write_geopackage_lines
 from ._outputs import FIGURE_SOFTWARE, figure_metadata, save_figure, write_csv
 from ._meshfile import _read_mesh, _write_mesh
 from ._metric import to_metric
@@ -155,13 +157,14 @@ from ._sample import bundled_terrain, sample_dem
 #   _geotiff   GeoTIFF through rasterio
 #   _meshfile  .ply, .obj, .stl, .glb
 #   _outputs   figures (.png, marked as terrainvis's) and CSV tables, written atomically
+#   _gpkg      GeoPackage line layers through sqlite3 (write_geopackage_lines, read_geopackage_lines)
 #   _sample    sample_dem, bundled_terrain
 #   _metric    to_metric: a lon/lat grid resampled onto a local transverse Mercator grid
 
 __all__ = [
     "load_terrain", "HEIGHT_DTYPES", "write_geotiff", "write_mask_geotiff", "save_figure", "write_csv", "figure_metadata",
     "FIGURE_SOFTWARE", "save_terrain", "load_dem", "save_dem", "sample_dem", "bundled_terrain", "native_coords",
-    "metres_per_degree", "to_metric",
+    "metres_per_degree", "to_metric", "write_geopackage_lines", "read_geopackage_lines",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",
 ]
 

@@ -79,6 +79,7 @@ from .engines import ENGINES, Engine, Predicate, engine_names
 from .engines import register as register_engine
 from .engines import unregister as unregister_engine
 from .los import embree_tolerance, line_of_sight, min_clearance, visibility_matrix
+from .observers import ObserverSets, intervisibility_network, observer_sets
 from .predicate import (
     EARTH_RADIUS,
     STANDARD_REFRACTION,
@@ -92,6 +93,7 @@ from .predicate import (
 from .field_of_view import FieldOfView, field_of_view, field_of_view_mask
 from .fresnel import FresnelClearance, fresnel_clearance, fresnel_radius
 from .profile import clearance_profile, lowest_point
+from .siting import SitingResult, candidate_grid, sample_areas, site_observers
 from .sweep import viewshed
 
 __all__ = [
@@ -121,6 +123,13 @@ __all__ = [
     "FresnelClearance",
     "fresnel_clearance",
     "fresnel_radius",
+    "observer_sets",
+    "ObserverSets",
+    "intervisibility_network",
+    "site_observers",
+    "SitingResult",
+    "candidate_grid",
+    "sample_areas",
     "lowest_point",
     "clearance_profile",
 ]

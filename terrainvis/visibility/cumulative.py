@@ -187,23 +187,23 @@ def cumulative_viewshed(
 
 
 # ----------------------------------------------------------------- validation
-def _as_observers(observers) -> np.ndarray:
-    """``observers`` as a (K, 2) or (K, 3) float64 array, K >= 1, finite."""
-    arr = as_float_array(observers, "observers")
+def _as_observers(observers, name: str = "observers") -> np.ndarray:
+    """``observers`` as a (K, 2) or (K, 3) float64 array, K >= 1, finite (``name``: the argument, for messages)."""
+    arr = as_float_array(observers, name)
     if arr.ndim != 2:
         hint = " (one observer: [[x, y]])" if arr.ndim == 1 else ""
         raise ValueError(
-            f"observers must be a 2-D array of shape (K, 2) (x, y) or (K, 3) (eyes x, y, z), got {arr.ndim}-D "
+            f"{name} must be a 2-D array of shape (K, 2) (x, y) or (K, 3) (eyes x, y, z), got {arr.ndim}-D "
             f"with shape {arr.shape}{hint}"
         )
     if arr.shape[1] not in (2, 3):
-        raise ValueError(f"observers must have shape (K, 2) (x, y) or (K, 3) (eyes x, y, z), got shape {arr.shape}")
+        raise ValueError(f"{name} must have shape (K, 2) (x, y) or (K, 3) (eyes x, y, z), got shape {arr.shape}")
     if arr.shape[0] == 0:
-        raise ValueError("observers must hold at least one observer (K >= 1), got shape " f"{arr.shape}")
+        raise ValueError(f"{name} must hold at least one observer (K >= 1), got shape " f"{arr.shape}")
     bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
     if bad.size:
         raise ValueError(
-            f"observers must be finite, but {bad.size} row(s) hold NaN or inf (first observers[{int(bad[0])}] = "
+            f"{name} must be finite, but {bad.size} row(s) hold NaN or inf (first {name}[{int(bad[0])}] = "
             f"{arr[bad[0]].tolist()})"
         )
     return np.array(arr, dtype=np.float64, order="C")  # our own copy: the caller's array is never held
@@ -250,14 +250,14 @@ def _options(terrain, target_height, max_distance, at, engine, curvature, earth_
             "curvature": float(curvature), "earth_radius": float(earth_radius)}
 
 
-def _check_inside(terrain, obs: np.ndarray) -> None:
+def _check_inside(terrain, obs: np.ndarray, name: str = "observers") -> None:
     """Every observer stands on the surface (by the viewshed's own rule, so no unit fails later)."""
     outside = [i for i in range(obs.shape[0]) if not math.isfinite(_surface_at(terrain, obs[i, 0], obs[i, 1]))]
     if outside:
         i = outside[0]
         raise OutsideFootprintError(
-            f"observers[{i}] = ({obs[i, 0]!r}, {obs[i, 1]!r}) is outside the terrain's footprint {terrain.extent} "
-            f"or on nodata (a triangle touching a NaN sample); {len(outside)} of {obs.shape[0]} observers are"
+            f"{name}[{i}] = ({float(obs[i, 0])!r}, {float(obs[i, 1])!r}) is outside the terrain's footprint {terrain.extent} "
+            f"or on nodata (a triangle touching a NaN sample); {len(outside)} of {obs.shape[0]} {name} are"
         )
 
 
