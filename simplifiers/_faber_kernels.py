@@ -26,6 +26,8 @@ import math
 import numba as nb
 import numpy as np
 
+from terrainvis.core.stopflag import stopped
+
 # Columns per block when a kernel walks several curves that are interleaved along B.
 _BLOCK = 64
 # Curves per block for the feature-aware solve (they are gathered into a local buffer).
@@ -447,7 +449,7 @@ def feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1, stop):
     nblk = (B + bs - 1) // bs
     bad = 0
     for t in range(t0, t1):
-        if stop[0] != 0:
+        if stopped(stop):
             break
         a = t // nblk
         b0 = (t - a * nblk) * bs

@@ -61,6 +61,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from terrainvis.core.stopflag import stopped
 from terrainvis.tolerances import ROW_SPAN_SNAP  # frozen into the kernels when they compile
 
 FREE = 0
@@ -886,7 +887,7 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
         if counts[N_VERTICES] > max_vertices:
             counts[STATUS] = OVER_BUDGET
             break
-        if stop[0] != 0:
+        if stopped(stop):
             counts[STATUS] = INTERRUPTED
             break
         na = queue[qhead, 0]

@@ -39,6 +39,8 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from terrainvis.core.stopflag import stopped
+
 NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
 
 #: Indices as int64, not literals: numba compiles a callee once per argument type, and a
@@ -367,7 +369,7 @@ def run(z, W, ratio, st, n_target, max_error, stop):
     while counts[NV] < n_target and counts[NH] > 0:
         if max_error >= 0.0 and hval[0] <= max_error:
             break
-        if stop[0] != 0:
+        if stopped(stop):
             break
         t = np.int64(heap[0])
         _heap_remove(heap, hval, pos, counts, t)

@@ -38,6 +38,7 @@ import numpy as np
 
 from terrainvis.visibility.thresholds import interval
 from terrainvis.visibility.walk import cell_diagonal, cells_next, cells_start
+from terrainvis.core.stopflag import stopped
 from terrainvis.core.surface import borrow, locate
 from terrainvis.tolerances import VERTEX_WEIGHT_ZERO
 
@@ -138,7 +139,7 @@ def track_counts(axes, p, ii, jj, delta, counts, stop):
     du = np.empty(0, np.float32)
     dt = np.empty(0, np.int32)
     for k in nb.prange(m):
-        if stop[0] != 0:
+        if stopped(stop):
             counts[k] = 0
             continue
         i = ii[k]
@@ -156,7 +157,7 @@ def track_fill(axes, p, ii, jj, delta, ptr, out, stop):
     (counts from :func:`track_counts`)."""
     m = ii.shape[0]
     for k in nb.prange(m):
-        if stop[0] != 0 or ptr[k + 1] == ptr[k]:
+        if stopped(stop) or ptr[k + 1] == ptr[k]:
             continue
         i = ii[k]
         j = jj[k]
@@ -173,7 +174,7 @@ def incidence(nv, ncx, ptr, btri, ba, bb, stop):
     vv = np.empty(3, np.int64)
     ww = np.empty(3)
     for k in range(npair):
-        if (k & 4095) == 0 and stop[0] != 0:
+        if (k & 4095) == 0 and stopped(stop):
             return deg, np.empty(0, np.int32)
         for s in range(ptr[k], ptr[k + 1]):
             _corners(btri[s], ba[s], bb[s], ncx, vv, ww)
@@ -218,7 +219,7 @@ def pair_visible(c, z, tk, tol, out, stop):
     """Verdict on the coarse surface ``c`` of each pair of the :data:`Tracks` ``tk``, the points at heights ``z``."""
     ncx, ii, jj, ptr, bu, btri, ba, bb = tk.ncx, tk.ii, tk.jj, tk.ptr, tk.bu, tk.btri, tk.ba, tk.bb
     for k in nb.prange(ii.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             continue
         vv = np.empty(3, np.int64)
         ww = np.empty(3)
@@ -389,7 +390,7 @@ def c_sweep(c, cref, rad, rd, vt, tk, tol, margin, order, stop):
     dl = np.empty(2 * mx)
     changed = 0
     for v in order:
-        if stop[0] != 0:
+        if stopped(stop):
             return changed
         if rad[v] <= 0.0 or vptr[v + 1] == vptr[v]:
             continue
@@ -411,7 +412,7 @@ def local_radius(zf, xf, yf, c, xs, ys, out, stop):
     ww = np.empty(3)
     out[:] = 0.0
     for r_ in range(yf.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         r = locate(ys, ys, 0, ys.shape[0] - 1, False, yf[r_])
         for c_ in range(xf.shape[0]):

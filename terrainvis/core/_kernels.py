@@ -9,6 +9,7 @@ import numba as nb
 import numpy as np
 
 from ..tolerances import BUCKET_SLACK, RASTER_BOX_REL  # frozen into the kernels when they compile
+from .stopflag import stopped
 from .surface import barycentric, plane_uv, weighted
 
 
@@ -77,7 +78,7 @@ def locate_heights(tin, qx, qy, out, rel_eps, stop):
     vx, vy, vz, faces, starts, items = tin.vx, tin.vy, tin.vz, tin.faces, tin.starts, tin.items
     x0, y0, bw, bh, nbx, nby = tin.x0, tin.y0, tin.bw, tin.bh, tin.nbx, tin.nby
     for i in range(qx.shape[0]):
-        if i % 4096 == 0 and stop[0] != 0:
+        if i % 4096 == 0 and stopped(stop):
             return
         x = qx[i]
         y = qy[i]
@@ -108,7 +109,7 @@ def rasterize_tin(vx, vy, vz, faces, xs, ys, out, rel_eps, stop):
     nc = xs.shape[0]
     nr = ys.shape[0]
     for f in range(faces.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         i0 = faces[f, 0]
         i1 = faces[f, 1]
@@ -146,7 +147,7 @@ def largest_valid_rectangle(valid, stop):
     bc0 = 0
     bc1 = 0
     for r in range(nr):
-        if stop[0] != 0:
+        if stopped(stop):
             return 0, 0, 0, 0
         for c in range(nc):
             if valid[r, c]:
@@ -189,7 +190,7 @@ def grid_on_grid(xs, ys, z, qx, qy, out, stop):
         cidx[j] = c
         uu[j] = (qx[j] - xs[c]) / (xs[c + 1] - xs[c])
     for i in range(qy.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         y = qy[i]
         if not (y >= ys[0] and y <= ys[nr - 1]):

@@ -28,6 +28,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .stopflag import stopped
+
 # Columns of the per-chunk result rows written by :func:`volume_between`.
 VOL = 0  #: Neumaier sum of the integral of |d|
 VOL_C = 1  #: its running compensation
@@ -290,7 +292,7 @@ def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop):
     cov = 0.0
     cov_c = 0.0
     for i_f in range(f0, f1):
-        if stop[0] != 0:
+        if stopped(stop):
             break
         f = order[i_f]
         for k in range(3):

@@ -9,7 +9,8 @@ This module is the one mechanism every long kernel uses instead:
 
 1. The kernel takes a *stop flag*, a ``(1,)`` int64 array, as its last argument, and at a
    bounded interval (an outer loop iteration, a chunk of a ``prange``) checks
-   ``if stop[0] != 0`` and returns early. Its partial result is never used.
+   ``if stopped(stop)`` (:func:`terrainvis.core.stopflag.stopped`, an atomic read) and
+   returns early. Its partial result is never used.
 2. The Python wrapper runs it with :func:`call` (``call(kernel, *args, work=n)``), which
    appends a fresh flag. Above :data:`THREAD_MIN_WORK` units of work, and only in the
    main thread (the only one that receives signals), :func:`call` runs the kernel in a
@@ -17,8 +18,9 @@ This module is the one mechanism every long kernel uses instead:
    short steps, where Python runs its signal handlers. When the wait raises (the
    ``KeyboardInterrupt`` of SIGINT, the :class:`terrainvis.core.runner.Interrupted` that the
    CLI's SIGTERM handler raises, or anything else), :func:`call` sets the flag, waits
-   for the kernel to return (at most :data:`_STOP_GRACE` seconds: a kernel that does not
-   see its flag in time finishes in its daemon thread) and re-raises the same exception. The result is boxed in
+   for the kernel to return (at most :data:`_STOP_GRACE` seconds, a safety net: a kernel
+   that does not see its flag in time finishes in its daemon thread) and re-raises the
+   same exception. The result is boxed in
    the helper thread, where no signal handler runs, so an interrupt can no longer land
    inside numba's boxing.
 3. Small calls run directly in the calling thread: starting a thread costs about
@@ -32,19 +34,22 @@ another thread was seen to wait for it and then abort on a corrupted heap.
 A kernel that calls other kernels passes its flag down to the ones that loop long. A
 ``prange`` kernel checks the flag at the start of each chunk and skips the chunk's
 work when it is set (a ``prange`` cannot be left early), so chunks must be small enough
-to end in well under a second. The flag is read where the loop also writes memory, so
-the compiler cannot hoist the read out of the loop; the tests in
-``tests/test_interrupt_kernels.py`` interrupt every long kernel in a subprocess and
-check that it stops.
+to end in well under a second. The flag is read with :func:`~terrainvis.core.stopflag.stopped`,
+never as a plain ``stop[0]``: another thread writes it, and a plain read in a ``prange``
+body was hoisted out of the loop by the compiler, so those kernels ran to their end (see
+:mod:`terrainvis.core.stopflag`). The tests in ``tests/test_interrupt_kernels.py``
+interrupt every long kernel in a subprocess and check that the caller raises and that
+the kernel's own thread ends, both within two seconds.
 
 Examples
 --------
 >>> import numba, numpy as np
+>>> from terrainvis.core.stopflag import stopped
 >>> @numba.njit(nogil=True)
 ... def total(a, stop):
 ...     s = 0.0
 ...     for i in range(a.shape[0]):
-...         if i % 4096 == 0 and stop[0] != 0:
+...         if i % 4096 == 0 and stopped(stop):
 ...             return s
 ...         s += a[i]
 ...     return s
@@ -177,9 +182,9 @@ def call(kernel, *args, work: int):
         job.wait()
     except BaseException:
         stop[0] = 1
-        # a kernel returns within a second of its flag; one that does not (a flag read that
-        # the compiler moved out of a parallel loop) is left to finish in its daemon thread,
-        # which is safe for numba code (it touches only its own arrays), unlike a C++ library
+        # a kernel returns within a second of its flag (read with stopflag.stopped); one that
+        # did not would be left to finish in its daemon thread, which is safe for numba code
+        # (it touches only its own arrays), unlike a C++ library
         job.wait_through(limit=_STOP_GRACE)
         raise
     return job.result()

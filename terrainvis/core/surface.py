@@ -41,6 +41,7 @@ from numba.extending import intrinsic
 from numba.np.arrayobj import make_array
 
 from ..tolerances import TRACK_FACE_SLACK
+from .stopflag import stopped
 
 _INF = np.inf
 
@@ -225,7 +226,7 @@ def heights_at(z, xs, ys, qx, qy, out, stop):
     nc = xs.shape[0]
     nr = ys.shape[0]
     for i in range(qx.shape[0]):
-        if i % 4096 == 0 and stop[0] != 0:
+        if i % 4096 == 0 and stopped(stop):
             return
         x = qx[i]
         y = qy[i]

@@ -64,6 +64,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from ..core.stopflag import stopped
 from ..core.surface import barycentric, cell_height, weighted
 from .walk import cell_diagonal, mid_height, node_pop, node_push, node_root, node_split
 
@@ -398,7 +399,7 @@ def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop
     m = index.shape[0]
     niter = (n + 1) // 2 if matrix else (m + PAIR_CHUNK - 1) // PAIR_CHUNK
     for it in nb.prange(niter):
-        if stop[0] != 0:
+        if stopped(stop):
             continue
         st = new_stack(g.ltop)
         kk = np.int64(it)
@@ -572,7 +573,7 @@ def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out, stop):
     """
     m = a.shape[0]
     for i in nb.prange(m):
-        if stop[0] != 0:
+        if stopped(stop):
             continue
         out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)
 
@@ -582,6 +583,6 @@ def tin_pairs_serial(mesh, a, b, delta, end_radius, eps, kc, out, stop):
     """:func:`tin_pairs` in the calling thread (the same clearances): with one thread the
     ``prange`` loop gains nothing and costs a parfor compilation (about 1 s of CPU)."""
     for i in range(a.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)

@@ -88,6 +88,7 @@ from ..tolerances import (
     WEDGE_BOUNDARY_SLACK,
 )
 
+from ..core.stopflag import stopped
 from ..core.surface import borrow, borrow_grid, cell_height, line_height, tri_height
 from ..core.surface import locate as _locate
 from ._kernels import _canonical, curved_min, interval_start
@@ -1648,7 +1649,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     plo = s * 4.0 / nsec
     phi = (s + 1) * 4.0 / nsec
     for j in range(0, jstop + 1):
-        if stop[0] != 0:
+        if stopped(stop):
             break
         if j > 0 and j % BLOCK == 0:
             _close_block(w, j, n, r1)

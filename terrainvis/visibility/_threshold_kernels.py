@@ -71,6 +71,7 @@ import numpy as np
 
 from collections import namedtuple
 
+from ..core.stopflag import stopped
 from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height
 from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
 from ._kernels import WalkStack, new_stack
@@ -570,7 +571,7 @@ def grid_heights(g, p, q, vis, near, rules, out, score, stop):
     ``near.lvis[i]``: :func:`best_height_kept`; parallel over points)."""
     n = p.shape[0]
     for i in nb.prange(n):
-        if stop[0] != 0:
+        if stopped(stop):
             continue
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
@@ -584,7 +585,7 @@ def tin_heights(tin, p, q, vis, near, rules, out, score, stop):
     """:func:`grid_heights` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     n = p.shape[0]
     for i in nb.prange(n):
-        if stop[0] != 0:
+        if stopped(stop):
             continue
         thr = np.empty(q.shape[0])
         _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
@@ -599,7 +600,7 @@ def grid_heights_serial(g, p, q, vis, near, rules, out, score, stop):
     st = new_stack(g.ltop)
     thr = np.empty(q.shape[0])
     for i in range(p.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         _grid_row(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
         out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
@@ -611,7 +612,7 @@ def tin_heights_serial(tin, p, q, vis, near, rules, out, score, stop):
     """:func:`tin_heights` in the calling thread (see :func:`grid_heights_serial`)."""
     thr = np.empty(q.shape[0])
     for i in range(p.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
         out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
@@ -628,7 +629,7 @@ def grid_sweep(g, q, order, vis, rules, stop):
     thr = np.empty(q.shape[0])
     st = new_stack(g.ltop)
     for j in range(order.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         i = order[j]
         _grid_row(g, st, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
@@ -640,7 +641,7 @@ def tin_sweep(tin, q, order, vis, rules, stop):
     """:func:`grid_sweep` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     thr = np.empty(q.shape[0])
     for j in range(order.shape[0]):
-        if stop[0] != 0:
+        if stopped(stop):
             return
         i = order[j]
         _tin_row(tin, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
