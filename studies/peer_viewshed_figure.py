@@ -7,7 +7,7 @@ temporary GRASS location (Debian package grass-core), and draws two panels over 
 hillshade: cells both see (pale), cells only ours sees (blue) and cells only the peer sees
 (red). It prints the counts. Command that made docs/figures/viewshed_peers.png::
 
-    python benchmarks/peer_viewshed_figure.py -o docs/figures/viewshed_peers.png
+    python studies/peer_viewshed_figure.py -o docs/figures/viewshed_peers.png
 """
 
 from __future__ import annotations

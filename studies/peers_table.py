@@ -23,7 +23,7 @@ resumes on its own); ``--no-visopt`` leaves it out. The results go to ``--out`` 
 and ``visopt.csv``, resumable with ``--resume``, and ``peers_table.md``); the table is
 printed too, followed by a table of VTK's stated error against the error it reaches.
 
-Run: ``.venv/bin/python benchmarks/peers_table.py [--out DIR] [--workers 2] [--no-visopt]``.
+Run: ``.venv/bin/python studies/peers_table.py [--out DIR] [--workers 2] [--no-visopt]``.
 """
 
 from __future__ import annotations
@@ -261,7 +261,7 @@ def main(argv=None) -> int:
     wall = time.perf_counter() - t0
     load_after = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
     head = [
-        "Command: `" + " ".join([".venv/bin/python benchmarks/peers_table.py", *given]) + "`",
+        "Command: `" + " ".join([".venv/bin/python studies/peers_table.py", *given]) + "`",
         f"Run: {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, {wall:.0f} s wall on "
         f"{os.cpu_count()} cores ({platform.processor() or platform.machine()}), workers={args.workers}; "
         f"uptime before: `{load}`; after: `{load_after}`",

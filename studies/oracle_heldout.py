@@ -15,8 +15,8 @@ Both oracles start from the calibrated heights, as in ``compare``. The work is t
 default experiment's (6 terrains, the 7 default methods, 6 sets of 50 points, the same
 point sets) at the given levels:
 
-    python benchmarks/oracle_heldout.py                 # level 3
-    python benchmarks/oracle_heldout.py --levels 1 2 3 --split-seed 2
+    python studies/oracle_heldout.py                 # level 3
+    python studies/oracle_heldout.py --levels 1 2 3 --split-seed 2
 """
 
 from __future__ import annotations

@@ -15,8 +15,8 @@ The work is the default experiment's (6 terrains, the 7 default methods, 6 sets 
 points, the same point sets). It prints, per method and level, full projection, the
 calibrated relocation, both bounds and the calibrated relocation's distance to each:
 
-    python benchmarks/oracle_bounds.py                 # level 3
-    python benchmarks/oracle_bounds.py --levels 1 2 3
+    python studies/oracle_bounds.py                 # level 3
+    python studies/oracle_bounds.py --levels 1 2 3
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ import pandas as pd
 import simplifiers
 import terrainvis as tv
 from terrainvis.experiment.plan import DEFAULT_TERRAINS, resolve_terrains
-from terrainvis.relocation.registry import _candidate_pass, _candidates, _ground, _oracle_start
+from terrainvis.relocation.oracle import _candidate_pass, _candidates, _oracle_start
+from terrainvis.relocation.paper import ground_heights as _ground
 from terrainvis.experiment.measures import point_sets
 
 #: Candidate heights per point (relocate's default ``n_candidates``, as when the issue was filed).

@@ -9,9 +9,9 @@ sets from another seed (1), and on the partners' own seed 3. For every setting i
 the mean accuracy of each method and level against T's verdicts, the time per unit
 (partners once, then every point set) and, for reference, full projection.
 
-    python benchmarks/tune_calibration.py                      # the grid of settings below
-    python benchmarks/tune_calibration.py --partners 256 512 --sweeps 2 --methods lls
-    python benchmarks/tune_calibration.py --partners 512 1024 2048 4096 --core 512 1024 --sweeps 2 \
+    python studies/tune_calibration.py                      # the grid of settings below
+    python studies/tune_calibration.py --partners 256 512 --sweeps 2 --methods lls
+    python studies/tune_calibration.py --partners 512 1024 2048 4096 --core 512 1024 --sweeps 2 \
         --methods gls lls qec greedy-insertion --sets 6 --terrain-seed 12
 
 A setting is (partners, core, sweeps, min gain): the core (at most the partners) is

@@ -19,7 +19,7 @@ calibrated relocation on every pair and within each distance, and whether calibr
 kept at least as many verdicts as full everywhere. Results go to ``OUT/<workload>/``
 (``results.csv``; a rerun resumes).
 
-    python benchmarks/relocation_dems.py --out relocation-dems
+    python studies/relocation_dems.py --out relocation-dems
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ and prints, per level and relocation, each method's mean accuracy (%) over the (
 cells, then visopt minus each peer over the same cells: mean difference, its standard error,
 wins / ties / losses, the Wilcoxon signed-rank p (zero differences dropped) and the mean per terrain.
 
-    python benchmarks/visopt_paired.py DIR/results.csv [DIR2/results.csv ...]
+    python studies/visopt_paired.py DIR/results.csv [DIR2/results.csv ...]
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ centred on the tile). Every figure is against geodesic distances on the WGS84 el
 * how far the geodesic between two points runs from the frame's straight segment (the
   line the engines walk).
 
-    python benchmarks/lonlat_distances.py
+    python studies/lonlat_distances.py
 """
 
 from __future__ import annotations

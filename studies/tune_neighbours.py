@@ -8,8 +8,8 @@ generator per terrain) and partners from seed 3, and prints, per level and per m
 the accuracy of each variant among the pairs within 5, 10, 20 and 40 cells of T and over
 every pair, beside full projection and the partners alone ("none").
 
-    python benchmarks/tune_neighbours.py                      # weights 0.5, 1, 3 and inf
-    python benchmarks/tune_neighbours.py --weights 0.25 0.5 --levels 1
+    python studies/tune_neighbours.py                      # weights 0.5, 1, 3 and inf
+    python studies/tune_neighbours.py --weights 0.25 0.5 --levels 1
 
 A weight is a neighbour's against a partner when there are 512 partners; with K partners
 it counts K / 512 times as much (terrainvis.relocation.calibrated.neighbour_weight), so the
