@@ -171,7 +171,7 @@ METHODS: dict[str, Method] = {
                options=("weight",), cost_rank=2, style=("tab:green", "^")),
         Method(
             "visopt", "regular", "simplifiers.visopt", "visopt",
-            "visibility-optimized coarse heights for the calibrated relocation (issue 18; docs/visopt.md)",
+            "visibility-optimized coarse heights for the calibrated relocation (docs/visopt.md)",
             options=("n_train", "rounds", "seed", "trust", "max_breakpoints"), cost_rank=1,
             style=("tab:olive", "*"), whole_grid=True, default=False,
             # GLS's solve and the error evaluation; the breakpoints (at most about 320 MB) do not grow with the grid

@@ -1,4 +1,4 @@
-"""The visibility-optimized regular simplifier (``"visopt"``, issue 18 item 3).
+"""The visibility-optimized regular simplifier (``"visopt"``).
 
 A HeightGrid at exactly the coarse positions of the reverse Faber levels (the grid of
 ``gls``/``lls`` at the same level), whose coarse heights are chosen so that points

@@ -1,8 +1,8 @@
 """The practitioners' simplifiers, as terrainvis methods: ``rtin``, ``delatin``, ``fqmr``, ``fqmr-free``, ``meshopt``, ``vtk-greedy``.
 
 Each is a library that terrain and graphics practitioners use, wrapped so that it takes
-a level's vertex budget like the built-in irregular methods (issue 27, part 3;
-docs/peers.md has what each reaches):
+a level's vertex budget like the built-in irregular methods (docs/peers.md has what
+each reaches):
 
 * ``rtin`` (semi-regular): pymartini, ``max_error`` searched; a height field as it
   comes (grids that are not (2^k+1)² are padded and clipped, see :mod:`.rtin`).

@@ -9,10 +9,10 @@ import sys
 def release_freed_memory() -> None:
     """Ask glibc to give freed heap pages back to the OS (``malloc_trim(0)``); elsewhere nothing.
 
-    Libraries that build large meshes in C++ (pymeshlab holds ~1.1 GB at its peak on a
-    1024² grid) free them on return, but glibc keeps the pages: the process stays at
-    ~690 MB for the rest of its life. Trimmed, it drops to ~240 MB (measured), which is
-    what lets two workers share a machine's memory.
+    Libraries that build large meshes in C++ (pymeshlab) free them on return, but glibc
+    keeps the pages, and the process keeps its peak size for the rest of its life.
+    Trimmed, it gives most of them back (docs/performance.md), which is what lets two
+    workers share a machine's memory.
     """
     if not sys.platform.startswith("linux"):
         return

@@ -100,9 +100,8 @@ def cumulative_viewshed(
         that observer.
     workers : int, optional
         Local worker processes. By default (and with 1) the observers' viewsheds run in
-        this process, each sweep on every core: on this project's 2-core machine that
-        beat one process per CPU (1,000 observers on 1024²: 13.6 s against 16.1 s, 19.8
-        against 31.2 s of CPU, medians of 3; docs/user-guide.md). ``workers=N`` runs them
+        this process, each sweep on every core, which on two cores beats one process per
+        CPU (docs/user-guide.md#many-observers has the figures). ``workers=N`` runs them
         on N processes of one core each, for machines with more cores than the sweep's
         16 sectors. Workers are started with ``spawn``, which imports the caller's
         ``__main__`` again: in a script, call this under ``if __name__ == "__main__":``.
