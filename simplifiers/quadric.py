@@ -20,7 +20,7 @@ clamped collapse ranks behind collapses with a much larger error, and the result
 on the grid's unit and on the bounding box (the figures are in the docs). The adapter
 therefore hands pymeshlab coordinates in units of the input's longest edge, so that a
 clamped collapse ranks before the others and the results no longer depend on the unit of
-the grid (``tests/test_quadric.py``). With these units the boundary weight that keeps the
+the grid (``tests/methods/test_quadric.py``). With these units the boundary weight that keeps the
 border in place is 10.
 fast-simplification compares its errors with an absolute threshold schedule in squared
 mesh units and gets metres (or larger units, when its schedule runs out).

@@ -19,7 +19,7 @@ touch that module (or clear its ``__pycache__``) or the cached machine code keep
 old value. The names a kernel reads are marked "(kernel)" below.
 
 Adding one: a ``NAME = value`` here with a ``#:`` line (what it protects, what it is
-relative to), then import it where it is used. ``tests/test_tolerances.py`` fails on a
+relative to), then import it where it is used. ``tests/whole/test_tolerances.py`` fails on a
 float literal below 1e-5 anywhere else in ``terrainvis/`` or ``simplifiers/``.
 """
 

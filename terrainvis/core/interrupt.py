@@ -37,7 +37,7 @@ work when it is set (a ``prange`` cannot be left early), so chunks must be small
 to end in well under a second. The flag is read with :func:`~terrainvis.core.stopflag.stopped`,
 never as a plain ``stop[0]``: another thread writes it, and a plain read in a ``prange``
 body was hoisted out of the loop by the compiler, so those kernels ran to their end (see
-:mod:`terrainvis.core.stopflag`). The tests in ``tests/test_interrupt_kernels.py``
+:mod:`terrainvis.core.stopflag`). The tests in ``tests/whole/test_interrupt_kernels.py``
 interrupt every long kernel in a subprocess and check that the caller raises and that
 the kernel's own thread ends, both within two seconds.
 
@@ -143,7 +143,7 @@ def for_threads(parallel, serial):
     """``parallel`` (a ``prange`` kernel), or its serial twin ``serial`` when numba has one
     thread, as in a worker of a :func:`terrainvis.compare` run: the twin computes the same,
     and spares the parfor compilation (about 1-1.5 s of CPU) that gains nothing there
-    (``tests/test_serial_twins.py`` checks each pair)."""
+    (``tests/whole/test_serial_twins.py`` checks each pair)."""
     import numba
 
     return parallel if numba.get_num_threads() > 1 else serial

@@ -34,7 +34,7 @@ The kernels read the surface as the core's :data:`~terrainvis.core.surface.Surfa
 the faces' neighbours ``nbr``), in local coordinates; the predicate and the choice of a
 height as :data:`Rules`; one track as a :data:`Track`; the neighbours of the points as
 :data:`Neighbours`; a point as the 3-tuple ``(x, y, z)``. No function takes more than
-twelve positional arguments (``tests/test_visibility_layout.py``).
+twelve positional arguments (``tests/visibility/test_visibility_layout.py``).
 
 The walks
 ---------

@@ -17,7 +17,7 @@ A track is the 4-tuple ``seg = (ax, ay, dx, dy)`` of the ground points ``a + t d
 grid is read through its coordinates ``xs``, ``ys`` (local, from 0), inverse widths
 ``ixw``, ``iyw`` and ``uniform`` (as in :data:`~terrainvis.core.surface.SurfaceGrid`).
 Every crossing parameter is computed one way, ``(line - a) / d``, so the consumers'
-breakpoints are the same numbers bit for bit (``tests/test_one_walk.py``).
+breakpoints are the same numbers bit for bit (``tests/visibility/test_one_walk.py``).
 
 The cell-by-cell cursor
 -----------------------

@@ -10,7 +10,7 @@ moves the paper's results fails CI instead of passing silently:
   terrains, all seven methods, levels 1 and 3, 2 sets of 20 points).
 
 Run it only when a change of these numbers is deliberate, and say in the commit message
-what moved and why. ``tests/test_golden.py`` checks the files.
+what moved and why. ``tests/experiment/test_golden.py`` checks the files.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-NOTEBOOK = Path(__file__).resolve().parents[1] / "examples" / "explore.ipynb"
+NOTEBOOK = Path(__file__).resolve().parents[2] / "examples" / "explore.ipynb"
 
 
 def test_explore_notebook_runs():

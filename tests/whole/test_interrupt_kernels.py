@@ -374,7 +374,7 @@ def test_every_kernel_reads_its_flag_with_stopped():
     import re
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     plain = re.compile(r"\bstop\[0\]\s*(!=|==|>|<)")
     readers = 0
     for path in sorted([*root.joinpath("terrainvis").rglob("*.py"), *root.joinpath("simplifiers").rglob("*.py")]):

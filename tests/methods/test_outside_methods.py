@@ -23,7 +23,7 @@ import simplifiers
 from terrainvis import TIN, HeightGrid, compare, evaluate, synthetic_terrain
 from terrainvis.errors import SimplificationError
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 _MODULE = '''
 """Outside methods for the tests: a regular one and an irregular one."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 #: The layers, lowest first: a module may import from its own layer and the ones below it.
 LAYERS = (
@@ -71,7 +71,7 @@ def _layer(module: str) -> int:
     found = [i for i, prefixes in enumerate(LAYERS) for p in prefixes if module == p or module.startswith(p + ".")]
     if module == "terrainvis":
         return -1  # the package's own __init__: the lazy API, importing nothing at import time
-    assert found, f"{module} belongs to no layer of tests/test_layout.py: add it there and to docs/architecture.md"
+    assert found, f"{module} belongs to no layer of tests/whole/test_layout.py: add it there and to docs/architecture.md"
     return max(found)
 
 

@@ -16,7 +16,7 @@ import pytest
 
 from conftest import SHARED_DEM
 
-DATA = Path(__file__).resolve().parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 REGENERATE = "if the change is deliberate, run `python tests/data/make_golden.py` and explain it in the commit"
 
 

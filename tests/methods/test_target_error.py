@@ -13,8 +13,8 @@ from terrainvis import HeightGrid, bundled_terrain, vertical_errors
 from conftest import shared_dem_120
 
 # visopt computes every level from the grid with 1200 training points (about a minute a level at
-# 120x120): its max_error search is tested on a small case in tests/test_visopt.py
-# the built-in methods; the practitioners' simplifiers' error targets are tested in tests/test_peer_methods.py
+# 120x120): its max_error search is tested on a small case in tests/methods/test_visopt.py
+# the built-in methods; the practitioners' simplifiers' error targets are tested in tests/methods/test_peer_methods.py
 METHODS = [m for m in simplifiers.METHODS if m in simplifiers.registry.BUILTIN and m != "visopt"]
 REGULAR = [m for m in METHODS if simplifiers.METHODS[m].regular]
 

@@ -18,7 +18,7 @@ from terrainvis.core._georef import lonlat_to_local, metres_per_degree, uniform_
 from terrainvis.core.mesh import footprint_matches
 from terrainvis.experiment.options import finite
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("terrainvis", "simplifiers")
 #: A literal this small (and not 0) is a tolerance (or a floor) and belongs in tolerances.py.
 SMALL = 1e-5

@@ -1,6 +1,6 @@
 """Options of compare declared once: the signature, the docstring, the CLI flags, the stored settings.
 
-The last tests add a toy option the way tests/test_toy_method.py adds a toy method: one
+The last tests add a toy option the way tests/extensions/test_toy_method.py adds a toy method: one
 entry in :data:`terrainvis.experiment.options.OPTIONS` (monkeypatched), no other file edited, and
 the option is accepted and validated by ``compare``, offered by ``terrainvis compare``,
 stored in the run's settings and checked on resume.

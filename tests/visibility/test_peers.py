@@ -12,7 +12,7 @@ highest sample and from the centre, an eye of 1.7 m on a flat earth and of 10 m 
 curvature and standard refraction (r.viewshed -c -r refraction_coeff=0.14286, ours
 curvature=0.85714):
 
-* measured (this DEM, 4 observers x 2 heights x curvature off/on, tests/test_peers.py's
+* measured (this DEM, 4 observers x 2 heights x curvature off/on, tests/visibility/test_peers.py's
   settings among them): 0.07-0.71 % of the cells differ, 69-98 % of them within one cell
   of a visibility edge of ours (95-98 % where more than 50 cells differ), and r.viewshed
   is the one that sees more in 70-88 % of them;
@@ -37,7 +37,7 @@ import pytest
 from terrainvis import viewshed
 from terrainvis.io import load_dem
 
-DEM = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "dem", "green_mountains_vt.tif")
+DEM = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "dem", "green_mountains_vt.tif")
 if not os.path.exists(DEM):
     DEM = "/work/shared/data/dem/green_mountains_vt.tif"
 
