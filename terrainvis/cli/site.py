@@ -9,6 +9,7 @@ from pathlib import Path
 from ._common import (
     UsageError,
     add_earth,
+    add_field_of_view,
     add_max_distance,
     add_nodata,
     add_positions,
@@ -16,6 +17,7 @@ from ._common import (
     check_heights,
     dask_client,
     earth_text,
+    field_of_view_args,
     height_arg,
     outside_message,
     plural,
@@ -66,6 +68,7 @@ def add_parser(sub) -> None:
                    help="eye height above the surface, >= 0, for candidates without a height column (default 1.7)")
     add_target_height(s)
     add_max_distance(s, "each observer sees only the samples within this distance")
+    add_field_of_view(s)
     s.add_argument("-o", "--output", metavar="CSV", help="write the chosen observers and the coverage after each "
                                                          "choice to this .csv")
     s.add_argument("--coverage", metavar="OUT", help="write the samples seen by the chosen observers: .tif (1 seen, 0 "
@@ -85,6 +88,7 @@ def run(args) -> int:
     from ..visibility import site_observers
 
     outputs = _check_outputs(args)
+    fov = field_of_view_args(args)
     label, grid = read_terrain(args.dem, args)
     check_heights(grid, args)
     if outputs.get("coverage") is not None and outputs["coverage"].suffix.lower() != ".npz" and not grid.is_uniform:
@@ -98,13 +102,14 @@ def run(args) -> int:
         t0 = time.perf_counter()
         result = site_observers(grid, xy, args.k, observer_height=heights, target_height=args.target_height,
                                 max_distance=args.max_distance, curvature=args.curvature,
-                                earth_radius=args.earth_radius, workers=args.workers, client=client, progress=True)
+                                earth_radius=args.earth_radius, azimuth=fov.azimuth, vertical=fov.vertical,
+                                min_distance=fov.min_distance, workers=args.workers, client=client, progress=True)
         seconds = time.perf_counter() - t0
     finally:
         if client is not None:
             client.close()
     table = _native_table(result.table, frame)
-    _report(label, frame, args, result, table, heights, source, seconds)
+    _report(label, frame, args, result, table, (heights, source, fov), seconds)
     _write(grid, result, table, outputs, frame, label, xy)
     return 0
 
@@ -165,13 +170,14 @@ def _native_table(table, frame):
     return out
 
 
-def _report(label, frame, args, result, table, heights, source, seconds) -> None:
+def _report(label, frame, args, result, table, setup, seconds) -> None:
     from .cumulative import heights_text
 
+    heights, source, fov = setup
     n = len(heights)
     print(f"{label}: choosing {args.k} of {plural(n, 'candidate')} ({source}), eyes {heights_text(heights)} "
           f"above the surface, target {args.target_height:g}"
-          + (f", within {args.max_distance:g}" if args.max_distance is not None else ""))
+          + (f", {fov.describe()}" if fov.limited else ""))
     print(f"  {earth_text(args)}")
     plain = args.k * n - args.k * (args.k - 1) // 2
     print(f"  viewsheds {result.seconds['viewsheds']:.1f} s, greedy {result.seconds['greedy']:.2f} s "

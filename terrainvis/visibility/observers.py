@@ -256,9 +256,8 @@ def observer_sets(
     ([1, 1, 2, 1, 1], 15)
     """
     run = _prepare(terrain, observers, observer_height, (target_height, max_distance, at, engine, curvature,
-                                                          earth_radius), workers, client, progress, "observers")
-    fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance, max_distance=max_distance)
-    run["options"].update(azimuth=fov.azimuth, vertical=fov.vertical, min_distance=fov.min_distance)
+                                                          earth_radius), workers, client, progress, "observers",
+                   fov=(azimuth, vertical, min_distance))
     grid = terrain if at is None else at
     k = run["obs"].shape[0]
     n_bytes = -(-k // 8)
@@ -292,11 +291,13 @@ def _sets_unit(terrain, at, token: str, observers: np.ndarray, heights: np.ndarr
 
 
 # ----------------------------------------------------------------- the chunked run (shared with siting)
-def _prepare(terrain, observers, observer_height, options, workers, client, progress, name: str) -> dict:
+def _prepare(terrain, observers, observer_height, options, workers, client, progress, name: str, *,
+             fov=(None, None, None)) -> dict:
     """Validate the arguments of a run of one viewshed per observer, as :func:`terrainvis.cumulative_viewshed` does.
 
     ``options`` is ``(target_height, max_distance, at, engine, curvature, earth_radius)``;
-    ``name`` names the observers' argument in messages.
+    ``name`` names the observers' argument in messages; ``fov`` is ``(azimuth, vertical,
+    min_distance)``, each observer's field of view.
     """
     from ..core.runner import check_client, check_workers
 
@@ -304,6 +305,8 @@ def _prepare(terrain, observers, observer_height, options, workers, client, prog
     obs = _as_observers(observers, name)
     heights = _as_heights(observer_height, obs.shape[0], terrain)
     opts = _options(terrain, *options)
+    limits = field_of_view(azimuth=fov[0], vertical=fov[1], min_distance=fov[2], max_distance=options[1])
+    opts.update(azimuth=limits.azimuth, vertical=limits.vertical, min_distance=limits.min_distance)
     workers = check_workers(workers)
     client = check_client(client)
     _check_inside(terrain, obs, name)

@@ -117,6 +117,9 @@ def site_observers(
     engine: str = "auto",
     curvature: float = 0.0,
     earth_radius: float = EARTH_RADIUS,
+    azimuth=None,
+    vertical=None,
+    min_distance=None,
     workers: int | None = None,
     client=None,
     progress: bool = False,
@@ -137,6 +140,9 @@ def site_observers(
     target_height, max_distance, at, engine, curvature, earth_radius
         As in :func:`terrainvis.viewshed` (the targets are the samples of ``at``, or of
         the terrain).
+    azimuth, vertical, min_distance : optional
+        Each candidate's field of view, as in :func:`terrainvis.viewshed`: a candidate
+        covers nothing outside it (a mast's antenna sector, a camera's view).
     workers, client, progress
         Where the K viewsheds run, as in :func:`terrainvis.cumulative_viewshed` (the
         progress bar counts candidates).
@@ -206,7 +212,8 @@ def site_observers(
     ([0, 2], [9, 6], [0.6, 1.0])
     """
     run = _prepare(terrain, candidates, observer_height, (target_height, max_distance, at, engine, curvature,
-                                                          earth_radius), workers, client, progress, "candidates")
+                                                          earth_radius), workers, client, progress, "candidates",
+                   fov=(azimuth, vertical, min_distance))
     n = run["obs"].shape[0]
     if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)):
         raise TypeError(f"k must be an integer (how many observers to choose), got {describe(k)}")

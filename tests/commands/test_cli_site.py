@@ -90,6 +90,8 @@ def test_csv_candidates_on_a_georeferenced_dem(tmp_path, capsys):
     (["-k", "2", "--grid", "12", "--candidates", "x.csv"], ["--candidates: not allowed with argument --grid"]),
     (["-k", "2", "--grid", "12", "-o", "chosen.txt"], ["-o must end in .csv, got 'chosen.txt'"]),
     (["-k", "2", "--grid", "12", "--plot", "curve.pdf"], ["--plot must end in .png, got 'curve.pdf'"]),
+    (["-k", "2", "--grid", "12", "--azimuth", "10", "400"], ["--azimuth", "400"]),
+    (["-k", "2", "--grid", "12", "--vertical", "5", "-5"], ["--vertical"]),
 ])
 def test_one_line_errors(tmp_path, capsys, monkeypatch, argv, pieces):
     monkeypatch.chdir(tmp_path)
@@ -106,3 +108,18 @@ def test_a_candidate_outside_the_dem_is_named(tmp_path, capsys):
     pd.DataFrame({"x": [100.0], "y": [100.0], "height": [-1.0]}).to_csv(tmp_path / "h.csv", index=False)
     err = _err(capsys, ["site", "hills", "--candidates", tmp_path / "h.csv", "-k", 1])
     assert "row 1, column height is -1; heights above the surface must be >= 0" in err
+
+
+def test_a_field_of_view_is_the_apis(tmp_path, capsys):
+    code, out, err = _run(capsys, ["site", "hills", "--grid", 15, "-k", 3, "-o", tmp_path / "chosen.csv",
+                                   "--height", 5, "--azimuth", 300, 60, "--min-distance", 100])
+    assert code == 0, err
+    grid = bundled_terrain("hills")
+    expected = site_observers(grid, candidate_grid(grid, 15), 3, observer_height=5.0, azimuth=(300.0, 60.0),
+                              min_distance=100.0, workers=1)
+    whole = site_observers(grid, candidate_grid(grid, 15), 3, observer_height=5.0, workers=1)
+    assert expected.table["covered_cells"].iloc[-1] < whole.table["covered_cells"].iloc[-1]
+    got = pd.read_csv(tmp_path / "chosen.csv")
+    assert got["candidate"].tolist() == expected.chosen.tolist()
+    np.testing.assert_array_equal(got["covered_cells"], expected.table["covered_cells"])
+    assert "azimuth 300 to 60 degrees clockwise (through north)" in out

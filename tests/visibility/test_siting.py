@@ -65,6 +65,7 @@ def _optimum(views, k, areas):
     {"observer_height": 10.0, "target_height": 2.0},
     {"max_distance": 300.0},
     {"curvature": 1.0, "earth_radius": 3000.0},  # a tiny earth, so that the bulge changes the viewsheds
+    {"azimuth": (300.0, 60.0), "vertical": (-20.0, 10.0), "min_distance": 50.0},  # a field of view
 ])
 def test_lazy_greedy_chooses_the_plain_greedys_sequence(hills, kw):
     cands = _random_candidates(hills, 12, seed=1)
@@ -74,6 +75,10 @@ def test_lazy_greedy_chooses_the_plain_greedys_sequence(hills, kw):
     if kw.get("curvature"):
         flat = _viewsheds(hills, cands, **{**kw, "curvature": 0.0})
         assert any((a != b).any() for a, b in zip(views, flat)), "the earth model changes no viewshed here"
+    if kw.get("azimuth"):
+        whole = _viewsheds(hills, cands)
+        assert all((a <= b).all() for a, b in zip(views, whole)) and sum(a.sum() for a in views) < 0.5 * sum(
+            b.sum() for b in whole), "the field of view leaves most of each viewshed"
     k = 6
     chosen, gains, covered = _plain_greedy(views, k, areas)
     result = site_observers(hills, cands, k, workers=1, **kw)
