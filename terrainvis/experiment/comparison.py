@@ -35,6 +35,7 @@ import sys
 import pandas as pd
 
 from ..core._progress import progress_bar_class
+from ..core.validate import describe
 from .measures import MEASURES
 from .collect import COLUMNS, UNIT_KEY, order, rows_per_unit, table
 from .options import (
@@ -48,14 +49,14 @@ from .options import (
     signature_parameters,
 )
 from .plan import DEFAULT_TERRAINS, JACKSBORO_WINDOW, resolve_terrains, run_record
-from .plan import kernels_cached as _kernels_cached
+from . import plan as _plan  # kernels_cached is read at call time: a test stands in for a fresh install
 from .plan import check_memory, check_sendable, extensions, settings_for
 from .plan import tasks as _plan_tasks
 from .plan import warm_up_parts as _warm_up_parts
 from .units import call as _call
 from .measures import point_sets
 from .units import end_radius_for, simplified_path
-from .units import run_unit as _run_unit
+from .units import run_unit
 from .units import warm_up as _warm_up
 
 __all__ = [
@@ -76,7 +77,8 @@ def _tasks(grids: dict, settings: Settings, done=frozenset()) -> list[tuple]:
 
 # ---------------------------------------------------------------------- compare
 def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=None, out_csv=None,
-            resume: bool = False, save_dir=None, progress: bool | None = None, **options) -> pd.DataFrame:
+            resume: bool = False, save_dir=None, progress: bool | None = None, on_unit=None,
+            **options) -> pd.DataFrame:
     """Run the paper's experiment: how many LOS verdicts survive each simplification.
 
     Parameters
@@ -107,6 +109,14 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
         someone watches, tqdm's convention: on a terminal (bars redrawn in place) or in
         Jupyter (a widget with ipywidgets); True shows it anywhere, as plain lines when
         stderr is a file; False never.
+    on_unit : callable, optional
+        ``on_unit(key, rows)``, called in this process as each unit finishes, after its
+        rows are stored in ``out_csv``: ``key`` is ``(terrain, method, levels)`` (a tuple
+        of the levels the unit ran: one, or several when ``cascade`` chains them) and
+        ``rows`` a DataFrame of its rows (the columns :data:`COLUMNS`). For live
+        figures, logs, or a stop rule: an exception it raises ends the run as an
+        interrupt does (the units stored so far stay in ``out_csv``; ``resume=True``
+        continues).
 
     The options (between ``terrains`` and ``workers``) are declared in
     :data:`terrainvis.experiment.options.OPTIONS`; their defaults are :data:`DEFAULTS`.
@@ -142,6 +152,8 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
         raise TypeError("terrains must be a terrain, a list of terrains or a dict of them, got None")
     if resume and out_csv is None:
         raise ValueError("resume=True continues the run stored in out_csv; give out_csv (the results file to resume)")
+    if on_unit is not None and not callable(on_unit):
+        raise TypeError(f"on_unit must be a function of (key, rows) or None, got {describe(on_unit)}")
     grids = resolve_terrains(terrains)
     settings = _settings(grids, **options)
     workers = check_workers(workers)
@@ -161,7 +173,7 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
             _remove_partial_saves(save_dir)  # left by an earlier run that was killed mid-write
         try:
             new_rows = _execute(tasks, grids, settings, done, store, save_dir=save_dir, workers=workers,
-                                client=client, progress=progress)
+                                client=client, progress=progress, on_unit=on_unit)
         finally:
             if save_dir is not None:  # a worker stopped mid-write (a full disk, a kill) leaves its temporary file
                 _remove_partial_saves(save_dir)
@@ -235,7 +247,7 @@ def _store(out_csv, settings: Settings, grids: dict, resume: bool):
     return store, frozenset(store.done)
 
 
-def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, progress) -> list[dict]:
+def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, progress, on_unit=None) -> list[dict]:
     """Run the tasks (after the warm-up parts of a cold numba cache); every finished unit goes to ``store``."""
     from ..core._progress import show_by_default
     from ..core.runner import run_units
@@ -245,12 +257,12 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
 
     todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
     n_local = (os.cpu_count() or 1) if workers is None else workers
-    cold = bool(tasks) and client is None and _kernels_cached() is False
+    cold = bool(tasks) and client is None and _plan.kernels_cached() is False
     parts = _warm_up_parts(tasks, grids, settings) if cold and ((n_local > 1 and len(tasks) > 1) or progress) else []
     # the parts and the units interleaved so that no two workers compile the same kernels
     sent = extensions(settings)
     work = [(("warm-up", x), (sent, _warm_up, x, settings)) if kind == "part" else
-            (x, (sent, _run_unit, grids[x[0]], x[0], x[1], x[2], settings, save_dir))
+            (x, (sent, run_unit, grids[x[0]], x[0], x[1], x[2], settings, save_dir))
             for kind, x in work_order(parts, tasks, min(n_local, len(parts) + len(tasks)))]
     bars = _Progress(progress and bool(tasks), parts, todo, min(n_local, len(work)))
     new_rows: list[dict] = []
@@ -264,6 +276,8 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
         if store is not None:
             store.add(rows)
         bars.finished(len({r["level"] for r in rows}))
+        if on_unit is not None and rows:
+            on_unit(key, pd.DataFrame(rows, columns=list(COLUMNS)))
 
     try:
         run_units(work, _call, on_result=collect, workers=workers, client=client)

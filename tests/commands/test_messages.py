@@ -134,12 +134,12 @@ def test_an_unwritable_output_is_refused_before_computing(tmp_path, capsys, monk
 
 
 def test_a_full_disk_exits_1_naming_the_real_file(tmp_path, capsys, monkeypatch):
-    import terrainvis.core.fileio as fileio
+    import os
 
-    def full(path):
+    def full(fd):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(fileio, "_fsync", full)
+    monkeypatch.setattr(os, "fsync", full)  # the file system reports the full disk when the data is flushed
     out = tmp_path / "s.npz"
     for argv in (["simplify", "hills", "-m", "lls", "-o", str(out)],
                  ["viewshed", "hills", "--observer", "900", "900", "-o", str(out)]):
@@ -255,9 +255,9 @@ def test_the_cli_turns_a_memory_error_into_one_line(capsys, monkeypatch):
 
 # ---------------------------------------------------------------------- progress
 def test_a_cold_cache_shows_what_compiles_and_how_far(capsys, monkeypatch):
-    from terrainvis.experiment import comparison as experiment
+    from terrainvis.experiment import plan
 
-    monkeypatch.setattr(experiment, "_kernels_cached", lambda: False)  # as on a fresh install
+    monkeypatch.setattr(plan, "kernels_cached", lambda: False)  # as on a fresh install
     capsys.readouterr()
     compare(["hills"], methods=["lls", "qec"], levels=[1], n_points=5, n_sets=1, repeats=1, workers=1,
             progress=True)
@@ -284,12 +284,12 @@ def test_the_compile_estimate_packs_parts_on_the_workers():
 
 
 def test_the_work_order_starts_nothing_before_what_it_compiles_is_there():
-    from terrainvis.experiment import comparison as experiment
+    from terrainvis.experiment import plan
     from terrainvis.experiment.plan import compile_weight, part_needs, unit_needs, warm_up_parts, work_order
 
-    grids = experiment.resolve_terrains(["hills", "ridges"])
-    settings = experiment._settings(grids, levels=[1, 3], n_points=20, n_sets=2)
-    tasks = experiment._tasks(grids, settings)
+    grids = plan.resolve_terrains(["hills", "ridges"])
+    settings = plan.settings_for(grids, {"levels": [1, 3], "n_points": 20, "n_sets": 2})
+    tasks = plan.tasks(grids, settings)
     parts = warm_up_parts(tasks, grids, settings)
     assert ("measure", "volume", 33) in parts and ("measure", "tin", 33) in parts
     assert ("measure", "volume", 33) not in warm_up_parts(tasks, grids, settings.replace(volume=False))

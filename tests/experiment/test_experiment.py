@@ -149,37 +149,37 @@ def test_everything_is_validated_before_any_unit_runs(small):
         compare(None)
 
 
-def _interrupt_after(monkeypatch, n_finished: int):
-    """Make the (n_finished + 1)-th unit raise KeyboardInterrupt, as a Ctrl-C would."""
-    from terrainvis.experiment import comparison as experiment
-
+def _interrupt_after(n_finished: int):
+    """An ``on_unit`` that raises KeyboardInterrupt once ``n_finished`` units have finished, as a Ctrl-C would."""
     calls = []
-    real = experiment._run_unit
 
-    def counting(*args):
-        calls.append(args[1:4])
-        if len(calls) == n_finished + 1:
+    def on_unit(key, rows):
+        calls.append(key)
+        assert len(rows) and (rows[["terrain", "method"]].to_numpy() == key[:2]).all()
+        if len(calls) == n_finished:
             raise KeyboardInterrupt
-        return real(*args)
 
-    monkeypatch.setattr(experiment, "_run_unit", counting)
-    return calls, real
+    return on_unit, calls
 
 
-def test_incremental_csv_and_resume(small, tmp_path, monkeypatch, serial):
-    from terrainvis.experiment import comparison as experiment
+def _recording():
+    """An ``on_unit`` that records the keys of the units that ran."""
+    ran = []
+    return (lambda key, rows: ran.append(key)), ran
 
+
+def test_incremental_csv_and_resume(small, tmp_path, serial):
     out = tmp_path / "results.csv"
-    calls, real = _interrupt_after(monkeypatch, 2)
+    stop, calls = _interrupt_after(2)
     with pytest.raises(KeyboardInterrupt):
-        compare(small, workers=1, out_csv=out, **_kw())
+        compare(small, workers=1, out_csv=out, on_unit=stop, **_kw())
+    assert len(calls) == 2
     on_disk = pd.read_csv(out)
     assert len(on_disk) == 2 * 6  # the two finished units (2 sets x 3 relocations each) are on disk
     finished = {(t, m, (lv,)) for t, m, lv in on_disk[["terrain", "method", "level"]].drop_duplicates().to_numpy().tolist()}
-    monkeypatch.setattr(experiment, "_run_unit", real)
-    rerun = []
-    monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
-    df = compare(small, workers=1, out_csv=out, resume=True, **_kw())
+    assert finished == {tuple(k) for k in calls}
+    record, rerun = _recording()
+    df = compare(small, workers=1, out_csv=out, resume=True, on_unit=record, **_kw())
     assert len(rerun) == 12 - 2 and not finished & {tuple(u) for u in rerun}
     assert len(df) == 72 and len(pd.read_csv(out)) == 72
     assert not df.duplicated(KEYS).any()
@@ -188,15 +188,30 @@ def test_incremental_csv_and_resume(small, tmp_path, monkeypatch, serial):
                                   serial[STABLE], check_dtype=False)
 
 
-def test_resume_after_an_interrupt_before_the_first_unit(small, tmp_path, monkeypatch, serial):
-    out = tmp_path / "results.csv"
-    _interrupt_after(monkeypatch, 0)
-    with pytest.raises(KeyboardInterrupt):
-        compare(small, workers=1, out_csv=out, **_kw())
-    assert out.read_text().count("\n") == 1  # the header only
-    monkeypatch.undo()
-    df = compare(small, workers=1, out_csv=out, resume=True, **_kw())
-    pd.testing.assert_frame_equal(df[STABLE], serial[STABLE], check_dtype=False)
+def test_resume_after_an_interrupt_before_the_first_unit(small, tmp_path):
+    """A Ctrl-C inside the first unit (here: raised by a user's method, registered as users do)."""
+    import simplifiers
+
+    state = {"interrupt": True}
+
+    def flaky(grid, level, **options):
+        if state.pop("interrupt", False):
+            raise KeyboardInterrupt
+        return simplifiers.simplify(grid, "lls", level)
+
+    simplifiers.register("flaky-lls", flaky, kind="regular")
+    try:
+        out = tmp_path / "results.csv"
+        kw = _kw(methods=["flaky-lls"])
+        with pytest.raises(KeyboardInterrupt):
+            compare(small, workers=1, out_csv=out, **kw)
+        assert out.read_text().count("\n") == 1  # the header only
+        df = compare(small, workers=1, out_csv=out, resume=True, **kw)
+        whole = compare(small, workers=1, **kw)  # uninterrupted
+    finally:
+        simplifiers.unregister("flaky-lls")
+    pd.testing.assert_frame_equal(df[STABLE], whole[STABLE], check_dtype=False)
+    assert set(df["method"]) == {"flaky-lls"} and len(df) == 2 * 2 * 2 * 3  # terrains x sets x levels x relocations
 
 
 def test_resume_is_strict_about_settings(small, tmp_path):
@@ -219,19 +234,15 @@ def test_resume_is_strict_about_settings(small, tmp_path):
         compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **_kw(methods=["lls"], levels=[1]))
 
 
-def test_a_cut_off_last_row_is_dropped_with_a_warning(small, tmp_path, monkeypatch):
-    from terrainvis.experiment import comparison as experiment
-
+def test_a_cut_off_last_row_is_dropped_with_a_warning(small, tmp_path):
     out = tmp_path / "results.csv"
     kw = _kw(methods=["simple", "lls"], levels=[1])
     full = compare({"a": small["a"]}, workers=1, out_csv=out, **kw)
     text = out.read_text()
     out.write_text(text[: len(text) - 40])  # a write cut off in the last row (a full disk, a power loss)
-    real = experiment._run_unit
-    rerun = []
-    monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
+    record, rerun = _recording()
     with pytest.warns(RuntimeWarning, match="dropped a cut-off last row"):
-        df = compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **kw)
+        df = compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, on_unit=record, **kw)
     assert rerun == [("a", "lls", (1,))]  # only the unit of the damaged row runs again
     pd.testing.assert_frame_equal(df[STABLE], full[STABLE], check_dtype=False)
 
@@ -370,10 +381,8 @@ def test_cascade_continues_each_qec_level_from_the_previous(small, tmp_path, mon
     level2 = [i for i, line in enumerate(lines) if ",qec,irregular,2," in line]
     assert len(level2) == 3  # 1 set x 3 relocations: drop them as if the run had stopped there
     out.write_text("\n".join(line for i, line in enumerate(lines) if i not in level2) + "\n")
-    rerun = []
-    real = experiment._run_unit
-    monkeypatch.setattr(experiment, "_run_unit", lambda *a: rerun.append(a[1:4]) or real(*a))
-    again = compare(g, workers=1, cascade=True, out_csv=out, resume=True, **kw)
+    record, rerun = _recording()
+    again = compare(g, workers=1, cascade=True, out_csv=out, resume=True, on_unit=record, **kw)
     assert rerun == [("a", "qec", (1, 2))]
     assert not again.duplicated(KEYS).any() and len(again) == len(full)
     pd.testing.assert_frame_equal(again[STABLE], full[STABLE], check_dtype=False)
@@ -491,3 +500,20 @@ def test_a_cascade_level_that_fails_is_simplified_from_the_grid(small, monkeypat
     fallback = compare(g, workers=1, cascade=True, **kw)
     assert fallback["error"].isna().all() and not fallback["cascaded"].any()
     pd.testing.assert_frame_equal(fallback[STABLE], independent[STABLE])
+
+
+def test_on_unit_sees_every_unit_once_with_its_rows(small, serial):
+    seen = {}
+
+    def on_unit(key, rows):
+        assert key not in seen
+        assert list(rows.columns) == list(COLUMNS)
+        seen[key] = rows
+
+    compare(small, workers=1, on_unit=on_unit, **_kw())
+    assert len(seen) == 2 * 3 * 2  # terrains x methods x levels, one level per unit
+    rows = pd.concat(seen.values())
+    got = rows.set_index(KEYS).sort_index()[MEASURED]
+    np.testing.assert_array_equal(got.to_numpy(), serial.set_index(KEYS).sort_index()[MEASURED].to_numpy())
+    with pytest.raises(TypeError, match=r"on_unit must be a function of \(key, rows\) or None, got int 5"):
+        compare(small, workers=1, on_unit=5, **_kw())

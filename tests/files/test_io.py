@@ -729,15 +729,15 @@ FORMATS = [".npz", ".npy", ".asc", ".tif", ".ply", ".obj", ".stl", ".glb"]
 def test_failed_write_leaves_the_old_file(tmp_path, suffix, monkeypatch):
     if suffix in (".tif", ".asc"):
         _rasterio()
-    import terrainvis.core.fileio as fileio
+    import os
 
     p = tmp_path / f"old{suffix}"
     p.write_bytes(b"the old file")
 
-    def boom(path):
+    def boom(fd):
         raise OSError("disk full (simulated)")
 
-    monkeypatch.setattr(fileio, "_fsync", boom)
+    monkeypatch.setattr(os, "fsync", boom)  # the flush of the new file fails
     g = HeightGrid(np.arange(12.0).reshape(3, 4))
     with warnings.catch_warnings(), pytest.raises(OSError, match="simulated"):
         warnings.simplefilter("ignore")
