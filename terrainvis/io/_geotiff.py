@@ -43,39 +43,23 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
             # the band, its mask (1 byte) and the float64 heights
             _check_read_memory(p.name, (src.height, src.width), np.dtype(src.dtypes[b - 1]).itemsize, extra_per_sample=1)
             # a mask beyond the nodata value (a mask band, alpha) needs rasterio's masked read; the
-            # nodata value alone is found below, in the one pass that converts and flips the band
+            # nodata value alone is found in the pass that converts and flips the band
             plain = all(f in (MaskFlags.all_valid, MaskFlags.nodata) for f in src.mask_flag_enums[b - 1])
-            data = src.read(b, masked=not plain)
-            nodata = src.nodatavals[b - 1] if plain else None
-            scale, offset = src.scales[b - 1], src.offsets[b - 1]
             t = src.transform
+            if t.b != 0 or t.d != 0:
+                raise _Corrupt(f"rotated rasters are not supported (transform {tuple(t)[:6]})")
+            scale, offset = src.scales[b - 1], src.offsets[b - 1]
+            scale = 1.0 if scale is None else float(scale)
+            offset = 0.0 if offset is None else float(offset)
+            if plain:
+                z = _read_strips(src, b, t, (scale, offset))
+            else:
+                z = _to_heights(_masked(src.read(b, masked=True), t), (scale, offset))
             file_crs = src.crs
             tags = src.tags()
     except rasterio.errors.RasterioError as exc:
         raise _Corrupt(str(exc)) from exc
-    if t.b != 0 or t.d != 0:
-        raise _Corrupt(f"rotated rasters are not supported (transform {tuple(t)[:6]})")
-    # Plain arrays, not masked arithmetic (several times slower on large rasters). One pass
-    # converts to float64 and turns north-up raster rows (and east-to-west columns) into
-    # increasing y (and x), into a fresh buffer the grid adopts.
-    band = np.ma.getdata(data)
-    rows, cols = band.shape
-    z = np.empty((rows, cols), dtype=np.float64)
-    z[...] = band[::-1 if t.e < 0 else 1, ::-1 if t.a < 0 else 1]
-    if np.ma.isMaskedArray(data):
-        mask = np.ma.getmaskarray(data)[::-1 if t.e < 0 else 1, ::-1 if t.a < 0 else 1]
-        if mask.any():
-            z[mask] = np.nan
-    elif nodata is not None and not np.isnan(nodata):
-        stored = _as_stored(nodata, band.dtype)
-        if stored is not None:
-            z[z == stored] = np.nan
-    scale = 1.0 if scale is None else float(scale)
-    offset = 0.0 if offset is None else float(offset)
-    if scale != 1.0:
-        z *= scale
-    if offset != 0.0:
-        z += offset
+    rows, cols = z.shape
     # Sample centres in native coordinates, made increasing (x east, y north).
     dx, dy = abs(t.a), abs(t.e)
     x0 = t.c + 0.5 * t.a if t.a > 0 else t.c + t.a * (cols - 0.5)
@@ -100,6 +84,60 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
         attrs.pop(key, None)  # the file's own georeferencing decides
     lattice = (t.c if t.a > 0 else t.c + t.a * cols, dx, t.f if t.e < 0 else t.f + t.e * rows, dy)
     return _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy, lattice=lattice, owned=True)
+
+
+#: Samples read at once: a strip of whole rows of about this many (rounded to the file's
+#: blocks), so that an interrupt is answered between strips (a 20000² band read in one
+#: call held Ctrl-C for seconds) and the file's own type is never held whole beside the heights.
+_STRIP_SAMPLES = 1 << 22
+
+
+def _read_strips(src, b: int, t, scale_offset) -> np.ndarray:
+    """Band ``b`` of an open raster as heights: float64, rows in increasing y (and x), its
+    nodata value NaN, ``(scale, offset)`` applied, read in strips of rows
+    (:data:`_STRIP_SAMPLES`) into a fresh buffer the grid adopts."""
+    from rasterio.windows import Window
+
+    rows, cols = src.height, src.width
+    z = np.empty((rows, cols), dtype=np.float64)
+    nodata = src.nodatavals[b - 1]
+    stored = None
+    if nodata is not None and not np.isnan(nodata):
+        stored = _as_stored(nodata, np.dtype(src.dtypes[b - 1]))
+    block = max(1, src.block_shapes[b - 1][0])
+    step = max(block, _STRIP_SAMPLES // max(cols, 1) // block * block)
+    flip_rows, flip_cols = t.e < 0, t.a < 0
+    for r0 in range(0, rows, step):
+        r1 = min(rows, r0 + step)
+        part = src.read(b, window=Window(0, r0, cols, r1 - r0))
+        dst = z[rows - r1: rows - r0] if flip_rows else z[r0:r1]
+        dst[...] = part[::-1 if flip_rows else 1, ::-1 if flip_cols else 1]
+        if stored is not None:
+            dst[dst == stored] = np.nan
+        _to_heights(dst, scale_offset)
+    return z
+
+
+def _to_heights(z: np.ndarray, scale_offset) -> np.ndarray:
+    """``z * scale + offset`` in place (the band's stored values to heights), as two steps."""
+    scale, offset = scale_offset
+    if scale != 1.0:
+        z *= scale
+    if offset != 0.0:
+        z += offset
+    return z
+
+
+def _masked(data, t) -> np.ndarray:
+    """A masked band read whole (a mask band or alpha beyond the nodata value) as float64, flipped as
+    :func:`_read_strips` does, its masked samples NaN."""
+    band = np.ma.getdata(data)
+    z = np.empty(band.shape, dtype=np.float64)
+    z[...] = band[::-1 if t.e < 0 else 1, ::-1 if t.a < 0 else 1]
+    mask = np.ma.getmaskarray(data)[::-1 if t.e < 0 else 1, ::-1 if t.a < 0 else 1]
+    if mask.any():
+        z[mask] = np.nan
+    return z
 
 
 def _as_stored(nodata: float, dtype) -> float | None:

@@ -240,3 +240,34 @@ def test_height_limit_is_the_tolerance_over_the_rounding():
         as_height(-50.0, "height", scale=scale, minimum=0.0)
     with pytest.raises(TypeError, match="height must be a real number"):
         as_height("2", "height", scale=scale)
+
+
+@pytest.mark.parametrize(("dtype", "nodata", "flip_rows", "flip_cols", "scale", "offset"), [
+    ("float32", -9999.0, True, False, 1.0, 0.0),
+    ("int16", -32768, False, True, 0.5, 100.0),
+    ("uint16", 0, True, True, 0.1, -5.0),
+])
+def test_a_large_band_read_in_strips_is_the_whole_band(tmp_path, dtype, nodata, flip_rows, flip_cols, scale, offset):
+    """A band of 4.4 million samples is read in two strips of rows (an interrupt is answered
+    between them); the heights are rasterio's whole read, flipped, nodata NaN, scaled."""
+    rasterio = pytest.importorskip("rasterio", reason="the geo extra is not installed")
+    from rasterio.transform import Affine
+
+    rows = cols = 2100
+    rng = np.random.default_rng(7)
+    band = (rng.random((rows, cols)) * 1000).astype(dtype)
+    band[rng.random((rows, cols)) < 0.05] = nodata
+    t = Affine(-30.0 if flip_cols else 30.0, 0.0, 500000.0, 0.0, -30.0 if flip_rows else 30.0, 4000000.0)
+    p = tmp_path / "big.tif"
+    with rasterio.open(p, "w", driver="GTiff", height=rows, width=cols, count=1, dtype=dtype, crs="EPSG:32617",
+                       transform=t, nodata=nodata, tiled=True, blockxsize=256, blockysize=256) as dst:
+        dst.write(band, 1)
+        dst.scales, dst.offsets = (scale,), (offset,)
+    with rasterio.open(p) as src:
+        whole = src.read(1).astype(np.float64)
+    expected = np.where(whole == nodata, np.nan, whole)[::-1 if flip_rows else 1, ::-1 if flip_cols else 1]
+    expected = expected * scale + offset if scale != 1.0 or offset != 0.0 else expected
+    g = load_dem(p)
+    np.testing.assert_allclose(g.z, expected, rtol=1e-15, atol=0.0, equal_nan=True)
+    assert np.isnan(g.z).sum() == (band == nodata).sum()
+    assert np.all(np.diff(g.xs) > 0) and np.all(np.diff(g.ys) > 0)
