@@ -10,6 +10,10 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DEM = REPO.parent / "shared" / "data" / "dem"
 DEM_NAMES = ("jacksboro_fault_tn", "mount_st_helens_wa", "green_mountains_vt", "west_bijou_escarpment_co")
+#: The real DEMs the simplifiers' tests run on: the shared ones and the Jacksboro window that
+#: ``compare`` uses by default (from the DEM that ships with matplotlib), which is always
+#: present, so that a clone without ../shared still tests a real DEM.
+REAL_DEM_NAMES = DEM_NAMES + ("jacksboro_window",)
 
 
 def shared_dem_path(name: str, suffix: str = ".npz") -> Path:
@@ -32,8 +36,14 @@ def shared_dems():
 
 
 def shared_dem_120(name: str):
-    """A NaN-free 120x120 crop from the middle of a shared DEM's valid window."""
+    """A NaN-free 120x120 crop from the middle of a shared DEM's valid window (or, for
+    ``"jacksboro_window"``, compare's default Jacksboro window, 120x120 too)."""
     from terrainvis import load_dem
+
+    if name == "jacksboro_window":
+        from terrainvis.experiment import resolve_terrains
+
+        return resolve_terrains(["jacksboro"])["jacksboro"]
 
     grid = load_dem(shared_dem_path(name))
     rs, cs = grid.valid_window()

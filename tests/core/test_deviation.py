@@ -298,7 +298,7 @@ def test_bundled_terrains_match_manifold(name, irregular, regular):
         assert_matches_manifold(g, simplify(g, method, level))
 
 
-@pytest.mark.parametrize("name", ["jacksboro_fault_tn", "mount_st_helens_wa", "green_mountains_vt"])
+@pytest.mark.parametrize("name", ["jacksboro_fault_tn", "mount_st_helens_wa", "green_mountains_vt", "jacksboro_window"])
 def test_real_dems_match_manifold(name):
     g = shared_dem_120(name)  # UTM coordinates (jacksboro: 75 m x 92 m cells)
     for method, level in (("lls", 1), ("greedy-insertion", 2), ("simple", 3)):

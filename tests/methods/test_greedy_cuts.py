@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import simplifiers
-from conftest import DEM_NAMES, shared_dem_120
+from conftest import REAL_DEM_NAMES, shared_dem_120
 from simplifiers import _gc_kernels as K
 from simplifiers import budget_tolerance, check_height_field, vertex_budget
 from simplifiers.greedy_cuts import _Triangulator, build, greedy_cuts
@@ -246,7 +246,7 @@ def test_budget_on_bundled_terrains(bundled, kind, level):
     _check_simplified(bundled[kind], level)
 
 
-@pytest.mark.parametrize("name", DEM_NAMES)
+@pytest.mark.parametrize("name", REAL_DEM_NAMES)
 def test_budget_on_real_dems(name):
     g = shared_dem_120(name)
     for level in (1, 2, 3):

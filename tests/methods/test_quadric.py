@@ -14,7 +14,7 @@ import functools
 import matplotlib.tri as mtri
 import numpy as np
 import pytest
-from conftest import DEM_NAMES, shared_dem_120
+from conftest import REAL_DEM_NAMES, shared_dem_120
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -122,7 +122,7 @@ def test_bundled_terrains(name, level, backend):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("level", LEVELS)
-@pytest.mark.parametrize("name", DEM_NAMES)
+@pytest.mark.parametrize("name", REAL_DEM_NAMES)
 def test_real_dems(name, level, backend):
     grid = _terrain(name)
     tin = _qec(name, level, backend)

@@ -20,7 +20,7 @@ from terrainvis.visibility import engine_names
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from conftest import DEM_NAMES, shared_dem_120
+from conftest import REAL_DEM_NAMES, shared_dem_120
 from terrainvis import HeightGrid, TIN
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.synthetic import KINDS, synthetic_terrain
@@ -157,7 +157,7 @@ def test_matches_pair_engine_synthetic(kind):
     assert n_sweep > 0  # the sweep decided samples (not only the exact fallback)
 
 
-@pytest.mark.parametrize("name", DEM_NAMES)
+@pytest.mark.parametrize("name", REAL_DEM_NAMES)
 def test_matches_pair_engine_dem(name):
     assert _check_pairwise(shared_dem_120(name), heights=((1.7, 0.0), (30.0, 2.0))) > 0
 
