@@ -23,7 +23,7 @@ from terrainvis.cli import main
 from terrainvis.experiment.options import DEFAULTS, OPTIONS, Flag, Option, Settings, Switch, validate
 from terrainvis.experiment.results import settings_path
 
-RUN_CONTROLS = ["workers", "client", "out_csv", "resume", "save_dir", "progress"]
+RUN_CONTROLS = ["workers", "client", "out_csv", "resume", "save_dir", "progress", "on_unit"]
 
 
 @pytest.fixture(scope="module")
