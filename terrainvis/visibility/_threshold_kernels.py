@@ -646,3 +646,77 @@ def tin_sweep(tin, q, order, vis, rules, stop):
         i = order[j]
         _tin_row(tin, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
         q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
+
+
+# --------------------------------------------------------------------------- one eye, many targets
+#: Targets per chunk of the eye kernels' parallel loops (each chunk reads the stop flag once).
+EYE_CHUNK = 256
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _grid_eye_one(g, st, eye, tx, ty, tz, rules):
+    """The threshold of the target point (tx, ty) for the fixed ``eye`` on the grid ``g``:
+    first with the target at ``tz`` (which only sets the trim), then, when the threshold is
+    higher, again with the target at that threshold (the trim of the answer itself)."""
+    t = grid_threshold(g, st, (tx, ty, tz), eye, rules)
+    if t > tz and t < _INF:
+        t = grid_threshold(g, st, (tx, ty, t), eye, rules)
+    return t
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _tin_eye_one(w, eye, tx, ty, tz, rules):
+    """:func:`_grid_eye_one` on a TIN."""
+    t = tin_threshold(w, (tx, ty, tz), eye, rules)
+    if t > tz and t < _INF:
+        t = tin_threshold(w, (tx, ty, t), eye, rules)
+    return t
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def grid_eye_thresholds(g, eye, t, rules, out, stop):
+    """``out[i]`` = the threshold height of the target point ``t[i]`` = (x, y, z) (local; z
+    sets the trim) for the fixed ``eye`` = (x, y, z) on the grid ``g``: the least height at
+    which it sees the eye (-inf: the segment is not tested). Parallel over chunks of
+    :data:`EYE_CHUNK` targets."""
+    n = t.shape[0]
+    for k in nb.prange((n + EYE_CHUNK - 1) // EYE_CHUNK):
+        if stopped(stop):
+            continue
+        gb = borrow_grid(g)
+        st = new_stack(g.ltop)
+        for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
+            out[i] = _grid_eye_one(gb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_eye_thresholds_serial(g, eye, t, rules, out, stop):
+    """:func:`grid_eye_thresholds` in the calling thread (the same thresholds; see "Compile time")."""
+    gb = borrow_grid(g)
+    st = new_stack(g.ltop)
+    for i in range(t.shape[0]):
+        if i % EYE_CHUNK == 0 and stopped(stop):
+            return
+        out[i] = _grid_eye_one(gb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def tin_eye_thresholds(w, eye, t, rules, out, stop):
+    """:func:`grid_eye_thresholds` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
+    n = t.shape[0]
+    for k in nb.prange((n + EYE_CHUNK - 1) // EYE_CHUNK):
+        if stopped(stop):
+            continue
+        wb = borrow_tin(w)
+        for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
+            out[i] = _tin_eye_one(wb, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_eye_thresholds_serial(w, eye, t, rules, out, stop):
+    """:func:`tin_eye_thresholds` in the calling thread (the same thresholds)."""
+    wb = borrow_tin(w)
+    for i in range(t.shape[0]):
+        if i % EYE_CHUNK == 0 and stopped(stop):
+            return
+        out[i] = _tin_eye_one(wb, eye, t[i, 0], t[i, 1], t[i, 2], rules)

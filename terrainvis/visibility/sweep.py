@@ -79,8 +79,10 @@ from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
 from . import _sweep_kernels as _vk
 from .engines import Predicate, choose
-from .field_of_view import apply_field_of_view, field_of_view
-from .predicate import EARTH_RADIUS, _check_heights, _height_above, clearance_tolerance, curvature_coefficient, trim_length
+from .field_of_view import apply_field_of_view, field_of_view, field_of_view_mask
+from .output_modes import check_output, eye_thresholds, output_values, tin_of_grid_thresholds
+from .predicate import (EARTH_RADIUS, _check_heights, _height_above, clearance_tolerance, curvature_coefficient,
+                        terrain_scale, trim_length)
 
 __all__ = ["viewshed"]
 
@@ -114,8 +116,9 @@ def viewshed(
     azimuth=None,
     vertical=None,
     min_distance=None,
+    output: str = "visible",
 ) -> np.ndarray:
-    """Which samples of a grid are visible from an observer.
+    """Which samples of a grid are visible from an observer (or how far from visible they are).
 
     Parameters
     ----------
@@ -165,10 +168,27 @@ def viewshed(
         ``curvature * d**2 / (2 R)``.
     min_distance : float, optional
         Field of view: samples nearer than this horizontal distance are False.
+    output : {"visible", "min_height", "angle"}, default "visible"
+        What to return for each target (:mod:`terrainvis.visibility.output_modes`):
+        ``"visible"`` the bool mask below; ``"min_height"`` (float64) the least height
+        above the surface at which a target at that sample is visible, 0 where the ground
+        itself is visible (GDAL's ``-om GROUND``; ``target_height`` is not used, but for
+        the ``vertical`` limit); ``"angle"`` (float64, degrees) the elevation angle of the
+        target (standing ``target_height`` above the surface) minus that of the horizon
+        of its ray, both seen from the eye and lowered by the earth's drop
+        ``curvature * d**2 / (2 R)``: ``atan2(z_T - drop - z_E, d) - atan2(z* - drop - z_E, d)``
+        with ``z*`` the target's threshold (least visible height), >= 0 exactly where the
+        target is visible (to within the clearance tolerance), -90 degrees for the horizon
+        of a segment that is not tested. Both are exact (the threshold engine,
+        :mod:`terrainvis.visibility.thresholds`), whatever ``engine``, and NaN where the
+        mask is False without a verdict: nodata samples, samples off the surface under
+        test, and samples outside the field of view (but for the sample nearest the
+        observer, as below). On a grid with nodata the sample nearest the observer gets
+        its exact value (the mask marks it True).
 
     Returns
     -------
-    (rows, cols) bool
+    (rows, cols) bool, or (rows, cols) float64 for ``output="min_height"`` or ``"angle"``
         ``out[r, c]`` is True where the target above sample (r, c) of ``at`` (or of the
         terrain) is visible: the line of sight from the eye to it, with the trim
         :func:`~terrainvis.visibility.trim_length` and the tolerance
@@ -226,7 +246,13 @@ def viewshed(
            [1, 1, 1, 0, 0],
            [1, 1, 1, 0, 0]])
     """
+    check_output(output)
     fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance, max_distance=max_distance)
+    if output != "visible":
+        return _output_values(
+            terrain, observer, output, fov, observer_height=observer_height, target_height=target_height,
+            max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
+        )
     out, _ = _viewshed(
         terrain, observer, observer_height=observer_height, target_height=target_height,
         max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
@@ -245,6 +271,24 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     blocks of rings whose bound reached the target), ``exact`` (answered by the pair
     engine, or the nodata-aware walk, or Embree, or the TIN clipper).
     """
+    engine, kc, eye, zs, at, own, (h_t, dmax) = _setup(
+        terrain, observer, observer_height=observer_height, target_height=target_height,
+        max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius)
+    if engine.name == "grid":
+        # The sweep's bounds assume the eye on or above its own cell's surface (so the
+        # part of every ray inside the trim cannot block). An eye below it, e.g. an
+        # observer relocated by identity onto a simplification, goes to the exact walk.
+        out, info = _grid(terrain, at, eye, (h_t, dmax, kc), own, sweep=bool(eye[2] >= zs))
+    else:
+        out, info = _rays(terrain, at, eye, (h_t, dmax, kc), own, engine)
+    _mark_nearest(out, terrain, at, eye, (h_t, dmax, kc), engine)
+    return out, info
+
+
+def _setup(terrain, observer, *, observer_height, target_height, max_distance, at, engine, curvature,
+           earth_radius):
+    """The checked arguments of a viewshed: ``(engine, kc, eye, zs, at, own, (h_t, dmax))``,
+    ``zs`` the surface under the observer and ``own`` whether the targets are the grid's samples."""
     as_terrain(terrain)
     kc = curvature_coefficient(curvature, earth_radius)
     engine = choose(engine, terrain, kc)
@@ -273,15 +317,77 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     own = at is terrain or (
         isinstance(terrain, HeightGrid) and np.array_equal(at.xs, terrain.xs) and np.array_equal(at.ys, terrain.ys)
     )
-    if engine.name == "grid":
-        # The sweep's bounds assume the eye on or above its own cell's surface (so the
-        # part of every ray inside the trim cannot block). An eye below it, e.g. an
-        # observer relocated by identity onto a simplification, goes to the exact walk.
-        out, info = _grid(terrain, at, eye, (h_t, dmax, kc), own, sweep=bool(eye[2] >= zs))
+    return engine, kc, eye, zs, at, own, (h_t, dmax)
+
+
+# ----------------------------------------------------------------- output modes
+#: Height step (a fraction of the terrain's scale) at which the thresholds of a grid with nodata
+#: are checked by the exact nodata-aware walk, and to which the bisection narrows those that fail.
+_SETTLE_REL = 1e-9
+
+
+def _output_values(terrain, observer, output: str, fov, **options) -> np.ndarray:
+    """:func:`viewshed`'s ``"min_height"`` or ``"angle"``: the threshold of every target in the field."""
+    _, kc, eye, _, at, own, (h_t, _) = _setup(terrain, observer, **options)
+    if own:
+        zt = np.array(terrain.z, dtype=np.float64)
+        if terrain.n_nodata:
+            zt[~_on_surface(terrain.z)] = np.nan
     else:
-        out, info = _rays(terrain, at, eye, (h_t, dmax, kc), own, engine)
-    _mark_nearest(out, terrain, at, eye, (h_t, dmax, kc), engine)
-    return out, info
+        zt = terrain.height_on_grid(at.xs, at.ys)
+    ok = np.isfinite(zt) & np.isfinite(at.z)
+    if fov.limited:
+        ok &= field_of_view_mask(terrain, eye, fov, at=at, target_height=h_t, curvature=options["curvature"],
+                                 earth_radius=options["earth_radius"])
+    idx = np.flatnonzero(ok.ravel())
+    r, c = np.divmod(idx, at.shape[1])
+    ground = zt.ravel()[idx]
+    pts = np.column_stack([at.xs[c], at.ys[r], ground + (h_t if output == "angle" else 0.0)])
+    if isinstance(terrain, HeightGrid) and terrain.n_nodata:
+        thr = _settle(terrain, eye, pts, tin_of_grid_thresholds(terrain, eye, pts, kc), kc)
+    else:
+        thr = eye_thresholds(terrain, eye, pts, kc)
+    out = np.full(at.shape, np.nan)
+    out.ravel()[idx] = output_values(output, thr, eye, pts, ground, kc)
+    return out
+
+
+def _settle(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray, thr: np.ndarray, kc: float) -> np.ndarray:
+    """Thresholds on a grid with nodata, checked by the exact nodata-aware walk (:func:`_exact`).
+
+    The TIN walk of ``grid.to_tin()`` stops at a hole, so a sight line that crosses one may
+    get too low a threshold: each finite threshold ``t`` must be blocked at ``t - eps`` and
+    visible at ``t + eps``; the others are found again by bisection of the walk's verdicts.
+    """
+    delta, tol = trim_length(grid), clearance_tolerance(grid)
+    eps = _SETTLE_REL * float(terrain_scale(grid))
+    x, y = pts[:, 0], pts[:, 1]
+    bad = np.isfinite(thr)
+    sel = np.flatnonzero(bad)
+    bad[sel] = ~(_exact(grid, eye, (x[sel], y[sel], thr[sel] + eps), delta, tol, kc)
+                 & ~_exact(grid, eye, (x[sel], y[sel], thr[sel] - eps), delta, tol, kc))
+    bad |= thr == np.inf
+    sel = np.flatnonzero(bad)
+    if sel.size == 0:
+        return thr
+    zmin, zmax = _nanrange(grid)
+    d2 = (x[sel] - eye[0]) ** 2 + (y[sel] - eye[1]) ** 2
+    span = 2.0 * (zmax - zmin + abs(eye[2] - zmin) + kc * float(d2.max())) + float(terrain_scale(grid))
+    lo = np.full(sel.size, zmin - span)
+    hi = np.full(sel.size, zmax + span)
+    out = thr.copy()
+    seen_lo = _exact(grid, eye, (x[sel], y[sel], lo), delta, tol, kc)
+    seen_hi = _exact(grid, eye, (x[sel], y[sel], hi), delta, tol, kc)
+    for _ in range(200):
+        go = np.flatnonzero(~seen_lo & seen_hi & (hi - lo > eps))
+        if go.size == 0:
+            break
+        mid = 0.5 * (lo[go] + hi[go])
+        seen = _exact(grid, eye, (x[sel][go], y[sel][go], mid), delta, tol, kc)
+        hi[go] = np.where(seen, mid, hi[go])
+        lo[go] = np.where(seen, lo[go], mid)
+    out[sel] = np.where(seen_lo, -np.inf, np.where(seen_hi, hi, np.inf))
+    return out
 
 
 # ----------------------------------------------------------------- validation
