@@ -29,7 +29,8 @@ def _random_grid(seed: int, rows: int = 23, cols: int = 29, spacing: float = 1.0
 
 def _with_nodata(g: HeightGrid) -> HeightGrid:
     z = g.z.copy()
-    z[5:8, 10:14] = np.nan  # a hole that sight lines cross
+    z[2:6, 6:22] = np.nan  # a hole that sight lines cross
+    z[4, 14] = 5.0 * np.nanmax(z)  # a spike in it, with no triangle: it must not block
     z[0, :3] = np.nan
     z[-1, -2:] = np.nan
     return HeightGrid.from_coords(z, g.xs, g.ys)

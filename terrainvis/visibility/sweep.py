@@ -344,12 +344,72 @@ def _output_values(terrain, observer, output: str, fov, **options) -> np.ndarray
     ground = zt.ravel()[idx]
     pts = np.column_stack([at.xs[c], at.ys[r], ground + (h_t if output == "angle" else 0.0)])
     if isinstance(terrain, HeightGrid) and terrain.n_nodata:
-        thr = _settle(terrain, eye, pts, tin_of_grid_thresholds(terrain, eye, pts, kc), kc)
+        thr = _nodata_thresholds(terrain, eye, pts, kc)
     else:
         thr = eye_thresholds(terrain, eye, pts, kc)
     out = np.full(at.shape, np.nan)
     out.ravel()[idx] = output_values(output, thr, eye, pts, ground, kc)
     return out
+
+
+#: Azimuth bins of :func:`_near_holes` (each hole cell marks the bins its directions span, and one more each side).
+_HOLE_BINS = 8192
+
+
+def _nodata_thresholds(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray, kc: float) -> np.ndarray:
+    """Thresholds on a grid with nodata: targets whose segment cannot meet a cell touching
+    nodata are walked on the grid with its nodata filled (their walk never reads a filled
+    height: every cell it evaluates has four finite corners, and the fill, the lowest height,
+    keeps the pyramid's bounds true); the others as the grid's TIN, checked (:func:`_settle`)."""
+    near = _near_holes(grid, eye, pts)
+    thr = np.empty(pts.shape[0])
+    far = np.flatnonzero(~near)
+    thr[far] = eye_thresholds(_filled(grid), eye, pts[far], kc)
+    near = np.flatnonzero(near)
+    if near.size:
+        thr[near] = _settle(grid, eye, pts[near], tin_of_grid_thresholds(grid, eye, pts[near], kc), kc)
+    return thr
+
+
+def _filled(grid: HeightGrid) -> HeightGrid:
+    """The grid with its nodata set to its lowest height (cached)."""
+    f = grid._cache.get("output_modes_filled")
+    if f is None:
+        zmin = _nanrange(grid)[0]
+        f = HeightGrid.from_coords(np.where(np.isfinite(grid.z), grid.z, zmin), grid.xs, grid.ys)
+        grid._cache["output_modes_filled"] = f
+    return f
+
+
+def _near_holes(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(n,) bool: targets whose segment from the eye may pass through a cell with a nodata corner
+    (conservative): the target lies at least as far as such a cell, in an azimuth bin that the
+    cell's directions from the eye span (widened by a bin each side). All of them when the eye
+    is on such a cell."""
+    f = np.isfinite(grid.z)
+    bad = ~(f[:-1, :-1] & f[:-1, 1:] & f[1:, :-1] & f[1:, 1:])
+    r, c = np.nonzero(bad)
+    if r.size == 0:
+        return np.zeros(pts.shape[0], dtype=bool)
+    x0, x1 = grid.xs[c] - eye[0], grid.xs[c + 1] - eye[0]
+    y0, y1 = grid.ys[r] - eye[1], grid.ys[r + 1] - eye[1]
+    dmin = np.hypot(np.maximum(np.maximum(x0, -x1), 0.0), np.maximum(np.maximum(y0, -y1), 0.0))
+    if (dmin == 0.0).any():
+        return np.ones(pts.shape[0], dtype=bool)
+    centre = np.arctan2(0.5 * (y0 + y1), 0.5 * (x0 + x1))
+    turn = np.stack([np.arctan2(y, x) for x, y in ((x0, y0), (x1, y0), (x0, y1), (x1, y1))])
+    turn = np.mod(turn - centre + np.pi, 2.0 * np.pi) - np.pi  # a cell away from the eye spans < 180 degrees
+    scale = _HOLE_BINS / (2.0 * np.pi)
+    lo = np.floor((centre + turn.min(axis=0) + np.pi) * scale).astype(np.int64) - 1
+    hi = np.floor((centre + turn.max(axis=0) + np.pi) * scale).astype(np.int64) + 1
+    count = hi - lo + 1
+    start = np.repeat(lo - np.cumsum(count) + count, count)
+    bins = np.mod(start + np.arange(int(count.sum())), _HOLE_BINS)
+    nearest = np.full(_HOLE_BINS, np.inf)
+    np.minimum.at(nearest, bins, np.repeat(dmin, count))
+    tx, ty = pts[:, 0] - eye[0], pts[:, 1] - eye[1]
+    tb = np.mod(np.floor((np.arctan2(ty, tx) + np.pi) * scale).astype(np.int64), _HOLE_BINS)
+    return np.hypot(tx, ty) >= nearest[tb] * (1.0 - 1e-9)
 
 
 def _settle(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray, thr: np.ndarray, kc: float) -> np.ndarray:
