@@ -450,11 +450,14 @@ def viewshed_values(terrain: HeightGrid, values, output: str, *, observer=None, 
         fig.colorbar(image, ax=ax, shrink=0.85, label="least visible height above the ground", extend="max")
         handles.append(Patch(color=(1.0, 0.83, 0.0, 0.8), label="ground visible (0)"))
     else:
-        top = float(np.percentile(np.abs(v[finite]), 98)) if finite.any() else 1.0
-        top = max(top, 1e-9)
+        below, above = v[finite & (v < 0)], v[finite & (v > 0)]
+        low = -max(float(np.percentile(-below, 98)) if below.size else 1.0, 1e-9)
+        high = max(float(np.percentile(above, 98)) if above.size else 1.0, 1e-9)
         image = ax.imshow(np.ma.masked_where(~finite, v), origin="lower", extent=extent, interpolation="nearest",
-                          cmap="RdBu_r", norm=TwoSlopeNorm(0.0, -top, top), alpha=0.85)
-        fig.colorbar(image, ax=ax, shrink=0.85, label="degrees above (+) or below (-) the horizon", extend="both")
+                          cmap="RdBu_r", norm=TwoSlopeNorm(0.0, low, high), alpha=0.85)
+        bar = fig.colorbar(image, ax=ax, shrink=0.85, label="degrees above (+) or below (-) the horizon",
+                           extend="both")
+        bar.set_ticks(np.unique(np.round(np.r_[np.linspace(low, 0.0, 5), np.linspace(0.0, high, 4)], 2)))
     if observer is not None:
         ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
         from matplotlib.lines import Line2D
