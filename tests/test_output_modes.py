@@ -275,3 +275,29 @@ def test_cli_writes_float32_geotiff_with_nan_nodata(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "Traceback" not in err
     assert "--output-mode" in err and "'depth'" in err and "min_height" in err
+
+
+@pytest.mark.parametrize("curvature", [0.0, 1.0])
+def test_thresholds_take_the_trim_of_the_answer(curvature):
+    """Each threshold is the threshold engine's (threshold_row) for a target standing at that
+    threshold itself (the trim depends on the target's height): the kernel's walk of the
+    slivers between the two trims gives what a second whole walk gives."""
+    from terrainvis.visibility.thresholds import ThresholdSurface, threshold_row
+
+    g = _random_grid(13, rows=15, cols=17, spacing=300.0)
+    obs = _observer(g, 13)
+    radius = 5e4
+    kw = dict(observer_height=0.0, curvature=curvature, earth_radius=radius)
+    mh = tv.viewshed(g, obs, output="min_height", **kw)
+    surf = ThresholdSurface(g)
+    kc = tv.visibility.curvature_coefficient(curvature, radius)
+    eye = surf.local(_eye(g, obs, kw)[None, :])
+    checked = 0
+    for r, c in zip(*np.nonzero(mh > 0)):
+        p = surf.local(np.array([[g.xs[c], g.ys[r], g.z[r, c]]]))[0]
+        t1 = threshold_row(surf, p, eye, kc=kc)[0]
+        p[2] = t1
+        t2 = threshold_row(surf, p, eye, kc=kc)[0]
+        assert g.z[r, c] + mh[r, c] == pytest.approx(t2, rel=0, abs=1e-9 * _relief(g))
+        checked += 1
+    assert checked > 50
