@@ -301,3 +301,22 @@ def test_thresholds_take_the_trim_of_the_answer(curvature):
         assert g.z[r, c] + mh[r, c] == pytest.approx(t2, rel=0, abs=1e-9 * _relief(g))
         checked += 1
     assert checked > 50
+
+
+@pytest.mark.parametrize("output", ["min_height", "angle"])
+def test_a_tin_with_a_hole_gives_the_grids_values(output):
+    """A TIN with a hole (a grid with nodata as its TIN): sight lines across the hole are
+    checked by the exact TIN engine, and the values are the grid's."""
+    g = _with_nodata(_random_grid(14))
+    obs = _observer(g, 14)
+    on_grid = tv.viewshed(g, obs, output=output, observer_height=4.0)
+    on_tin = tv.viewshed(g.to_tin(), obs, at=g, output=output, observer_height=4.0)
+    judged = _judged(g, obs) & np.isfinite(on_grid)
+    np.testing.assert_array_equal(np.isnan(on_tin), np.isnan(on_grid))
+    # heights to REL of the relief (the threshold engine and the exact engines differ by
+    # about 1e-7 of it near the eye); an angle by that height over the distance
+    tol = np.full(g.shape, REL * _relief(g))
+    if output == "angle":
+        d = np.hypot(g.xs[None, :] - obs[0], g.ys[:, None] - obs[1])
+        tol = np.degrees(tol / d)
+    assert (np.abs(on_tin - on_grid)[judged] <= tol[judged]).all()

@@ -345,6 +345,8 @@ def _output_values(terrain, observer, output: str, fov, **options) -> np.ndarray
     pts = np.column_stack([at.xs[c], at.ys[r], ground + (h_t if output == "angle" else 0.0)])
     if isinstance(terrain, HeightGrid) and terrain.n_nodata:
         thr = _nodata_thresholds(terrain, eye, pts, kc)
+    elif isinstance(terrain, TIN):
+        thr = _tin_thresholds(terrain, eye, pts, kc)
     else:
         thr = eye_thresholds(terrain, eye, pts, kc)
     out = np.full(at.shape, np.nan)
@@ -412,42 +414,79 @@ def _near_holes(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray) -> np.ndarra
     return np.hypot(tx, ty) >= nearest[tb] * (1.0 - 1e-9)
 
 
-def _settle(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray, thr: np.ndarray, kc: float) -> np.ndarray:
-    """Thresholds on a grid with nodata, checked by the exact nodata-aware walk (:func:`_exact`).
+def _settle(terrain, eye: np.ndarray, pts: np.ndarray, thr: np.ndarray, kc: float) -> np.ndarray:
+    """Thresholds of a walk that stops where the surface does, checked by an exact engine.
 
-    The TIN walk of ``grid.to_tin()`` stops at a hole, so a sight line that crosses one may
-    get too low a threshold: each finite threshold ``t`` must be blocked at ``t - eps`` and
-    visible at ``t + eps``; the others are found again by bisection of the walk's verdicts.
+    The TIN walk (of a TIN, or of ``grid.to_tin()`` on a grid with nodata) stops at a hole
+    or at a concave edge of the footprint, so a sight line that leaves the surface and
+    comes back may get too low a threshold: each finite threshold ``t`` must be blocked at
+    ``t - eps`` and visible at ``t + eps`` under the exact verdicts (:func:`_verdicts`); the
+    others are found again by bisection of those verdicts.
     """
-    delta, tol = trim_length(grid), clearance_tolerance(grid)
-    eps = _SETTLE_REL * float(terrain_scale(grid))
+    seen = _verdicts(terrain, eye, kc)
+    eps = _SETTLE_REL * float(terrain_scale(terrain))
     x, y = pts[:, 0], pts[:, 1]
     bad = np.isfinite(thr)
     sel = np.flatnonzero(bad)
-    bad[sel] = ~(_exact(grid, eye, (x[sel], y[sel], thr[sel] + eps), delta, tol, kc)
-                 & ~_exact(grid, eye, (x[sel], y[sel], thr[sel] - eps), delta, tol, kc))
+    bad[sel] = ~(seen(x[sel], y[sel], thr[sel] + eps) & ~seen(x[sel], y[sel], thr[sel] - eps))
     bad |= thr == np.inf
     sel = np.flatnonzero(bad)
     if sel.size == 0:
         return thr
-    zmin, zmax = _nanrange(grid)
+    z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
+    zmin, zmax = float(np.nanmin(z)), float(np.nanmax(z))
     d2 = (x[sel] - eye[0]) ** 2 + (y[sel] - eye[1]) ** 2
-    span = 2.0 * (zmax - zmin + abs(eye[2] - zmin) + kc * float(d2.max())) + float(terrain_scale(grid))
+    span = 2.0 * (zmax - zmin + abs(eye[2] - zmin) + kc * float(d2.max())) + float(terrain_scale(terrain))
     lo = np.full(sel.size, zmin - span)
     hi = np.full(sel.size, zmax + span)
     out = thr.copy()
-    seen_lo = _exact(grid, eye, (x[sel], y[sel], lo), delta, tol, kc)
-    seen_hi = _exact(grid, eye, (x[sel], y[sel], hi), delta, tol, kc)
+    seen_lo = seen(x[sel], y[sel], lo)
+    seen_hi = seen(x[sel], y[sel], hi)
     for _ in range(200):
         go = np.flatnonzero(~seen_lo & seen_hi & (hi - lo > eps))
         if go.size == 0:
             break
         mid = 0.5 * (lo[go] + hi[go])
-        seen = _exact(grid, eye, (x[sel][go], y[sel][go], mid), delta, tol, kc)
-        hi[go] = np.where(seen, mid, hi[go])
-        lo[go] = np.where(seen, lo[go], mid)
+        v = seen(x[sel][go], y[sel][go], mid)
+        hi[go] = np.where(v, mid, hi[go])
+        lo[go] = np.where(v, lo[go], mid)
     out[sel] = np.where(seen_lo, -np.inf, np.where(seen_hi, hi, np.inf))
     return out
+
+
+def _verdicts(terrain, eye: np.ndarray, kc: float):
+    """``seen(x, y, z)``: whether the eye sees each target (x, y, z), exactly: on a grid the
+    nodata-aware walk (:func:`_exact`), on a TIN the TIN engine (the exact clipper)."""
+    delta, tol = trim_length(terrain), clearance_tolerance(terrain)
+    if isinstance(terrain, HeightGrid):
+        return lambda x, y, z: _exact(terrain, eye, (x, y, z), delta, tol, kc)
+    engine = choose("tin", terrain, kc)
+    predicate = Predicate(delta, tol, 0.0, kc)
+
+    def seen(x, y, z):
+        b = np.column_stack([x, y, z])
+        return engine.pairs(terrain, np.repeat(eye[None, :], b.shape[0], axis=0), b, predicate)
+
+    return seen
+
+
+def _tin_thresholds(tin: TIN, eye: np.ndarray, pts: np.ndarray, kc: float) -> np.ndarray:
+    """Thresholds on a TIN: checked (:func:`_settle`) unless its footprint is its bounding
+    rectangle, where no sight line between two of its points can leave it."""
+    thr = eye_thresholds(tin, eye, pts, kc)
+    if _fills_its_rectangle(tin):
+        return thr
+    return _settle(tin, eye, pts, thr, kc)
+
+
+def _fills_its_rectangle(tin: TIN) -> bool:
+    """Whether the TIN's faces cover its bounding rectangle exactly (their areas add up to it;
+    faces do not overlap in a valid TIN)."""
+    v = tin.vertices[:, :2]
+    a, b, c = v[tin.faces[:, 0]], v[tin.faces[:, 1]], v[tin.faces[:, 2]]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])).sum()
+    box = float(np.ptp(v[:, 0]) * np.ptp(v[:, 1]))
+    return bool(abs(area - box) <= 1e-9 * box)
 
 
 # ----------------------------------------------------------------- validation
