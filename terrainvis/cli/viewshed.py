@@ -35,7 +35,11 @@ def add_parser(sub) -> None:
         description=(
             "Compute the exact viewshed of one observer on a DEM (every sample as a target, on the piecewise-linear "
             "surface) and write it as a GeoTIFF aligned with the DEM (CRS and transform kept; 1 visible, 0 not, "
-            "255 nodata), an .npz, or a .png drawn over the hillshade."
+            "255 nodata), an .npz, or a .png drawn over the hillshade. With --output-mode min_height or angle, "
+            "each sample gets a value instead (a float32 GeoTIFF with NaN as nodata, a float .npz, or a .png): "
+            "the least height above the ground at which a target there is visible (0: the ground is visible; "
+            "gdal_viewshed's -om GROUND), or the target's elevation angle above (+) or below (-) the horizon "
+            "of its ray, in degrees."
         ),
     )
     v.add_argument("dem", help="DEM file or bundled name")
@@ -46,6 +50,10 @@ def add_parser(sub) -> None:
     add_max_distance(v, "only samples within this distance")
     add_field_of_view(v)
     v.add_argument("-o", "--output", required=True, metavar="OUT", help="output file: .tif, .npz or .png")
+    v.add_argument("--output-mode", choices=["visible", "min_height", "angle"], default="visible",
+                   help="what each sample gets: visible (1/0, the default), min_height (least visible height "
+                        "above the ground, 0 where the ground is visible) or angle (degrees above the horizon); "
+                        "NaN outside the field of view and on nodata")
     add_earth(v)
     add_nodata(v)
     add_positions(v)
@@ -72,8 +80,10 @@ def run(args) -> int:
     t0 = time.perf_counter()
     vis = viewshed(grid, observer, observer_height=args.height, target_height=args.target_height,
                    max_distance=args.max_distance, curvature=args.curvature, earth_radius=args.earth_radius,
-                   azimuth=fov.azimuth, vertical=fov.vertical, min_distance=fov.min_distance)
+                   azimuth=fov.azimuth, vertical=fov.vertical, min_distance=fov.min_distance, output=args.output_mode)
     seconds = time.perf_counter() - t0
+    if args.output_mode != "visible":
+        return _report_values(grid, vis, out, suffix, args, (label, observer, frame, fov, seconds))
     valid = np.isfinite(grid.z)
     n_vis = int(vis[valid].sum())
     field = _field(grid, observer, fov, args)
@@ -89,6 +99,62 @@ def run(args) -> int:
           f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %{inside}), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
+
+
+def _report_values(grid, values, out: Path, suffix: str, args, about) -> int:
+    """``--output-mode min_height`` or ``angle``: write the values and say what they hold."""
+    import numpy as np
+
+    label, observer, frame, fov, seconds = about
+    _write_values(grid, values, out, suffix, args, label, observer)
+    print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
+    print(f"  {earth_text(args)}")
+    if fov.limited:
+        print(f"  field of view: {fov.describe()}")
+    v = values[np.isfinite(values)]
+    if args.output_mode == "min_height":
+        n0 = int((v == 0).sum())
+        print(f"  least visible height above the ground, {plural(v.size, 'sample')} with a value: ground visible at "
+              f"{n0:,} ({100 * n0 / max(v.size, 1):.2f} %), median {np.median(v) if v.size else 0:.2f}, "
+              f"largest {v.max() if v.size else 0:.2f}; {seconds:.2f} s")
+    else:
+        n0 = int((v >= 0).sum())
+        print(f"  angle above the horizon (degrees, target {args.target_height:g} above the surface), "
+              f"{plural(v.size, 'sample')} with a value: >= 0 (visible) at {n0:,} ({100 * n0 / max(v.size, 1):.2f} %), "
+              f"range {v.min() if v.size else 0:.3f} to {v.max() if v.size else 0:.3f}; {seconds:.2f} s")
+    print(f"  wrote {out}")
+    return 0
+
+
+def _write_values(grid, values, out: Path, suffix: str, args, label: str, observer) -> None:
+    """The values of ``--output-mode`` by OUT's suffix: float32 GeoTIFF (NaN nodata), float .npz, or .png."""
+    import numpy as np
+
+    if suffix == ".png":
+        from ..experiment import plot
+        from ..io import save_figure
+
+        save_figure(plot.viewshed_values(grid, values, args.output_mode, observer=observer,
+                                         title=f"{label}: viewshed, {args.output_mode}"), out)
+        return
+    if suffix == ".npz":
+        from ..io import save_terrain
+
+        from ..core.terrain import HeightGrid
+
+        attrs = {**grid.attrs, "viewshed_output_mode": args.output_mode,
+                 "viewshed_observer": [float(v) for v in observer],
+                 "viewshed_observer_native": [float(v) for v in position_frame(grid, None).from_grid(observer)],
+                 "viewshed_observer_height": float(args.height), "viewshed_target_height": float(args.target_height),
+                 "viewshed_curvature": float(args.curvature), "viewshed_earth_radius": float(args.earth_radius),
+                 **_field_of_view_attrs(args)}
+        save_terrain(HeightGrid.from_coords(values, grid.xs, grid.ys, attrs=attrs), out)
+        return
+    from ..io import write_geotiff
+
+    unit = "z units above the ground" if args.output_mode == "min_height" else "degrees above the horizon"
+    write_geotiff(grid, values.astype(np.float32), out, nodata=float("nan"),
+                  tags={"TERRAINVIS_OUTPUT_MODE": args.output_mode, "TERRAINVIS_UNITS": unit})
 
 
 def _field(grid, observer, fov, args):

@@ -18,7 +18,7 @@ from ..core.terrain import TIN, HeightGrid, as_terrain
 
 __all__ = [
     "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance", "viewshed",
-    "cumulative_viewshed", "siting", "observer_network",
+    "viewshed_values", "cumulative_viewshed", "siting", "observer_network",
 ]
 
 
@@ -397,6 +397,73 @@ def viewshed(terrain: HeightGrid, visible, *, observer=None, title: str | None =
         handles.append(Patch(facecolor=(0.95, 0.95, 0.95, 0.9), edgecolor="0.5", label="outside the field of view"))
     if observer is not None:
         ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+
+
+def viewshed_values(terrain: HeightGrid, values, output: str, *, observer=None, title: str | None = None,
+                    figsize=(6.5, 5)) -> Figure:
+    """A viewshed's ``"min_height"`` or ``"angle"`` output drawn over the terrain's hillshade.
+
+    Parameters
+    ----------
+    terrain : HeightGrid
+        The grid whose samples ``values`` refers to.
+    values : (rows, cols) float
+        :func:`terrainvis.viewshed`'s result with ``output`` (NaN: no value, left as the hillshade).
+    output : {"min_height", "angle"}
+    observer : (x, y), optional
+        Marked with a star.
+    title : str, optional
+
+    ``"min_height"``: samples whose ground is visible (0) in yellow, the others coloured by
+    the height a target needs (a colour bar up to the 98th percentile). ``"angle"``: a
+    diverging map centred on 0 (red above the horizon, blue below), symmetric up to the
+    98th percentile of the absolute angles.
+    """
+    as_terrain(terrain)
+    if not isinstance(terrain, HeightGrid):
+        raise TypeError(f"terrain must be the HeightGrid of the values' samples, got {describe(terrain)}")
+    v = np.asarray(values, dtype=np.float64)
+    if v.shape != terrain.shape:
+        raise ValueError(f"values must have the terrain's shape {terrain.shape}, got {v.shape}")
+    if output not in ("min_height", "angle"):
+        raise ValueError(f"output must be 'min_height' or 'angle', got {output!r}")
+    from matplotlib.colors import TwoSlopeNorm
+    from matplotlib.patches import Patch
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    ax = fig.add_subplot()
+    _draw_terrain(ax, terrain, wireframe=False, title=title or f"viewshed: {output}")
+    extent = terrain.extent
+    finite = np.isfinite(v)
+    handles = []
+    if output == "min_height":
+        seen = finite & (v == 0.0)
+        glow = np.zeros(terrain.shape + (4,))
+        glow[seen] = (1.0, 0.83, 0.0, 0.6)
+        ax.imshow(glow, origin="lower", extent=extent, interpolation="nearest")
+        rest = finite & ~seen
+        top = float(np.percentile(v[rest], 98)) if rest.any() else 1.0
+        image = ax.imshow(np.ma.masked_where(~rest, v), origin="lower", extent=extent, interpolation="nearest",
+                          cmap="PuBu", vmin=-0.1 * max(top, 1e-9), vmax=max(top, 1e-9), alpha=0.85)
+        fig.colorbar(image, ax=ax, shrink=0.85, label="least visible height above the ground", extend="max")
+        handles.append(Patch(color=(1.0, 0.83, 0.0, 0.8), label="ground visible (0)"))
+    else:
+        below, above = v[finite & (v < 0)], v[finite & (v > 0)]
+        low = -max(float(np.percentile(-below, 98)) if below.size else 1.0, 1e-9)
+        high = max(float(np.percentile(above, 98)) if above.size else 1.0, 1e-9)
+        image = ax.imshow(np.ma.masked_where(~finite, v), origin="lower", extent=extent, interpolation="nearest",
+                          cmap="RdBu_r", norm=TwoSlopeNorm(0.0, low, high), alpha=0.85)
+        bar = fig.colorbar(image, ax=ax, shrink=0.85, label="degrees above (+) or below (-) the horizon",
+                           extend="both")
+        bar.set_ticks(np.unique(np.round(np.r_[np.linspace(low, 0.0, 5), np.linspace(0.0, high, 4)], 2)))
+    if observer is not None:
+        ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
+        from matplotlib.lines import Line2D
+
+        handles.append(Line2D([], [], linestyle="none", marker="*", markersize=10, color="red", markeredgecolor="k",
+                              label="observer"))
     ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
     return fig
 

@@ -646,3 +646,150 @@ def tin_sweep(tin, q, order, vis, rules, stop):
         i = order[j]
         _tin_row(tin, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
         q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
+
+
+# --------------------------------------------------------------------------- one eye, many targets
+#: Targets per chunk of the eye kernels' parallel loops (each chunk reads the stop flag once).
+EYE_CHUNK = 256
+
+
+@nb.njit(cache=True, nogil=True)
+def _grid_span(g, st, tr, u0, u1):
+    """Max of :func:`_value` over [u0, u1] of the track ``tr`` on the grid (the walk of
+    :func:`grid_threshold`, on that part of the track)."""
+    t = Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge)
+    if g.ltop <= DDA_MAX_LEVELS:
+        return grid_dda_max_slope(g, t)
+    return grid_max_slope(g, t, st)
+
+
+@nb.njit(cache=True, nogil=True)
+def _tin_span(w, tr, u0, u1):
+    """:func:`_grid_span` on a TIN."""
+    return tin_max_slope(w, Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge))
+
+
+@nb.njit(cache=True, nogil=True)
+def _eye_track(eye, tx, ty, rules):
+    """The :data:`Track` from the eye to the target point (tx, ty) (its interval is set by
+    the callers, per part)."""
+    qx, qy, qz = eye
+    dx = tx - qx
+    dy = ty - qy
+    return Track(qx, qy, qz, dx, dy, 0.0, 1.0, rules.tol, rules.kc * (dx * dx + dy * dy))
+
+
+@nb.njit(cache=True, nogil=True)
+def _trim(eye, tx, ty, tz, rules):
+    """The start of the tested interval of the segment eye - (tx, ty, tz) (-1: not tested)."""
+    return interval(tx, ty, tz, eye[0], eye[1], eye[2], rules.delta, rules.end_radius)[0]
+
+
+@nb.njit(cache=True, nogil=True)
+def _grid_eye_one(g, st, eye, tx, ty, tz, rules):
+    """The threshold of the target point (tx, ty) for the fixed ``eye`` on the grid ``g``,
+    under the trim of a target at the answer itself.
+
+    Walked first with the target at ``tz`` (which only sets the trim): ``t`` over
+    ``[ua, 1 - ua]``. When ``t`` differs from ``tz`` (above it: the target is hidden; below
+    it: the horizon the angle output needs), the trim ``ub`` of a target at ``t`` differs
+    slightly, and only the two slivers between ``ua`` and ``ub`` (at the eye, at the target)
+    are walked: a grown interval takes their maximum too; a shrunk one keeps ``t`` when
+    their maximum is below it (the maximum then lies in the part both share), and is
+    walked whole again otherwise. Near the eye, where a segment is short, this matters:
+    without it a horizon 1.3 m from the eye was 1.3e-6 m off the pair engine's.
+    """
+    ua = _trim(eye, tx, ty, tz, rules)
+    if ua < 0.0:
+        return -_INF
+    tr = _eye_track(eye, tx, ty, rules)
+    t = tr.qz + _grid_span(g, st, tr, ua, 1.0 - ua)
+    if not (t != tz and abs(t) < _INF):
+        return t
+    ub = _trim(eye, tx, ty, t, rules)
+    if ub < 0.0:
+        return -_INF
+    if ub == ua:
+        return t
+    lo = min(ua, ub)
+    hi = max(ua, ub)
+    m = tr.qz + max(_grid_span(g, st, tr, lo, hi), _grid_span(g, st, tr, 1.0 - hi, 1.0 - lo))
+    if ub < ua:
+        return max(t, m)
+    if m < t:
+        return t
+    return tr.qz + _grid_span(g, st, tr, ub, 1.0 - ub)
+
+
+@nb.njit(cache=True, nogil=True)
+def _tin_eye_one(w, eye, tx, ty, tz, rules):
+    """:func:`_grid_eye_one` on a TIN."""
+    ua = _trim(eye, tx, ty, tz, rules)
+    if ua < 0.0:
+        return -_INF
+    tr = _eye_track(eye, tx, ty, rules)
+    t = tr.qz + _tin_span(w, tr, ua, 1.0 - ua)
+    if not (t != tz and abs(t) < _INF):
+        return t
+    ub = _trim(eye, tx, ty, t, rules)
+    if ub < 0.0:
+        return -_INF
+    if ub == ua:
+        return t
+    lo = min(ua, ub)
+    hi = max(ua, ub)
+    m = tr.qz + max(_tin_span(w, tr, lo, hi), _tin_span(w, tr, 1.0 - hi, 1.0 - lo))
+    if ub < ua:
+        return max(t, m)
+    if m < t:
+        return t
+    return tr.qz + _tin_span(w, tr, ub, 1.0 - ub)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def grid_eye_thresholds(g, eye, t, rules, out, stop):
+    """``out[i]`` = the threshold height of the target point ``t[i]`` = (x, y, z) (local; z
+    sets the trim) for the fixed ``eye`` = (x, y, z) on the grid ``g``: the least height at
+    which it sees the eye (-inf: the segment is not tested). Parallel over chunks of
+    :data:`EYE_CHUNK` targets."""
+    n = t.shape[0]
+    for k in nb.prange((n + EYE_CHUNK - 1) // EYE_CHUNK):
+        if stopped(stop):
+            continue
+        gb = borrow_grid(g)
+        st = new_stack(g.ltop)
+        for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
+            out[i] = _grid_eye_one(gb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_eye_thresholds_serial(g, eye, t, rules, out, stop):
+    """:func:`grid_eye_thresholds` in the calling thread (the same thresholds; see "Compile time")."""
+    gb = borrow_grid(g)
+    st = new_stack(g.ltop)
+    for i in range(t.shape[0]):
+        if i % EYE_CHUNK == 0 and stopped(stop):
+            return
+        out[i] = _grid_eye_one(gb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+
+
+@nb.njit(cache=True, nogil=True, parallel=True)
+def tin_eye_thresholds(w, eye, t, rules, out, stop):
+    """:func:`grid_eye_thresholds` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
+    n = t.shape[0]
+    for k in nb.prange((n + EYE_CHUNK - 1) // EYE_CHUNK):
+        if stopped(stop):
+            continue
+        wb = borrow_tin(w)
+        for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
+            out[i] = _tin_eye_one(wb, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_eye_thresholds_serial(w, eye, t, rules, out, stop):
+    """:func:`tin_eye_thresholds` in the calling thread (the same thresholds)."""
+    wb = borrow_tin(w)
+    for i in range(t.shape[0]):
+        if i % EYE_CHUNK == 0 and stopped(stop):
+            return
+        out[i] = _tin_eye_one(wb, eye, t[i, 0], t[i, 1], t[i, 2], rules)

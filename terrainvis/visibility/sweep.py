@@ -79,8 +79,10 @@ from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain
 from . import _sweep_kernels as _vk
 from .engines import Predicate, choose
-from .field_of_view import apply_field_of_view, field_of_view
-from .predicate import EARTH_RADIUS, _check_heights, _height_above, clearance_tolerance, curvature_coefficient, trim_length
+from .field_of_view import apply_field_of_view, field_of_view, field_of_view_mask
+from .output_modes import check_output, eye_thresholds, output_values, tin_of_grid_thresholds
+from .predicate import (EARTH_RADIUS, _check_heights, _height_above, clearance_tolerance, curvature_coefficient,
+                        terrain_scale, trim_length)
 
 __all__ = ["viewshed"]
 
@@ -114,8 +116,9 @@ def viewshed(
     azimuth=None,
     vertical=None,
     min_distance=None,
+    output: str = "visible",
 ) -> np.ndarray:
-    """Which samples of a grid are visible from an observer.
+    """Which samples of a grid are visible from an observer (or how far from visible they are).
 
     Parameters
     ----------
@@ -165,10 +168,27 @@ def viewshed(
         ``curvature * d**2 / (2 R)``.
     min_distance : float, optional
         Field of view: samples nearer than this horizontal distance are False.
+    output : {"visible", "min_height", "angle"}, default "visible"
+        What to return for each target (:mod:`terrainvis.visibility.output_modes`):
+        ``"visible"`` the bool mask below; ``"min_height"`` (float64) the least height
+        above the surface at which a target at that sample is visible, 0 where the ground
+        itself is visible (GDAL's ``-om GROUND``; ``target_height`` is not used, but for
+        the ``vertical`` limit); ``"angle"`` (float64, degrees) the elevation angle of the
+        target (standing ``target_height`` above the surface) minus that of the horizon
+        of its ray, both seen from the eye and lowered by the earth's drop
+        ``curvature * d**2 / (2 R)``: ``atan2(z_T - drop - z_E, d) - atan2(z* - drop - z_E, d)``
+        with ``z*`` the target's threshold (least visible height), >= 0 exactly where the
+        target is visible (to within the clearance tolerance), -90 degrees for the horizon
+        of a segment that is not tested. Both are exact (the threshold engine,
+        :mod:`terrainvis.visibility.thresholds`), whatever ``engine``, and NaN where the
+        mask is False without a verdict: nodata samples, samples off the surface under
+        test, and samples outside the field of view (but for the sample nearest the
+        observer, as below). On a grid with nodata the sample nearest the observer gets
+        its exact value (the mask marks it True).
 
     Returns
     -------
-    (rows, cols) bool
+    (rows, cols) bool, or (rows, cols) float64 for ``output="min_height"`` or ``"angle"``
         ``out[r, c]`` is True where the target above sample (r, c) of ``at`` (or of the
         terrain) is visible: the line of sight from the eye to it, with the trim
         :func:`~terrainvis.visibility.trim_length` and the tolerance
@@ -226,7 +246,13 @@ def viewshed(
            [1, 1, 1, 0, 0],
            [1, 1, 1, 0, 0]])
     """
+    check_output(output)
     fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance, max_distance=max_distance)
+    if output != "visible":
+        return _output_values(
+            terrain, observer, output, fov, observer_height=observer_height, target_height=target_height,
+            max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
+        )
     out, _ = _viewshed(
         terrain, observer, observer_height=observer_height, target_height=target_height,
         max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
@@ -245,6 +271,24 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     blocks of rings whose bound reached the target), ``exact`` (answered by the pair
     engine, or the nodata-aware walk, or Embree, or the TIN clipper).
     """
+    engine, kc, eye, zs, at, own, (h_t, dmax) = _setup(
+        terrain, observer, observer_height=observer_height, target_height=target_height,
+        max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius)
+    if engine.name == "grid":
+        # The sweep's bounds assume the eye on or above its own cell's surface (so the
+        # part of every ray inside the trim cannot block). An eye below it, e.g. an
+        # observer relocated by identity onto a simplification, goes to the exact walk.
+        out, info = _grid(terrain, at, eye, (h_t, dmax, kc), own, sweep=bool(eye[2] >= zs))
+    else:
+        out, info = _rays(terrain, at, eye, (h_t, dmax, kc), own, engine)
+    _mark_nearest(out, terrain, at, eye, (h_t, dmax, kc), engine)
+    return out, info
+
+
+def _setup(terrain, observer, *, observer_height, target_height, max_distance, at, engine, curvature,
+           earth_radius):
+    """The checked arguments of a viewshed: ``(engine, kc, eye, zs, at, own, (h_t, dmax))``,
+    ``zs`` the surface under the observer and ``own`` whether the targets are the grid's samples."""
     as_terrain(terrain)
     kc = curvature_coefficient(curvature, earth_radius)
     engine = choose(engine, terrain, kc)
@@ -273,15 +317,176 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     own = at is terrain or (
         isinstance(terrain, HeightGrid) and np.array_equal(at.xs, terrain.xs) and np.array_equal(at.ys, terrain.ys)
     )
-    if engine.name == "grid":
-        # The sweep's bounds assume the eye on or above its own cell's surface (so the
-        # part of every ray inside the trim cannot block). An eye below it, e.g. an
-        # observer relocated by identity onto a simplification, goes to the exact walk.
-        out, info = _grid(terrain, at, eye, (h_t, dmax, kc), own, sweep=bool(eye[2] >= zs))
+    return engine, kc, eye, zs, at, own, (h_t, dmax)
+
+
+# ----------------------------------------------------------------- output modes
+#: Height step (a fraction of the terrain's scale) at which the thresholds of a grid with nodata
+#: are checked by the exact nodata-aware walk, and to which the bisection narrows those that fail.
+_SETTLE_REL = 1e-9
+
+
+def _output_values(terrain, observer, output: str, fov, **options) -> np.ndarray:
+    """:func:`viewshed`'s ``"min_height"`` or ``"angle"``: the threshold of every target in the field."""
+    _, kc, eye, _, at, own, (h_t, _) = _setup(terrain, observer, **options)
+    if own:
+        zt = np.array(terrain.z, dtype=np.float64)
+        if terrain.n_nodata:
+            zt[~_on_surface(terrain.z)] = np.nan
     else:
-        out, info = _rays(terrain, at, eye, (h_t, dmax, kc), own, engine)
-    _mark_nearest(out, terrain, at, eye, (h_t, dmax, kc), engine)
-    return out, info
+        zt = terrain.height_on_grid(at.xs, at.ys)
+    ok = np.isfinite(zt) & np.isfinite(at.z)
+    if fov.limited:
+        ok &= field_of_view_mask(terrain, eye, fov, at=at, target_height=h_t, curvature=options["curvature"],
+                                 earth_radius=options["earth_radius"])
+    idx = np.flatnonzero(ok.ravel())
+    r, c = np.divmod(idx, at.shape[1])
+    ground = zt.ravel()[idx]
+    pts = np.column_stack([at.xs[c], at.ys[r], ground + (h_t if output == "angle" else 0.0)])
+    if isinstance(terrain, HeightGrid) and terrain.n_nodata:
+        thr = _nodata_thresholds(terrain, eye, pts, kc)
+    elif isinstance(terrain, TIN):
+        thr = _tin_thresholds(terrain, eye, pts, kc)
+    else:
+        thr = eye_thresholds(terrain, eye, pts, kc)
+    out = np.full(at.shape, np.nan)
+    out.ravel()[idx] = output_values(output, thr, eye, pts, ground, kc)
+    return out
+
+
+#: Azimuth bins of :func:`_near_holes` (each hole cell marks the bins its directions span, and one more each side).
+_HOLE_BINS = 8192
+
+
+def _nodata_thresholds(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray, kc: float) -> np.ndarray:
+    """Thresholds on a grid with nodata: targets whose segment cannot meet a cell touching
+    nodata are walked on the grid with its nodata filled (their walk never reads a filled
+    height: every cell it evaluates has four finite corners, and the fill, the lowest height,
+    keeps the pyramid's bounds true); the others as the grid's TIN, checked (:func:`_settle`)."""
+    near = _near_holes(grid, eye, pts)
+    thr = np.empty(pts.shape[0])
+    far = np.flatnonzero(~near)
+    thr[far] = eye_thresholds(_filled(grid), eye, pts[far], kc)
+    near = np.flatnonzero(near)
+    if near.size:
+        thr[near] = _settle(grid, eye, pts[near], tin_of_grid_thresholds(grid, eye, pts[near], kc), kc)
+    return thr
+
+
+def _filled(grid: HeightGrid) -> HeightGrid:
+    """The grid with its nodata set to its lowest height (cached)."""
+    f = grid._cache.get("output_modes_filled")
+    if f is None:
+        zmin = _nanrange(grid)[0]
+        f = HeightGrid.from_coords(np.where(np.isfinite(grid.z), grid.z, zmin), grid.xs, grid.ys)
+        grid._cache["output_modes_filled"] = f
+    return f
+
+
+def _near_holes(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(n,) bool: targets whose segment from the eye may pass through a cell with a nodata corner
+    (conservative): the target lies at least as far as such a cell, in an azimuth bin that the
+    cell's directions from the eye span (widened by a bin each side). All of them when the eye
+    is on such a cell."""
+    f = np.isfinite(grid.z)
+    bad = ~(f[:-1, :-1] & f[:-1, 1:] & f[1:, :-1] & f[1:, 1:])
+    r, c = np.nonzero(bad)
+    if r.size == 0:
+        return np.zeros(pts.shape[0], dtype=bool)
+    x0, x1 = grid.xs[c] - eye[0], grid.xs[c + 1] - eye[0]
+    y0, y1 = grid.ys[r] - eye[1], grid.ys[r + 1] - eye[1]
+    dmin = np.hypot(np.maximum(np.maximum(x0, -x1), 0.0), np.maximum(np.maximum(y0, -y1), 0.0))
+    if (dmin == 0.0).any():
+        return np.ones(pts.shape[0], dtype=bool)
+    centre = np.arctan2(0.5 * (y0 + y1), 0.5 * (x0 + x1))
+    turn = np.stack([np.arctan2(y, x) for x, y in ((x0, y0), (x1, y0), (x0, y1), (x1, y1))])
+    turn = np.mod(turn - centre + np.pi, 2.0 * np.pi) - np.pi  # a cell away from the eye spans < 180 degrees
+    scale = _HOLE_BINS / (2.0 * np.pi)
+    lo = np.floor((centre + turn.min(axis=0) + np.pi) * scale).astype(np.int64) - 1
+    hi = np.floor((centre + turn.max(axis=0) + np.pi) * scale).astype(np.int64) + 1
+    count = hi - lo + 1
+    start = np.repeat(lo - np.cumsum(count) + count, count)
+    bins = np.mod(start + np.arange(int(count.sum())), _HOLE_BINS)
+    nearest = np.full(_HOLE_BINS, np.inf)
+    np.minimum.at(nearest, bins, np.repeat(dmin, count))
+    tx, ty = pts[:, 0] - eye[0], pts[:, 1] - eye[1]
+    tb = np.mod(np.floor((np.arctan2(ty, tx) + np.pi) * scale).astype(np.int64), _HOLE_BINS)
+    return np.hypot(tx, ty) >= nearest[tb] * (1.0 - 1e-9)
+
+
+def _settle(terrain, eye: np.ndarray, pts: np.ndarray, thr: np.ndarray, kc: float) -> np.ndarray:
+    """Thresholds of a walk that stops where the surface does, checked by an exact engine.
+
+    The TIN walk (of a TIN, or of ``grid.to_tin()`` on a grid with nodata) stops at a hole
+    or at a concave edge of the footprint, so a sight line that leaves the surface and
+    comes back may get too low a threshold: each finite threshold ``t`` must be blocked at
+    ``t - eps`` and visible at ``t + eps`` under the exact verdicts (:func:`_verdicts`); the
+    others are found again by bisection of those verdicts.
+    """
+    seen = _verdicts(terrain, eye, kc)
+    eps = _SETTLE_REL * float(terrain_scale(terrain))
+    x, y = pts[:, 0], pts[:, 1]
+    bad = np.isfinite(thr)
+    sel = np.flatnonzero(bad)
+    bad[sel] = ~(seen(x[sel], y[sel], thr[sel] + eps) & ~seen(x[sel], y[sel], thr[sel] - eps))
+    bad |= thr == np.inf
+    sel = np.flatnonzero(bad)
+    if sel.size == 0:
+        return thr
+    z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
+    zmin, zmax = float(np.nanmin(z)), float(np.nanmax(z))
+    d2 = (x[sel] - eye[0]) ** 2 + (y[sel] - eye[1]) ** 2
+    span = 2.0 * (zmax - zmin + abs(eye[2] - zmin) + kc * float(d2.max())) + float(terrain_scale(terrain))
+    lo = np.full(sel.size, zmin - span)
+    hi = np.full(sel.size, zmax + span)
+    out = thr.copy()
+    seen_lo = seen(x[sel], y[sel], lo)
+    seen_hi = seen(x[sel], y[sel], hi)
+    for _ in range(200):
+        go = np.flatnonzero(~seen_lo & seen_hi & (hi - lo > eps))
+        if go.size == 0:
+            break
+        mid = 0.5 * (lo[go] + hi[go])
+        v = seen(x[sel][go], y[sel][go], mid)
+        hi[go] = np.where(v, mid, hi[go])
+        lo[go] = np.where(v, lo[go], mid)
+    out[sel] = np.where(seen_lo, -np.inf, np.where(seen_hi, hi, np.inf))
+    return out
+
+
+def _verdicts(terrain, eye: np.ndarray, kc: float):
+    """``seen(x, y, z)``: whether the eye sees each target (x, y, z), exactly: on a grid the
+    nodata-aware walk (:func:`_exact`), on a TIN the TIN engine (the exact clipper)."""
+    delta, tol = trim_length(terrain), clearance_tolerance(terrain)
+    if isinstance(terrain, HeightGrid):
+        return lambda x, y, z: _exact(terrain, eye, (x, y, z), delta, tol, kc)
+    engine = choose("tin", terrain, kc)
+    predicate = Predicate(delta, tol, 0.0, kc)
+
+    def seen(x, y, z):
+        b = np.column_stack([x, y, z])
+        return engine.pairs(terrain, np.repeat(eye[None, :], b.shape[0], axis=0), b, predicate)
+
+    return seen
+
+
+def _tin_thresholds(tin: TIN, eye: np.ndarray, pts: np.ndarray, kc: float) -> np.ndarray:
+    """Thresholds on a TIN: checked (:func:`_settle`) unless its footprint is its bounding
+    rectangle, where no sight line between two of its points can leave it."""
+    thr = eye_thresholds(tin, eye, pts, kc)
+    if _fills_its_rectangle(tin):
+        return thr
+    return _settle(tin, eye, pts, thr, kc)
+
+
+def _fills_its_rectangle(tin: TIN) -> bool:
+    """Whether the TIN's faces cover its bounding rectangle exactly (their areas add up to it;
+    faces do not overlap in a valid TIN)."""
+    v = tin.vertices[:, :2]
+    a, b, c = v[tin.faces[:, 0]], v[tin.faces[:, 1]], v[tin.faces[:, 2]]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])).sum()
+    box = float(np.ptp(v[:, 0]) * np.ptp(v[:, 1]))
+    return bool(abs(area - box) <= 1e-9 * box)
 
 
 # ----------------------------------------------------------------- validation

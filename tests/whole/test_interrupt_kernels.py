@@ -191,6 +191,20 @@ del x, y
 def work():
     tv.viewshed(g, (g.xs[0], g.ys[0]), observer_height=2.0)
 """, False)
+# the viewshed's min_height output (the threshold engine, parallel over chunks of targets)
+# on the same grazing worst case, smaller
+_CASES["viewshed-min-height"] = ("""
+from terrainvis import HeightGrid
+def warm():
+    s = tv.synthetic_terrain("mountains", size=33)
+    tv.viewshed(s, (s.xs[3], s.ys[5]), output="min_height")
+n = 2048
+y, x = np.mgrid[0:n, 0:n] * 30.0
+g = HeightGrid(100.0 + 0.05 * x + 0.02 * y + np.random.default_rng(0).normal(0.0, 0.5, (n, n)), dx=30.0, dy=30.0)
+del x, y
+def work():
+    tv.viewshed(g, (g.xs[0], g.ys[0]), observer_height=2.0, output="min_height")
+""", False)
 # the parallel visibility matrix of the grid engine: 8,000 points, 32 million pairs
 _CASES["visibility-matrix"] = ("""
 def warm():

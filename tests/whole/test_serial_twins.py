@@ -35,6 +35,8 @@ def test_one_thread_and_two_give_the_same_bits():
             out.append(tv.relocate(pts, s, "calibrated", original=t, offset=2.0, n_partners=64))  # *_heights
         out.append(tv.min_clearance(tin, pts[:15], pts[15:]))  # tin_pairs
         out.append(np.array([tv.volume_error(t, grid), tv.volume_error(t, tin)]))  # volume_between
+        out.append(tv.viewshed(t, (t.xs[40], t.ys[50]), output="min_height"))  # grid_eye_thresholds
+        out.append(tv.viewshed(tin, (t.xs[40], t.ys[50]), at=t, output="angle"))  # tin_eye_thresholds
         return out
 
     one = _with_threads(1, run)
