@@ -66,7 +66,12 @@ import numpy as np
 
 from ..core.stopflag import stopped
 from ..core.surface import barycentric, cell_height, weighted
-from .walk import cell_diagonal, mid_height, node_pop, node_push, node_root, node_split
+from .walk import cell_diagonal
+from .walk import mid_height_inline as mid_height
+from .walk import node_pop_inline as node_pop
+from .walk import node_push_inline as node_push
+from .walk import node_root_inline as node_root
+from .walk import node_split_inline as node_split
 
 _INF = np.inf
 

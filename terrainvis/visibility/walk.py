@@ -39,7 +39,9 @@ they allocate nothing), which LLVM inlines into the consumers' loops: no allocat
 no reference count. Inlined at numba IR level instead (``inline="always"``), each step
 bound the grid's arrays to the helper's parameters anew, with a reference-count
 increment and decrement per array, and the walks were slower than the copies they
-replace.
+replace. The pair engine's parallel loop is the exception: there the plain calls stay
+calls, so it takes the descent helpers' IR-inlined twins (``node_pop_inline``, ...),
+compiled from the same source.
 
 The pyramid descent
 -------------------
@@ -139,8 +141,7 @@ def cell_diagonal(xs, ys, ixw, iyw, r, c, seg):
 
 
 # --------------------------------------------------------------------------- pyramid
-@nb.njit(**_STEP)
-def node_pop(stk, sp):
+def _node_pop(stk, sp):
     """The node on top of the stack ``stk = (level, row, col, t)`` (the arrays of a
     :data:`~terrainvis.visibility._kernels.WalkStack`) of ``sp`` entries: (sp - 1, level,
     row, col, a0, a1)."""
@@ -149,8 +150,7 @@ def node_pop(stk, sp):
     return sp, sL[sp], sR[sp], sC[sp], sT[2 * sp], sT[2 * sp + 1]
 
 
-@nb.njit(**_STEP)
-def node_root(stk, ltop, t0, t1):
+def _node_root(stk, ltop, t0, t1):
     """Push the root (level ``ltop``) over [t0, t1] on the empty stack ``stk``; returns its size, 1."""
     sL, sR, sC, sT = stk
     sL[0] = ltop
@@ -161,8 +161,7 @@ def node_root(stk, ltop, t0, t1):
     return 1
 
 
-@nb.njit(**_STEP)
-def node_split(xs, ys, node, seg):
+def _node_split(xs, ys, node, seg):
     """Where the track crosses the mid lines of ``node = (L, R, C, a0, a1)`` (L >= 1) inside
     (a0, a1): ``(cm, rm, tx, ty)``, the mid column and row and their crossing parameters
     (inf where there is no such crossing: no mid line, parallel, or outside)."""
@@ -184,8 +183,7 @@ def node_split(xs, ys, node, seg):
     return cm, rm, tx, ty
 
 
-@nb.njit(**_STEP)
-def mid_height(z, xs, ys, ixw, iyw, uniform, node, vertical, m, w):
+def _mid_height(z, xs, ys, ixw, iyw, uniform, node, vertical, m, w):
     """The surface height on a mid line of ``node`` at the coordinate ``w`` along it: the
     vertical line x = xs[m] (``vertical``; w a y) or the horizontal line y = ys[m]."""
     L, R, C, a0, a1 = node
@@ -198,8 +196,7 @@ def mid_height(z, xs, ys, ixw, iyw, uniform, node, vertical, m, w):
     return line_height(z, m, c, False, u)
 
 
-@nb.njit(**_STEP)
-def node_push(stk, sp, xs, ys, node, split, seg):
+def _node_push(stk, sp, xs, ys, node, split, seg):
     """Push the children of ``node`` cut at the crossings ``split = (cm, rm, tx, ty)``
     (:func:`node_split`) far-first, so that the nearest pops first; returns the new size."""
     sL, sR, sC, sT = stk
@@ -249,3 +246,16 @@ def node_push(stk, sp, xs, ys, node, split, seg):
         sT[2 * sp + 1] = b1
         sp += 1
     return sp
+
+
+# Each descent helper twice, from the one source above: plain and without the runtime for
+# the serial walks (the thresholds), inlined at numba IR level for the pair engine's
+# parallel loop (there the plain calls are not inlined by LLVM, and every node paid them;
+# the IR-inlined twins count no references there, the arrays being bound once per walk).
+# The inlined twins are never cached (numba inlines their source).
+_INLINE = {"cache": False, "nogil": True, "inline": "always"}
+node_pop, node_pop_inline = nb.njit(**_STEP)(_node_pop), nb.njit(**_INLINE)(_node_pop)
+node_root, node_root_inline = nb.njit(**_STEP)(_node_root), nb.njit(**_INLINE)(_node_root)
+node_split, node_split_inline = nb.njit(**_STEP)(_node_split), nb.njit(**_INLINE)(_node_split)
+mid_height, mid_height_inline = nb.njit(**_STEP)(_mid_height), nb.njit(**_INLINE)(_mid_height)
+node_push, node_push_inline = nb.njit(**_STEP)(_node_push), nb.njit(**_INLINE)(_node_push)
