@@ -189,7 +189,8 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
     counts as a pair (observer, cell), so the agreement counts read as in the pair measure.
     Each row also says how S(T) changes the minimum visible height of the counted cells
     (:func:`min_height_error`: ``min_height_rms``, ``min_height_p95``, in z units), from
-    the ``output="min_height"`` viewsheds of the same eyes (``target_height`` does not enter).
+    the ``output="min_height"`` viewsheds of the same eyes (``target_height`` does not enter),
+    unless ``settings.min_height`` is False (then they are left out: NaN in the table).
     """
     from ..core.metrics import viewshed_agreement
     from ..relocation.registry import RELOCATIONS, relocate
@@ -202,20 +203,21 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
     for s, eye in enumerate(eyes):
         eye = np.asarray(eye, dtype=np.float64).reshape(1, 3)
         v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, **kw)
-        h_true = viewshed(grid, eye[0], output="min_height", **los)
+        h_true = viewshed(grid, eye[0], output="min_height", **los) if settings.min_height else None
         dist = np.hypot(X - eye[0, 0], Y - eye[0, 1])
         heights = {}  # relocations that place the eye alike (often identity and half) share its raster
         for how in settings.relocations:
             moved = relocate(eye, simplified, how, **RELOCATIONS[how].keywords(known, los))[0]
             v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, **kw)
             place = np.asarray(moved, dtype=np.float64).tobytes()
-            if place not in heights:
+            if settings.min_height and place not in heights:
                 heights[place] = viewshed(simplified, moved, at=grid, output="min_height", **los)
-            h_test = heights[place]
             for d in settings.max_distance:
                 counted = dist <= _limit(d, grid, settings.distance_unit)
                 row = _row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted))
-                rows.append(dict(row, **min_height_error(h_true, h_test, counted)))
+                if settings.min_height:
+                    row.update(min_height_error(h_true, heights[place], counted))
+                rows.append(row)
     return rows
 
 

@@ -487,6 +487,13 @@ _DECLARED = [
         "target_height", 0.0, height, "the viewshed targets' height above the surface under test, >= 0", "float",
         measures=("viewshed",), cli=Flag(type=float),
     ),
+    Option(
+        "min_height", True, boolean, "measure the error of the minimum-visible-height raster on S(T)", "bool",
+        measures=("viewshed",),
+        doc=("The ``output=\"min_height\"`` viewsheds on T and on S(T) behind ``min_height_rms`` and "
+             "``min_height_p95``; False leaves those columns empty and saves about 40 % of a viewshed run."),
+        cli=Switch(off="--no-min-height", off_help="skip the minimum-visible-height rasters (viewshed measure)"),
+    ),
 ]
 
 #: Every option of :func:`terrainvis.compare`, by name, in the order of its signature.

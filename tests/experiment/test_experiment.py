@@ -240,6 +240,12 @@ def test_min_height_error():
 def test_the_pairs_measure_leaves_the_min_height_columns_empty(small):
     df = compare({"a": small["a"]}, workers=1, **_kw(methods=["lls"], levels=[1]))
     assert df["min_height_rms"].isna().all() and df["min_height_p95"].isna().all() and df["accuracy"].notna().all()
+    # and so does the viewshed measure with min_height=False, its other columns the same
+    kw = dict(methods=["lls"], levels=[1], seed=3, repeats=1, measure="viewshed", n_observers=2)
+    on, off = compare({"a": small["a"]}, workers=1, **kw), compare({"a": small["a"]}, workers=1, min_height=False, **kw)
+    assert on["min_height_rms"].notna().all() and off["min_height_rms"].isna().all() and off["min_height_p95"].isna().all()
+    rest = [c for c in STABLE if not c.startswith("min_height")]
+    pd.testing.assert_frame_equal(on[rest], off[rest])
 
 
 def test_resume_of_a_file_written_before_the_min_height_columns(small, tmp_path):
