@@ -12,18 +12,22 @@ import pandas as pd
 
 from .options import Settings
 
-__all__ = ["COLUMNS", "UNIT_KEY", "TIMING_COLUMNS", "rows_per_unit", "table", "order"]
+__all__ = ["COLUMNS", "MEASURE_COLUMNS", "UNIT_KEY", "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table",
+           "order"]
 
 #: Columns of the result table, in order.
 COLUMNS = (
     "terrain", "set", "method", "kind", "level", "relocation", "measure", "predicate",
     "accuracy", "visible_kept", "blocked_kept", "accuracy_paper", "visible_area_ratio",
     "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
-    "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
+    "min_height_rms", "min_height_p95", "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
     "max_error", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
     "seed", "max_distance", "distance_unit", "offset", "error",
 )
+#: Columns that only one measure fills (NaN in the other measures' rows), by that measure;
+#: they came after the first results files, so an older file lacks them (:func:`optional_columns`).
+MEASURE_COLUMNS = {"viewshed": ("min_height_rms", "min_height_p95")}
 #: Columns that identify a unit.
 UNIT_KEY = ("terrain", "method", "level")
 #: Columns holding times (they differ between runs; everything else is deterministic).
@@ -35,6 +39,12 @@ def rows_per_unit(settings: Settings) -> int:
     from .measures import MEASURES
 
     return MEASURES[settings.measure].n_sets(settings) * len(settings.relocations) * len(settings.max_distance)
+
+
+def optional_columns(measure: str) -> tuple:
+    """The columns a results file of ``measure`` may lack and still resume: those only other
+    measures fill (read back as NaN, which is what this measure's rows hold there)."""
+    return tuple(c for m, cols in MEASURE_COLUMNS.items() if m != measure for c in cols)
 
 
 def table(rows: list[dict]) -> pd.DataFrame:

@@ -37,7 +37,7 @@ import pandas as pd
 from ..core._progress import progress_bar_class
 from ..core.validate import describe
 from .measures import MEASURES
-from .collect import COLUMNS, UNIT_KEY, order, rows_per_unit, table
+from .collect import COLUMNS, UNIT_KEY, optional_columns, order, rows_per_unit, table
 from .options import (
     CASCADE_AUTO_MIN_SAMPLES,
     DEFAULTS,
@@ -242,8 +242,9 @@ def _store(out_csv, settings: Settings, grids: dict, resume: bool):
     per_unit = rows_per_unit(settings)
     # a settings file written before an option existed ran it at its default
     absent = {name: option.check(option.default, name) for name, option in OPTIONS.items()}
+    # a results file written before a measure's columns existed resumes when this measure leaves them empty
     store = ResultStore(out_csv, run_record(settings, grids), COLUMNS, UNIT_KEY, lambda key: per_unit, resume=resume,
-                        absent=absent)
+                        absent=absent, optional=optional_columns(settings.measure))
     return store, frozenset(store.done)
 
 

@@ -14,7 +14,9 @@ The built-in measures:
     each distance counts, so it runs once per distance, after the practical ones.
 ``"viewshed"``
     Each observer's viewshed of every sample of T, on T and on S(T), per relocation
-    (:func:`viewshed_rows`); a cell counts as a pair (observer, cell).
+    (:func:`viewshed_rows`); a cell counts as a pair (observer, cell). Its rows also give
+    the error of the minimum-visible-height raster on S(T) (``min_height_rms``,
+    ``min_height_p95``; NaN in the other measures' rows).
 
 A measure's functions read the run's settings by attribute and take the line-of-sight
 predicate's options (``los``) as an argument; they import nothing from the rest of the
@@ -35,7 +37,7 @@ from ..core.validate import describe
 
 __all__ = [
     "Measure", "MEASURES", "register", "unregister", "available", "point_sets", "observers", "pair_rows",
-    "viewshed_rows",
+    "viewshed_rows", "min_height_error",
 ]
 
 
@@ -185,6 +187,10 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
     The observer is relocated onto S(T) as the points of the pair measure are; the targets
     are T's samples, standing ``target_height`` above the surface under test. A cell
     counts as a pair (observer, cell), so the agreement counts read as in the pair measure.
+    Each row also says how S(T) changes the minimum visible height of the counted cells
+    (:func:`min_height_error`: ``min_height_rms``, ``min_height_p95``, in z units), from
+    the ``output="min_height"`` viewsheds of the same eyes (``target_height`` does not enter),
+    unless ``settings.min_height`` is False (then they are left out: NaN in the table).
     """
     from ..core.metrics import viewshed_agreement
     from ..relocation.registry import RELOCATIONS, relocate
@@ -197,14 +203,47 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
     for s, eye in enumerate(eyes):
         eye = np.asarray(eye, dtype=np.float64).reshape(1, 3)
         v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, **kw)
+        h_true = viewshed(grid, eye[0], output="min_height", **los) if settings.min_height else None
         dist = np.hypot(X - eye[0, 0], Y - eye[0, 1])
+        heights = {}  # relocations that place the eye alike (often identity and half) share its raster
         for how in settings.relocations:
             moved = relocate(eye, simplified, how, **RELOCATIONS[how].keywords(known, los))[0]
             v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, **kw)
+            place = np.asarray(moved, dtype=np.float64).tobytes()
+            if settings.min_height and place not in heights:
+                heights[place] = viewshed(simplified, moved, at=grid, output="min_height", **los)
             for d in settings.max_distance:
                 counted = dist <= _limit(d, grid, settings.distance_unit)
-                rows.append(_row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted)))
+                row = _row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted))
+                if settings.min_height:
+                    row.update(min_height_error(h_true, heights[place], counted))
+                rows.append(row)
     return rows
+
+
+def min_height_error(h_true: np.ndarray, h_test: np.ndarray, counted=None) -> dict:
+    """How S(T) changes the minimum visible height: ``min_height_rms`` and ``min_height_p95``.
+
+    ``h_true`` and ``h_test`` are :func:`terrainvis.viewshed`'s ``output="min_height"``
+    rasters on T and on S(T) (the least height above the ground at which each sample is
+    seen, in z units); the error is ``h_test - h_true`` over the ``counted`` cells (all
+    when None) where both are finite. ``min_height_rms`` is its root mean square and
+    ``min_height_p95`` the 95th percentile of its absolute value (linear interpolation);
+    both are NaN when no cell counts.
+
+    >>> h = np.array([[0.0, 2.0], [np.nan, 4.0]])
+    >>> e = min_height_error(h, h + np.array([[0.0, 3.0], [1.0, -4.0]]))
+    >>> round(e["min_height_rms"], 4), round(e["min_height_p95"], 4)
+    (2.8868, 3.9)
+    """
+    both = np.isfinite(h_true) & np.isfinite(h_test)
+    if counted is not None:
+        both &= counted
+    if not both.any():
+        return {"min_height_rms": np.nan, "min_height_p95": np.nan}
+    err = h_test[both] - h_true[both]
+    return {"min_height_rms": float(np.sqrt(np.mean(err * err))),
+            "min_height_p95": float(np.percentile(np.abs(err), 95))}
 
 
 def _relocation_keywords(settings, grid: HeightGrid, end_radius: float) -> dict:
@@ -234,9 +273,9 @@ def _pair_bytes(settings, grids) -> int:
 
 
 def _viewshed_bytes(settings, grids) -> int:
-    """Six arrays of 8 bytes per sample of the largest terrain (coordinates, distances, the two
-    viewshed, a mask)."""
-    return 8 * 6 * max(g.size for g in grids.values())
+    """Eight arrays of 8 bytes per sample of the largest terrain (coordinates, distances, the two
+    viewsheds, the two minimum-height rasters, a mask)."""
+    return 8 * 8 * max(g.size for g in grids.values())
 
 
 def _pair_sets(grid, name, settings) -> list:

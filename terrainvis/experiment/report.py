@@ -566,10 +566,13 @@ def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
     """What simplification does to viewsheds: per method, level and relocation.
 
     Columns ``cells_kept`` (share of cells whose verdict survives), ``visible_kept``,
-    ``blocked_kept`` (means over terrains and observers, %) and ``area_ratio`` (visible
+    ``blocked_kept`` (means over terrains and observers, %), ``area_ratio`` (visible
     area on S(T) / on T, the median: an observer who sees little of T can see many times
-    more of S(T), and a few such ratios would dominate a mean), for a result of
-    ``compare(..., measure="viewshed")``.
+    more of S(T), and a few such ratios would dominate a mean), ``min_height_rms`` and
+    ``min_height_p95`` (the error of the minimum-visible-height raster on S(T), RMS and
+    95th percentile of its absolute value, in z units: means over terrains and
+    observers; NaN where no row has them, e.g. rows written before they existed) and
+    ``n`` (rows), for a result of ``compare(..., measure="viewshed")``.
     """
     from simplifiers import METHODS
 
@@ -582,11 +585,13 @@ def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
     g = data.groupby(["method", "level", "relocation"])
     t = pd.DataFrame({
         "cells_kept": 100 * g["accuracy"].mean(), "visible_kept": 100 * g["visible_kept"].mean(),
-        "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].median(), "n": g.size(),
+        "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].median(),
+        "min_height_rms": g["min_height_rms"].mean(), "min_height_p95": g["min_height_p95"].mean(), "n": g.size(),
     })
     idx = [(m, lv, r) for m in _ordered({i[0] for i in t.index}, METHODS) for lv in sorted({i[1] for i in t.index})
            for r in RELOCATIONS if (m, lv, r) in t.index]
     t = t.loc[idx]
     t.attrs["title"] = ("Viewsheds: cells whose verdict survives, visible and blocked cells kept (%), "
-                        "visible-area ratio S(T) / T (median)")
+                        "visible-area ratio S(T) / T (median), error of the minimum visible height on S(T) "
+                        "(RMS and 95th percentile, z units, means)")
     return t

@@ -80,8 +80,11 @@ def _csv_text(df: pd.DataFrame, header: bool) -> str:
     return buf.getvalue()
 
 
-def read_results(path, columns) -> pd.DataFrame:
+def read_results(path, columns, optional=()) -> pd.DataFrame:
     """Read a results CSV written by :class:`ResultStore`, dropping a cut-off last line.
+
+    A file written before some of ``optional`` existed (its header is ``columns`` without
+    them, in the same order) reads with them empty (NaN).
 
     Raises
     ------
@@ -97,12 +100,13 @@ def read_results(path, columns) -> pd.DataFrame:
     if not lines:
         return _frame([], columns)
     header = next(csv.reader([lines[0]]))
-    if header != list(columns):
-        missing = [c for c in columns if c not in header]
+    missing = [c for c in columns if c not in header]
+    if header != [c for c in columns if c not in missing] or not set(missing) <= set(optional):
+        missing = [c for c in missing if c not in optional] or missing
         raise ValueError(
-            f"{str(path)!r} is not a terrainvis results file of this version "
-            f"(missing columns {missing})" if missing else
-            f"{str(path)!r} has its columns in another order than this version writes"
+            f"{str(path)!r} is not a terrainvis results file of this version (missing columns {missing}; a file "
+            "written by an older terrainvis lacks the columns added since): write to a new output instead"
+            if missing else f"{str(path)!r} has its columns in another order than this version writes"
         )
     body = lines[1:]
     # A line without its newline, or with the wrong number of fields, can only be the
@@ -110,16 +114,17 @@ def read_results(path, columns) -> pd.DataFrame:
     if body:
         last = body[-1]
         fields = next(csv.reader([last]), [])
-        if not last.endswith("\n") or len(fields) != len(columns):
+        if not last.endswith("\n") or len(fields) != len(header):
             warnings.warn(
                 f"{path.name}: dropped a cut-off last row (a damaged write); its unit will run again",
                 RuntimeWarning, stacklevel=2,
             )
             body = body[:-1]
     for i, line in enumerate(body):
-        if len(next(csv.reader([line]), [])) != len(columns):
-            raise ValueError(f"{str(path)!r} is damaged at line {i + 2}: it does not have {len(columns)} fields")
-    return _read_csv(lines[0] + "".join(body), columns)[list(columns)]
+        if len(next(csv.reader([line]), [])) != len(header):
+            raise ValueError(f"{str(path)!r} is damaged at line {i + 2}: it does not have {len(header)} fields")
+    df = _read_csv(lines[0] + "".join(body), header)
+    return df.assign(**{c: np.nan for c in missing})[list(columns)]
 
 
 class ResultStore:
@@ -143,15 +148,20 @@ class ResultStore:
     absent : dict, optional
         What a setting missing from a stored settings file means (a file written before
         that setting existed): resuming such a file compares these values instead.
+    optional : sequence of str, optional
+        Columns a file written before they existed may lack and still resume (its rows
+        read them as NaN, and the file is written back with them); a file lacking any
+        other column is refused.
     """
 
     def __init__(self, path, settings: dict, columns, unit_key, rows_per_unit, *, resume: bool,
-                 absent: dict | None = None):
+                 absent: dict | None = None, optional=()):
         self.path = Path(path)
         self.columns = list(columns)
         self.unit_key = list(unit_key)
         self.settings = json.loads(json.dumps(settings))  # normalised (tuples -> lists)
         self.absent = json.loads(json.dumps(absent or {}))
+        self.optional = tuple(optional)
         self.done: set = set()
         self._parts: list[str] = []
         if self.path.is_dir():
@@ -200,7 +210,7 @@ class ResultStore:
                 + "). Either write to a new output (another --out, or another out_csv), or resume with the "
                 "same settings as before"
             )
-        old = read_results(self.path, self.columns)
+        old = read_results(self.path, self.columns, self.optional)
         keep = np.zeros(len(old), dtype=bool)
         for key, idx in old.groupby(self.unit_key, sort=False).groups.items():
             key = tuple(key) if isinstance(key, tuple) else (key,)

@@ -214,6 +214,62 @@ def test_resume_after_an_interrupt_before_the_first_unit(small, tmp_path):
     assert set(df["method"]) == {"flaky-lls"} and len(df) == 2 * 2 * 2 * 3  # terrains x sets x levels x relocations
 
 
+def test_min_height_error():
+    """The error of S(T)'s minimum-visible-height raster: RMS and 95th percentile of |S - T|, on the counted
+    cells where both are finite; none when S(T) is T."""
+    from terrainvis import viewshed
+    from terrainvis.experiment.measures import min_height_error
+
+    t = np.array([[0.0, 1.0, np.nan], [2.0, 0.0, 5.0]])
+    s = np.array([[0.0, 3.0, 1.0], [np.nan, -1.0, 5.0]])
+    # counted and finite on both: (0,0) error 0, (0,1) error 2, (1,1) error -1, (1,2) error 0
+    e = min_height_error(t, s)
+    assert e["min_height_rms"] == pytest.approx(np.sqrt(5 / 4))
+    assert e["min_height_p95"] == pytest.approx(np.percentile([0.0, 2.0, 1.0, 0.0], 95))  # 1.85
+    e = min_height_error(t, s, np.array([[False, True, True], [True, False, False]]))
+    assert e == {"min_height_rms": 2.0, "min_height_p95": 2.0}
+    assert all(np.isnan(v) for v in min_height_error(t, s, np.zeros(t.shape, bool)).values())
+    T = synthetic_terrain("hills", size=33, seed=4)
+    eye = np.array([T.xs[10], T.ys[20], T.z[20, 10] + 1.7])
+    h = viewshed(T, eye, output="min_height")
+    assert (h > 0).any()
+    assert min_height_error(h, viewshed(T, eye, at=T, output="min_height")) == {"min_height_rms": 0.0,
+                                                                                  "min_height_p95": 0.0}
+
+
+def test_the_pairs_measure_leaves_the_min_height_columns_empty(small):
+    df = compare({"a": small["a"]}, workers=1, **_kw(methods=["lls"], levels=[1]))
+    assert df["min_height_rms"].isna().all() and df["min_height_p95"].isna().all() and df["accuracy"].notna().all()
+    # and so does the viewshed measure with min_height=False, its other columns the same
+    kw = dict(methods=["lls"], levels=[1], seed=3, repeats=1, measure="viewshed", n_observers=2)
+    on, off = compare({"a": small["a"]}, workers=1, **kw), compare({"a": small["a"]}, workers=1, min_height=False, **kw)
+    assert on["min_height_rms"].notna().all() and off["min_height_rms"].isna().all() and off["min_height_p95"].isna().all()
+    rest = [c for c in STABLE if not c.startswith("min_height")]
+    pd.testing.assert_frame_equal(on[rest], off[rest])
+
+
+def test_resume_of_a_file_written_before_the_min_height_columns(small, tmp_path):
+    """A results file without the viewshed measure's columns (an older terrainvis) resumes in the pair
+    measure, which leaves them empty, and is refused, clearly, in the viewshed measure."""
+    out = tmp_path / "results.csv"
+    kw = _kw(methods=["simple", "lls"], levels=[1])
+    full = compare({"a": small["a"]}, workers=1, out_csv=out, **kw)
+    old = pd.read_csv(out, dtype=str, keep_default_na=False)
+    old = old[old["method"] == "simple"].drop(columns=["min_height_rms", "min_height_p95"])
+    old.to_csv(out, index=False)  # an older file, with the first unit only
+    record, rerun = _recording()
+    df = compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, on_unit=record, **kw)
+    assert rerun == [("a", "lls", (1,))]
+    pd.testing.assert_frame_equal(df[STABLE], full[STABLE], check_dtype=False)
+    assert pd.read_csv(out).columns.tolist() == list(COLUMNS)  # written back with every column
+    vkw = dict(methods=["lls"], levels=[1], seed=3, repeats=1, measure="viewshed", n_observers=1)
+    out.unlink()
+    compare({"a": small["a"]}, workers=1, out_csv=out, **vkw)
+    pd.read_csv(out, dtype=str, keep_default_na=False).drop(columns=["min_height_p95"]).to_csv(out, index=False)
+    with pytest.raises(ValueError, match=r"missing columns \['min_height_p95'\].*older terrainvis.*new output"):
+        compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **vkw)
+
+
 def test_resume_is_strict_about_settings(small, tmp_path):
     out = tmp_path / "results.csv"
     compare({"a": small["a"]}, workers=1, out_csv=out, **_kw(methods=["lls"], levels=[1]))
@@ -438,6 +494,15 @@ def test_viewshed_measure(small):
     v_c = viewshed(S, moved, at=T)
     row = df[(df.method == "greedy-insertion") & (df.set == 1) & (df.relocation == "calibrated")].iloc[0]
     assert row["accuracy"] == (v_t == v_c).mean()
+    # the minimum visible height: S(T)'s raster for the half-relocated eye minus T's, where both are finite
+    h_t = viewshed(T, eye, output="min_height")
+    h_s = viewshed(S, relocate(eye[None], S, "half", offset=1.7)[0], at=T, output="min_height")
+    err = (h_s - h_t)[np.isfinite(h_s) & np.isfinite(h_t)]
+    assert err.size == 33 * 33 and np.abs(err).max() > 0  # no nodata here; the TIN moves some heights
+    row = df[(df.method == "greedy-insertion") & (df.set == 1) & (df.relocation == "half")].iloc[0]
+    assert row["min_height_rms"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-12)
+    assert row["min_height_p95"] == pytest.approx(np.percentile(np.abs(err), 95), rel=1e-12)
+    assert df["min_height_rms"].notna().all() and (df["min_height_p95"] >= 0).all()
     with pytest.raises(ValueError, match="measure 'viewshed' supports predicate 'exact' only"):
         compare(g, predicate="paper", **kw)
     with pytest.raises(ValueError, match=r"measure must be one of \['pairs', 'viewshed'\]"):

@@ -100,8 +100,8 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     seen.clear()
     with pytest.raises(Stop):  # the viewshed measure's options (it refuses predicate 'paper')
         main(["compare", "--terrain", "hills", "--out", str(tmp_path), "--measure", "viewshed", "--observers", "4",
-              "--target-height", "0.5"])
-    viewshed = dict(measure="viewshed", n_observers=4, target_height=0.5)
+              "--target-height", "0.5", "--no-min-height"])
+    viewshed = dict(measure="viewshed", n_observers=4, target_height=0.5, min_height=False)
     assert {k: v for k, v in seen.items() if k in OPTIONS} == viewshed
     expected.update(viewshed)
     assert set(expected) == {n for n, o in OPTIONS.items() if o.cli is not None}  # the test covers every flag

@@ -157,6 +157,13 @@ def test_viewshed_table():
     sel = df[(df.level == 2) & (df.relocation == "full")]
     assert t.loc[("lls", 2, "full"), "cells_kept"] == pytest.approx(100 * sel["accuracy"].mean())
     assert t.loc[("lls", 2, "full"), "area_ratio"] == pytest.approx(sel["visible_area_ratio"].median())
+    # the error of the minimum visible height (m): means over the observers
+    assert t.loc[("lls", 2, "full"), "min_height_rms"] == pytest.approx(sel["min_height_rms"].mean())
+    assert t.loc[("lls", 2, "full"), "min_height_p95"] == pytest.approx(sel["min_height_p95"].mean())
+    assert (t["min_height_p95"] > 0).all()
+    text = report.to_markdown({"viewsheds": t})
+    assert "minimum visible height" in text and "| min_height_rms | min_height_p95 | n |" in text
+    assert f"| {t.loc[('lls', 2, 'full'), 'min_height_rms']:.2f} | {t.loc[('lls', 2, 'full'), 'min_height_p95']:.2f} |" in text
     tables = report.paper_tables(df)
     assert "cells whose verdict survives" in tables["Table 1"].attrs["title"]
     assert tables["Table 4"].attrs["title"].startswith("Table 4: visible and blocked cells kept (%)")
