@@ -35,6 +35,7 @@ __all__ = [
     "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "VERTEX_WEIGHT_ZERO",
     "SLOPE_REL", "PSEUDO_ANGLE_SLACK", "EDGE_CLIP_SLACK", "DIAGONAL_SLACK", "PSEUDO_ANGLE_SPAN_MIN", "PARALLEL_SINE_MIN",
     "WEDGE_BOUNDARY_SLACK", "RING_BOUND_REL", "TRIM_MARGIN_REL", "TIN_ON_EDGE_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
+    "OUTPUT_SETTLE_REL", "HOLE_REACH_SLACK",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -195,3 +196,15 @@ RING_BOUND_REL = 1e-12
 TRIM_MARGIN_REL = 1e-6
 #: The TIN engine: a point within this fraction of the extent's diagonal of an edge is on it.
 TIN_ON_EDGE_REL = 1e-12
+
+# ----------------------------------------------------------------- viewshed output modes
+#: ``viewshed(output="min_height" | "angle")`` on a grid with nodata: the height step (a
+#: fraction of the terrain's scale) at which each threshold is checked by the exact
+#: nodata-aware walk (blocked just below, visible just above), and to which the bisection
+#: narrows a threshold that fails the check.
+OUTPUT_SETTLE_REL = 1e-9
+#: The same: a target counts as reaching a hole's angular bin when its distance is at least
+#: the bin's nearest hole distance times ``1 - HOLE_REACH_SLACK`` (the conservative side:
+#: a target at the hole's rounded distance is checked exactly).
+HOLE_REACH_SLACK = 1e-9
+

@@ -445,14 +445,16 @@ def viewshed_values(terrain: HeightGrid, values, output: str, *, observer=None, 
         ax.imshow(glow, origin="lower", extent=extent, interpolation="nearest")
         rest = finite & ~seen
         top = float(np.percentile(v[rest], 98)) if rest.any() else 1.0
+        top = top if top > 0.0 else 1.0  # a colour scale needs some span
         image = ax.imshow(np.ma.masked_where(~rest, v), origin="lower", extent=extent, interpolation="nearest",
-                          cmap="PuBu", vmin=-0.1 * max(top, 1e-9), vmax=max(top, 1e-9), alpha=0.85)
+                          cmap="PuBu", vmin=-0.1 * top, vmax=top, alpha=0.85)
         fig.colorbar(image, ax=ax, shrink=0.85, label="least visible height above the ground", extend="max")
         handles.append(Patch(color=(1.0, 0.83, 0.0, 0.8), label="ground visible (0)"))
     else:
         below, above = v[finite & (v < 0)], v[finite & (v > 0)]
-        low = -max(float(np.percentile(-below, 98)) if below.size else 1.0, 1e-9)
-        high = max(float(np.percentile(above, 98)) if above.size else 1.0, 1e-9)
+        low = float(np.percentile(-below, 98)) if below.size else 1.0  # below.size: each > 0
+        high = float(np.percentile(above, 98)) if above.size else 1.0
+        low = -low
         image = ax.imshow(np.ma.masked_where(~finite, v), origin="lower", extent=extent, interpolation="nearest",
                           cmap="RdBu_r", norm=TwoSlopeNorm(0.0, low, high), alpha=0.85)
         bar = fig.colorbar(image, ax=ax, shrink=0.85, label="degrees above (+) or below (-) the horizon",

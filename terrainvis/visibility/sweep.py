@@ -71,8 +71,9 @@ import math
 import numba
 import numpy as np
 
-from ..tolerances import EXTENT_INSIDE_REL, TRIM_MARGIN_REL
+from ..tolerances import EXTENT_INSIDE_REL, HOLE_REACH_SLACK, OUTPUT_SETTLE_REL, TRIM_MARGIN_REL
 from ..core.interrupt import call
+from ..core.mesh import footprint_matches
 from ..core.surface import SurfaceGrid, no_pyramid
 from ..core.validate import as_nonnegative_finite, describe
 from ..errors import OutsideFootprintError
@@ -323,7 +324,7 @@ def _setup(terrain, observer, *, observer_height, target_height, max_distance, a
 # ----------------------------------------------------------------- output modes
 #: Height step (a fraction of the terrain's scale) at which the thresholds of a grid with nodata
 #: are checked by the exact nodata-aware walk, and to which the bisection narrows those that fail.
-_SETTLE_REL = 1e-9
+_SETTLE_REL = OUTPUT_SETTLE_REL
 
 
 def _output_values(terrain, observer, output: str, fov, **options) -> np.ndarray:
@@ -411,7 +412,7 @@ def _near_holes(grid: HeightGrid, eye: np.ndarray, pts: np.ndarray) -> np.ndarra
     np.minimum.at(nearest, bins, np.repeat(dmin, count))
     tx, ty = pts[:, 0] - eye[0], pts[:, 1] - eye[1]
     tb = np.mod(np.floor((np.arctan2(ty, tx) + np.pi) * scale).astype(np.int64), _HOLE_BINS)
-    return np.hypot(tx, ty) >= nearest[tb] * (1.0 - 1e-9)
+    return np.hypot(tx, ty) >= nearest[tb] * (1.0 - HOLE_REACH_SLACK)
 
 
 def _settle(terrain, eye: np.ndarray, pts: np.ndarray, thr: np.ndarray, kc: float) -> np.ndarray:
@@ -486,7 +487,7 @@ def _fills_its_rectangle(tin: TIN) -> bool:
     a, b, c = v[tin.faces[:, 0]], v[tin.faces[:, 1]], v[tin.faces[:, 2]]
     area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])).sum()
     box = float(np.ptp(v[:, 0]) * np.ptp(v[:, 1]))
-    return bool(abs(area - box) <= 1e-9 * box)
+    return footprint_matches(area, box)
 
 
 # ----------------------------------------------------------------- validation
