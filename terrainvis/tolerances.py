@@ -35,7 +35,7 @@ __all__ = [
     "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "VERTEX_WEIGHT_ZERO",
     "SLOPE_REL", "PSEUDO_ANGLE_SLACK", "EDGE_CLIP_SLACK", "DIAGONAL_SLACK", "PSEUDO_ANGLE_SPAN_MIN", "PARALLEL_SINE_MIN",
     "WEDGE_BOUNDARY_SLACK", "RING_BOUND_REL", "TRIM_MARGIN_REL", "TIN_ON_EDGE_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
-    "OUTPUT_SETTLE_REL", "HOLE_REACH_SLACK",
+    "OUTPUT_SETTLE_REL", "HOLE_REACH_SLACK", "BUCKET_SLACK_REL",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -196,6 +196,9 @@ RING_BOUND_REL = 1e-12
 TRIM_MARGIN_REL = 1e-6
 #: The TIN engine: a point within this fraction of the extent's diagonal of an edge is on it.
 TIN_ON_EDGE_REL = 1e-12
+#: (kernel) The TIN clipper visits the buckets its track passes through, widened by this
+#: fraction of a bucket's side (far more than rounding and :data:`TIN_ON_EDGE_REL`).
+BUCKET_SLACK_REL = 1e-6
 
 # ----------------------------------------------------------------- viewshed output modes
 #: ``viewshed(output="min_height" | "angle")`` on a grid with nodata: the height step (a

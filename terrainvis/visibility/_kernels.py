@@ -66,6 +66,7 @@ import numpy as np
 
 from ..core.stopflag import stopped
 from ..core.surface import barycentric, cell_height, weighted
+from ..tolerances import BUCKET_SLACK_REL
 from .walk import cell_diagonal
 from .walk import mid_height_inline as mid_height
 from .walk import node_pop_inline as node_pop
@@ -513,29 +514,33 @@ def _face_clip_min(mesh, f, seg, t0, t1, eps, bulge):
 def _tin_segment_min(mesh, seg, t0, t1, eps, bulge):
     """Exact minimum clearance of the segment ``seg`` over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceTin`.
 
-    The buckets whose rows and columns the ground track passes through (plus one bucket
-    of margin) are visited; every face in them is clipped against the track and the
-    clearance is evaluated at the clip points (the minimum of a piecewise-linear function
-    is at a breakpoint; under earth curvature, ``bulge > 0``, at a breakpoint or at the
-    vertex of one face's convex clearance).
+    The buckets the ground track passes through are visited (widened by
+    :data:`~terrainvis.tolerances.BUCKET_SLACK_REL` of a bucket, far more than rounding
+    and the clip's ``eps``): a face holds the part of the track it is crossed by, so its
+    bounding box, and so one of its buckets, holds a point of the track. Every face in
+    them is clipped against the track and the clearance is evaluated at the clip points
+    (the minimum of a piecewise-linear function is at a breakpoint; under earth
+    curvature, ``bulge > 0``, at a breakpoint or at the vertex of one face's convex
+    clearance). A face in several of the buckets is clipped once per bucket (the same
+    value: the minimum does not change).
     """
     x0, y0, bw, bh, nbx, nby = mesh.x0, mesh.y0, mesh.bw, mesh.bh, mesh.nbx, mesh.nby
     starts, items = mesh.starts, mesh.items
     ax, ay, dx, dy = seg[0], seg[1], seg[3], seg[4]
+    sx = BUCKET_SLACK_REL * bw
+    sy = BUCKET_SLACK_REL * bh
     ya = ay + t0 * dy
     yb = ay + t1 * dy
-    ymin = min(ya, yb)
-    ymax = max(ya, yb)
-    by0 = max(int(np.floor((ymin - y0) / bh)) - 1, 0)
-    by1 = min(int(np.floor((ymax - y0) / bh)) + 1, nby - 1)
+    by0 = max(int(np.floor((min(ya, yb) - sy - y0) / bh)), 0)
+    by1 = min(int(np.floor((max(ya, yb) + sy - y0) / bh)), nby - 1)
     best = _INF
     for rb in range(by0, by1 + 1):
-        # part of the track inside this bucket row (with a margin of one bucket row)
+        # the part of the track inside this bucket row (widened by the slack)
         lo = t0
         hi = t1
         if dy != 0.0:
-            ta = (y0 + (rb - 1) * bh - ay) / dy
-            tb = (y0 + (rb + 2) * bh - ay) / dy
+            ta = (y0 + rb * bh - sy - ay) / dy
+            tb = (y0 + (rb + 1) * bh + sy - ay) / dy
             if ta > tb:
                 ta, tb = tb, ta
             lo = max(lo, ta)
@@ -544,8 +549,8 @@ def _tin_segment_min(mesh, seg, t0, t1, eps, bulge):
                 continue
         xa = ax + lo * dx
         xb = ax + hi * dx
-        bx0 = max(int(np.floor((min(xa, xb) - x0) / bw)) - 1, 0)
-        bx1 = min(int(np.floor((max(xa, xb) - x0) / bw)) + 1, nbx - 1)
+        bx0 = max(int(np.floor((min(xa, xb) - sx - x0) / bw)), 0)
+        bx1 = min(int(np.floor((max(xa, xb) + sx - x0) / bw)), nbx - 1)
         for cb in range(bx0, bx1 + 1):
             bk = rb * nbx + cb
             for s in range(starts[bk], starts[bk + 1]):

@@ -306,15 +306,20 @@ def grid_threshold(g, st, p, q, rules):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _exit(w, f, qx, qy, dx, dy, u):
+def _exit(w, f, entry, qx, qy, dx, dy, u):
     """Where the track q + u' d leaves face f after ``u``: (u', edge, height there), or (inf, -1, 0).
 
+    ``entry`` is the edge the walk came in by (-1: not known); it is not tested, as the
+    track meets it at ``u`` itself (the exit must lie past ``u`` by more than
+    :data:`~terrainvis.tolerances.TRACK_STEP_MIN`): a third fewer edges per face.
     Inlined in :func:`tin_max_slope`'s loop: called there at every face, it made the walk
     1.3-1.5 times slower (same thresholds, bit for bit)."""
     best_u = _INF
     best_e = -1
     best_s = 0.0
     for e in range(3):
+        if e == entry:
+            continue
         a = w.faces[f, e]
         b = w.faces[f, (e + 1) % 3]
         ex = w.vx[b] - w.vx[a]
@@ -324,9 +329,11 @@ def _exit(w, f, qx, qy, dx, dy, u):
             continue
         rx = w.vx[a] - qx
         ry = w.vy[a] - qy
-        ue = (rx * ey - ry * ex) / den
         we = (rx * dy - ry * dx) / den
-        if we < -TRACK_EDGE_SLACK or we > 1.0 + TRACK_EDGE_SLACK or ue <= u + TRACK_STEP_MIN or ue >= best_u:
+        if we < -TRACK_EDGE_SLACK or we > 1.0 + TRACK_EDGE_SLACK:  # the track misses the edge
+            continue
+        ue = (rx * ey - ry * ex) / den
+        if ue <= u + TRACK_STEP_MIN or ue >= best_u:
             continue
         we = min(max(we, 0.0), 1.0)
         best_u = ue
@@ -369,8 +376,9 @@ def tin_max_slope(w, tr):
         # subnormal offset squares to 0 and is too short for the walk to step across)
         return max(best, _value(su, u1, qz, tol, bulge))
     nf = w.faces.shape[0]
+    entry = -1
     for _ in range(4 * nf + 16):
-        ue, e, se = _exit(w, f, qx, qy, dx, dy, u)
+        ue, e, se = _exit(w, f, entry, qx, qy, dx, dy, u)
         if e < 0:  # stuck (through a vertex into a face the track does not enter): step ahead
             g, ug = _face_ahead(w, f, qx, qy, dx, dy, u, u1)
             if g < 0:
@@ -378,6 +386,7 @@ def tin_max_slope(w, tr):
             # go on from the probe on g, so that u grows at every step (faces around a vertex
             # could otherwise hand the walk back and forth); the piece skipped is ~1e-9 long
             f = g
+            entry = -1
             u = ug
             su = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u * dx, qy + u * dy)
             v = _value(su, u, qz, tol, bulge)
@@ -394,10 +403,16 @@ def tin_max_slope(w, tr):
         u = ue
         su = se
         g = w.nbr[f, e]
+        entry = -1
         if g < 0:
             g = face_at(w, qx + (u + TRACK_PROBE_REL) * dx, qy + (u + TRACK_PROBE_REL) * dy)
             if g < 0:
                 return best
+        else:
+            for k in range(3):
+                if w.nbr[g, k] == f:
+                    entry = k
+                    break
         f = g
     return best
 
