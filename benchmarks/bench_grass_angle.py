@@ -33,7 +33,9 @@ Agreement, per case (cells with a height, the observer's own cell left out):
    CLEAR_DEGREES``, 0.1 degrees), it prints which program sees them and where our sight
    line meets the terrain (:func:`terrainvis.visibility.lowest_point`): the median
    distance of that point from the eye in cells (the mean of the two spacings), and the
-   median depth of the sight line below our surface there.
+   median depth of the sight line below our surface there (on a DEM with nodata, on the
+   grid with its nodata filled by the nearest sample, ``HeightGrid.fill_nodata()``: our
+   viewshed leaves holes out instead, so near a hole this is an approximation).
 2. **Sight-line angle**, at the cells both call visible: r.viewshed's ``value - 90``
    against the geometric elevation angle of the sight line from our eye to our target,
    ``atan2(z_T - k d**2 - E_z, d)`` (``terrainvis.visibility.field_of_view.elevation_degrees``,
@@ -184,10 +186,11 @@ def _agreement(g, r: int, c: int, eye: float, target: float, curv: float, ours: 
                clear_cells=float("nan"), clear_depth=float("nan"))
     if out["clear"]:
         e = np.array([g.xs[c], g.ys[r], g.z[r, c] + eye])
+        located = g.fill_nodata() if g.n_nodata else g  # lowest_point needs a grid without nodata
         spacing = 0.5 * (abs(g.xs[1] - g.xs[0]) + abs(g.ys[1] - g.ys[0]))
         dist, depth = [], []
         for tr, tc in zip(*np.nonzero(clear)):
-            low = lowest_point(g, e, [g.xs[tc], g.ys[tr], g.z[tr, tc] + target], curvature=curv)
+            low = lowest_point(located, e, [g.xs[tc], g.ys[tr], g.z[tr, tc] + target], curvature=curv)
             dist.append(low["distance"] / spacing)
             depth.append(-low["clearance"])
         out.update(clear_cells=float(np.median(dist)), clear_depth=float(np.median(depth)))
