@@ -21,9 +21,11 @@ thresholds into output values:
     ``atan2(z_T - kc d**2 - E_z, d) - atan2(z* - kc d**2 - E_z, d)``. The horizon of a
     ray is the sight line grazing the highest terrain between the eye and the target, so
     the angle is >= 0 exactly where the target is visible (to within the clearance
-    tolerance), as r.viewshed's vertical angle relative to the horizon or QGIS's depth
-    below the horizon. A target whose segment is not tested at all (within the trim of
-    the eye) has a horizon of -90 degrees.
+    tolerance), as QGIS's depth below the horizon. GRASS r.viewshed's angle output is
+    another quantity: the first term alone (as 90 + degrees, 0 straight down), for
+    visible cells only (``benchmarks/bench_grass_angle.py`` compares the two). A target
+    whose segment is not tested at all (within the trim of the eye) has a horizon of
+    -90 degrees.
 
 Both are NaN where the viewshed would say False without deciding: nodata samples,
 samples off the surface under test, and samples outside the field of view.
