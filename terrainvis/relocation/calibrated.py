@@ -67,6 +67,16 @@ Per point, K + L LOS queries on T and K + L threshold walks on S(T) (K = ``n_par
 L = 48 neighbours or none); per (T, S(T), setting), once, C² / 2 LOS queries on T and
 ``sweeps`` x C² walks on S(T) for the core (C = :data:`CORE_PARTNERS`), and (K - C) x
 (C + L) of each for the other partners.
+
+Most walks need not run to their end. A point's best height almost always lies close to
+its reference height, so its thresholds are first walked in a *window* around it
+(:data:`WINDOW_ERRORS` times S(T)'s largest vertical error at the partners): a walk stops
+as soon as it shows the threshold above the window (for a point on the ground, most
+sight lines are blocked near it), and skips what cannot rise above the window's floor.
+The best height is then chosen from the most favourable thresholds those bounds allow;
+when that choice lies inside the window, no exact threshold can change it, and otherwise
+the point's thresholds are walked whole (:mod:`terrainvis.visibility._threshold_kernels`,
+"Windows"). The heights are the same bit for bit.
 """
 
 from __future__ import annotations
@@ -85,7 +95,7 @@ from ..visibility import EARTH_RADIUS, curvature_coefficient
 from ..visibility.thresholds import ThresholdSurface, best_height, best_heights, gauss_seidel, threshold_row
 
 __all__ = ["calibrated_heights", "best_responses", "neighbour_weight", "Partners", "partners", "N_PARTNERS",
-           "CORE_PARTNERS", "SWEEPS", "MIN_GAIN"]
+           "CORE_PARTNERS", "SWEEPS", "MIN_GAIN", "WINDOW_ERRORS"]
 
 #: Default number of partners (K), the core and the others (see "Partners" in the module
 #: docstring); chosen on the tuning terrains (docs/relocation.md gives the figures).
@@ -97,6 +107,14 @@ CORE_PARTNERS = 512
 SWEEPS = 2
 #: Default least gain (partners' verdicts) that moves a point off the full projection.
 MIN_GAIN = 1
+#: Each best height is found from thresholds walked exactly within this many times S(T)'s
+#: largest vertical error (at the partners) of the reference height first, and from every
+#: threshold exactly only when that choice might not be the exact one: the same heights
+#: bit for bit, for less walking (inf: every threshold exactly; see "Cost" above).
+WINDOW_ERRORS = 0.5
+#: The least window, in height margins (:data:`MARGIN_REL` of the terrain's scale): when
+#: S(T) is T, 1,000 margins (about 5 m on a 5 km grid).
+WINDOW_MIN_MARGINS = 1000.0
 #: Points per chunk of the T-side verdicts (bounds the temporary (chunk x K) segment arrays).
 _CHUNK_PAIRS = 1 << 20
 #: Height margin kept from thresholds, as a fraction of the terrain's scale (about 5 mm on a 5 km grid).
@@ -282,7 +300,8 @@ def _core(original: HeightGrid, simplified, height: float, move: bool, k: int, s
         n = xy.shape[0]
         for _ in range(sweeps):
             order = order_rng.permutation(n).astype(np.int64)
-            gauss_seidel(surf, q, order, visible, end_radius=end_radius, kc=kc, min_gain=min_gain)
+            gauss_seidel(surf, q, order, visible, end_radius=end_radius, kc=kc, min_gain=min_gain,
+                         window=_window(surf, z_t, z_s))
         z_s = q[:, 2].copy()
     return Partners(xy, z_t, z_s, ground, visible)
 
@@ -360,8 +379,18 @@ def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, of
         lthr, near_vis = np.zeros((n, 0)), np.zeros((n, 0), dtype=np.int8)
     weight = float(neighbour_weight(q.shape[0]))
     out, _ = best_heights(surf, p, q, vis, neighbour_thresholds=lthr, neighbour_verdicts=near_vis, weight=weight,
-                          end_radius=end_radius, kc=kc, min_gain=min_gain)
+                          end_radius=end_radius, kc=kc, min_gain=min_gain,
+                          window=_window(surf, part.z_original, part.ground_simplified + height))
     return out
+
+
+def _window(surf, z_original, z_simplified) -> float:
+    """The window of the best heights (:data:`WINDOW_ERRORS`) on ``surf`` (S(T)), from
+    partners standing at ``z_original`` on T and ``z_simplified`` on S(T)."""
+    if WINDOW_ERRORS == np.inf:
+        return np.inf
+    err = float(np.max(np.abs(z_simplified - z_original))) if z_original.size else 0.0
+    return max(WINDOW_ERRORS * err, WINDOW_MIN_MARGINS * surf.margin)
 
 
 def best_responses(points: np.ndarray, simplified, verdicts: np.ndarray, counted: np.ndarray, *,

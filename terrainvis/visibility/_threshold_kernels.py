@@ -62,6 +62,25 @@ function of z that changes only at the thresholds. :func:`best_height` sorts the
 returns the height in an optimal interval closest to a reference height, kept a margin
 away from the interval's ends so that the verdicts it counted are the verdicts a LOS
 engine will give there.
+
+Windows
+-------
+The best height almost always lies near the reference height, and only the thresholds
+near it need be known exactly. With ``rules.window`` = w finite, a point's thresholds are
+first walked in the window (lo, hi) = (zref - w, zref + w) (:func:`grid_clamped`,
+:func:`tin_clamped`): the walk starts from lo, so the pyramid skips every node that
+cannot exceed it (a threshold below lo is known only as "at most lo"), and stops as soon
+as its maximum reaches hi ("at least hi"); on a grid a few probes near the point, where a
+sight line from the ground is most often blocked, can show that before any walk
+(:func:`_grid_probes_reach`). Each threshold is then exact, or a bound on one side. The
+bounds are replaced by the most favourable thresholds they allow (:func:`optimistic`:
+each partner agrees at every height at least as well as with its exact threshold, and
+exactly as well inside the window), and :func:`best_height_kept` chooses from those. If
+the choice lies inside the window, more than the margin from its ends, it is the choice
+the exact thresholds give, bit for bit: the favourable agreement is exact inside the
+window and no lower than the exact one outside, so an optimum outside it would at best
+tie, farther from the reference height; the intervals the choice is clamped to are the
+same inside. Otherwise the row is walked again, exactly. A window only saves work.
 """
 
 from __future__ import annotations
@@ -72,7 +91,7 @@ import numpy as np
 from collections import namedtuple
 
 from ..core.stopflag import stopped
-from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height
+from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height, locate
 from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
 from ._kernels import WalkStack, new_stack
 from .walk import cell_diagonal, cells_next, cells_start, mid_height, node_pop, node_push, node_root, node_split
@@ -85,15 +104,19 @@ _NO_SKIP = np.int64(-1)
 #: The predicate and the choice of a height: the trim ``delta``, the ``end_radius``, the
 #: clearance tolerance ``tol``, the curvature coefficient ``kc`` (``curvature / (2 R)``,
 #: 0: flat), the height ``margin`` kept from thresholds and the least gain ``min_gain``
-#: (an int) that moves a point (:func:`best_height_kept`).
-Rules = namedtuple("Rules", ["delta", "end_radius", "tol", "kc", "margin", "min_gain"])
+#: (an int) that moves a point (:func:`best_height_kept`), and the half-width ``window``
+#: of the heights around a point's reference height inside which its thresholds are
+#: walked exactly first (inf: every threshold exactly; see "Windows" above).
+Rules = namedtuple("Rules", ["delta", "end_radius", "tol", "kc", "margin", "min_gain", "window"])
 #: The neighbours of each point p[i] (:func:`best_height_kept`): their thresholds
 #: ``lthr`` (n, L) float64, T's verdicts ``lvis`` (n, L) int8 and the ``weight`` of one.
 Neighbours = namedtuple("Neighbours", ["lthr", "lvis", "weight"])
 #: One track seen from the target q = (``qx``, ``qy``) at height ``qz``: the direction
 #: (``dx``, ``dy``) = p - q, the tested interval [``u0``, ``u1``], the clearance tolerance
-#: ``tol`` and the ``bulge`` ``kc (dx**2 + dy**2)`` of earth curvature (0: flat).
-Track = namedtuple("Track", ["qx", "qy", "qz", "dx", "dy", "u0", "u1", "tol", "bulge"])
+#: ``tol``, the ``bulge`` ``kc (dx**2 + dy**2)`` of earth curvature (0: flat), and the
+#: ``floor`` and ``cap`` of the walk's maximum (-inf, inf: none): the walk starts from
+#: ``floor`` (so it skips whatever cannot exceed it) and stops as soon as it reaches ``cap``.
+Track = namedtuple("Track", ["qx", "qy", "qz", "dx", "dy", "u0", "u1", "tol", "bulge", "floor", "cap"])
 
 
 # --------------------------------------------------------------------------- grid
@@ -165,13 +188,15 @@ def grid_max_slope(g, tr, st):
     """
     z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
     pyr, off, nxl, uniform = g.pyr, g.off, g.nxl, g.uniform
-    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge, floor, cap = tr
     track = (qx, qy, dx, dy)
-    best = -_INF
+    best = floor
     stk = (st.level, st.row, st.col, st.t)
     sp = node_root(stk, g.ltop, u0, u1)
     last = -_INF
     while sp > 0:
+        if best >= cap:
+            return best
         sp, L, R, C, a0, a1 = node_pop(stk, sp)
         if L == 0:
             v = _leaf(g, R, C, tr, a0, a1, a0 != last)
@@ -216,10 +241,10 @@ def grid_dda_max_slope(g, tr):
     cell made this walk 3 times slower on the default experiment's grids, for the same
     thresholds bit for bit (docs/relocation.md, "Cost")."""
     z, xs, ys, ixw, iyw, uniform = g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform
-    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge, floor, cap = tr
     track = (qx, qy, dx, dy)
     curved = bulge > 0.0
-    best = -_INF
+    best = floor
     first = True
     cur = cells_start(xs, ys, ixw, iyw, uniform, track, u0, u1)
     while True:
@@ -253,7 +278,7 @@ def grid_dda_max_slope(g, tr):
         first = False
         if v > best:
             best = v
-        if b >= u1:
+        if b >= u1 or best >= cap:
             break
         cur = cells_next(xs, ys, cur, track, u1)
         if cur.r < 0:
@@ -293,10 +318,78 @@ def grid_threshold(g, st, p, q, rules):
         return -_INF
     dx = px - qx
     dy = py - qy
-    tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy))
+    tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy), -_INF, _INF)
     if g.ltop <= DDA_MAX_LEVELS:
         return qz + grid_dda_max_slope(g, tr)
     return qz + grid_max_slope(g, tr, st)
+
+
+@nb.njit(cache=True, nogil=True)
+def grid_clamped(g, st, p, q, rules, zlo, zhi):
+    """:func:`grid_threshold` known exactly only inside (``zlo``, ``zhi``): ``(z, state)``
+    with state 0 (z is the threshold, bit for bit), -1 (the threshold is at most z, about
+    ``zlo``) or 1 (it is at least z, about ``zhi`` or above). The walk skips what cannot
+    exceed ``zlo`` and stops at ``zhi`` (see "Windows")."""
+    px, py, pz = p
+    qx, qy, qz = q
+    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
+    if u0 < 0.0:
+        return -_INF, 0
+    dx = px - qx
+    dy = py - qy
+    floor = zlo - qz
+    cap = zhi - qz
+    tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy), floor, cap)
+    if _grid_probes_reach(g, tr, rules.margin):
+        return zhi, 1
+    if g.ltop <= DDA_MAX_LEVELS:
+        m = grid_dda_max_slope(g, tr)
+    else:
+        m = grid_max_slope(g, tr, st)
+    return _clamped(qz, m, floor, cap)
+
+
+#: Where :func:`_grid_probes_reach` probes a track first: these many cells of the grid
+#: (its first spacing) from the point's end.
+PROBE_CELLS = (0.5, 1.5, 3.0, 6.0)
+
+
+@nb.njit(cache=True, nogil=True)
+def _grid_probes_reach(g, tr, margin):
+    """Whether the track's value at a few places near the point's end (:data:`PROBE_CELLS`)
+    exceeds its cap by more than ``margin``: the maximum, at least as large as any value
+    of the track, then reaches the cap, without a walk. For a point on the ground a sight
+    line is most often blocked right there."""
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge, floor, cap = tr
+    if cap == _INF:
+        return False
+    z, xs, ys, ixw, iyw, uniform = g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform
+    length = np.sqrt(dx * dx + dy * dy)
+    cell = xs[1] - xs[0]
+    for k in range(len(PROBE_CELLS)):
+        u = u1 - PROBE_CELLS[k] * cell / length
+        if u <= u0:
+            break
+        x = qx + u * dx
+        y = qy + u * dy
+        c = locate(xs, ixw, 0, xs.shape[0] - 1, uniform, x)
+        r = locate(ys, iyw, 0, ys.shape[0] - 1, uniform, y)
+        if _value(cell_height(z, xs, ys, ixw, iyw, r, c, x, y), u, qz, tol, bulge) > cap + margin:
+            return True
+    return False
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _clamped(qz, m, floor, cap):
+    """The ``(z, state)`` of :func:`grid_clamped` from a walk's maximum ``m`` (floor: nothing
+    exceeded ``floor``; at least ``cap``: the walk may have stopped there). Rounding is
+    monotone, so ``qz + floor`` is at least the threshold ``qz + max`` as the exact walk
+    rounds it, and ``qz + m`` at most it."""
+    if m <= floor:
+        return qz + floor, -1
+    if m >= cap:
+        return qz + m, 1
+    return qz + m, 0
 
 
 # --------------------------------------------------------------------------- TIN
@@ -365,13 +458,13 @@ def tin_max_slope(w, tr):
     Where the walk cannot go on (through a vertex into the wrong face, across a hole), it
     locates the next face a step further along the track.
     """
-    qx, qy, qz, dx, dy, u0, u1, tol, bulge = tr
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge, floor, cap = tr
     u = u0
     f = face_at(w, qx + u * dx, qy + u * dy)
     if f < 0:
         return _INF  # the start is outside the TIN: not a valid query
     su = face_height(w.vx, w.vy, w.vz, w.faces, f, qx + u * dx, qy + u * dy)
-    best = _value(su, u, qz, tol, bulge)
+    best = max(_value(su, u, qz, tol, bulge), floor)
     if dx * dx + dy * dy == 0.0:  # a vertical segment: one ground point (as interval() sees it: a
         # subnormal offset squares to 0 and is too short for the walk to step across)
         return max(best, _value(su, u1, qz, tol, bulge))
@@ -400,6 +493,8 @@ def tin_max_slope(w, tr):
         v = max(_value(se, ue, qz, tol, bulge), _piece_max(u, su, ue, se, qz, tol, bulge))
         if v > best:
             best = v
+            if best >= cap:
+                return best
         u = ue
         su = se
         g = w.nbr[f, e]
@@ -426,7 +521,23 @@ def tin_threshold(w, p, q, rules):
     if u0 < 0.0:
         return -_INF
     bulge = rules.kc * ((px - qx) ** 2 + (py - qy) ** 2)
-    return qz + tin_max_slope(w, Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge))
+    return qz + tin_max_slope(w, Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge, -_INF, _INF))
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_clamped(w, p, q, rules, zlo, zhi):
+    """:func:`grid_clamped` on a TIN (the walk stops at ``zhi``; a face walk has nothing to
+    skip below ``zlo``)."""
+    px, py, pz = p
+    qx, qy, qz = q
+    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
+    if u0 < 0.0:
+        return -_INF, 0
+    floor = zlo - qz
+    cap = zhi - qz
+    bulge = rules.kc * ((px - qx) ** 2 + (py - qy) ** 2)
+    tr = Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge, floor, cap)
+    return _clamped(qz, tin_max_slope(w, tr), floor, cap)
 
 
 # --------------------------------------------------------------------------- best heights
@@ -539,6 +650,33 @@ def best_height_kept(thr, vis, lthr, lvis, weight, zref, margin, min_gain):
     return best_z, best_g
 
 
+@nb.njit(cache=True, nogil=True)
+def optimistic(thr, state, vis):
+    """Turn a window's thresholds (``state``: see :func:`grid_clamped`) into the most
+    favourable ones they allow, in place, and return the window ``(lo, hi)`` inside which
+    those give every verdict exactly (see "Windows").
+
+    A threshold known to be at most ``thr[k]`` becomes -inf when the partner is seen on T
+    (it agrees at every height then) and stays ``thr[k]`` otherwise (agreeing below it,
+    as it may); one known to be at least ``thr[k]`` becomes +inf when the partner is not
+    seen on T and stays otherwise. No partner then agrees at any height less than with
+    its exact threshold, and inside (``lo``, ``hi``), the largest of the first bounds and
+    the least of the second, every one agrees exactly as with it.
+    """
+    lo = -_INF
+    hi = _INF
+    for k in range(thr.shape[0]):
+        if state[k] < 0:
+            lo = max(lo, thr[k])
+            if vis[k]:
+                thr[k] = -_INF
+        elif state[k] > 0:
+            hi = min(hi, thr[k])
+            if not vis[k]:
+                thr[k] = _INF
+    return lo, hi
+
+
 # --------------------------------------------------------------------------- loops
 @nb.njit(cache=True, nogil=True)
 def _grid_row(g, st, p, q, rules, skip, out):
@@ -567,6 +705,68 @@ def _tin_row(tin, p, q, rules, skip, out):
 
 
 @nb.njit(cache=True, nogil=True)
+def _grid_window_row(g, st, p, q, rules, skip, out, state):
+    """:func:`_grid_row` known exactly only within ``rules.window`` of p's height:
+    :func:`grid_clamped`'s ``(z, state)`` into ``out`` and ``state``."""
+    g = borrow_grid(g)
+    st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
+    zlo = p[2] - rules.window
+    zhi = p[2] + rules.window
+    for k in range(q.shape[0]):
+        if k == skip:
+            out[k] = -_INF
+            state[k] = 0
+        else:
+            out[k], state[k] = grid_clamped(g, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi)
+
+
+@nb.njit(cache=True, nogil=True)
+def _tin_window_row(tin, p, q, rules, skip, out, state):
+    """:func:`_grid_window_row` on a TIN."""
+    tin = borrow_tin(tin)
+    zlo = p[2] - rules.window
+    zhi = p[2] + rules.window
+    for k in range(q.shape[0]):
+        if k == skip:
+            out[k] = -_INF
+            state[k] = 0
+        else:
+            out[k], state[k] = tin_clamped(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi)
+
+
+@nb.njit(cache=True, nogil=True)
+def _grid_best(g, st, p, q, vis, near, rules, skip, thr, state):
+    """The best height of the point p = (x, y, reference height) against the partners q
+    (but ``skip``) whose verdicts on T are ``vis``, with its neighbours ``near`` = (their
+    thresholds, verdicts, weight): :func:`best_height_kept`'s ``(z, agreement)``. The
+    thresholds are walked in the window first (``thr``, ``state``: scratch rows), and all
+    exactly only when the window's choice might not stand (:func:`window_holds`)."""
+    lthr, lvis, weight = near
+    if rules.window < _INF:
+        _grid_window_row(g, st, p, q, rules, skip, thr, state)
+        lo, hi = optimistic(thr, state, vis)
+        z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+        if z > lo + rules.margin and z < hi - rules.margin:
+            return z, a
+    _grid_row(g, st, p, q, rules, skip, thr)
+    return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
+def _tin_best(tin, p, q, vis, near, rules, skip, thr, state):
+    """:func:`_grid_best` on a TIN."""
+    lthr, lvis, weight = near
+    if rules.window < _INF:
+        _tin_window_row(tin, p, q, rules, skip, thr, state)
+        lo, hi = optimistic(thr, state, vis)
+        z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+        if z > lo + rules.margin and z < hi - rules.margin:
+            return z, a
+    _tin_row(tin, p, q, rules, skip, thr)
+    return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+
+
+@nb.njit(cache=True, nogil=True)
 def grid_row(g, p, q, rules, skip, out):
     """:func:`_grid_row` with a stack of its own (one row, called from Python)."""
     _grid_row(g, new_stack(g.ltop), p, q, rules, skip, out)
@@ -590,9 +790,9 @@ def grid_heights(g, p, q, vis, near, rules, out, score, stop):
             continue
         st = new_stack(g.ltop)
         thr = np.empty(q.shape[0])
-        _grid_row(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
-                                            rules.margin, rules.min_gain)
+        state = np.empty(q.shape[0], dtype=np.int8)
+        out[i], score[i] = _grid_best(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
+                                      (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
 
 
 @nb.njit(cache=True, nogil=True, parallel=True)
@@ -603,9 +803,9 @@ def tin_heights(tin, p, q, vis, near, rules, out, score, stop):
         if stopped(stop):
             continue
         thr = np.empty(q.shape[0])
-        _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
-                                            rules.margin, rules.min_gain)
+        state = np.empty(q.shape[0], dtype=np.int8)
+        out[i], score[i] = _tin_best(tin, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
+                                     (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -614,24 +814,24 @@ def grid_heights_serial(g, p, q, vis, near, rules, out, score, stop):
     ``prange`` loop gains nothing and costs a parfor compilation (see "Compile time")."""
     st = new_stack(g.ltop)
     thr = np.empty(q.shape[0])
+    state = np.empty(q.shape[0], dtype=np.int8)
     for i in range(p.shape[0]):
         if stopped(stop):
             return
-        _grid_row(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
-                                            rules.margin, rules.min_gain)
+        out[i], score[i] = _grid_best(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
+                                      (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
 
 
 @nb.njit(cache=True, nogil=True)
 def tin_heights_serial(tin, p, q, vis, near, rules, out, score, stop):
     """:func:`tin_heights` in the calling thread (see :func:`grid_heights_serial`)."""
     thr = np.empty(q.shape[0])
+    state = np.empty(q.shape[0], dtype=np.int8)
     for i in range(p.shape[0]):
         if stopped(stop):
             return
-        _tin_row(tin, (p[i, 0], p[i, 1], p[i, 2]), q, rules, _NO_SKIP, thr)
-        out[i], score[i] = best_height_kept(thr, vis[i], near.lthr[i], near.lvis[i], near.weight, p[i, 2],
-                                            rules.margin, rules.min_gain)
+        out[i], score[i] = _tin_best(tin, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
+                                     (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -642,25 +842,27 @@ def grid_sweep(g, q, order, vis, rules, stop):
     Serial: each step depends on the previous one (a compare runs units side by side).
     """
     thr = np.empty(q.shape[0])
+    state = np.empty(q.shape[0], dtype=np.int8)
     st = new_stack(g.ltop)
+    none = (np.empty(0), np.empty(0, dtype=np.int8), 0.0)
     for j in range(order.shape[0]):
         if stopped(stop):
             return
         i = order[j]
-        _grid_row(g, st, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
+        q[i, 2], _ = _grid_best(g, st, (q[i, 0], q[i, 1], q[i, 2]), q, vis[i], none, rules, i, thr, state)
 
 
 @nb.njit(cache=True, nogil=True)
 def tin_sweep(tin, q, order, vis, rules, stop):
     """:func:`grid_sweep` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     thr = np.empty(q.shape[0])
+    state = np.empty(q.shape[0], dtype=np.int8)
+    none = (np.empty(0), np.empty(0, dtype=np.int8), 0.0)
     for j in range(order.shape[0]):
         if stopped(stop):
             return
         i = order[j]
-        _tin_row(tin, (q[i, 0], q[i, 1], q[i, 2]), q, rules, i, thr)
-        q[i, 2], _ = best_height(thr, vis[i], q[i, 2], rules.margin, rules.min_gain)
+        q[i, 2], _ = _tin_best(tin, (q[i, 0], q[i, 1], q[i, 2]), q, vis[i], none, rules, i, thr, state)
 
 
 # --------------------------------------------------------------------------- one eye, many targets
@@ -672,7 +874,7 @@ EYE_CHUNK = 256
 def _grid_span(g, st, tr, u0, u1):
     """Max of :func:`_value` over [u0, u1] of the track ``tr`` on the grid (the walk of
     :func:`grid_threshold`, on that part of the track)."""
-    t = Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge)
+    t = Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge, -_INF, _INF)
     if g.ltop <= DDA_MAX_LEVELS:
         return grid_dda_max_slope(g, t)
     return grid_max_slope(g, t, st)
@@ -681,7 +883,7 @@ def _grid_span(g, st, tr, u0, u1):
 @nb.njit(cache=True, nogil=True)
 def _tin_span(w, tr, u0, u1):
     """:func:`_grid_span` on a TIN."""
-    return tin_max_slope(w, Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge))
+    return tin_max_slope(w, Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge, -_INF, _INF))
 
 
 @nb.njit(cache=True, nogil=True)
@@ -691,7 +893,7 @@ def _eye_track(eye, tx, ty, rules):
     qx, qy, qz = eye
     dx = tx - qx
     dy = ty - qy
-    return Track(qx, qy, qz, dx, dy, 0.0, 1.0, rules.tol, rules.kc * (dx * dx + dy * dy))
+    return Track(qx, qy, qz, dx, dy, 0.0, 1.0, rules.tol, rules.kc * (dx * dx + dy * dy), -_INF, _INF)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -105,9 +105,11 @@ class ThresholdSurface:
         out[:, 1] -= self.y0
         return out
 
-    def rules(self, *, end_radius: float = 0.0, kc: float = 0.0, min_gain: int = 1) -> _tk.Rules:
+    def rules(self, *, end_radius: float = 0.0, kc: float = 0.0, min_gain: int = 1,
+              window: float = np.inf) -> _tk.Rules:
         """The kernels' :data:`~terrainvis.visibility._threshold_kernels.Rules` on this surface."""
-        return _tk.Rules(self.delta, float(end_radius), self.tol, float(kc), self.margin, int(min_gain))
+        return _tk.Rules(self.delta, float(end_radius), self.tol, float(kc), self.margin, int(min_gain),
+                         float(window))
 
 
 def _tin_surface(tin: TIN):
@@ -156,24 +158,31 @@ def threshold_row(surface: ThresholdSurface, p, q: np.ndarray, *, skip: int = -1
 
 
 def gauss_seidel(surface: ThresholdSurface, q: np.ndarray, order: np.ndarray, visible: np.ndarray, *,
-                 end_radius: float = 0.0, kc: float = 0.0, min_gain: int = 1) -> None:
+                 end_radius: float = 0.0, kc: float = 0.0, min_gain: int = 1, window: float = np.inf) -> None:
     """One Gauss-Seidel sweep over the points ``q`` (local, (n, 3); heights updated in place):
     each point ``q[order[j]]`` in turn takes its best height against the others at their
-    current heights, given the verdicts ``visible`` (n, n) to agree with. Interruptible."""
+    current heights, given the verdicts ``visible`` (n, n) to agree with. Interruptible.
+
+    ``window`` (z units; inf: none) walks each point's thresholds exactly only within
+    that distance of its current height first, and all of them exactly only when the
+    choice made from those might not be the exact one: the same heights, bit for bit
+    (the module docstring of :mod:`terrainvis.visibility._threshold_kernels`, "Windows")."""
     kernel = _tk.grid_sweep if surface.grid else _tk.tin_sweep
     n = q.shape[0]
-    call(kernel, surface.data, q, order, visible, surface.rules(end_radius=end_radius, kc=kc, min_gain=min_gain),
-         work=n * n)
+    rules = surface.rules(end_radius=end_radius, kc=kc, min_gain=min_gain, window=_window(window))
+    call(kernel, surface.data, q, order, visible, rules, work=n * n)
 
 
 def best_heights(surface: ThresholdSurface, p: np.ndarray, q: np.ndarray, visible: np.ndarray, *,
                  neighbour_thresholds: np.ndarray, neighbour_verdicts: np.ndarray, weight: float,
-                 end_radius: float = 0.0, kc: float = 0.0, min_gain: int = 1) -> tuple[np.ndarray, np.ndarray]:
+                 end_radius: float = 0.0, kc: float = 0.0, min_gain: int = 1,
+                 window: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
     """The best height of each point ``p[i]`` (local (x, y, reference height)) against the
     partners ``q`` (local, (K, 3)) whose verdicts it should agree with are ``visible[i]``,
     counting its neighbours (thresholds (n, L), verdicts (n, L) int8: 1 seen, 0 not, -1
     none; each weighing ``weight`` partners). Returns the heights (n,) and the partners'
-    agreement (n,) int64. Parallel when numba has threads; interruptible."""
+    agreement (n,) int64. Parallel when numba has threads; interruptible. ``window`` as
+    in :func:`gauss_seidel` (the same heights; not used when ``weight`` is inf)."""
     n = p.shape[0]
     out = np.empty(n)
     score = np.empty(n, dtype=np.int64)
@@ -182,6 +191,15 @@ def best_heights(surface: ThresholdSurface, p: np.ndarray, q: np.ndarray, visibl
     else:
         kernel = for_threads(_tk.tin_heights, _tk.tin_heights_serial)
     near = _tk.Neighbours(neighbour_thresholds, neighbour_verdicts, float(weight))
-    call(kernel, surface.data, p, q, visible, near, surface.rules(end_radius=end_radius, kc=kc, min_gain=min_gain),
-         out, score, work=n * q.shape[0])
+    rules = surface.rules(end_radius=end_radius, kc=kc, min_gain=min_gain,
+                          window=np.inf if weight == np.inf else _window(window))
+    call(kernel, surface.data, p, q, visible, near, rules, out, score, work=n * q.shape[0])
     return out, score
+
+
+def _window(window) -> float:
+    """``window`` as the kernels take it: a positive float, inf for none."""
+    w = float(window)
+    if not w > 0.0:
+        raise ValueError(f"window must be a positive number of z units (inf: none), got {window!r}")
+    return w

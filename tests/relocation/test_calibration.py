@@ -139,7 +139,7 @@ def test_the_pyramid_walk_equals_the_cell_walk():
     for k in range(300):
         dx, dy = p[k, 0] - q[k, 0], p[k, 1] - q[k, 1]
         bulge = (k % 2) * 1e-7 * (dx * dx + dy * dy)  # every other track under a strong curvature
-        tr = ck.Track(q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge)
+        tr = ck.Track(q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge, -np.inf, np.inf)
         a = ck.grid_max_slope(surf.data, tr, stack)
         b = ck.grid_dda_max_slope(surf.data, tr)
         assert a == pytest.approx(b, rel=1e-12, abs=1e-12)

@@ -204,8 +204,8 @@ def test_thresholds_are_the_largest_value_over_the_breakpoints(case, end_radius,
     if u0 < 0.0:
         assert dda == -np.inf
         return
-    tr = tk.Track(b[0], b[1], b[2], a[0] - b[0], a[1] - b[1], u0, u1, surf.tol, kc * ((a[0] - b[0]) ** 2
-                                                                                        + (a[1] - b[1]) ** 2))
+    tr = tk.Track(b[0], b[1], b[2], a[0] - b[0], a[1] - b[1], u0, u1, surf.tol,
+                  kc * ((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2), -np.inf, np.inf)
     # the pyramid descent over the same grid (forced: these grids are small) and the TIN of the grid
     desc = b[2] + tk.grid_max_slope(surf.data, tr, pk.new_stack(surf.ltop))
     scale = 1.0 + abs(dda)
