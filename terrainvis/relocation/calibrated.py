@@ -194,8 +194,12 @@ def _positions(original: HeightGrid, simplified, k: int, seed: int, stream: int 
 #: Verdicts on T, kept across calls by content (T's fingerprint and the points' bytes): the
 #: units of a comparison simplify one terrain many ways and relocate the same point sets
 #: onto each, in processes that receive T anew each time, so a cache on T would not last.
+#: The least recently used go first once they hold more than :data:`_ON_ORIGINAL_BYTES`
+#: (the default comparison's six terrains hold about 10 MB; units of different terrains
+#: come interleaved, so a cache of 64 entries, as before, kept none of them until reused:
+#: a quarter of the comparison's time went into recomputing them).
 _ON_ORIGINAL: OrderedDict = OrderedDict()
-_ON_ORIGINAL_SIZE = 64
+_ON_ORIGINAL_BYTES = 256 << 20
 
 
 def _cached(key, compute):
@@ -203,8 +207,10 @@ def _cached(key, compute):
     if out is None:
         out = compute()
         _ON_ORIGINAL[key] = out
-        while len(_ON_ORIGINAL) > _ON_ORIGINAL_SIZE:
-            _ON_ORIGINAL.popitem(last=False)
+        held = sum(v.nbytes for v in _ON_ORIGINAL.values())
+        while held > _ON_ORIGINAL_BYTES and len(_ON_ORIGINAL) > 1:
+            _, gone = _ON_ORIGINAL.popitem(last=False)
+            held -= gone.nbytes
     else:
         _ON_ORIGINAL.move_to_end(key)
     return out
@@ -429,19 +435,27 @@ def _neighbour_thresholds(simplified, ref, near, near_vis, tol, end_radius, curv
     clearance by that amount; the point at z sees it exactly when
     ``z >= z_ref - tol - clearance at the reference heights``. ``-inf`` where the segment is
     not tested (too short) or there is no neighbour (``near_vis`` -1)."""
-    from ..visibility import min_clearance
-
     n, L = near_vis.shape
     lthr = np.full((n, L), -np.inf)
     ok = near_vis >= 0
     if ok.any():
         rows = np.nonzero(ok)[0]
-        mc = min_clearance(simplified, ref[rows], near[ok], end_radius=end_radius, **curve)
+        mc = _min_clearance(simplified, ref[rows], near[ok], end_radius, curve)
         tested = np.isfinite(mc)
         vals = np.full(rows.size, -np.inf)
         vals[tested] = ref[rows[tested], 2] - tol - mc[tested]
         lthr[ok] = vals
     return lthr
+
+
+def _min_clearance(simplified, a: np.ndarray, b: np.ndarray, end_radius: float, curve: dict) -> np.ndarray:
+    """:func:`terrainvis.min_clearance` of the points and their neighbours, known to lie
+    inside S(T)'s footprint (both surfaces have a height at each), without its checks."""
+    from ..visibility.los import segment_clearances
+
+    return segment_clearances(simplified, np.ascontiguousarray(a, dtype=np.float64),
+                              np.ascontiguousarray(b, dtype=np.float64), end_radius=float(end_radius),
+                              kc=curvature_coefficient(**curve))
 
 
 def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float, curve: dict):

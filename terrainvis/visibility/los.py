@@ -104,7 +104,14 @@ def min_clearance(
     """
     a, b = _prepare_segments(terrain, a, b, "min_clearance")
     end_radius = _check_end_radius(end_radius)
-    kc = curvature_coefficient(curvature, earth_radius)
+    return segment_clearances(terrain, a, b, end_radius=end_radius, kc=curvature_coefficient(curvature, earth_radius))
+
+
+def segment_clearances(terrain, a: np.ndarray, b: np.ndarray, *, end_radius: float, kc: float) -> np.ndarray:
+    """:func:`min_clearance` of checked input: ``a``, ``b`` (m, 3) float64 contiguous, inside
+    the footprint, ``end_radius`` >= 0 and ``kc`` the curvature coefficient. For callers
+    that know their segments are inside (the calibrated relocation's neighbours: on a TIN
+    the checks locate every end, half the cost of short segments)."""
     delta = trim_length(terrain)
     if isinstance(terrain, HeightGrid):
         return grid_clearance(
