@@ -80,7 +80,8 @@ the choice lies inside the window, more than the margin from its ends, it is the
 the exact thresholds give, bit for bit: the favourable agreement is exact inside the
 window and no lower than the exact one outside, so an optimum outside it would at best
 tie, farther from the reference height; the intervals the choice is clamped to are the
-same inside. Otherwise the row is walked again, exactly. A window only saves work.
+same inside. Otherwise the thresholds known only by a bound are walked whole (those the
+window walked exactly stand). A window only saves work.
 """
 
 from __future__ import annotations
@@ -739,8 +740,8 @@ def _grid_best(g, st, p, q, vis, near, rules, skip, thr, state):
     """The best height of the point p = (x, y, reference height) against the partners q
     (but ``skip``) whose verdicts on T are ``vis``, with its neighbours ``near`` = (their
     thresholds, verdicts, weight): :func:`best_height_kept`'s ``(z, agreement)``. The
-    thresholds are walked in the window first (``thr``, ``state``: scratch rows), and all
-    exactly only when the window's choice might not stand (:func:`window_holds`)."""
+    thresholds are walked in the window first (``thr``, ``state``: scratch rows), and those
+    known only by a bound exactly when the window's choice might not stand (see "Windows")."""
     lthr, lvis, weight = near
     if rules.window < _INF:
         _grid_window_row(g, st, p, q, rules, skip, thr, state)
@@ -748,7 +749,13 @@ def _grid_best(g, st, p, q, vis, near, rules, skip, thr, state):
         z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
         if z > lo + rules.margin and z < hi - rules.margin:
             return z, a
-    _grid_row(g, st, p, q, rules, skip, thr)
+        gb = borrow_grid(g)  # the window's exact thresholds stand; the bounds are walked whole
+        sb = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
+        for k in range(q.shape[0]):
+            if state[k] != 0:
+                thr[k] = grid_threshold(gb, sb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+    else:
+        _grid_row(g, st, p, q, rules, skip, thr)
     return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
 
 
@@ -762,7 +769,12 @@ def _tin_best(tin, p, q, vis, near, rules, skip, thr, state):
         z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
         if z > lo + rules.margin and z < hi - rules.margin:
             return z, a
-    _tin_row(tin, p, q, rules, skip, thr)
+        tb = borrow_tin(tin)  # the window's exact thresholds stand; the bounds are walked whole
+        for k in range(q.shape[0]):
+            if state[k] != 0:
+                thr[k] = tin_threshold(tb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+    else:
+        _tin_row(tin, p, q, rules, skip, thr)
     return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
 
 
