@@ -20,14 +20,16 @@ COLUMNS = (
     "terrain", "set", "method", "kind", "level", "relocation", "measure", "predicate",
     "accuracy", "visible_kept", "blocked_kept", "accuracy_paper", "visible_area_ratio",
     "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
-    "min_height_rms", "min_height_p95", "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
+    "min_height_rms", "min_height_p95", "siting_share", "siting_share_original", "siting_ratio",
+    "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
     "max_error", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
     "seed", "max_distance", "distance_unit", "offset", "error",
 )
 #: Columns that only one measure fills (NaN in the other measures' rows), by that measure;
 #: they came after the first results files, so an older file lacks them (:func:`optional_columns`).
-MEASURE_COLUMNS = {"viewshed": ("min_height_rms", "min_height_p95")}
+MEASURE_COLUMNS = {"viewshed": ("min_height_rms", "min_height_p95", "siting_share", "siting_share_original",
+                                "siting_ratio")}
 #: Columns that identify a unit.
 UNIT_KEY = ("terrain", "method", "level")
 #: Columns holding times (they differ between runs; everything else is deterministic).

@@ -16,7 +16,9 @@ The built-in measures:
     Each observer's viewshed of every sample of T, on T and on S(T), per relocation
     (:func:`viewshed_rows`); a cell counts as a pair (observer, cell). Its rows also give
     the error of the minimum-visible-height raster on S(T) (``min_height_rms``,
-    ``min_height_p95``; NaN in the other measures' rows).
+    ``min_height_p95``) and what S(T) does to an observer siting (``siting_share``,
+    ``siting_share_original``, ``siting_ratio``: :func:`siting_coverage`, once per unit);
+    NaN in the other measures' rows.
 
 A measure's functions read the run's settings by attribute and take the line-of-sight
 predicate's options (``los``) as an argument; they import nothing from the rest of the
@@ -25,6 +27,7 @@ experiment, which imports them.
 
 from __future__ import annotations
 
+import hashlib
 import time
 import zlib
 from dataclasses import dataclass
@@ -37,8 +40,14 @@ from ..core.validate import describe
 
 __all__ = [
     "Measure", "MEASURES", "register", "unregister", "available", "point_sets", "observers", "pair_rows",
-    "viewshed_rows", "min_height_error",
+    "viewshed_rows", "min_height_error", "siting_coverage", "SITING_LATTICE",
 ]
+
+#: The siting's candidates (:func:`siting_coverage`): every ``ceil(max(rows, cols) / SITING_LATTICE)``-th
+#: sample of T along rows and columns (:func:`terrainvis.candidate_grid`), at most
+#: ``SITING_LATTICE`` per side: 8 x 8 = 64 candidates on a 120x120 terrain, whose viewsheds on
+#: S(T) add about 13 % to the viewshed measure's CPU time on the default run.
+SITING_LATTICE = 8
 
 
 @dataclass(frozen=True)
@@ -191,6 +200,12 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
     (:func:`min_height_error`: ``min_height_rms``, ``min_height_p95``, in z units), from
     the ``output="min_height"`` viewsheds of the same eyes (``target_height`` does not enter),
     unless ``settings.min_height`` is False (then they are left out: NaN in the table).
+
+    With ``settings.siting`` = k > 0, the unit also sites k observers on S(T) and on T
+    (:func:`siting_coverage`: ``siting_share``, ``siting_share_original``,
+    ``siting_ratio``). The siting is one per unit, apart from the observers, relocations
+    and distances: every row of the unit carries the same three values (its viewsheds
+    have no distance limit). With ``settings.siting`` = 0 they are left out (NaN).
     """
     from ..core.metrics import viewshed_agreement
     from ..relocation.registry import RELOCATIONS, relocate
@@ -199,6 +214,10 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
     kw = {"target_height": settings.target_height, **los}
     known = dict(_relocation_keywords(settings, grid, 0.0), target_height=settings.target_height)
     X, Y = np.meshgrid(grid.xs, grid.ys)
+    siting = {}
+    if settings.siting:
+        siting = siting_coverage(grid, simplified, settings.siting, offset=settings.offset,
+                                 target_height=settings.target_height, **los)
     rows = []
     for s, eye in enumerate(eyes):
         eye = np.asarray(eye, dtype=np.float64).reshape(1, 3)
@@ -217,6 +236,7 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
                 row = _row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted))
                 if settings.min_height:
                     row.update(min_height_error(h_true, heights[place], counted))
+                row.update(siting)
                 rows.append(row)
     return rows
 
@@ -244,6 +264,109 @@ def min_height_error(h_true: np.ndarray, h_test: np.ndarray, counted=None) -> di
     err = h_test[both] - h_true[both]
     return {"min_height_rms": float(np.sqrt(np.mean(err * err))),
             "min_height_p95": float(np.percentile(np.abs(err), 95))}
+
+
+def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0, target_height: float = 0.0,
+                    **los) -> dict:
+    """How S(T) changes an observer siting: the area of T that k observers chosen on S(T) see, against k chosen on T.
+
+    The candidates are a lattice of T's samples (:data:`SITING_LATTICE` per side at most,
+    :func:`terrainvis.candidate_grid`). :func:`terrainvis.site_observers` chooses k of them
+    greedily on S(T), and k on T, each candidate's eye ``offset`` above the surface it is
+    sited on (a practitioner who has only S(T) stands the mast on S(T)'s ground) and the
+    targets T's samples, ``target_height`` above that surface. Then the two choices are
+    built on T: each chosen position's viewshed on T (eye ``offset`` above T, targets
+    ``target_height`` above T, no distance limit), and the union's area as a share of T's
+    valid area (each sample weighted by its cell, :func:`terrainvis.visibility.sample_areas`).
+
+    Parameters
+    ----------
+    grid : HeightGrid
+        T.
+    simplified : HeightGrid or TIN
+        S(T), over T's footprint.
+    k : int
+        Observers to choose, >= 1 (all the candidates when the lattice has fewer than k).
+    offset, target_height : float
+        The eyes' and the targets' heights above the surface, as in the viewshed measure.
+    **los
+        The line-of-sight options (``engine``, ``curvature``, ``earth_radius``), passed to
+        every siting and viewshed.
+
+    Returns
+    -------
+    dict
+        ``siting_share``: the share of T's area that S(T)'s choice sees on T;
+        ``siting_share_original``: the same for T's own choice; ``siting_ratio``: the first
+        over the second (NaN when T's choice sees nothing). All NaN when T has no
+        candidate. The ratio would be at most 1 if the choice on T were the best one, but
+        greedy is not optimal (it reaches at least ``1 - (1 - 1/k)**k`` > 1 - 1/e of the
+        optimum), so S(T)'s choice can beat T's greedy choice: the ratio can exceed 1, by
+        at most a factor ``1 / (1 - (1 - 1/k)**k)`` (1.46 for k = 4).
+
+    Notes
+    -----
+    The siting on T is the same for every simplification of T: a process computes it once
+    per T and set of options and keeps it by content (T's samples and coordinates), so a
+    unit of a comparison pays the candidates' viewsheds on S(T) and k viewsheds on T (and
+    the first unit of each T in a worker process the candidates' viewsheds on T as well).
+
+    Examples
+    --------
+    S(T) = T chooses what T does:
+
+    >>> from terrainvis import synthetic_terrain
+    >>> T = synthetic_terrain("hills", size=17, seed=4)
+    >>> siting_coverage(T, T, 2, offset=1.7)["siting_ratio"]
+    1.0
+    """
+    from ..visibility import candidate_grid, site_observers
+
+    candidates = candidate_grid(grid, -(-max(grid.shape) // SITING_LATTICE))
+    if candidates.shape[0] == 0:
+        return {"siting_share": np.nan, "siting_share_original": np.nan, "siting_ratio": np.nan}
+    k = min(int(k), candidates.shape[0])
+    kw = dict(observer_height=offset, target_height=target_height, at=grid, **los)
+    on_s = site_observers(simplified, candidates, k, workers=1, **kw).chosen
+    share = _seen_share(grid, candidates[on_s], offset, target_height, los)
+    key = _content_key(grid, candidates, k, offset, target_height, los)
+    share_t = _ORIGINAL_SITINGS.pop(key, None)  # popped and put back: the most recent last
+    if share_t is None:
+        on_t = site_observers(grid, candidates, k, workers=1, **kw).chosen
+        share_t = _seen_share(grid, candidates[on_t], offset, target_height, los)
+    _ORIGINAL_SITINGS[key] = share_t
+    while len(_ORIGINAL_SITINGS) > _ORIGINAL_SITINGS_SIZE:
+        _ORIGINAL_SITINGS.pop(next(iter(_ORIGINAL_SITINGS)))
+    return {"siting_share": share, "siting_share_original": share_t,
+            "siting_ratio": share / share_t if share_t > 0 else np.nan}
+
+
+#: T's own siting (the share its choice sees), kept across calls by content: every unit of a
+#: terrain sites on the same T, in processes that receive T anew each time, so a cache on T
+#: itself would not last (as :mod:`terrainvis.relocation.calibrated` keeps T's verdicts).
+_ORIGINAL_SITINGS: dict = {}
+_ORIGINAL_SITINGS_SIZE = 64
+
+
+def _content_key(grid: HeightGrid, candidates: np.ndarray, k: int, offset: float, target_height: float,
+                 los: dict) -> tuple:
+    """What T's siting depends on: T's samples and coordinates, the candidates, k, the heights and the predicate."""
+    h = hashlib.sha256()
+    for a in (grid.z, grid.xs, grid.ys, candidates):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest(), k, float(offset), float(target_height), repr(sorted(los.items()))
+
+
+def _seen_share(grid: HeightGrid, positions: np.ndarray, offset: float, target_height: float, los: dict) -> float:
+    """The share of T's valid area that observers ``offset`` above T at ``positions`` (x, y) see together."""
+    from ..visibility import sample_areas, viewshed
+
+    seen = np.zeros(grid.shape, dtype=bool)
+    for xy in positions:
+        seen |= viewshed(grid, xy, observer_height=offset, target_height=target_height, **los)
+    valid = np.isfinite(grid.z)
+    areas = sample_areas(grid)
+    return float(areas[seen & valid].sum() / areas[valid].sum())
 
 
 def _relocation_keywords(settings, grid: HeightGrid, end_radius: float) -> dict:
@@ -274,8 +397,10 @@ def _pair_bytes(settings, grids) -> int:
 
 def _viewshed_bytes(settings, grids) -> int:
     """Eight arrays of 8 bytes per sample of the largest terrain (coordinates, distances, the two
-    viewsheds, the two minimum-height rasters, a mask)."""
-    return 8 * 8 * max(g.size for g in grids.values())
+    viewsheds, the two minimum-height rasters, a mask), and with siting the packed viewsheds of the
+    candidates (a bit per sample each, :data:`SITING_LATTICE` squared of them at most)."""
+    size = max(g.size for g in grids.values())
+    return 8 * 8 * size + (SITING_LATTICE ** 2 * -(-size // 8) if settings.siting else 0)
 
 
 def _pair_sets(grid, name, settings) -> list:

@@ -478,7 +478,9 @@ _DECLARED = [
              "counts cells as pairs (observer, cell), with the share of cells whose verdict survives in "
              "``accuracy``, the visible-area ratio S(T) / T in ``visible_area_ratio`` and the error of the "
              "minimum-visible-height raster on S(T) (RMS and 95th percentile of its absolute value, z units) in "
-             "``min_height_rms`` and ``min_height_p95``."),
+             "``min_height_rms`` and ``min_height_p95``; once per unit, the share of T's area that ``siting`` "
+             "observers sited on S(T), and as many sited on T, see on T, in ``siting_share``, "
+             "``siting_share_original`` and ``siting_ratio``."),
         cli=Flag(choices=_measure_names),
     ),
     Option("n_observers", 20, integer(minimum=1), "observers per terrain", "int", measures=("viewshed",),
@@ -493,6 +495,17 @@ _DECLARED = [
         doc=("The ``output=\"min_height\"`` viewsheds on T and on S(T) behind ``min_height_rms`` and "
              "``min_height_p95``; False leaves those columns empty and saves about 40 % of a viewshed run."),
         cli=Switch(off="--no-min-height", off_help="skip the minimum-visible-height rasters (viewshed measure)"),
+    ),
+    Option(
+        "siting", 4, integer(minimum=0),
+        "observers sited greedily on S(T) and on T to compare the area each choice sees on T (0: no siting)", "int",
+        measures=("viewshed",),
+        doc=("Per unit, k observers chosen by :func:`terrainvis.site_observers` among a lattice of T's samples "
+             "(at most 8 x 8) on S(T) and on T, and the share of T's area each choice sees on T: "
+             "``siting_share``, ``siting_share_original`` and their ratio ``siting_ratio`` "
+             "(:func:`terrainvis.experiment.measures.siting_coverage`); 0 leaves those columns empty and saves "
+             "about 12 % of a viewshed run."),
+        cli=Flag(type=int, metavar="K"),
     ),
 ]
 

@@ -571,8 +571,13 @@ def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
     more of S(T), and a few such ratios would dominate a mean), ``min_height_rms`` and
     ``min_height_p95`` (the error of the minimum-visible-height raster on S(T), RMS and
     95th percentile of its absolute value, in z units: means over terrains and
-    observers; NaN where no row has them, e.g. rows written before they existed) and
-    ``n`` (rows), for a result of ``compare(..., measure="viewshed")``.
+    observers; NaN where no row has them, e.g. rows written before they existed),
+    ``siting_share``, ``siting_share_original`` and ``siting_ratio`` (the share of T's
+    area that k observers sited on S(T), and k sited on T, see on T, and the ratio of
+    the two: means over terrains, in the table as fractions; a unit's rows all carry its
+    one siting, so every relocation shows the same values; NaN where no row has them,
+    e.g. with ``siting=0``) and ``n`` (rows), for a result of
+    ``compare(..., measure="viewshed")``.
     """
     from simplifiers import METHODS
 
@@ -586,12 +591,15 @@ def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
     t = pd.DataFrame({
         "cells_kept": 100 * g["accuracy"].mean(), "visible_kept": 100 * g["visible_kept"].mean(),
         "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].median(),
-        "min_height_rms": g["min_height_rms"].mean(), "min_height_p95": g["min_height_p95"].mean(), "n": g.size(),
+        "min_height_rms": g["min_height_rms"].mean(), "min_height_p95": g["min_height_p95"].mean(),
+        "siting_share": g["siting_share"].mean(), "siting_share_original": g["siting_share_original"].mean(),
+        "siting_ratio": g["siting_ratio"].mean(), "n": g.size(),
     })
     idx = [(m, lv, r) for m in _ordered({i[0] for i in t.index}, METHODS) for lv in sorted({i[1] for i in t.index})
            for r in RELOCATIONS if (m, lv, r) in t.index]
     t = t.loc[idx]
     t.attrs["title"] = ("Viewsheds: cells whose verdict survives, visible and blocked cells kept (%), "
                         "visible-area ratio S(T) / T (median), error of the minimum visible height on S(T) "
-                        "(RMS and 95th percentile, z units, means)")
+                        "(RMS and 95th percentile, z units, means), share of T seen by the observers sited on "
+                        "S(T) and on T, and their ratio (means)")
     return t

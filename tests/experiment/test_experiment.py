@@ -270,6 +270,95 @@ def test_resume_of_a_file_written_before_the_min_height_columns(small, tmp_path)
         compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **vkw)
 
 
+SITING = ["siting_share", "siting_share_original", "siting_ratio"]
+
+
+def _sited_share(T, S, candidates, k, offset):
+    """Independently of siting_coverage: k observers chosen on S, built on T, their union's share of T's samples."""
+    from terrainvis import site_observers, viewshed
+
+    chosen = site_observers(S, candidates, k, observer_height=offset, at=T, workers=1).chosen
+    seen = np.zeros(T.shape, dtype=bool)
+    for x, y in candidates[chosen]:
+        seen |= viewshed(T, (x, y), observer_height=offset)
+    return seen.sum() / T.size  # a uniform grid without nodata: every sample the same area
+
+
+def test_siting_in_the_viewshed_measure(small):
+    """siting_share: the share of T that k observers chosen on S(T) see on T; siting_share_original: those chosen
+    on T; both from the same candidate lattice (8 per side at most); every row of a unit carries the unit's values."""
+    from simplifiers import simplify
+
+    from terrainvis import candidate_grid
+    from terrainvis.experiment.measures import SITING_LATTICE, siting_coverage
+
+    T = small["a"]
+    df = compare({"a": T}, workers=1, methods=["lls", "greedy-insertion"], levels=[1, 3], seed=3, repeats=1,
+                 measure="viewshed", n_observers=2, offset=1.7, siting=3, min_height=False,
+                 relocations=["identity", "full"])
+    candidates = candidate_grid(T, 5)  # ceil(33 / 8)
+    assert len(candidates) == 7 * 7 and SITING_LATTICE == 8
+    share_t = _sited_share(T, T, candidates, 3, 1.7)
+    assert df.groupby(["method", "level"])[SITING].nunique().eq(1).all().all()  # one value per unit
+    ratios = []
+    for method, level in [("lls", 1), ("lls", 3), ("greedy-insertion", 1), ("greedy-insertion", 3)]:
+        S = simplify(T, method, level)
+        share = _sited_share(T, S, candidates, 3, 1.7)
+        row = df[(df.method == method) & (df.level == level)].iloc[0]
+        assert row["siting_share"] == pytest.approx(share, rel=1e-12)
+        assert row["siting_share_original"] == pytest.approx(share_t, rel=1e-12)
+        assert row["siting_ratio"] == pytest.approx(share / share_t, rel=1e-12)
+        ratios.append(row["siting_ratio"])
+    assert siting_coverage(T, S, 3, offset=1.7) == {c: row[c] for c in SITING}  # the function compare calls
+    assert min(ratios) < 0.99  # the coarsest grid moves the sites (else the test above would check little)
+    # k larger than the lattice: every candidate, on S(T) and on T alike
+    assert siting_coverage(T, simplify(T, "lls", 3), 100, offset=1.7)["siting_ratio"] == 1.0
+
+
+def test_siting_of_the_terrain_itself_is_exact():
+    """S(T) = T (evaluate with the original as the simplification) chooses T's observers: the ratio is exactly 1."""
+    from terrainvis import evaluate
+
+    T = synthetic_terrain("rough", size=33, seed=7)
+    df = evaluate({"t": T}, T, name="itself", measure="viewshed", n_observers=1, repeats=1, offset=1.7,
+                  relocations=["full"], min_height=False)
+    assert (df["siting_ratio"] == 1.0).all() and (df["siting_share"] == df["siting_share_original"]).all()
+    assert 0 < df["siting_share"].iloc[0] < 1
+
+
+def test_the_siting_columns_are_empty_in_the_pairs_measure_and_with_siting_0(small):
+    df = compare({"a": small["a"]}, workers=1, **_kw(methods=["lls"], levels=[1]))
+    assert df[SITING].isna().all().all() and df["accuracy"].notna().all()
+    kw = dict(methods=["lls"], levels=[1], seed=3, repeats=1, measure="viewshed", n_observers=2, min_height=False)
+    on, off = compare({"a": small["a"]}, workers=1, **kw), compare({"a": small["a"]}, workers=1, siting=0, **kw)
+    assert on[SITING].notna().all().all() and off[SITING].isna().all().all()
+    rest = [c for c in STABLE if c not in SITING]
+    pd.testing.assert_frame_equal(on[rest], off[rest])
+    with pytest.raises(ValueError, match="siting must be >= 0, got -1"):
+        compare({"a": small["a"]}, workers=1, siting=-1, **kw)
+
+
+def test_resume_of_a_file_written_before_the_siting_columns(small, tmp_path):
+    """A viewshed results file with the min-height columns but not the siting ones (the version before them) is
+    refused naming the three; a pairs file without them resumes."""
+    out = tmp_path / "results.csv"
+    vkw = dict(methods=["lls"], levels=[1], seed=3, repeats=1, measure="viewshed", n_observers=1, min_height=False)
+    compare({"a": small["a"]}, workers=1, out_csv=out, **vkw)
+    pd.read_csv(out, dtype=str, keep_default_na=False).drop(columns=SITING).to_csv(out, index=False)
+    with pytest.raises(ValueError, match=re.escape(f"missing columns {SITING}") + ".*older terrainvis.*new output"):
+        compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, **vkw)
+    out.unlink()
+    kw = _kw(methods=["simple", "lls"], levels=[1])
+    full = compare({"a": small["a"]}, workers=1, out_csv=out, **kw)
+    old = pd.read_csv(out, dtype=str, keep_default_na=False)
+    old[old["method"] == "simple"].drop(columns=SITING).to_csv(out, index=False)
+    record, rerun = _recording()
+    df = compare({"a": small["a"]}, workers=1, out_csv=out, resume=True, on_unit=record, **kw)
+    assert rerun == [("a", "lls", (1,))]
+    pd.testing.assert_frame_equal(df[STABLE], full[STABLE], check_dtype=False)
+    assert pd.read_csv(out).columns.tolist() == list(COLUMNS)
+
+
 def test_resume_is_strict_about_settings(small, tmp_path):
     out = tmp_path / "results.csv"
     compare({"a": small["a"]}, workers=1, out_csv=out, **_kw(methods=["lls"], levels=[1]))

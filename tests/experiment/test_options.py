@@ -100,8 +100,8 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     seen.clear()
     with pytest.raises(Stop):  # the viewshed measure's options (it refuses predicate 'paper')
         main(["compare", "--terrain", "hills", "--out", str(tmp_path), "--measure", "viewshed", "--observers", "4",
-              "--target-height", "0.5", "--no-min-height"])
-    viewshed = dict(measure="viewshed", n_observers=4, target_height=0.5, min_height=False)
+              "--target-height", "0.5", "--no-min-height", "--siting", "2"])
+    viewshed = dict(measure="viewshed", n_observers=4, target_height=0.5, min_height=False, siting=2)
     assert {k: v for k, v in seen.items() if k in OPTIONS} == viewshed
     expected.update(viewshed)
     assert set(expected) == {n for n, o in OPTIONS.items() if o.cli is not None}  # the test covers every flag
@@ -205,9 +205,10 @@ def test_a_toy_option_is_on_the_command_line(toy, tmp_path, capsys):
 
 
 def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, grid):
-    """``los=True``: one entry, and the units pass it to visibility_matrix, viewshed and every relocation
-    that computes visibility itself (declared ``predicate=True``: calibrated, oracle), as they pass the
-    earth-curvature coefficient; a relocation that does not (full) does not get it."""
+    """``los=True``: one entry, and the units pass it to visibility_matrix, viewshed, the viewshed measure's
+    siting (site_observers) and every relocation that computes visibility itself (declared ``predicate=True``:
+    calibrated, oracle), as they pass the earth-curvature coefficient; a relocation that does not (full) does
+    not get it."""
     from terrainvis.relocation import registry as relocation
     from terrainvis import visibility
 
@@ -227,7 +228,8 @@ def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, g
                 inside.pop()
         return wrapped
 
-    for module, name in ((visibility, "visibility_matrix"), (visibility, "viewshed"), (relocation, "relocate")):
+    for module, name in ((visibility, "visibility_matrix"), (visibility, "viewshed"), (visibility, "site_observers"),
+                         (relocation, "relocate")):
         monkeypatch.setattr(module, name, spy(getattr(module, name)))
     df = compare({"g": grid}, toy_refraction=0.13, relocations=["full", "calibrated", "oracle"], **_small())
     assert df["error"].isna().all()
@@ -237,4 +239,5 @@ def test_a_visibility_option_reaches_every_visibility_computation(monkeypatch, g
     df = compare({"g": grid}, toy_refraction=0.25, measure="viewshed", n_observers=1,
                  **_small(relocations=["half", "calibrated"]))
     assert df["error"].isna().all()
-    assert set(seen) == {("viewshed", None, 0.25), ("relocate", "half", "not given"), ("relocate", "calibrated", 0.25)}
+    assert set(seen) == {("viewshed", None, 0.25), ("relocate", "half", "not given"), ("relocate", "calibrated", 0.25),
+                         ("site_observers", None, 0.25)}

@@ -161,8 +161,14 @@ def test_viewshed_table():
     assert t.loc[("lls", 2, "full"), "min_height_rms"] == pytest.approx(sel["min_height_rms"].mean())
     assert t.loc[("lls", 2, "full"), "min_height_p95"] == pytest.approx(sel["min_height_p95"].mean())
     assert (t["min_height_p95"] > 0).all()
+    # the siting: one per unit (every relocation shows it), means over terrains
+    for c in ("siting_share", "siting_share_original", "siting_ratio"):
+        assert t.loc[("lls", 2, "full"), c] == pytest.approx(sel[c].mean())
+        assert t.loc[("lls", 2, "full"), c] == t.loc[("lls", 2, "identity"), c]
+    assert t["siting_ratio"].between(0, 2).all() and (t["siting_share"] > 0).all()
     text = report.to_markdown({"viewsheds": t})
-    assert "minimum visible height" in text and "| min_height_rms | min_height_p95 | n |" in text
+    assert "minimum visible height" in text and "sited on S(T) and on T" in text
+    assert "| min_height_rms | min_height_p95 | siting_share | siting_share_original | siting_ratio | n |" in text
     assert f"| {t.loc[('lls', 2, 'full'), 'min_height_rms']:.2f} | {t.loc[('lls', 2, 'full'), 'min_height_p95']:.2f} |" in text
     tables = report.paper_tables(df)
     assert "cells whose verdict survives" in tables["Table 1"].attrs["title"]
