@@ -70,9 +70,10 @@ near it need be known exactly. With ``rules.window`` = w finite, a point's thres
 first walked in the window (lo, hi) = (zref - w, zref + w) (:func:`grid_clamped`,
 :func:`tin_clamped`): the walk starts from lo, so the pyramid skips every node that
 cannot exceed it (a threshold below lo is known only as "at most lo"), and stops as soon
-as its maximum reaches hi ("at least hi"); on a grid a few probes near the point, where a
-sight line from the ground is most often blocked, can show that before any walk
-(:func:`_grid_probes_reach`). Each threshold is then exact, or a bound on one side. The
+as its maximum reaches hi ("at least hi"); a few probes near the point, where a sight
+line from the ground is most often blocked, can show that before any walk (on a grid at
+a few cells from it, :func:`_grid_probes_reach`; on a TIN where the track leaves the
+first faces from the point's own, :func:`_tin_probes_reach`). Each threshold is then exact, or a bound on one side. The
 bounds are replaced by the most favourable thresholds they allow (:func:`optimistic`:
 each partner agrees at every height at least as well as with its exact threshold, and
 exactly as well inside the window), and :func:`best_height_kept` chooses from those. If
@@ -526,9 +527,9 @@ def tin_threshold(w, p, q, rules):
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_clamped(w, p, q, rules, zlo, zhi):
+def tin_clamped(w, p, q, rules, zlo, zhi, fp):
     """:func:`grid_clamped` on a TIN (the walk stops at ``zhi``; a face walk has nothing to
-    skip below ``zlo``)."""
+    skip below ``zlo``). ``fp``: the face that holds p (-1: unknown, no probes)."""
     px, py, pz = p
     qx, qy, qz = q
     u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
@@ -538,7 +539,50 @@ def tin_clamped(w, p, q, rules, zlo, zhi):
     cap = zhi - qz
     bulge = rules.kc * ((px - qx) ** 2 + (py - qy) ** 2)
     tr = Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge, floor, cap)
+    if _tin_probes_reach(w, tr, fp, rules.margin):
+        return zhi, 1
     return _clamped(qz, tin_max_slope(w, tr), floor, cap)
+
+
+#: :func:`_tin_probes_reach` looks at the track where it leaves this many faces, walking
+#: from the point's face towards the target.
+PROBE_FACES = 8
+
+
+@nb.njit(cache=True, nogil=True)
+def _tin_probes_reach(w, tr, fp, margin):
+    """:func:`_grid_probes_reach` on a TIN: the track's value where it crosses the edges of
+    the first :data:`PROBE_FACES` faces from the point's end, walked from the face ``fp``
+    that holds the point (found once per row) towards the target; only the crossings
+    inside the tested interval count."""
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge, floor, cap = tr
+    if cap == _INF or fp < 0:
+        return False
+    px = qx + dx
+    py = qy + dy
+    f = fp
+    entry = -1
+    v = 0.0
+    for _ in range(PROBE_FACES):
+        ve, e, se = _exit(w, f, entry, px, py, -dx, -dy, v)
+        if e < 0:
+            return False
+        u = 1.0 - ve
+        if u < u0:
+            return False
+        if u <= u1 and _value(se, u, qz, tol, bulge) > cap + margin:
+            return True
+        g = w.nbr[f, e]
+        if g < 0:
+            return False
+        entry = -1
+        for k in range(3):
+            if w.nbr[g, k] == f:
+                entry = k
+                break
+        f = g
+        v = ve
+    return False
 
 
 # --------------------------------------------------------------------------- best heights
@@ -727,12 +771,13 @@ def _tin_window_row(tin, p, q, rules, skip, out, state):
     tin = borrow_tin(tin)
     zlo = p[2] - rules.window
     zhi = p[2] + rules.window
+    fp = face_at(tin, p[0], p[1])
     for k in range(q.shape[0]):
         if k == skip:
             out[k] = -_INF
             state[k] = 0
         else:
-            out[k], state[k] = tin_clamped(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi)
+            out[k], state[k] = tin_clamped(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi, fp)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -16,6 +16,7 @@ import pytest
 
 import simplifiers
 import terrainvis as tv
+from terrainvis.core.surface import face_at
 from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.relocation import calibrated as cal
 from terrainvis.visibility import _threshold_kernels as tk
@@ -72,7 +73,7 @@ def test_a_window_walk_is_exact_inside_and_a_bound_outside(name, curved, end_rad
                 if surf.grid:
                     z, state = tk.grid_clamped(surf.data, stack, pi, qk, rules, lo, hi)
                 else:
-                    z, state = tk.tin_clamped(surf.data, pi, qk, rules, lo, hi)
+                    z, state = tk.tin_clamped(surf.data, pi, qk, rules, lo, hi, face_at(surf.data, pi[0], pi[1]))
                 states.add(int(state))
                 if state == 0:
                     assert z == exact  # bit for bit
