@@ -71,7 +71,7 @@ first walked in the window (lo, hi) = (zref - w, zref + w) (:func:`grid_clamped`
 :func:`tin_clamped`): the walk starts from lo, so the pyramid skips every node that
 cannot exceed it (a threshold below lo is known only as "at most lo"), and stops as soon
 as its maximum reaches hi ("at least hi"); a few probes near the point, where a sight
-line from the ground is most often blocked, can show that before any walk (on a grid at
+line from the ground is often blocked, can show that before any walk (on a grid at
 a few cells from it, :func:`_grid_probes_reach`; on a TIN where the track leaves the
 first faces from the point's own, :func:`_tin_probes_reach`). Each threshold is then exact, or a bound on one side. The
 bounds are replaced by the most favourable thresholds they allow (:func:`optimistic`:
@@ -361,7 +361,7 @@ def _grid_probes_reach(g, tr, margin):
     """Whether the track's value at a few places near the point's end (:data:`PROBE_CELLS`)
     exceeds its cap by more than ``margin``: the maximum, at least as large as any value
     of the track, then reaches the cap, without a walk. For a point on the ground a sight
-    line is most often blocked right there."""
+    line is often blocked right there."""
     qx, qy, qz, dx, dy, u0, u1, tol, bulge, floor, cap = tr
     if cap == _INF:
         return False
