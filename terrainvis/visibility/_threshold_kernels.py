@@ -313,17 +313,7 @@ def grid_threshold(g, st, p, q, rules):
     """The threshold height of the point p = (px, py, pz) for the target q = (qx, qy, qz)
     under the :data:`Rules` ``rules``; ``pz`` (a height near the answer) only sets the
     trim. ``-inf`` when the segment is not tested."""
-    px, py, pz = p
-    qx, qy, qz = q
-    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
-    if u0 < 0.0:
-        return -_INF
-    dx = px - qx
-    dy = py - qy
-    tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy), -_INF, _INF)
-    if g.ltop <= DDA_MAX_LEVELS:
-        return qz + grid_dda_max_slope(g, tr)
-    return qz + grid_max_slope(g, tr, st)
+    return grid_clamped(g, st, p, q, rules, -_INF, _INF)[0]
 
 
 @nb.njit(cache=True, nogil=True)
@@ -331,7 +321,8 @@ def grid_clamped(g, st, p, q, rules, zlo, zhi):
     """:func:`grid_threshold` known exactly only inside (``zlo``, ``zhi``): ``(z, state)``
     with state 0 (z is the threshold, bit for bit), -1 (the threshold is at most z, about
     ``zlo``) or 1 (it is at least z, about ``zhi`` or above). The walk skips what cannot
-    exceed ``zlo`` and stops at ``zhi`` (see "Windows")."""
+    exceed ``zlo`` and stops at ``zhi`` (see "Windows"); with (-inf, inf) it is the
+    exact threshold, state 0 (-inf when the segment is not tested)."""
     px, py, pz = p
     qx, qy, qz = q
     u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
@@ -517,13 +508,7 @@ def tin_max_slope(w, tr):
 @nb.njit(cache=True, nogil=True)
 def tin_threshold(w, p, q, rules):
     """The threshold height of the point p for the target q on a TIN; see :func:`grid_threshold`."""
-    px, py, pz = p
-    qx, qy, qz = q
-    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
-    if u0 < 0.0:
-        return -_INF
-    bulge = rules.kc * ((px - qx) ** 2 + (py - qy) ** 2)
-    return qz + tin_max_slope(w, Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge, -_INF, _INF))
+    return tin_clamped(w, p, q, rules, -_INF, _INF, -1)[0]
 
 
 @nb.njit(cache=True, nogil=True)
