@@ -93,6 +93,7 @@ import numpy as np
 
 from bench_output_modes import DEMS, STD_CURVATURE, _geotiff, _median_time, _observers
 from terrainvis import load_dem, viewshed
+from terrainvis.core.metrics import verdict_edges
 from terrainvis.visibility import EARTH_RADIUS, curvature_coefficient, lowest_point
 from terrainvis.visibility.field_of_view import elevation_degrees
 
@@ -151,17 +152,6 @@ def _r_viewshed_args(x: float, y: float, eye: float, target: float, curv: float)
     return args
 
 
-def _near_edge(vis: np.ndarray) -> np.ndarray:
-    """Cells with a cell of the other verdict among their 8 neighbours."""
-    p = np.pad(vis, 1, mode="edge")
-    rows, cols = vis.shape
-    edge = np.zeros(vis.shape, dtype=bool)
-    for dr in range(3):
-        for dc in range(3):
-            edge |= p[dr : dr + rows, dc : dc + cols] != vis
-    return edge
-
-
 def _agreement(g, r: int, c: int, eye: float, target: float, curv: float, ours: np.ndarray, ours_bool: np.ndarray,
                peer: np.ndarray) -> dict:
     valid = np.isfinite(g.z)
@@ -177,7 +167,7 @@ def _agreement(g, r: int, c: int, eye: float, target: float, curv: float, ours: 
            "median_abs_all": float(np.median(np.abs(ours[valid & np.isfinite(ours)])))}
     if out["differ"]:
         a = np.abs(ours[differ])
-        out.update(near_edge=float((differ & _near_edge(ours_vis)).sum() / out["differ"]),
+        out.update(near_edge=float((differ & verdict_edges(ours_vis)).sum() / out["differ"]),
                    median_abs_differ=float(np.median(a)), p95_abs_differ=float(np.percentile(a, 95)))
     else:
         out.update(near_edge=float("nan"), median_abs_differ=float("nan"), p95_abs_differ=float("nan"))

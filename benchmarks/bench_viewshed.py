@@ -80,6 +80,7 @@ import time
 
 import numpy as np
 
+from terrainvis.core.metrics import verdict_edges
 from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import clearance_tolerance, trim_length
 from terrainvis.visibility.grid import grid_accel, grid_clearance
@@ -126,17 +127,6 @@ def _xrs_viewshed(da, x: float, y: float, h: float) -> np.ndarray:
     from xrspatial import viewshed as xrs_viewshed
 
     return np.asarray(xrs_viewshed(da, x=x, y=y, observer_elev=h, target_elev=0.0).values) >= 0
-
-
-def _near_edge(vis: np.ndarray) -> np.ndarray:
-    """Samples with a sample of the other verdict among their 8 neighbours."""
-    p = np.pad(vis, 1, mode="edge")
-    rows, cols = vis.shape
-    edge = np.zeros(vis.shape, dtype=bool)
-    for dr in (0, 1, 2):
-        for dc in (0, 1, 2):
-            edge |= p[dr : dr + rows, dc : dc + cols] != vis
-    return edge
 
 
 def main(argv=None) -> None:
@@ -215,7 +205,7 @@ def main(argv=None) -> None:
             gc.collect()
             differ = xvis != ours
             nd = int(differ.sum())
-            near = int((differ & _near_edge(ours)).sum())
+            near = int((differ & verdict_edges(ours)).sum())
             print(f"xarray-spatial  {t_xrs:8.3f} s   ratio xrs / ours {t_xrs / t_ours:6.2f} x; visible "
                   f"{int(xvis.sum()):,} ({100 * xvis.mean():.3f} %)")
             print(f"  disagreements {nd:,} ({100 * nd / g.z.size:.4f} % of samples): xrs visible / ours hidden "
@@ -290,7 +280,7 @@ def _observers_high_low(g):
 def _differences(name, peer, ours, n_cells) -> dict:
     differ = peer != ours
     nd = int(differ.sum())
-    near1 = int((differ & _near_edge(ours)).sum())
+    near1 = int((differ & verdict_edges(ours)).sum())
     print(f"    {name}: {nd:,} cells differ ({100 * nd / n_cells:.3f} %): {name} visible / ours hidden "
           f"{int((peer & ~ours).sum()):,}, {name} hidden / ours visible {int((~peer & ours).sum()):,}; "
           f"{100 * near1 / max(nd, 1):.1f} % of them within one cell of a visibility edge of ours")

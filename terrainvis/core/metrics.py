@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 
-__all__ = ["agreement", "viewshed_agreement"]
+__all__ = ["agreement", "viewshed_agreement", "verdict_edges"]
 
 
 def agreement(V_true, V_test, mask=None) -> dict:
@@ -117,6 +117,40 @@ def viewshed_agreement(V_true, V_test, mask=None) -> dict:
     counts["visible_area_ratio"] = (
         (counts["agree_visible"] + counts["false_visible"]) / visible if visible else np.nan)
     return counts
+
+
+def verdict_edges(viewshed) -> np.ndarray:
+    """The cells of a viewshed that have a cell of the other verdict among their 8 neighbours.
+
+    Two exact viewsheds of different surface models (ours against GDAL's or GRASS's)
+    differ mostly where a ray grazes its horizon, on these cells: the share of their
+    differences that lies here says whether they differ as models do or otherwise.
+
+    Parameters
+    ----------
+    viewshed : (rows, cols) bool
+
+    Returns
+    -------
+    (rows, cols) bool
+
+    Examples
+    --------
+    >>> v = np.zeros((3, 4), bool)
+    >>> v[:, 2:] = True
+    >>> verdict_edges(v).astype(int)
+    array([[0, 1, 1, 0],
+           [0, 1, 1, 0],
+           [0, 1, 1, 0]])
+    """
+    vis = _bool_array(viewshed, "viewshed")
+    p = np.pad(vis, 1, mode="edge")
+    rows, cols = vis.shape
+    edge = np.zeros(vis.shape, dtype=bool)
+    for dr in range(3):
+        for dc in range(3):
+            edge |= p[dr : dr + rows, dc : dc + cols] != vis
+    return edge
 
 
 def _tally(t: np.ndarray, s: np.ndarray) -> dict:

@@ -94,3 +94,19 @@ def test_viewshed_agreement_bad_input():
         viewshed_agreement(np.zeros((2, 3), bool), np.zeros((2, 3), bool), np.ones((2, 2), bool))
     with pytest.raises(ValueError, match="V_true must be a 2-D array"):
         viewshed_agreement(np.zeros(4, bool), np.zeros(4, bool))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 7), st.integers(1, 7), st.integers(0, 2**31))
+def test_verdict_edges_are_the_cells_with_a_neighbour_of_the_other_verdict(rows, cols, seed):
+    from terrainvis.core.metrics import verdict_edges
+
+    v = np.random.default_rng(seed).random((rows, cols)) < 0.5
+    expected = np.zeros_like(v)
+    for r in range(rows):
+        for c in range(cols):
+            around = v[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2]
+            expected[r, c] = bool((around != v[r, c]).any())
+    np.testing.assert_array_equal(verdict_edges(v), expected)
+    with pytest.raises(ValueError, match="viewshed must be a 2-D array"):
+        verdict_edges(v.ravel())

@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 
 from terrainvis import viewshed
+from terrainvis.core.metrics import verdict_edges
 from terrainvis.io import load_dem
 
 DEM = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "data", "dem", "green_mountains_vt.tif")
@@ -48,17 +49,6 @@ pytestmark = pytest.mark.skipif(shutil.which("grass") is None,
 MAX_SHARE = 0.010
 #: Least share of the differing cells (pooled) within one cell of a visibility edge of ours.
 MIN_NEAR_EDGE = 0.90
-
-
-def _near_edge(vis: np.ndarray) -> np.ndarray:
-    """Cells with a cell of the other verdict among their 8 neighbours."""
-    p = np.pad(vis, 1, mode="edge")
-    rows, cols = vis.shape
-    edge = np.zeros(vis.shape, dtype=bool)
-    for dr in range(3):
-        for dc in range(3):
-            edge |= p[dr : dr + rows, dc : dc + cols] != vis
-    return edge
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +98,7 @@ def test_r_viewshed_differs_only_near_our_horizons(grass_dem):
             share = differ.mean()
             assert 0.0 < share <= MAX_SHARE, (r, c, eye, curvature, share)
             n_diff += int(differ.sum())
-            n_near += int((differ & _near_edge(ours)).sum())
+            n_near += int((differ & verdict_edges(ours)).sum())
             peer_more += int((peer & ~ours).sum())
             ours_more += int((ours & ~peer).sum())
     assert n_near >= MIN_NEAR_EDGE * n_diff, (n_near, n_diff)
