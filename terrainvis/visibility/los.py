@@ -111,7 +111,7 @@ def segment_clearances(terrain, a: np.ndarray, b: np.ndarray, *, end_radius: flo
     """:func:`min_clearance` of checked input: ``a``, ``b`` (m, 3) float64 contiguous, inside
     the footprint, ``end_radius`` >= 0 and ``kc`` the curvature coefficient. For callers
     that know their segments are inside (the calibrated relocation's neighbours: on a TIN
-    the checks locate every end, half the cost of short segments)."""
+    the checks locate every end: about a third of the cost of short segments)."""
     delta = trim_length(terrain)
     if isinstance(terrain, HeightGrid):
         return grid_clearance(
