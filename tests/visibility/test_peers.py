@@ -1,12 +1,14 @@
 """Agreement with GRASS r.viewshed on a real DEM (skipped when GRASS is not installed).
 
-r.viewshed (Haverkort et al.'s radial sweep) answers for a different surface: each cell is
-a step at its centre's height, and a cell is visible when the gradient to its centre is at
-least the largest gradient of the cells the ray crossed before (each modelled by its
-entering, centre and exiting elevations). Ours is exact on the piecewise-linear surface
-(cells split along a diagonal). The two surfaces agree at the samples and differ between
-them by less than the local relief of one cell, so the verdicts can only differ where a
-ray grazes its horizon: near the edges of the viewshed. That is what is pinned here, on
+r.viewshed (Haverkort et al.'s radial sweep) answers for a different surface: a cell is
+visible when the gradient to its centre is at least the largest gradient of the cells the
+ray crossed before, each modelled by its entering, centre and exiting elevations (its
+manual of 8.2 calls the surface bilinear between cell centres). Ours is exact on the
+piecewise-linear surface (cells split along a diagonal). The two surfaces agree at the
+samples and differ between them by less than the local relief of one cell, so the
+verdicts differ mostly where a ray grazes its horizon: near the edges of the viewshed
+(docs/visibility.md also finds cells r.viewshed sees well below our horizon, blocked
+close to the eye). That is what is pinned here, on
 /work/shared/data/dem/green_mountains_vt.tif (237 x 188 samples, 90 m, UTM 18N), from the
 highest sample and from the centre, an eye of 1.7 m on a flat earth and of 10 m with
 curvature and standard refraction (r.viewshed -c -r refraction_coeff=0.14286, ours
