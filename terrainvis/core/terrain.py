@@ -35,6 +35,7 @@ coordinates rather than describing one raster.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 
@@ -141,6 +142,20 @@ def height_range(terrain) -> tuple[float, float] | None:
         z = terrain.z if isinstance(terrain, HeightGrid) else terrain.vertices[:, 2]
         terrain._cache["z_range"] = _height_range(z)
     return terrain._cache["z_range"]
+
+
+def fingerprint(grid) -> str:
+    """A content hash of a HeightGrid: 16 hex digits of the SHA-256 of its heights and
+    coordinates, computed once per grid (its arrays are read-only). A results file records
+    it so that a resume notices a changed terrain; the caches of work on T kept across the
+    units of a comparison are keyed by it."""
+    fp = grid._cache.get("fingerprint")
+    if fp is None:
+        h = hashlib.sha256()
+        for a in (grid.z, grid.xs, grid.ys):
+            h.update(np.ascontiguousarray(a).tobytes())
+        fp = grid._cache["fingerprint"] = h.hexdigest()[:16]
+    return fp
 
 
 def _as_attrs(attrs) -> dict:

@@ -27,7 +27,6 @@ experiment, which imports them.
 
 from __future__ import annotations
 
-import hashlib
 import time
 import zlib
 from dataclasses import dataclass
@@ -35,7 +34,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..core.terrain import HeightGrid
+from ..core.terrain import HeightGrid, fingerprint
 from ..core.validate import describe
 
 __all__ = [
@@ -329,7 +328,7 @@ def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0
     kw = dict(observer_height=offset, target_height=target_height, at=grid, **los)
     on_s = site_observers(simplified, candidates, k, workers=1, **kw).chosen
     share = _seen_share(grid, candidates[on_s], offset, target_height, los)
-    key = _content_key(grid, candidates, k, offset, target_height, los)
+    key = (fingerprint(grid), k, float(offset), float(target_height), repr(sorted(los.items())))
     share_t = _ORIGINAL_SITINGS.pop(key, None)  # popped and put back: the most recent last
     if share_t is None:
         on_t = site_observers(grid, candidates, k, workers=1, **kw).chosen
@@ -346,15 +345,6 @@ def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0
 #: itself would not last (as :mod:`terrainvis.relocation.calibrated` keeps T's verdicts).
 _ORIGINAL_SITINGS: dict = {}
 _ORIGINAL_SITINGS_SIZE = 64
-
-
-def _content_key(grid: HeightGrid, candidates: np.ndarray, k: int, offset: float, target_height: float,
-                 los: dict) -> tuple:
-    """What T's siting depends on: T's samples and coordinates, the candidates, k, the heights and the predicate."""
-    h = hashlib.sha256()
-    for a in (grid.z, grid.xs, grid.ys, candidates):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest(), k, float(offset), float(target_height), repr(sorted(los.items()))
 
 
 def _seen_share(grid: HeightGrid, positions: np.ndarray, offset: float, target_height: float, los: dict) -> float:

@@ -15,14 +15,13 @@ What one unit computes is :mod:`terrainvis.experiment.units`; ordering the rows 
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
 
 from ..core.validate import describe
 from .options import CASCADE_AUTO_MIN_SAMPLES, Settings, validate
-from ..core.terrain import HeightGrid
+from ..core.terrain import HeightGrid, fingerprint
 from ..io._names import JACKSBORO_WINDOW, resolve_one  # noqa: F401  (resolve_one: the commands' reader)
 
 __all__ = [
@@ -118,14 +117,6 @@ def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
         f"{what} needs at least {format_bytes(need)} of memory{side_by_side}, but this machine has "
         f"{format_bytes(have)} available; use fewer points or partners" + (" or fewer workers" if at_once > 1 else "")
     )
-
-
-def fingerprint(grid: HeightGrid) -> str:
-    """A content hash of a terrain (z, xs, ys), so a resume notices a changed input."""
-    h = hashlib.sha256()
-    for a in (grid.z, grid.xs, grid.ys):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()[:16]
 
 
 def run_record(settings: Settings, grids: dict) -> dict:

@@ -89,7 +89,7 @@ import numpy as np
 
 from ..core.validate import as_int, describe
 from ..errors import OutsideFootprintError
-from ..core.terrain import HeightGrid
+from ..core.terrain import HeightGrid, fingerprint
 from ..tolerances import THRESHOLD_MARGIN_REL
 from ..visibility import EARTH_RADIUS, curvature_coefficient
 from ..visibility.thresholds import ThresholdSurface, best_height, best_heights, gauss_seidel, threshold_row
@@ -166,16 +166,6 @@ class Partners:
     visible: np.ndarray | None
 
 
-def _fingerprint(grid: HeightGrid) -> str:
-    fp = grid._cache.get("fingerprint")
-    if fp is None:
-        h = hashlib.sha256()
-        for a in (grid.z, grid.xs, grid.ys):
-            h.update(np.ascontiguousarray(a).tobytes())
-        fp = grid._cache["fingerprint"] = h.hexdigest()[:16]
-    return fp
-
-
 # ----------------------------------------------------------------------- partners
 def _positions(original: HeightGrid, simplified, k: int, seed: int, stream: int = 0) -> np.ndarray:
     """About ``k`` stratified random positions over T's extent where both surfaces exist
@@ -220,7 +210,7 @@ def _key(original, curve, *arrays):
     h = hashlib.sha256()
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
-    return (_fingerprint(original), curvature_coefficient(**curve), h.hexdigest())
+    return (fingerprint(original), curvature_coefficient(**curve), h.hexdigest())
 
 
 def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
@@ -257,7 +247,7 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
     """
     kc = curvature_coefficient(curvature, earth_radius)
     core = CORE_PARTNERS if core is None else core
-    key = ("calibration", _fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
+    key = ("calibration", fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
            int(seed), float(end_radius), kc, int(min_gain), bool(neighbours), int(core))
     cached = simplified._cache.get(key)
     if cached is not None:
