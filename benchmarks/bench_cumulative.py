@@ -9,7 +9,7 @@ question from the same eyes). The script prints
   with numba on one thread (over the peer's observers), and what K of them cost on all
   cores with no overhead at all (the floor);
 * ours: :func:`terrainvis.cumulative_viewshed` on all K observers with ``workers=1``
-  (in this process; each viewshed's sweep uses every core) and ``workers=2`` (two worker
+  (in this process, one viewshed per numba thread at a time) and ``workers=2`` (two worker
   processes, one numba thread each; their start-up included), in seconds and observers
   per second, and the ratio to the floor;
 * the peer: ``gdal_viewshed`` (Debian package ``gdal-bin``; skipped with a note when it is

@@ -55,7 +55,7 @@ def add_parser(sub) -> None:
     add_max_distance(c, "each observer sees only the samples within this distance")
     add_field_of_view(c)
     c.add_argument("--workers", type=workers_arg, default=None,
-                   help="local worker processes (default 1: in this process, each viewshed on every core)")
+                   help="local worker processes (default 1: in this process, one viewshed per core at a time)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler "
                                                                         "(needs the dask extra)")
     c.add_argument("--network", metavar="FILE",

@@ -75,8 +75,8 @@ def add_parser(sub) -> None:
                                                      "not, 255 nodata, aligned with the DEM) or .npz")
     s.add_argument("--plot", metavar="PNG", help="draw the covered-area curve and the chosen observers into this .png")
     s.add_argument("--workers", type=workers_arg, default=None,
-                   help="local worker processes for the candidates' viewsheds (default 1: in this process, each "
-                        "viewshed on every core)")
+                   help="local worker processes for the candidates' viewsheds (default 1: in this process, one "
+                        "viewshed per core at a time)")
     s.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run the viewsheds on this dask.distributed "
                                                                         "scheduler (needs the dask extra)")
     add_earth(s)

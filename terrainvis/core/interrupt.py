@@ -25,6 +25,11 @@ This module is the one mechanism every long kernel uses instead:
    inside numba's boxing.
 3. Small calls run directly in the calling thread: starting a thread costs about
    0.1 ms, far more than a kernel over a few thousand samples.
+4. Outside the main thread :func:`call` runs the kernel directly. A thread that runs
+   units for :func:`terrainvis.core.runner.run_units` (its ``threads`` mode) first
+   passes a flag shared by the run to :func:`thread_flag`; its kernels then take that
+   flag, and :func:`call` raises :class:`terrainvis.errors.Interrupted` once it is set, so
+   the main thread stops every unit within a ring of a sweep.
 
 Libraries in C++ (pymeshlab, fast-simplification) take no flag, and are interrupted
 between their passes, when the call returns. Leaving such a call running in an
@@ -67,7 +72,7 @@ import sys
 import threading
 
 __all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library",
-           "kept_interrupts", "raise_pending", "call_library"]
+           "kept_interrupts", "raise_pending", "call_library", "thread_flag"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
@@ -82,6 +87,9 @@ _STOP_GRACE = 1.0
 
 #: The signals that :func:`kept_interrupts`' handlers received, first first (empty outside the CLI).
 _pending: list[int] = []
+
+#: Per thread: the stop flag that :func:`thread_flag` set for the kernels :func:`call` starts there.
+_local = threading.local()
 
 
 @contextlib.contextmanager
@@ -174,8 +182,16 @@ def call(kernel, *args, work: int):
         kernel's own exception.
     """
     raise_pending()  # an interrupt swallowed by C code since the last call (see kept_interrupts)
+    if threading.current_thread() is not threading.main_thread():
+        shared = getattr(_local, "flag", None)
+        if shared is None:
+            return kernel(*args, new_flag())
+        _raise_if_set(shared)
+        out = kernel(*args, shared)
+        _raise_if_set(shared)  # its result may be partial: never used
+        return out
     stop = new_flag()
-    if work < THREAD_MIN_WORK or threading.current_thread() is not threading.main_thread():
+    if work < THREAD_MIN_WORK:
         return kernel(*args, stop)
     job = _Job(kernel, *args, stop)
     try:
@@ -188,6 +204,34 @@ def call(kernel, *args, work: int):
         job.wait_through(limit=_STOP_GRACE)
         raise
     return job.result()
+
+
+@contextlib.contextmanager
+def thread_flag(flag):
+    """In this block, the kernels that :func:`call` starts in this thread take ``flag`` (a
+    :func:`new_flag` that another thread may set), and :func:`call` raises
+    :class:`terrainvis.errors.Interrupted` before and after a kernel once it is set.
+
+    For threads that run units beside a waiting main thread (signals reach only the main
+    thread, which stops the units by setting the flag). In the main thread the block does
+    nothing: :func:`call` makes its own flag there.
+    """
+    if threading.current_thread() is threading.main_thread():
+        yield
+        return
+    previous = getattr(_local, "flag", None)
+    _local.flag = flag
+    try:
+        yield
+    finally:
+        _local.flag = previous
+
+
+def _raise_if_set(flag) -> None:
+    if flag[0]:
+        from ..errors import Interrupted
+
+        raise Interrupted(signal.SIGINT)
 
 
 def call_library(fn, *args, what: str, **kwargs):

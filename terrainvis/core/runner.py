@@ -1,7 +1,8 @@
 """Running independent units of work: in this process, on a local process pool, or on dask.
 
 :func:`run_units` is the one interface the experiments use. It calls ``fn(*args)`` for
-every task, wherever it runs, and hands each result to ``on_result`` in this process as
+every task, wherever it runs (in this process, one after the other or on threads; on a
+local process pool; on dask), and hands each result to ``on_result`` in this process as
 soon as it arrives (in completion order), so the caller can save it at once.
 
 Interrupts stop everything promptly and leave no orphan: Ctrl-C (SIGINT to the whole
@@ -42,7 +43,7 @@ def check_client(client):
     return client
 
 
-def run_units(tasks, fn, *, on_result, workers=None, client=None) -> None:
+def run_units(tasks, fn, *, on_result, workers=None, client=None, threads: int = 1) -> None:
     """Run ``fn(*args)`` for every ``(key, args)`` in ``tasks``; pass each result to ``on_result(key, result)``.
 
     Parameters
@@ -54,9 +55,15 @@ def run_units(tasks, fn, *, on_result, workers=None, client=None) -> None:
     on_result : callable
         Called in this process with ``(key, result)`` as each unit finishes.
     workers : int, optional
-        Local worker processes (default: the number of CPUs; 1 runs here, serially).
+        Local worker processes (default: the number of CPUs; 1 runs here).
     client : dask.distributed.Client, optional
         Run on this cluster instead.
+    threads : int, default 1
+        With ``workers=1``: how many units run at once in this process, each in its own
+        thread with numba on one thread (1: one after the other, in this thread). For
+        units that spend their time in ``nogil`` kernels started by
+        :func:`terrainvis.core.interrupt.call`; an interrupt sets their shared stop flag,
+        and the threads have ended when this raises.
 
     Raises
     ------
@@ -74,6 +81,11 @@ def run_units(tasks, fn, *, on_result, workers=None, client=None) -> None:
             _run_dask(tasks, fn, _deliver(on_result, signals), client, signals)
         return
     n = (os.cpu_count() or 1) if workers is None else workers
+    if n == 1 and threads > 1 and len(tasks) > 1:
+        signals = _Signals(defer=True)
+        with signals.installed():
+            _run_threads(tasks, fn, _deliver(on_result, signals), min(threads, len(tasks)), signals)
+        return
     if n == 1 or len(tasks) == 1:
         # the units run here: a signal interrupts them at once (outside a save)
         signals = _Signals(defer=False)
@@ -168,6 +180,42 @@ class _Signals:
 
 def _as_interrupted(exc: BaseException) -> Interrupted:
     return exc if isinstance(exc, Interrupted) else Interrupted(signal.SIGINT)
+
+
+# ---------------------------------------------------------------- threads of this process
+def _run_threads(tasks, fn, on_result, n_threads: int, signals: _Signals) -> None:
+    """The units on ``n_threads`` threads of this process, numba on one thread in each."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .interrupt import new_flag, thread_flag
+
+    stop = new_flag()
+
+    def one(args):
+        import numba
+
+        numba.set_num_threads(1)  # per thread: the main thread keeps its own number
+        with thread_flag(stop):
+            return fn(*args)
+
+    pool = ThreadPoolExecutor(max_workers=n_threads, thread_name_prefix="terrainvis-unit")
+    futures = {}
+    try:
+        for key, args in tasks:
+            futures[pool.submit(one, args)] = key
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            for fut in done:
+                on_result(futures[fut], fut.result())
+            signals.check()
+    except BaseException as exc:
+        stop[0] = 1  # running kernels return within a ring; the next call() in those threads raises
+        pool.shutdown(wait=True, cancel_futures=True)  # signals only note themselves meanwhile (defer)
+        if isinstance(exc, KeyboardInterrupt):
+            raise _as_interrupted(exc) from None
+        raise
+    pool.shutdown(wait=True)
 
 
 # ---------------------------------------------------------------- local pool

@@ -100,10 +100,10 @@ def cumulative_viewshed(
         that observer.
     workers : int, optional
         Local worker processes. By default (and with 1) the observers' viewsheds run in
-        this process, each sweep on every core, which on two cores beats one process per
-        CPU (docs/user-guide.md#many-observers has the figures). ``workers=N`` runs them
-        on N processes of one core each, for machines with more cores than the sweep's
-        16 sectors. Workers are started with ``spawn``, which imports the caller's
+        this process: on a HeightGrid, one viewshed per numba thread at a time, each
+        on one core, which on two cores beats one process per CPU
+        (docs/user-guide.md#many-observers has the figures). ``workers=N`` runs them on
+        N processes of one core each. Workers are started with ``spawn``, which imports the caller's
         ``__main__`` again: in a script, call this under ``if __name__ == "__main__":``.
     client : dask.distributed.Client, optional
         Run on this dask cluster instead (the terrain is scattered to it once).
@@ -132,7 +132,7 @@ def cumulative_viewshed(
 
     Notes
     -----
-    The observers are cut into chunks of about K / (32 workers) observers, each chunk one
+    The observers are cut into chunks of about K / (32 workers or threads) observers, each chunk one
     unit of :func:`terrainvis.core.runner.run_units`; the counts of a chunk are added to the
     total as the unit finishes. The sum of integers does not depend on the order, so any
     ``workers`` or cluster gives the same raster, bit for bit.
@@ -162,14 +162,15 @@ def cumulative_viewshed(
     workers = check_workers(workers)
     client = check_client(client)
     if workers is None:
-        workers = 1  # in this process, each sweep on every core (see ``workers`` above)
+        workers = 1  # in this process (see ``workers`` above)
     _check_inside(terrain, obs)
     if not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True or False, got {describe(progress)}")
     target_grid = terrain if at is None else at
     dtype = _count_dtype(k)
     total = np.zeros(target_grid.shape, dtype=dtype)
-    chunks = _chunks(k, _n_slots(workers, client))
+    threads = _local_threads(terrain, engine, workers, client)
+    chunks = _chunks(k, max(_n_slots(workers, client), threads))
     token = uuid.uuid4().hex
     tasks = [((s, e), (terrain, at, token, obs[s:e], heights[s:e], options)) for s, e in chunks]
     bar = _progress_bar(k, progress)
@@ -178,7 +179,7 @@ def cumulative_viewshed(
             np.add(total, counts, out=total, casting="unsafe")  # counts <= K fit the total's dtype
             bar.update(key[1] - key[0])
 
-        run_units(tasks, _unit, on_result=add, workers=workers, client=client)
+        run_units(tasks, _unit, on_result=add, workers=workers, client=client, threads=threads)
     finally:
         bar.close()
         _WORKER_TERRAIN.pop(token, None)  # units that ran here held the terrain
@@ -274,6 +275,22 @@ def _n_slots(workers: int | None, client) -> int:
         except Exception:  # a client without nthreads() (or a cluster that is still starting)
             return 1
     return (os.cpu_count() or 1) if workers is None else workers
+
+
+def _local_threads(terrain, engine: str, workers: int, client) -> int:
+    """How many units run at once in this process (``workers=1``, no client): numba's threads
+    for the grid engine, whose sweep then runs on one core per viewshed; else 1.
+
+    Two viewsheds at a time, one per core, beat one viewshed's sweep spread over both: its
+    sectors do not split evenly and its pair walks start a parallel loop for a few
+    segments (docs/user-guide.md, "Many observers"). Embree and registered engines keep
+    their own threads, so their units run one after the other.
+    """
+    if client is not None or workers != 1 or not isinstance(terrain, HeightGrid) or engine not in ("auto", "grid"):
+        return 1
+    import numba
+
+    return max(1, numba.get_num_threads())
 
 
 def _chunks(k: int, slots: int) -> list[tuple[int, int]]:

@@ -38,6 +38,7 @@ from .cumulative import (
     _chunks,
     _count_dtype,
     _keep_terrain,
+    _local_threads,
     _n_slots,
     _options,
 )
@@ -322,7 +323,8 @@ def _run_chunks(run: dict, unit, on_result, *, align: int = 1, desc: str) -> Non
     from ..core.runner import run_units
 
     k = run["obs"].shape[0]
-    groups = _chunks(-(-k // align), _n_slots(run["workers"], run["client"]))
+    threads = _local_threads(run["terrain"], run["options"]["engine"], run["workers"], run["client"])
+    groups = _chunks(-(-k // align), max(_n_slots(run["workers"], run["client"]), threads))
     chunks = [(s * align, min(e * align, k)) for s, e in groups]
     token = uuid.uuid4().hex
     tasks = [((s, e), (run["terrain"], run["at"], token, run["obs"][s:e], run["heights"][s:e], run["options"]))
@@ -333,7 +335,7 @@ def _run_chunks(run: dict, unit, on_result, *, align: int = 1, desc: str) -> Non
             on_result(key, result)
             bar.update(key[1] - key[0])
 
-        run_units(tasks, unit, on_result=add, workers=run["workers"], client=run["client"])
+        run_units(tasks, unit, on_result=add, workers=run["workers"], client=run["client"], threads=threads)
     finally:
         bar.close()
         _WORKER_TERRAIN.pop(token, None)  # units that ran here held the terrain

@@ -177,6 +177,99 @@ def test_an_interrupt_swallowed_inside_a_unit_still_stops_a_serial_run():
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the run's handler is gone
 
 
+# ----------------------------------------------------------------- units on threads of this process
+def test_threads_run_the_units_beside_each_other_with_numba_on_one_thread():
+    """``threads=2``: every unit runs in a unit thread with numba on one thread, two at a
+    time (each waits for the other to start), and this thread keeps its own numba threads."""
+    import threading
+
+    import numba
+
+    from terrainvis.core.runner import run_units
+
+    before = numba.get_num_threads()
+    started = threading.Barrier(2, timeout=20)
+
+    def unit(i):
+        started.wait()  # both units run at once, or this times out
+        return threading.current_thread().name, numba.get_num_threads()
+
+    got = {}
+    run_units([(i, (i,)) for i in range(4)], unit, on_result=got.__setitem__, workers=1, threads=2)
+    assert sorted(got) == [0, 1, 2, 3]
+    assert all(name.startswith("terrainvis-unit") and n == 1 for name, n in got.values()), got
+    assert numba.get_num_threads() == before
+
+
+def test_a_failing_unit_on_a_thread_stops_the_others():
+    """A unit's error reaches the caller; the other unit's kernel sees the shared flag and
+    stops, and no unit thread outlives the call."""
+    import threading
+
+    import numba
+
+    from terrainvis.core.interrupt import call
+    from terrainvis.core.runner import run_units
+    from terrainvis.core.stopflag import stopped
+
+    @numba.njit(nogil=True)
+    def spin(seconds_of_work, stop):
+        s = 0.0
+        for i in range(seconds_of_work):
+            if stopped(stop):
+                return -1.0
+            for j in range(1_000_000):
+                s += j * 1e-9
+        return s
+
+    ran = []
+
+    def unit(i):
+        if i == 0:
+            time.sleep(0.5)
+            raise ValueError("unit 0 failed")
+        ran.append(i)
+        return call(spin, 20_000, work=1)  # about 20 s of work, unless stopped
+
+    t0 = time.monotonic()
+    with pytest.raises(ValueError, match="unit 0 failed"):
+        run_units([(i, (i,)) for i in range(2)], unit, on_result=lambda key, result: None, workers=1, threads=2)
+    assert ran == [1]
+    assert time.monotonic() - t0 < 10.0, "the spinning unit did not stop"
+    assert not [t for t in threading.enumerate() if t.name.startswith("terrainvis-unit")]
+
+
+def test_a_thread_flag_once_set_stops_calls_in_that_thread():
+    """:func:`call` in a unit thread hands the shared flag to the kernel, and raises once it is set."""
+    import threading
+
+    from terrainvis.core.interrupt import call, new_flag, thread_flag
+    from terrainvis.errors import Interrupted
+
+    flag = new_flag()
+    seen = {"shared": []}
+
+    def kernel(x, stop):
+        seen["shared"].append(stop is flag)
+        return x + 1
+
+    def body():
+        with thread_flag(flag):
+            seen["before"] = call(kernel, 1, work=1)
+            flag[0] = 1
+            try:
+                call(kernel, 2, work=1)
+            except Interrupted:
+                seen["raised"] = True
+        seen["after"] = call(kernel, 3, work=1)  # outside the block: a fresh flag, no raise
+
+    t = threading.Thread(target=body)
+    t.start()
+    t.join(10)
+    # the set flag raised before its kernel ran; outside the block the kernel got its own flag
+    assert seen == {"shared": [True, False], "before": 2, "raised": True, "after": 4}
+
+
 def test_an_interrupt_that_c_code_swallows_still_ends_the_command():
     # issue 31 item 17: a Ctrl-C landing in one of llvmlite's ctypes callbacks was printed as
     # "Exception ignored on calling ctypes callback" and the command went on to exit 0

@@ -158,6 +158,28 @@ def test_workers_one_and_two_give_the_same_raster(hills):
     np.testing.assert_array_equal(one, _sum_of_viewsheds(hills, obs, np.full(12, 1.7), max_distance=800.0))
 
 
+def test_threads_and_one_thread_give_the_same_raster(hills, monkeypatch):
+    """The default runs two viewsheds at a time on numba's threads; forced onto one thread
+    (one unit after the other) it gives the same counts, and with numba on one thread
+    that is what it does."""
+    import numba
+
+    from terrainvis.visibility import cumulative as module
+
+    obs = _observers(hills, 24, seed=5)
+    if numba.get_num_threads() < 2:
+        pytest.skip("numba has one thread here: the threaded path is not taken")
+    assert module._local_threads(hills, "auto", 1, None) == numba.get_num_threads()
+    assert module._local_threads(hills.to_tin(), "auto", 1, None) == 1  # Embree keeps its own threads
+    assert module._local_threads(hills, "auto", 2, None) == 1
+    threaded = cumulative_viewshed(hills, obs, curvature=0.85714, earth_radius=6000.0)
+    monkeypatch.setattr(module, "_local_threads", lambda *a: 1)
+    serial = cumulative_viewshed(hills, obs, curvature=0.85714, earth_radius=6000.0)
+    np.testing.assert_array_equal(threaded, serial)
+    np.testing.assert_array_equal(
+        threaded, _sum_of_viewsheds(hills, obs, [1.7] * len(obs), curvature=0.85714, earth_radius=6000.0))
+
+
 def test_dask_local_cluster(hills):
     distributed = pytest.importorskip("distributed", reason="the dask extra is not installed (pip install terrainvis[dask])")
     obs = _observers(hills, 10, seed=8)
@@ -307,6 +329,49 @@ def test_ctrl_c_stops_the_workers(tmp_path):
     assert "interrupted by SIGINT" in err and "Traceback" not in err, err
     _, alive = psutil.wait_procs(workers, timeout=10)
     assert not alive, f"worker processes survived: {alive}"
+
+
+_THREADS_SCRIPT = """
+import sys, threading, time
+import numpy as np
+from terrainvis import cumulative_viewshed
+from terrainvis.core.synthetic import synthetic_terrain
+from terrainvis.errors import Interrupted
+
+if __name__ == "__main__":
+    grid = synthetic_terrain("mountains", 512)
+    rng = np.random.default_rng(0)
+    obs = np.column_stack([rng.uniform(0, 15000, 20000), rng.uniform(0, 15000, 20000)])
+    cumulative_viewshed(grid, obs[:2])  # the kernels loaded and the grid's tables built
+    print("running", flush=True)
+    try:
+        cumulative_viewshed(grid, obs)  # in this process, on numba's threads
+    except Interrupted as exc:
+        left = [t.name for t in threading.enumerate() if t.name.startswith("terrainvis-unit")]
+        print(f"{exc}; unit threads left: {left}", file=sys.stderr)
+        sys.exit(130)
+    sys.exit(0)
+"""
+
+
+def test_ctrl_c_stops_the_threads_of_an_in_process_run(tmp_path):
+    script = tmp_path / "cum_threads.py"
+    script.write_text(_THREADS_SCRIPT)
+    p = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    assert p.stdout.readline().strip() == "running"
+    time.sleep(2.0)  # 20,000 observers take minutes
+    t0 = time.monotonic()
+    os.killpg(p.pid, signal.SIGINT)
+    try:
+        p.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        pytest.fail("cumulative_viewshed did not stop within 20 s of Ctrl-C")
+    err = p.stderr.read()
+    assert p.returncode == 130, err
+    assert "interrupted by SIGINT; unit threads left: []" in err and "Traceback" not in err, err
+    assert time.monotonic() - t0 < 5.0, "the threads took more than 5 s to stop"
 
 
 # ----------------------------------------------------------------- the figure
