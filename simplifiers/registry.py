@@ -31,13 +31,12 @@ from typing import Callable
 import numpy as np
 
 from terrainvis.core.memory import check_memory
-from terrainvis.core.repair import height_field_problems
 from terrainvis.core.validate import as_int, as_nonnegative_finite, describe
-from terrainvis.core.deviation import vertical_errors
 from terrainvis.errors import SimplificationError
 from terrainvis.core.terrain import TIN, HeightGrid
 
-from ._target import qec_within, regular_within
+# repair, deviation and _target import numba (0.2 s): imported where a simplification runs,
+# so that the methods' table and the levels (``terrainvis info``) come without it
 from .levels import check_budget, check_level, coarse_coords, coarse_shape, vertex_budget
 
 __all__ = [
@@ -415,6 +414,10 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
     >>> T.attrs["level"], T.attrs["max_error"] <= 25.0, T.attrs["stopped_by"]
     (2, True, 'max_error')
     """
+    from terrainvis.core.deviation import vertical_errors
+
+    from ._target import regular_within
+
     if not isinstance(grid, HeightGrid):
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {describe(grid)}")
     info = method_info(method)
@@ -494,6 +497,8 @@ def _apply_regular(grid: HeightGrid, info: Method, level: int, options) -> Heigh
 def _whole_grid_within(grid: HeightGrid, info: Method, cap: int, target: float, options):
     """:func:`simplifiers._target.regular_within` for a ``whole_grid`` method: each level
     from ``cap`` to the deepest computed from the grid, the coarsest within ``target`` kept."""
+    from terrainvis.core.deviation import vertical_errors
+
     from .levels import max_level
 
     levels = [(lv, out, vertical_errors(grid, out)[0])
@@ -511,6 +516,8 @@ def _whole_grid_within(grid: HeightGrid, info: Method, cap: int, target: float, 
 
 def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
     """``(tin, seconds, level, budget, extra attrs)`` of an irregular method (``target``: max_error or None)."""
+    from ._target import qec_within
+
     options = dict(options)
     n_override = options.pop("n_vertices", None)
     if n_override is not None:
@@ -581,6 +588,8 @@ def check_height_field(tin: TIN, grid: HeightGrid, *, method: str, budget: int |
     The rules and what the message says are :func:`terrainvis.core.repair.height_field_problems`'s
     (with ``budget``: the vertex count within :func:`~simplifiers.levels.budget_tolerance` of it).
     """
+    from terrainvis.core.repair import height_field_problems
+
     problems = height_field_problems(tin, grid, budget=budget)
     if problems:
         raise SimplificationError(f"{method} returned an invalid height field: " + "; ".join(problems))

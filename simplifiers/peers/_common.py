@@ -13,8 +13,6 @@ from typing import Callable
 
 import numpy as np
 
-from terrainvis.core.deviation import vertical_errors
-from terrainvis.core.repair import repair_tin
 from terrainvis.core.terrain import TIN, HeightGrid
 from terrainvis.errors import SimplificationError
 
@@ -114,6 +112,8 @@ def grid_mesh(grid: HeightGrid):
 def repaired(vertices: np.ndarray, faces: np.ndarray, grid: HeightGrid, source: str) -> TIN:
     """The mesh made a height field over ``grid`` by :func:`terrainvis.repair_tin` (always run, so
     ``attrs["repair"]`` records what it did, zeros when nothing was wrong)."""
+    from terrainvis.core.repair import repair_tin  # here: it imports numba, which registering the peers does not need
+
     return repair_tin(TIN(vertices, faces), grid, source=source)
 
 
@@ -207,6 +207,8 @@ class BudgetSearch:
         ``attrs["search"]["errors"]`` has ``[value, vertices, max error]`` for every run
         measured.
         """
+        from terrainvis.core.deviation import vertical_errors
+
         t0 = time.perf_counter()
         if self.budget >= grid.size:
             self.found = self.hi

@@ -8,6 +8,7 @@ here once, by ``add_*`` functions, so that they read and fail the same everywher
 from __future__ import annotations
 
 import argparse
+import contextlib
 from pathlib import Path
 
 
@@ -210,6 +211,33 @@ def _read_tin(path: Path):
     from ..core.validate import file_label
 
     return _read(path, file_label(path.stem))
+
+
+@contextlib.contextmanager
+def loading_kernels(load, command: str):
+    """``load()`` in a helper thread while the block runs: the imports and first calls that
+    load a command's cached numba kernels (about half a second) beside the block's reading
+    of its input. Its error, if any, is raised when the block ends.
+
+    GDAL's decompression releases the GIL and numba's loading mostly holds it, so on two
+    cores the two overlap. The block's own error or an interrupt still waits for the load to
+    end (an interrupt says so on stderr): a process must not exit while LLVM works in
+    another thread (see :func:`terrainvis.core.interrupt.call_library`).
+    """
+    import sys
+
+    from ..core.interrupt import _Job
+
+    job = _Job(load)
+    try:
+        yield
+        job.wait()
+    except BaseException as exc:
+        if isinstance(exc, KeyboardInterrupt):
+            print(f"terrainvis {command}: stopping once the kernels have loaded", file=sys.stderr, flush=True)
+        job.wait_through()
+        raise
+    job.result()
 
 
 def working(command: str, what: str) -> None:

@@ -14,6 +14,7 @@ from ._common import (
     distance_arg,
     earth_text,
     height_arg,
+    loading_kernels,
     number_arg,
     outside_message,
     position_frame,
@@ -57,14 +58,31 @@ def add_parser(sub) -> None:
     add_positions(los)
 
 
-def run(args) -> int:
+def _load_kernels() -> None:
+    """Import line of sight and load its cached kernels: the commands' calls on a 3 x 3 grid (beside the DEM's reading)."""
     import numpy as np
 
+    from ..core.terrain import HeightGrid
     from ..visibility import line_of_sight, min_clearance
     from ..visibility.profile import lowest_point
 
+    grid = HeightGrid(np.zeros((3, 3)))
+    a, b = np.array([[0.0, 0.0, 1.0]]), np.array([[2.0, 2.0, 1.0]])
+    grid.height_at(a[:, :2])
+    line_of_sight(grid, a, b)
+    min_clearance(grid, a, b)
+    lowest_point(grid, a[0], b[0])
+
+
+def run(args) -> int:
+    import numpy as np
+
     png = _check_png(args)
-    label, grid = read_surface(args.dem, args, command="los")
+    with loading_kernels(_load_kernels, "los"):
+        label, grid = read_surface(args.dem, args, command="los")
+    from ..visibility import line_of_sight, min_clearance
+    from ..visibility.profile import lowest_point
+
     check_heights(grid, args)
     if args.pairs:
         if args.start or args.end:

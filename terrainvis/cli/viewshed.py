@@ -17,6 +17,7 @@ from ._common import (
     earth_text,
     field_of_view_args,
     height_arg,
+    loading_kernels,
     number_arg,
     outside_message,
     plural,
@@ -63,7 +64,6 @@ def run(args) -> int:
     import numpy as np
 
     from ..core.fileio import check_output_file
-    from ..visibility import viewshed
 
     out = Path(args.output)
     suffix = out.suffix.lower()
@@ -71,7 +71,10 @@ def run(args) -> int:
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
     check_output_file(out, "-o", inputs=[args.dem])
     fov = field_of_view_args(args)
-    label, grid = read_terrain(args.dem, args)
+    with loading_kernels(_load_kernels, "viewshed"):
+        label, grid = read_terrain(args.dem, args)
+    from ..visibility import viewshed
+
     check_heights(grid, args)
     frame = position_frame(grid, args)
     observer = tuple(float(v) for v in frame.to_grid(args.observer))
@@ -99,6 +102,16 @@ def run(args) -> int:
           f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %{inside}), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
+
+
+def _load_kernels() -> None:
+    """Import the viewshed and load its cached kernels: a viewshed on a 3 x 3 grid (run beside the DEM's reading)."""
+    import numpy as np
+
+    from ..core.terrain import HeightGrid
+    from ..visibility import viewshed
+
+    viewshed(HeightGrid(np.zeros((3, 3))), (1.0, 1.0))
 
 
 def _report_values(grid, values, out: Path, suffix: str, args, about) -> int:

@@ -41,15 +41,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _kernels, surface
 from ._georef import uniform_step
 from .interrupt import call
-from .mesh import footprint_matches, signed_area2
 from .validate import as_float_array, as_int, as_points, as_positive_finite, describe
 from ..errors import NodataError
 from ..tolerances import BARYCENTRIC_SLACK, DIVISOR_FLOOR, FOOTPRINT_REL
 
 __all__ = ["HeightGrid", "TIN", "as_terrain"]
+
+
+def _kn():
+    """This module's numba kernels (:mod:`terrainvis.core._kernels`), imported on first use:
+    numba takes about 0.2 s to import, and reading, describing or writing a terrain needs none of it."""
+    from . import _kernels
+
+    return _kernels
+
+
+def _surface():
+    """:mod:`terrainvis.core.surface` (numba's records of a surface), imported on first use, as :func:`_kn`."""
+    from . import surface
+
+    return surface
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
@@ -442,7 +455,7 @@ class HeightGrid:
         out = np.full(pts.shape[0], np.nan)
         if pts.shape[0] == 0:
             return out
-        call(surface.heights_at, self.z, self.xs, self.ys,
+        call(_surface().heights_at, self.z, self.xs, self.ys,
              np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, work=out.size)
         return out
 
@@ -455,7 +468,7 @@ class HeightGrid:
         qx = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
         qy = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((qy.size, qx.size), np.nan)
-        call(_kernels.grid_on_grid, self.xs, self.ys, self.z, qx, qy, out, work=out.size)
+        call(_kn().grid_on_grid, self.xs, self.ys, self.z, qx, qy, out, work=out.size)
         return out
 
     def sample_xy(self) -> np.ndarray:
@@ -503,7 +516,7 @@ class HeightGrid:
         """``(rows, cols)`` slices of the largest axis-aligned window without nodata."""
         if not self.n_nodata:
             return slice(0, self.shape[0]), slice(0, self.shape[1])
-        r0, r1, c0, c1 = call(_kernels.largest_valid_rectangle, np.isfinite(self.z), work=self.size)
+        r0, r1, c0, c1 = call(_kn().largest_valid_rectangle, np.isfinite(self.z), work=self.size)
         if r1 - r0 < 2 or c1 - c0 < 2:
             raise ValueError(f"z has no NaN-free window of at least 2x2 samples ({self.n_nodata} NaN cells)")
         return slice(int(r0), int(r1)), slice(int(c0), int(c1))
@@ -713,6 +726,8 @@ class TIN:
     # ---------------------------------------------------------------- geometry
     def face_areas(self) -> np.ndarray:
         """(m,) signed projected (x, y) area of each face: > 0 for counter-clockwise faces."""
+        from .mesh import signed_area2
+
         return 0.5 * signed_area2(self.vertices, self.faces)
 
     def footprint_area(self) -> float:
@@ -727,6 +742,8 @@ class TIN:
             return False
         xmin, xmax, ymin, ymax = self.extent
         area = (xmax - xmin) * (ymax - ymin)
+        from .mesh import footprint_matches
+
         return footprint_matches(areas.sum(), area, rtol)
 
     def _buckets(self) -> _Buckets:
@@ -742,7 +759,7 @@ class TIN:
             bw = w / nbx
             bh = h / nby
             v = self.vertices
-            starts, items = _kernels.build_buckets(
+            starts, items = _kn().build_buckets(
                 np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), self.faces, xmin, ymin, bw, bh, nbx, nby
             )
             bk = _Buckets(starts, items, xmin, ymin, bw, bh, nbx, nby)
@@ -766,11 +783,11 @@ class TIN:
             return out
         bk = self._buckets()
         v = self.vertices
-        tin = surface.SurfaceTin(
+        tin = _surface().SurfaceTin(
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]), self.faces,
-            surface.no_neighbours(), bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
+            _surface().no_neighbours(), bk.starts, bk.items, bk.x0, bk.y0, bk.bw, bk.bh, bk.nbx, bk.nby,
         )
-        call(_kernels.locate_heights, tin, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out,
+        call(_kn().locate_heights, tin, np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out,
              BARYCENTRIC_SLACK, work=pts.shape[0])
         return out
 
@@ -829,7 +846,7 @@ class TIN:
         out = np.full((ys.size, xs.size), np.nan)
         v = self.vertices
         call(
-            _kernels.rasterize_tin,
+            _kn().rasterize_tin,
             np.ascontiguousarray(v[:, 0]), np.ascontiguousarray(v[:, 1]), np.ascontiguousarray(v[:, 2]),
             self.faces, xs, ys, out, BARYCENTRIC_SLACK, work=out.size + self.n_faces,
         )

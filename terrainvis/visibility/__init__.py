@@ -74,27 +74,45 @@ B. Duvenhage, "Using an implicit min/max KD-tree for doing efficient terrain lin
 sight calculations", AFRIGRAPH 2009, doi:10.1145/1503454.1503465.
 """
 
-from .cumulative import cumulative_viewshed
-from .engines import ENGINES, Engine, Predicate, engine_names
-from .engines import register as register_engine
-from .engines import unregister as unregister_engine
-from .los import embree_tolerance, line_of_sight, min_clearance, visibility_matrix
-from .observers import ObserverSets, intervisibility_network, observer_sets
-from .predicate import (
-    EARTH_RADIUS,
-    STANDARD_REFRACTION,
-    TOL_REL,
-    TRIM_REL,
-    clearance_tolerance,
-    curvature_coefficient,
-    terrain_scale,
-    trim_length,
-)
+import importlib
+
+# The field of view is imported here: its module's name is also one of its functions, and a
+# submodule imported first would otherwise take the package attribute ``field_of_view``.
+# It needs no numba; every other name below is imported on first use (PEP 562), so that a
+# command that reads only what it uses (``terrainvis viewshed`` checks its flags before it
+# loads the sweep) does not pay for the whole package.
 from .field_of_view import FieldOfView, field_of_view, field_of_view_mask
-from .fresnel import FresnelClearance, fresnel_clearance, fresnel_radius
-from .profile import clearance_profile, lowest_point
-from .siting import SitingResult, candidate_grid, sample_areas, site_observers
-from .sweep import viewshed
+
+#: Each public name and the submodule that defines it (``(module, name there)`` when renamed).
+_API = {
+    "cumulative_viewshed": "cumulative",
+    "ENGINES": "engines", "Engine": "engines", "Predicate": "engines", "engine_names": "engines",
+    "register_engine": ("engines", "register"), "unregister_engine": ("engines", "unregister"),
+    "embree_tolerance": "los", "line_of_sight": "los", "min_clearance": "los", "visibility_matrix": "los",
+    "ObserverSets": "observers", "intervisibility_network": "observers", "observer_sets": "observers",
+    "EARTH_RADIUS": "predicate", "STANDARD_REFRACTION": "predicate", "TOL_REL": "predicate", "TRIM_REL": "predicate",
+    "clearance_tolerance": "predicate", "curvature_coefficient": "predicate", "terrain_scale": "predicate",
+    "trim_length": "predicate",
+    "FresnelClearance": "fresnel", "fresnel_clearance": "fresnel", "fresnel_radius": "fresnel",
+    "clearance_profile": "profile", "lowest_point": "profile",
+    "SitingResult": "siting", "candidate_grid": "siting", "sample_areas": "siting", "site_observers": "siting",
+    "viewshed": "sweep",
+}
+
+
+def __getattr__(name):
+    spec = _API.get(name)
+    if spec is None:
+        raise AttributeError(f"module 'terrainvis.visibility' has no attribute {name!r}")
+    module, attr = spec if isinstance(spec, tuple) else (spec, name)
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "ENGINES",

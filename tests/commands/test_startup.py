@@ -50,3 +50,63 @@ def test_the_visibility_commands_import_no_experiment(argv, tmp_path):
     # ... and need nothing of the experiment, the simplifiers, the meshes or the figures
     assert not got & {"pandas", "simplifiers", "terrainvis.experiment", "terrainvis.relocation", "matplotlib",
                       "trimesh", "embreex", "pymeshlab", "dask"}, got
+
+
+def test_info_reads_and_describes_without_numba(tmp_path):
+    """``info`` reads the DEM and prints its levels and methods: numpy, no kernels, no simplifier runs."""
+    got = _imported(["info", "hills"])
+    assert "numpy" in got and "simplifiers" in got  # the methods' table and the levels
+    assert not got & {"numba", "pandas", "terrainvis.experiment", "matplotlib", "trimesh", "embreex", "pymeshlab",
+                      "dask"}, got
+
+
+def test_the_visibility_package_imports_its_parts_on_first_use():
+    code = ("import sys\nimport terrainvis.visibility as v\nprint('numba' in sys.modules)\n"
+            "v.viewshed\nprint('numba' in sys.modules, 'terrainvis.visibility.siting' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "True", "False"], out.stdout
+
+
+def test_kernels_load_beside_the_read_and_their_error_is_raised():
+    import threading
+    import time
+
+    from terrainvis.cli._common import loading_kernels
+
+    seen = {}
+
+    def load():
+        seen["thread"] = threading.current_thread() is not threading.main_thread()
+        time.sleep(0.3)
+        seen["loaded"] = True
+
+    t0 = time.monotonic()
+    with loading_kernels(load, "test"):
+        time.sleep(0.3)  # the read
+    assert seen == {"thread": True, "loaded": True}
+    assert time.monotonic() - t0 < 0.55  # side by side, not one after the other
+
+    def broken():
+        raise ImportError("no kernels")
+
+    with pytest.raises(ImportError, match="no kernels"):
+        with loading_kernels(broken, "test"):
+            pass
+
+
+def test_an_error_while_reading_waits_for_the_kernels_to_load():
+    import time
+
+    from terrainvis.cli._common import UsageError, loading_kernels
+
+    seen = {}
+
+    def load():
+        time.sleep(0.3)
+        seen["loaded"] = True
+
+    with pytest.raises(UsageError, match="no such DEM"):
+        with loading_kernels(load, "test"):
+            raise UsageError("no such DEM")
+    assert seen == {"loaded": True}  # no LLVM left running in another thread as the process exits

@@ -26,9 +26,22 @@ def test_public_names_are_handed_on():
 
 
 def test_the_package_init_only_hands_names_on():
+    """No logic in the package's ``__init__``: its names, imported on first use by PEP 562's
+    ``__getattr__`` (and listed by ``__dir__``), each the object its submodule defines."""
+    import importlib
+
     tree = ast.parse((PACKAGE / "__init__.py").read_text())
-    defined = [n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]
-    assert defined == []
+    defined = [n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]
+    assert sorted(defined) == ["__dir__", "__getattr__"]
+    assert sorted(vis._API) == sorted(set(vis.__all__) - {"FieldOfView", "field_of_view", "field_of_view_mask"})
+    for name, spec in vis._API.items():
+        module, attr = spec if isinstance(spec, tuple) else (spec, name)
+        assert getattr(vis, name) is getattr(importlib.import_module(f"terrainvis.visibility.{module}"), attr), name
+    assert set(vis.__all__) <= set(dir(vis))
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        vis.nothing
+    # the function, though its module has the same name and is imported by the package
+    assert callable(vis.field_of_view) and not inspect.ismodule(vis.field_of_view)
 
 
 def _module_imports(path: Path) -> set[str]:
