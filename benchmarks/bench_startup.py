@@ -6,7 +6,14 @@ turn (A B A B ...; ratios are taken pair by pair, so a drifting machine cancels 
 
 * ``terrainvis viewshed DEM --observer X Y -o out.tif`` against
   ``gdal_viewshed -ox X -oy Y -oz 1.7 -cc 0 DEM out.tif`` (the same observer, a flat earth);
-* ``terrainvis info DEM`` against ``gdalinfo -stats DEM`` (both read every sample);
+* ``terrainvis info DEM`` against ``gdalinfo -stats DEM`` (both read every sample; GDAL
+  keeps the statistics in ``DEM.aux.xml`` after its first run, so its later runs read them
+  back instead);
+* ``terrainvis los DEM --from ... --to ...`` (one sight line across the tile) and
+  ``terrainvis simplify DEM -m simple -l 1 -o out.tif`` (reading, the simplest method,
+  writing a GeoTIFF) against ``gdal_translate -outsize 50% 50% -r near DEM out.tif`` (GDAL
+  reads the tile and writes one of a quarter of its samples: the nearest thing it has to
+  either; a yardstick for reading and writing, not the same work);
 * ``terrainvis --help`` against ``gdalinfo --version`` (start-up alone);
 
 and then splits one ``terrainvis viewshed`` into its phases, each timed in a fresh
@@ -116,6 +123,13 @@ def main() -> None:
                 ["gdal_viewshed", "-ox", f"{x}", "-oy", f"{y}", "-oz", "1.7", "-cc", "0", str(dem), str(tmp / "b.tif")]
                 if gdal else None, args.repeats)
         _paired("info", [TERRAINVIS, "info", str(dem)], ["gdalinfo", "-stats", str(dem)] if gdal else None, args.repeats)
+        translate = ["gdal_translate", "-q", "-outsize", "50%", "50%", "-r", "near", str(dem), str(tmp / "t.tif")]
+        x1, y1 = t.c + t.a * (cols // 8 + 0.5), t.f + t.e * (rows // 8 + 0.5)
+        x2, y2 = t.c + t.a * (cols - cols // 8 - 0.5), t.f + t.e * (rows - rows // 8 - 0.5)
+        _paired("los", [TERRAINVIS, "los", str(dem), "--from", f"{x1}", f"{y1}", "--to", f"{x2}", f"{y2}"],
+                translate if gdal else None, args.repeats)
+        _paired("simplify", [TERRAINVIS, "simplify", str(dem), "-m", "simple", "-l", "1", "-o", str(tmp / "s.tif")],
+                translate if gdal else None, args.repeats)
         _paired("--help", [TERRAINVIS, "--help"], ["gdalinfo", "--version"] if gdal else None, args.repeats)
         names = ["imports", "kernel loading", "reading", "the call", "writing"]
         runs = []
