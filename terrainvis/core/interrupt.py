@@ -266,14 +266,23 @@ class _Job:
     cuts short marks a thread that is still running as stopped (the bpo-45274 fix
     releases its state lock), so later joins return at once and the caller would stop
     waiting for a kernel or a library that still works.
+
+    The helper thread runs numba's parallel kernels on as many threads as the caller
+    would: numba keeps that number per thread, and a new thread starts from the default
+    (all cores), so a worker of a compare run, set to one thread, ran its large parallel
+    calls on every core beside the other workers.
     """
 
     def __init__(self, fn, *args, **kwargs):
         self._box = {}
         self._done = threading.Event()
+        numba = sys.modules.get("numba")  # not imported for it: a library call needs none
+        threads = numba.get_num_threads() if hasattr(numba, "get_num_threads") else None  # (None: not yet imported)
 
         def target():
             try:
+                if threads is not None:
+                    numba.set_num_threads(threads)
                 self._box["value"] = fn(*args, **kwargs)
             except BaseException as exc:  # handed to the caller's thread
                 self._box["error"] = exc

@@ -239,6 +239,30 @@ def test_a_failing_unit_on_a_thread_stops_the_others():
     assert not [t for t in threading.enumerate() if t.name.startswith("terrainvis-unit")]
 
 
+def test_a_large_call_s_helper_thread_keeps_the_caller_s_numba_threads():
+    """numba keeps its thread count per thread and a new thread starts from the default: the
+    helper thread of a large :func:`call` takes the caller's (a worker of a compare run is
+    set to one, and its large parallel calls ran on every core)."""
+    import threading
+
+    import numba
+
+    from terrainvis.core.interrupt import THREAD_MIN_WORK, call
+
+    def kernel(stop):
+        return threading.current_thread().name, numba.get_num_threads()
+
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert call(kernel, work=THREAD_MIN_WORK) == ("terrainvis-call", 1)
+        if numba.config.NUMBA_NUM_THREADS >= 2:
+            numba.set_num_threads(2)
+            assert call(kernel, work=THREAD_MIN_WORK) == ("terrainvis-call", 2)
+    finally:
+        numba.set_num_threads(before)
+
+
 def test_a_thread_flag_once_set_stops_calls_in_that_thread():
     """:func:`call` in a unit thread hands the shared flag to the kernel, and raises once it is set."""
     import threading
