@@ -331,10 +331,45 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
 
 
 # ---------------------------------------------------------------- dask
+def _host_threads(client) -> dict:
+    """``{worker address: the threads of every worker on its host}``, from the scheduler (empty when it cannot tell)."""
+    with contextlib.suppress(Exception):
+        workers = client.scheduler_info()["workers"]
+        per_host = {}
+        for w in workers.values():
+            per_host[w["host"]] = per_host.get(w["host"], 0) + int(w["nthreads"])
+        return {address: per_host[w["host"]] for address, w in workers.items()}
+    return {}
+
+
+def _on_dask_worker(host_threads: dict, fn, *args):
+    """``fn(*args)`` in a dask worker's thread, numba on that thread's share of its machine's
+    cores: the cores over the threads of every worker on the machine (``host_threads``, by
+    worker address; the worker's own threads for one the scheduler had not listed), as
+    :func:`_worker_init` gives a local worker its share.
+
+    numba keeps its thread count per thread, and a thread that never set it runs parallel
+    kernels on every core: two one-thread workers on two cores ran four. The share is set
+    for each unit, since the thread may serve other work between units.
+    """
+    share = None
+    with contextlib.suppress(Exception):  # not on a worker (a client's local thread), or another distributed API
+        from distributed import get_worker
+
+        w = get_worker()
+        share = max(1, (os.cpu_count() or 1) // max(1, int(host_threads.get(w.address, w.state.nthreads))))
+    if share is not None:
+        import numba
+
+        numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))
+    return fn(*args)
+
+
 def _run_dask(tasks, fn, on_result, client, signals: _Signals) -> None:
     from dask.distributed import wait as dask_wait
 
     futures = {}
+    host_threads = _host_threads(client)
     try:
         scattered = {}
         for key, args in tasks:
@@ -347,7 +382,7 @@ def _run_dask(tasks, fn, on_result, client, signals: _Signals) -> None:
                     sent.append(scattered[id(a)])
                 else:
                     sent.append(a)
-            futures[client.submit(fn, *sent, pure=False)] = key
+            futures[client.submit(_on_dask_worker, host_threads, fn, *sent, pure=False)] = key
             signals.check()
         pending = set(futures)
         while pending:

@@ -263,6 +263,30 @@ def test_a_large_call_s_helper_thread_keeps_the_caller_s_numba_threads():
         numba.set_num_threads(before)
 
 
+def _numba_threads(i):
+    import numba
+
+    return numba.get_num_threads()
+
+
+def test_a_unit_on_dask_runs_numba_on_its_thread_s_share_of_the_cores():
+    """A dask worker's thread runs its unit's kernels on the cores over the threads of all
+    the workers on its machine (numba's default in a fresh thread is every core)."""
+    distributed = pytest.importorskip("distributed", reason="the dask extra is not installed")
+    import numba
+
+    from terrainvis.core.runner import run_units
+
+    share = min(max(1, (os.cpu_count() or 1) // 2), numba.config.NUMBA_NUM_THREADS)
+    for workers, threads in ((1, 2), (2, 1)):  # two threads of one worker, or two one-thread workers, on one machine
+        got = {}
+        with distributed.LocalCluster(n_workers=workers, threads_per_worker=threads, processes=False,
+                                      dashboard_address=None) as cluster:
+            with distributed.Client(cluster) as client:
+                run_units([(i, (i,)) for i in range(4)], _numba_threads, on_result=got.__setitem__, client=client)
+        assert got == {i: share for i in range(4)}, (workers, threads)
+
+
 def test_a_thread_flag_once_set_stops_calls_in_that_thread():
     """:func:`call` in a unit thread hands the shared flag to the kernel, and raises once it is set."""
     import threading
