@@ -86,13 +86,23 @@ def _meminfo_available() -> int | None:
     return None
 
 
-def _cgroup_room() -> int | None:
-    """The memory limit of this process's cgroup minus its usage (None: no limit, or not Linux)."""
+#: The cgroup files that bound this process's memory, ``(limit, usage)``: looked up once
+#: (:func:`_cgroup_files`; a process stays in its cgroup), since a run checks memory before
+#: every visibility matrix, thousands of times. ``()``: no limit was found.
+_CGROUP_FILES: tuple | None = None
+
+
+def _cgroup_files() -> tuple:
+    """``(limit path, usage path)`` of the first cgroup folder with a memory limit, or ``()``."""
+    global _CGROUP_FILES
+    if _CGROUP_FILES is not None:
+        return _CGROUP_FILES
+    found = ()
     try:
         with open("/proc/self/cgroup", encoding="ascii") as fh:
             lines = fh.read().splitlines()
     except (OSError, UnicodeDecodeError):
-        return None
+        lines = []
     for line in lines:
         parts = line.split(":", 2)
         if len(parts) != 3:
@@ -105,10 +115,26 @@ def _cgroup_room() -> int | None:
         else:
             continue
         for folder in (base + group.rstrip("/"), base):  # the group's own folder, or the namespace's root
-            limit, used = (_read_int(f"{folder}/{name}") for name in names)
+            paths = tuple(f"{folder}/{name}" for name in names)
+            limit, used = (_read_int(p) for p in paths)
             if limit is not None and used is not None and limit < (1 << 60):
-                return max(0, limit - used)
-    return None
+                found = paths
+                break
+        if found:
+            break
+    _CGROUP_FILES = found
+    return found
+
+
+def _cgroup_room() -> int | None:
+    """The memory limit of this process's cgroup minus its usage (None: no limit, or not Linux)."""
+    files = _cgroup_files()
+    if not files:
+        return None
+    limit, used = (_read_int(p) for p in files)
+    if limit is None or used is None or limit >= (1 << 60):
+        return None
+    return max(0, limit - used)
 
 
 def _sysconf_available() -> int | None:

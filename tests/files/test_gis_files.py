@@ -156,6 +156,43 @@ def test_simplify_checks_its_memory_first(monkeypatch):
     assert simplifiers.simplify(g, "lls", 1).shape == (33, 33)
 
 
+def test_the_cgroup_limit_is_found_once_and_its_usage_read_at_every_check(monkeypatch):
+    """The cgroup's memory files are looked up once per process (a compare run checks memory
+    before every visibility matrix); the limit and the usage are read at every check. v2,
+    the group's own ``memory.max`` unlimited, the namespace root's limit used."""
+    import io
+
+    import terrainvis.core.memory as mem
+
+    files = {
+        "/proc/self/cgroup": "0::/user.slice/job\n",
+        "/sys/fs/cgroup/user.slice/job/memory.max": "max\n",
+        "/sys/fs/cgroup/user.slice/job/memory.current": "5\n",
+        "/sys/fs/cgroup/memory.max": "1000000\n",
+        "/sys/fs/cgroup/memory.current": "250000\n",
+    }
+    opened = []
+
+    def fake_open(path, encoding=None):
+        opened.append(path)
+        if path not in files:
+            raise OSError(path)
+        return io.StringIO(files[path])
+
+    monkeypatch.setattr(mem, "open", fake_open, raising=False)
+    monkeypatch.setattr(mem, "_CGROUP_FILES", None)
+    assert mem._cgroup_room() == 750_000
+    files["/sys/fs/cgroup/memory.current"] = "900000\n"
+    assert mem._cgroup_room() == 100_000
+    assert opened.count("/proc/self/cgroup") == 1
+    assert mem._cgroup_files() == ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current")
+    # no limit anywhere: none, and not looked up again
+    files["/sys/fs/cgroup/memory.max"] = "max\n"
+    monkeypatch.setattr(mem, "_CGROUP_FILES", None)
+    assert mem._cgroup_room() is None and mem._cgroup_room() is None
+    assert opened.count("/proc/self/cgroup") == 2 and mem._CGROUP_FILES == ()
+
+
 # ------------------------------------------------------------------ names that are not UTF-8
 def test_geotiff_names_that_are_not_utf8(tmp_path, gm):
     name = os.fsdecode(b"dem_\xff.tif")
