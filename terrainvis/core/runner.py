@@ -182,6 +182,17 @@ def _as_interrupted(exc: BaseException) -> Interrupted:
     return exc if isinstance(exc, Interrupted) else Interrupted(signal.SIGINT)
 
 
+def _collect(futures: dict, on_result, signals: _Signals) -> None:
+    """Hand each future's result to ``on_result(key, result)`` as it finishes (``futures``:
+    future -> key), checking for a signal between waits of at most 0.2 s."""
+    pending = set(futures)
+    while pending:
+        done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+        for fut in done:
+            on_result(futures[fut], fut.result())
+        signals.check()
+
+
 # ---------------------------------------------------------------- threads of this process
 def _run_threads(tasks, fn, on_result, n_threads: int, signals: _Signals) -> None:
     """The units on ``n_threads`` threads of this process, numba on one thread in each."""
@@ -203,12 +214,7 @@ def _run_threads(tasks, fn, on_result, n_threads: int, signals: _Signals) -> Non
     try:
         for key, args in tasks:
             futures[pool.submit(one, args)] = key
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            for fut in done:
-                on_result(futures[fut], fut.result())
-            signals.check()
+        _collect(futures, on_result, signals)
     except BaseException as exc:
         stop[0] = 1  # running kernels return within a ring; the next call() in those threads raises
         pool.shutdown(wait=True, cancel_futures=True)  # signals only note themselves meanwhile (defer)
@@ -256,12 +262,7 @@ def _run_pool(tasks, fn, on_result, n_workers: int, signals: _Signals) -> None:
             for key, args in tasks:  # the pool starts its workers inside submit()
                 futures[pool.submit(fn, *args)] = key
         signals.check()
-        pending = set(futures)
-        while pending:
-            done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-            for fut in done:
-                on_result(futures[fut], fut.result())
-            signals.check()
+        _collect(futures, on_result, signals)
     except BrokenProcessPool as exc:
         _stop_pool(pool)
         if signals.pending is not None:  # the same signal reached a worker too: the user's stop
