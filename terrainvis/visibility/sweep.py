@@ -606,11 +606,12 @@ def _max_slope(grid: HeightGrid) -> float:
 
 
 def _build_tables(grid: HeightGrid) -> None:
-    """Build a grid's tables for its first viewshed, two at a time: the steepest slope and
-    the pair engine's pyramid (for the nearest sample and the targets the bounds leave) in a
-    helper thread, the strips' maxima here. On 3601² the three took 0.19 s one after the other. Small grids, a grid already done, numba on one thread and
-    threads other than the main one (units of :func:`terrainvis.core.runner.run_units`)
-    build them where they are first needed, one after the other."""
+    """Build a grid's tables for its first sweep, two at a time: the steepest slope and the
+    pair engine's pyramid (for the nearest sample and the targets the bounds leave) in a
+    helper thread, the strips' maxima here. On 3601² the three took 0.19 s one after the
+    other. Small grids, a grid already done, numba on one thread and threads other than
+    the main one (units of :func:`terrainvis.core.runner.run_units`) build them where they
+    are first needed, one after the other."""
     cached = grid._cache
     if ("viewshed_max_slope" in cached and "viewshed_strip_max" in cached) or grid.size < THREAD_MIN_WORK \
             or numba.get_num_threads() < 2 or threading.current_thread() is not threading.main_thread():
@@ -650,7 +651,8 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, s
     buckets by sector and ring first. Without ``sweep`` every target goes to the exact walk.
     """
     h_t, dmax, kc = query
-    _build_tables(grid)
+    if sweep:
+        _build_tables(grid)
     code, zt = _target_codes(grid, at, eye, dmax, own)
     delta = trim_length(grid)
     tol = clearance_tolerance(grid)
