@@ -233,7 +233,7 @@ def loading_kernels(load, command: str):
         yield
         job.wait()
     except BaseException as exc:
-        if isinstance(exc, KeyboardInterrupt):
+        if isinstance(exc, KeyboardInterrupt) and not job.finished():
             print(f"terrainvis {command}: stopping once the kernels have loaded", file=sys.stderr, flush=True)
         job.wait_through()
         raise

@@ -291,6 +291,10 @@ class _Job:
 
         threading.Thread(target=target, name="terrainvis-call", daemon=True).start()
 
+    def finished(self) -> bool:
+        """Whether the call has returned (or raised)."""
+        return self._done.is_set()
+
     def wait(self) -> None:
         """Until the call returns; an interrupt (a signal handler's exception) ends the wait."""
         while not self._done.wait(_JOIN_STEP):
