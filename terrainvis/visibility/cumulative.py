@@ -281,9 +281,9 @@ def _local_threads(terrain, engine: str, workers: int, client) -> int:
     """How many units run at once in this process (``workers=1``, no client): numba's threads
     for the grid engine, whose sweep then runs on one core per viewshed; else 1.
 
-    Two viewsheds at a time, one per core, beat one viewshed's sweep spread over both: its
-    sectors do not split evenly and its pair walks start a parallel loop for a few
-    segments (docs/user-guide.md, "Many observers"). Embree and registered engines keep
+    Two viewsheds at a time, one per core, beat one viewshed's sweep spread over both: on a
+    million samples that sweep gained little over one core, and its pair walks start a
+    parallel loop for a few segments (docs/user-guide.md, "Many observers"). Embree and registered engines keep
     their own threads, so their units run one after the other.
     """
     if client is not None or workers != 1 or not isinstance(terrain, HeightGrid) or engine not in ("auto", "grid"):
