@@ -150,39 +150,16 @@ def cumulative_viewshed(
            [1, 1, 2, 1, 1],
            [1, 1, 2, 1, 1]], dtype=uint16)
     """
-    from ..core.runner import check_client, check_workers, run_units
+    run = _prepare(terrain, observers, observer_height,
+                   (target_height, max_distance, at, engine, curvature, earth_radius), workers, client, progress,
+                   "observers", fov=(azimuth, vertical, min_distance))
+    k = run["obs"].shape[0]
+    total = np.zeros((terrain if at is None else at).shape, dtype=_count_dtype(k))
 
-    as_terrain(terrain)
-    obs = _as_observers(observers)
-    k = obs.shape[0]
-    heights = _as_heights(observer_height, k, terrain)
-    options = _options(terrain, target_height, max_distance, at, engine, curvature, earth_radius)
-    fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance, max_distance=max_distance)
-    options.update(azimuth=fov.azimuth, vertical=fov.vertical, min_distance=fov.min_distance)
-    workers = check_workers(workers)
-    client = check_client(client)
-    if workers is None:
-        workers = 1  # in this process (see ``workers`` above)
-    _check_inside(terrain, obs)
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be True or False, got {describe(progress)}")
-    target_grid = terrain if at is None else at
-    dtype = _count_dtype(k)
-    total = np.zeros(target_grid.shape, dtype=dtype)
-    threads = _local_threads(terrain, engine, workers, client)
-    chunks = _chunks(k, max(_n_slots(workers, client), threads))
-    token = uuid.uuid4().hex
-    tasks = [((s, e), (terrain, at, token, obs[s:e], heights[s:e], options)) for s, e in chunks]
-    bar = _progress_bar(k, progress)
-    try:
-        def add(key, counts):
-            np.add(total, counts, out=total, casting="unsafe")  # counts <= K fit the total's dtype
-            bar.update(key[1] - key[0])
+    def add(key, counts):
+        np.add(total, counts, out=total, casting="unsafe")  # counts <= K fit the total's dtype
 
-        run_units(tasks, _unit, on_result=add, workers=workers, client=client, threads=threads)
-    finally:
-        bar.close()
-        _WORKER_TERRAIN.pop(token, None)  # units that ran here held the terrain
+    _run_chunks(run, _unit, add, desc="cumulative viewshed")
     return total
 
 
@@ -321,7 +298,59 @@ def _keep_terrain(token: str, terrain, at):
     return terrain, at
 
 
-def _progress_bar(k: int, show: bool):
+# ----------------------------------------------------------------- the chunked run (shared with observer sets and siting)
+def _prepare(terrain, observers, observer_height, options, workers, client, progress, name: str, *,
+             fov=(None, None, None)) -> dict:
+    """Validate the arguments of a run of one viewshed per observer (:func:`cumulative_viewshed`,
+    :func:`terrainvis.observer_sets`, :func:`terrainvis.site_observers`).
+
+    ``options`` is ``(target_height, max_distance, at, engine, curvature, earth_radius)``;
+    ``name`` names the observers' argument in messages; ``fov`` is ``(azimuth, vertical,
+    min_distance)``, each observer's field of view.
+    """
+    from ..core.runner import check_client, check_workers
+
+    as_terrain(terrain)
+    obs = _as_observers(observers, name)
+    heights = _as_heights(observer_height, obs.shape[0], terrain)
+    opts = _options(terrain, *options)
+    limits = field_of_view(azimuth=fov[0], vertical=fov[1], min_distance=fov[2], max_distance=options[1])
+    opts.update(azimuth=limits.azimuth, vertical=limits.vertical, min_distance=limits.min_distance)
+    workers = check_workers(workers)
+    client = check_client(client)
+    _check_inside(terrain, obs, name)
+    if not isinstance(progress, (bool, np.bool_)):
+        raise TypeError(f"progress must be True or False, got {describe(progress)}")
+    return {"terrain": terrain, "at": options[2], "obs": obs, "heights": heights, "options": opts,
+            "workers": 1 if workers is None else workers, "client": client, "progress": bool(progress)}
+
+
+def _run_chunks(run: dict, unit, on_result, *, align: int = 1, desc: str) -> None:
+    """Run ``unit`` over chunks of the observers (starting on multiples of ``align``; each
+    chunk one unit of :func:`terrainvis.core.runner.run_units`), showing a progress bar
+    of observers (``desc``); ``on_result((start, end), result)`` as each unit finishes."""
+    from ..core.runner import run_units
+
+    k = run["obs"].shape[0]
+    threads = _local_threads(run["terrain"], run["options"]["engine"], run["workers"], run["client"])
+    groups = _chunks(-(-k // align), max(_n_slots(run["workers"], run["client"]), threads))
+    chunks = [(s * align, min(e * align, k)) for s, e in groups]
+    token = uuid.uuid4().hex
+    tasks = [((s, e), (run["terrain"], run["at"], token, run["obs"][s:e], run["heights"][s:e], run["options"]))
+             for s, e in chunks]
+    bar = _progress_bar(k, run["progress"], desc)
+    try:
+        def add(key, result):
+            on_result(key, result)
+            bar.update(key[1] - key[0])
+
+        run_units(tasks, unit, on_result=add, workers=run["workers"], client=run["client"], threads=threads)
+    finally:
+        bar.close()
+        _WORKER_TERRAIN.pop(token, None)  # units that ran here held the terrain
+
+
+def _progress_bar(k: int, show: bool, desc: str):
     """A tqdm bar counting observers (disabled unless ``show``)."""
     from tqdm.std import tqdm
 
@@ -329,4 +358,4 @@ def _progress_bar(k: int, show: bool):
         from ..core._progress import progress_bar_class  # the notebook's bar in Jupyter
 
         tqdm = progress_bar_class()
-    return tqdm(total=k, desc="cumulative viewshed", unit="observer", file=sys.stderr, disable=not show)
+    return tqdm(total=k, desc=desc, unit="observer", file=sys.stderr, disable=not show)

@@ -13,36 +13,31 @@ same exact :func:`terrainvis.viewshed` per observer, the same chunks of observer
 terrain between them, with the pair engine's exact minimum clearance
 (:func:`terrainvis.min_clearance`).
 
-The chunked run (:func:`_run_chunks`) is shared with :mod:`terrainvis.visibility.siting`,
-whose units keep each candidate's viewshed as packed bits instead.
+The chunked run (:func:`terrainvis.visibility.cumulative._run_chunks`) is the cumulative
+viewshed's, shared with :mod:`terrainvis.visibility.siting`, whose units keep each
+candidate's viewshed as packed bits instead.
 """
 
 from __future__ import annotations
 
 import json
-import sys
-import uuid
 from pathlib import Path
 
 import numpy as np
 
 from ..core.memory import check_memory
-from ..core.terrain import HeightGrid, as_terrain
-from ..core.validate import as_int, describe
+from ..core.terrain import as_terrain
+from ..core.validate import as_int
 from ..errors import OutsideFootprintError
 from .cumulative import (
-    _WORKER_TERRAIN,
     _as_heights,
     _as_observers,
     _check_inside,
-    _chunks,
     _count_dtype,
     _keep_terrain,
-    _local_threads,
-    _n_slots,
-    _options,
+    _prepare,
+    _run_chunks,
 )
-from .field_of_view import field_of_view
 from .predicate import EARTH_RADIUS, clearance_tolerance, curvature_coefficient
 from .sweep import _surface_at, viewshed
 
@@ -289,67 +284,6 @@ def _sets_unit(terrain, at, token: str, observers: np.ndarray, heights: np.ndarr
         v = viewshed(terrain, observers[i], observer_height=heights[i], at=at, **options)
         out[:, :, i >> 3] |= v.view(np.uint8) << np.uint8(7 - (i & 7))
     return out
-
-
-# ----------------------------------------------------------------- the chunked run (shared with siting)
-def _prepare(terrain, observers, observer_height, options, workers, client, progress, name: str, *,
-             fov=(None, None, None)) -> dict:
-    """Validate the arguments of a run of one viewshed per observer, as :func:`terrainvis.cumulative_viewshed` does.
-
-    ``options`` is ``(target_height, max_distance, at, engine, curvature, earth_radius)``;
-    ``name`` names the observers' argument in messages; ``fov`` is ``(azimuth, vertical,
-    min_distance)``, each observer's field of view.
-    """
-    from ..core.runner import check_client, check_workers
-
-    as_terrain(terrain)
-    obs = _as_observers(observers, name)
-    heights = _as_heights(observer_height, obs.shape[0], terrain)
-    opts = _options(terrain, *options)
-    limits = field_of_view(azimuth=fov[0], vertical=fov[1], min_distance=fov[2], max_distance=options[1])
-    opts.update(azimuth=limits.azimuth, vertical=limits.vertical, min_distance=limits.min_distance)
-    workers = check_workers(workers)
-    client = check_client(client)
-    _check_inside(terrain, obs, name)
-    if not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be True or False, got {describe(progress)}")
-    return {"terrain": terrain, "at": options[2], "obs": obs, "heights": heights, "options": opts,
-            "workers": 1 if workers is None else workers, "client": client, "progress": bool(progress)}
-
-
-def _run_chunks(run: dict, unit, on_result, *, align: int = 1, desc: str) -> None:
-    """Run ``unit`` over chunks of the observers (starting on multiples of ``align``), as
-    :func:`terrainvis.cumulative_viewshed` runs its units; ``on_result((start, end), result)``."""
-    from ..core.runner import run_units
-
-    k = run["obs"].shape[0]
-    threads = _local_threads(run["terrain"], run["options"]["engine"], run["workers"], run["client"])
-    groups = _chunks(-(-k // align), max(_n_slots(run["workers"], run["client"]), threads))
-    chunks = [(s * align, min(e * align, k)) for s, e in groups]
-    token = uuid.uuid4().hex
-    tasks = [((s, e), (run["terrain"], run["at"], token, run["obs"][s:e], run["heights"][s:e], run["options"]))
-             for s, e in chunks]
-    bar = _progress_bar(k, run["progress"], desc)
-    try:
-        def add(key, result):
-            on_result(key, result)
-            bar.update(key[1] - key[0])
-
-        run_units(tasks, unit, on_result=add, workers=run["workers"], client=run["client"], threads=threads)
-    finally:
-        bar.close()
-        _WORKER_TERRAIN.pop(token, None)  # units that ran here held the terrain
-
-
-def _progress_bar(k: int, show: bool, desc: str):
-    """A tqdm bar counting observers (disabled unless ``show``)."""
-    from tqdm.std import tqdm
-
-    if show:
-        from ..core._progress import progress_bar_class  # the notebook's bar in Jupyter
-
-        tqdm = progress_bar_class()
-    return tqdm(total=k, desc=desc, unit="observer", file=sys.stderr, disable=not show)
 
 
 # ----------------------------------------------------------------- the network

@@ -20,7 +20,7 @@ Memory: each candidate's viewshed is kept as packed bits (``numpy.packbits``), K
 cols / 8 bytes (1,000 candidates on 1024²: 125 MiB); a request that would not fit is
 refused before anything runs (:func:`terrainvis.core.memory.check_memory`). The viewsheds
 run in chunks of candidates as :func:`terrainvis.cumulative_viewshed`'s observers do
-(:func:`terrainvis.visibility.observers._run_chunks`), on this process, local workers or
+(:func:`terrainvis.visibility.cumulative._run_chunks`), on this process, local workers or
 dask; the greedy choice itself runs here, in numpy (an AND and a popcount per evaluation).
 
 References
@@ -54,8 +54,8 @@ import numpy as np
 from ..core.memory import check_memory
 from ..core.terrain import HeightGrid, as_terrain
 from ..core.validate import as_int, describe
-from .cumulative import _keep_terrain
-from .observers import _eyes, _prepare, _run_chunks
+from .cumulative import _keep_terrain, _prepare, _run_chunks
+from .observers import _eyes
 from .predicate import EARTH_RADIUS
 from .sweep import _on_surface, viewshed
 
