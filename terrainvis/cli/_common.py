@@ -8,7 +8,6 @@ here once, by ``add_*`` functions, so that they read and fail the same everywher
 from __future__ import annotations
 
 import argparse
-import contextlib
 from pathlib import Path
 
 
@@ -213,31 +212,25 @@ def _read_tin(path: Path):
     return _read(path, file_label(path.stem))
 
 
-@contextlib.contextmanager
 def loading_kernels(load, command: str):
-    """``load()`` in a helper thread while the block runs: the imports and first calls that
-    load a command's cached numba kernels (about half a second) beside the block's reading
-    of its input. Its error, if any, is raised when the block ends.
+    """A block during which ``load()`` runs in a helper thread: the imports and first calls
+    that load a command's cached numba kernels (about half a second) beside the block's
+    reading of its input (:func:`terrainvis.core.interrupt.alongside`). Its error, if any, is
+    raised when the block ends.
 
     GDAL's decompression releases the GIL and numba's loading mostly holds it, so on two
     cores the two overlap. The block's own error or an interrupt still waits for the load to
-    end (an interrupt says so on stderr): a process must not exit while LLVM works in
-    another thread (see :func:`terrainvis.core.interrupt.call_library`).
+    end (an interrupt while it loads says so on stderr): a process must not exit while
+    LLVM works in another thread.
     """
     import sys
 
-    from ..core.interrupt import _Job
+    from ..core.interrupt import alongside
 
-    job = _Job(load)
-    try:
-        yield
-        job.wait()
-    except BaseException as exc:
-        if isinstance(exc, KeyboardInterrupt) and not job.finished():
-            print(f"terrainvis {command}: stopping once the kernels have loaded", file=sys.stderr, flush=True)
-        job.wait_through()
-        raise
-    job.result()
+    def note():
+        print(f"terrainvis {command}: stopping once the kernels have loaded", file=sys.stderr, flush=True)
+
+    return alongside(load, on_interrupt=note)
 
 
 def working(command: str, what: str) -> None:

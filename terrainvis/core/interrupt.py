@@ -72,7 +72,7 @@ import sys
 import threading
 
 __all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library",
-           "kept_interrupts", "raise_pending", "call_library", "thread_flag"]
+           "kept_interrupts", "raise_pending", "call_library", "thread_flag", "alongside"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
@@ -232,6 +232,30 @@ def _raise_if_set(flag) -> None:
         from ..errors import Interrupted
 
         raise Interrupted(signal.SIGINT)
+
+
+@contextlib.contextmanager
+def alongside(fn, *, on_interrupt=None):
+    """``fn()`` in a helper thread while the block runs in this one; its error, if any, is
+    raised when the block ends.
+
+    For work that can overlap (loading kernels while a file is read, building one table
+    while another is built). The block's own error or an interrupt still waits for ``fn``
+    to return before it propagates, calling ``on_interrupt()`` first on an interrupt that
+    finds ``fn`` still running: a process must not exit while a kernel, LLVM or a library
+    works in another thread (see :func:`call_library`). ``fn`` takes no stop flag, so it
+    should take well under a second or two.
+    """
+    job = _Job(fn)
+    try:
+        yield
+        job.wait()
+    except BaseException as exc:
+        if isinstance(exc, KeyboardInterrupt) and on_interrupt is not None and not job.finished():
+            on_interrupt()
+        job.wait_through()
+        raise
+    job.result()
 
 
 def call_library(fn, *args, what: str, **kwargs):

@@ -73,7 +73,7 @@ import numba
 import numpy as np
 
 from ..tolerances import EXTENT_INSIDE_REL, HOLE_REACH_SLACK, OUTPUT_SETTLE_REL, TRIM_MARGIN_REL
-from ..core.interrupt import THREAD_MIN_WORK, call
+from ..core.interrupt import THREAD_MIN_WORK, alongside, call
 from ..core.mesh import footprint_matches
 from ..core.surface import SurfaceGrid, no_pyramid
 from ..core.validate import as_nonnegative_finite, describe
@@ -616,22 +616,15 @@ def _build_tables(grid: HeightGrid) -> None:
     if ("viewshed_max_slope" in cached and "viewshed_strip_max" in cached) or grid.size < THREAD_MIN_WORK \
             or numba.get_num_threads() < 2 or threading.current_thread() is not threading.main_thread():
         return
-    from ..core.interrupt import _Job
     from .grid import grid_accel
 
-    def helper():
+    def helper():  # its kernels take no stop flag: under a second on 3601²
         _max_slope(grid)
         if not grid.n_nodata:
             grid_accel(grid)
 
-    job = _Job(helper)
-    try:
+    with alongside(helper):
         _strip_max(grid)
-        job.wait()
-    except BaseException:
-        job.wait_through()  # its kernels take no stop flag: under a second on 3601²
-        raise
-    job.result()
 
 
 def _nanrange(grid: HeightGrid) -> tuple[float, float]:
