@@ -254,8 +254,24 @@ def _reads_back(path: Path, data: np.ndarray, tags: dict) -> bool:
     with rasterio.open(path) as src:
         back = src.read(1)
         stored = src.tags()
-    same = back.shape == data.shape and back.dtype == data.dtype and np.array_equal(back, data, equal_nan=True)
+    same = back.shape == data.shape and back.dtype == data.dtype and _same_values(back, data)
     return same and all(stored.get(k) == v for k, v in tags.items())
+
+
+#: Unsigned integer types by size in bytes, for comparing arrays bit for bit.
+_BITS = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
+
+
+def _same_values(a: np.ndarray, b: np.ndarray) -> bool:
+    """``np.array_equal(a, b, equal_nan=True)`` for two arrays of one shape and dtype, bit for
+    bit first: on a 3601² float32 raster the bits take 0.01 s and ``equal_nan`` 0.3 s (it
+    finds the NaN of both arrays); only arrays whose bits differ (a NaN's payload, -0.0)
+    take the slow comparison."""
+    bits = _BITS.get(a.dtype.itemsize)
+    if bits is not None and a.dtype.kind in "biuf" and a.flags.c_contiguous and b.flags.c_contiguous \
+            and np.array_equal(a.view(bits), b.view(bits)):
+        return True
+    return bool(np.array_equal(a, b, equal_nan=True))
 
 
 @contextlib.contextmanager

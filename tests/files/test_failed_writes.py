@@ -158,3 +158,37 @@ def test_viewshed_on_a_full_tmpfs_keeps_the_old_file():
         assert "No space left on device" in r.stderr
         assert out.read_bytes() == before
         assert sorted(p.name for p in disk.iterdir()) == ["filler", "old.tif"]
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64", "uint8", "int16", "uint16", "int32"])
+def test_the_read_back_compares_as_array_equal_with_nan_does(dtype):
+    """The bit-for-bit shortcut of the read-back check says what ``np.array_equal(...,
+    equal_nan=True)`` says: NaN of other payloads and -0.0 are equal, other values are not."""
+    import numpy as np
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+    from hypothesis.extra.numpy import arrays
+
+    from terrainvis.io._geotiff import _same_values
+
+    dt = np.dtype(dtype)
+    floats = dt.kind == "f"
+
+    @settings(max_examples=60, deadline=None)
+    @given(arrays(dt, st.tuples(st.integers(1, 6), st.integers(1, 6))), st.data())
+    def check(a, data):
+        b = a.copy()
+        flat = b.reshape(-1)
+        for i in data.draw(st.lists(st.integers(0, flat.size - 1), max_size=3)):
+            kind = data.draw(st.sampled_from(["nan", "zero", "value"] if floats else ["value"]))
+            if kind == "nan" and np.isnan(flat[i]):
+                bits = flat[i:i + 1].view(f"u{dt.itemsize}")
+                bits ^= 1  # another NaN (the payload's lowest bit)
+            elif kind == "zero" and flat[i] == 0:
+                flat[i] = -flat[i]
+            else:
+                flat[i] = data.draw(arrays(dt, 1))[0]
+        assert _same_values(a, b) == bool(np.array_equal(a, b, equal_nan=True))
+        assert _same_values(a, a.copy())
+
+    check()
