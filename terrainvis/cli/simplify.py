@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import UsageError, add_nodata, distance_arg, plural, read_terrain, working
+from ._common import UsageError, add_nodata, distance_arg, loading_kernels, plural, read_terrain, working
 
 
 #: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
@@ -60,7 +60,8 @@ def run(args) -> int:
         raise UsageError(f"-o {out.name!r}: a .npy file keeps only the heights, and a simplification needs its "
                          "coordinates (a coarser grid or a TIN): write .npz, .tif, .asc or a mesh")
     check_output_file(out, "-o", inputs=[args.dem])
-    label, grid = read_terrain(args.dem, args)
+    with loading_kernels(_load_kernels, "simplify"):
+        label, grid = read_terrain(args.dem, args)
     level = 1 if args.level is None and args.max_error is None else args.level
     at = f"level {level}" if level is not None else f"max error {args.max_error:g}"
     working("simplify", f"simplifying {grid.shape[0]}x{grid.shape[1]} samples with {args.method} to {at}")
@@ -94,6 +95,20 @@ def run(args) -> int:
         print(f"  heights stored as float32, rounded by up to {loss:.3g} (z units; --dtype float64 keeps them)")
     print(f"  wrote {out}")
     return 0
+
+
+def _load_kernels() -> None:
+    """Import numba and load the kernel every simplification measures itself with (its
+    vertical errors; a 3 x 3 grid against itself), beside the DEM's reading: numba's import
+    and its first cached kernel are most of a second, a method's own kernels a few
+    milliseconds each after it."""
+    import numpy as np
+
+    from ..core.deviation import vertical_errors
+    from ..core.terrain import HeightGrid
+
+    grid = HeightGrid(np.zeros((3, 3)))
+    vertical_errors(grid, grid)
 
 
 def parse_options(items) -> dict:

@@ -42,12 +42,21 @@ def vertical_errors(fine: HeightGrid, coarse) -> tuple[float, float]:
     xmin, xmax, ymin, ymax = coarse.extent
     slack = COVER_EDGE_CELL_REL * _cell(coarse)
     approx = coarse.height_on_grid(_onto(fine.xs, xmin, xmax, slack), _onto(fine.ys, ymin, ymax, slack))
-    valid = np.isfinite(fine.z)
-    uncovered = int(np.isnan(approx[valid]).sum())
+    if fine.n_nodata:
+        valid = np.isfinite(fine.z)
+        approx = approx[valid]
+        z = fine.z[valid]
+    else:  # every sample counts: no masked copies (on 3601², 0.74 s of numpy passes before)
+        approx = approx.ravel()
+        z = fine.z.ravel()
+    uncovered = int(np.count_nonzero(np.isnan(approx)))
     if uncovered:
         raise ValueError(f"coarse must cover the fine grid, but {uncovered} fine samples fall outside it")
-    diff = approx[valid] - fine.z[valid]
-    return float(np.abs(diff).max()), float(np.sqrt(np.mean(diff**2)))
+    diff = np.subtract(approx, z, out=approx)  # approx is this call's own array
+    np.abs(diff, out=diff)
+    worst = float(diff.max())
+    np.square(diff, out=diff)  # the squares of the differences, as diff**2 gives them
+    return worst, float(np.sqrt(np.mean(diff)))
 
 
 def _cell(terrain) -> float:

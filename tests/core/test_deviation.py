@@ -95,6 +95,30 @@ def test_vertical_errors_grid_and_tin():
         vertical_errors(fine, HeightGrid(np.zeros((2, 2))))
 
 
+@pytest.mark.parametrize("holes", [False, True])
+@pytest.mark.parametrize("method", ["lls", "qec"])
+def test_vertical_errors_against_every_sample_one_by_one(method, holes):
+    """Max and RMS error against a plain loop over the fine samples (``height_at`` of each,
+    nodata samples skipped); the fine grid with nodata takes the masked path."""
+    fine = synthetic_terrain("hills", size=49, seed=3)
+    coarse = simplify(fine, method, 2)
+    if holes:
+        z = fine.z.copy()
+        z[5:9, 30:33] = np.nan
+        z[40, 2] = np.nan
+        fine = HeightGrid(z, fine.dx, fine.dy, (fine.xs[0], fine.ys[0]))
+    diffs = []
+    for r, y in enumerate(fine.ys):
+        for c, x in enumerate(fine.xs):
+            if np.isfinite(fine.z[r, c]):
+                diffs.append(coarse.height_at([[x, y]])[0] - fine.z[r, c])
+    diffs = np.array(diffs)
+    mx, rms = vertical_errors(fine, coarse)
+    assert diffs.size == fine.size - fine.n_nodata
+    assert mx == np.abs(diffs).max()
+    assert rms == pytest.approx(np.sqrt(np.mean(diffs ** 2)), rel=1e-12)
+
+
 # ------------------------------------------------- the closed-form kernel pieces
 def test_abs_integral_tri_hand_cases():
     # one sign: the mean of the vertex values times the area
