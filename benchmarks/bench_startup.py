@@ -16,10 +16,12 @@ turn (A B A B ...; ratios are taken pair by pair, so a drifting machine cancels 
   either; a yardstick for reading and writing, not the same work);
 * ``terrainvis --help`` against ``gdalinfo --version`` (start-up alone);
 
-and then splits one ``terrainvis viewshed`` into its phases, each timed in a fresh
-process: the interpreter (``python -c pass``), the imports the command makes, loading
-the cached numba kernels (the first call, on a 3 x 3 grid), reading the DEM, the call
-(its per-grid tables included) and writing the GeoTIFF.
+and then splits each of ``viewshed``, ``los``, ``info`` and ``simplify`` into its phases, one
+after the other in a fresh process per run: the interpreter (``python -c pass``), the
+imports the command makes, loading the cached numba kernels (the first calls, on a 3 x 3
+grid; ``viewshed``, ``los`` and ``simplify`` overlap this with reading), reading the DEM,
+the per-grid tables (the sweep's for ``viewshed``, the pair engine's pyramid for ``los``),
+the call and writing the output.
 
 Usage::
 
@@ -47,23 +49,79 @@ TERRAINVIS = str(VENV_BIN / "terrainvis")
 PHASES = r"""
 import sys, time
 t = [time.perf_counter()]
+marks = []
+def mark(name):
+    t.append(time.perf_counter())
+    marks.append(name)
+command, dem, out = sys.argv[1], sys.argv[2], sys.argv[3]
+xy = [float(v) for v in sys.argv[4:]]
 import numpy as np
-from terrainvis.cli import _common, viewshed as command
 from terrainvis import HeightGrid
-from terrainvis.io import load_dem, write_mask_geotiff
-from terrainvis.visibility import viewshed
-import rasterio
-t.append(time.perf_counter())
-viewshed(HeightGrid(np.zeros((3, 3))), (1.0, 1.0))  # loads the sweep's cached kernels
-t.append(time.perf_counter())
-grid = load_dem(sys.argv[1])
-t.append(time.perf_counter())
-x, y = float(sys.argv[2]), float(sys.argv[3])
-v = viewshed(grid, (x, y), observer_height=1.7)
-t.append(time.perf_counter())
-write_mask_geotiff(grid, v, sys.argv[4])
-t.append(time.perf_counter())
-print(" ".join(f"{b - a:.4f}" for a, b in zip(t, t[1:])))
+from terrainvis.io import load_dem
+if command == "viewshed":
+    from terrainvis.cli import viewshed as _command
+    from terrainvis.io import write_mask_geotiff
+    from terrainvis.visibility import viewshed
+    from terrainvis.visibility.sweep import _build_tables
+    import rasterio
+    mark("imports")
+    viewshed(HeightGrid(np.zeros((3, 3))), (1.0, 1.0))
+    mark("kernel loading")
+    grid = load_dem(dem)
+    mark("reading")
+    _build_tables(grid)
+    mark("per-grid tables")
+    v = viewshed(grid, (xy[0], xy[1]), observer_height=1.7)
+    mark("the call")
+    write_mask_geotiff(grid, v, out)
+    mark("writing")
+elif command == "los":
+    from terrainvis.cli import los as _command
+    from terrainvis.visibility import line_of_sight, min_clearance
+    from terrainvis.visibility.grid import grid_accel
+    from terrainvis.visibility.profile import lowest_point
+    import rasterio
+    mark("imports")
+    g3 = HeightGrid(np.zeros((3, 3)))
+    a3, b3 = np.array([[0.0, 0.0, 1.0]]), np.array([[2.0, 2.0, 1.0]])
+    line_of_sight(g3, a3, b3), min_clearance(g3, a3, b3), lowest_point(g3, a3[0], b3[0])
+    mark("kernel loading")
+    grid = load_dem(dem)
+    mark("reading")
+    grid_accel(grid)
+    mark("per-grid tables")
+    a = np.array([[xy[0], xy[1], grid.height_at([xy[:2]])[0] + 1.7]])
+    b = np.array([[xy[2], xy[3], grid.height_at([xy[2:]])[0]]])
+    line_of_sight(grid, a, b), min_clearance(grid, a, b), lowest_point(grid, a[0], b[0])
+    mark("the call")
+elif command == "info":
+    from terrainvis.cli import info as _command
+    from simplifiers import METHODS, max_level, vertex_budget
+    import rasterio
+    mark("imports")
+    grid = load_dem(dem)
+    mark("reading")
+    z = grid.z
+    summary = (np.nanmin(z), np.nanmax(z), grid.n_nodata, [vertex_budget(grid.shape, k)
+                                                           for k in range(1, max_level(grid.shape) + 1)])
+    mark("the call")
+else:  # simplify
+    from terrainvis.cli import simplify as _command
+    from terrainvis.core.deviation import vertical_errors
+    from terrainvis.io import save_terrain
+    from simplifiers import simplify
+    import rasterio
+    mark("imports")
+    g3 = HeightGrid(np.zeros((3, 3)))
+    vertical_errors(g3, g3)
+    mark("kernel loading")
+    grid = load_dem(dem)
+    mark("reading")
+    result = simplify(grid, "simple", 1)
+    mark("the call")
+    save_terrain(result, out, dtype="float32")
+    mark("writing")
+print(";".join(f"{name}={b - a:.4f}" for name, a, b in zip(marks, t, t[1:])))
 """
 
 
@@ -131,18 +189,20 @@ def main() -> None:
         _paired("simplify", [TERRAINVIS, "simplify", str(dem), "-m", "simple", "-l", "1", "-o", str(tmp / "s.tif")],
                 translate if gdal else None, args.repeats)
         _paired("--help", [TERRAINVIS, "--help"], ["gdalinfo", "--version"] if gdal else None, args.repeats)
-        names = ["imports", "kernel loading", "reading", "the call", "writing"]
-        runs = []
-        for _ in range(args.repeats):
-            out = subprocess.run([sys.executable, "-c", PHASES, str(dem), f"{x}", f"{y}", str(tmp / "c.tif")],
-                                 capture_output=True, text=True, check=True)
-            runs.append([float(v) for v in out.stdout.split()])
         bare = statistics.median(_wall([sys.executable, "-c", "pass"]) for _ in range(args.repeats))
-        print(f"terrainvis viewshed, phases (medians of {args.repeats} fresh processes):", flush=True)
-        print(f"  {'interpreter':<16} {bare:6.3f} s")
-        for k, name in enumerate(names):
-            print(f"  {name:<16} {statistics.median(r[k] for r in runs):6.3f} s")
-
+        ends = {"viewshed": [f"{x}", f"{y}"], "los": [f"{x1}", f"{y1}", f"{x2}", f"{y2}"], "info": [], "simplify": []}
+        for command, where in ends.items():
+            runs = []
+            for _ in range(args.repeats):
+                out = subprocess.run([sys.executable, "-c", PHASES, command, str(dem), str(tmp / "c.tif"), *where],
+                                     capture_output=True, text=True, check=True)
+                runs.append(dict(item.split("=") for item in out.stdout.strip().split(";")))
+            print(f"terrainvis {command}, phases (medians of {args.repeats} fresh processes; the command overlaps "
+                  f"kernel loading with reading):" if "kernel loading" in runs[0] else
+                  f"terrainvis {command}, phases (medians of {args.repeats} fresh processes):", flush=True)
+            print(f"  {'interpreter':<16} {bare:6.3f} s")
+            for name in runs[0]:
+                print(f"  {name:<16} {statistics.median(float(r[name]) for r in runs):6.3f} s", flush=True)
 
 if __name__ == "__main__":
     main()
