@@ -46,7 +46,7 @@ def vertical_errors(fine: HeightGrid, coarse) -> tuple[float, float]:
         valid = np.isfinite(fine.z)
         approx = approx[valid]
         z = fine.z[valid]
-    else:  # every sample counts: no masked copies (on 3601², 0.74 s of numpy passes before)
+    else:  # every sample counts: no masked copies (0.29-0.36 s with them on 3601², 0.11-0.12 s without)
         approx = approx.ravel()
         z = fine.z.ravel()
     uncovered = int(np.count_nonzero(np.isnan(approx)))

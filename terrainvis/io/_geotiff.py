@@ -264,9 +264,9 @@ _BITS = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
 
 def _same_values(a: np.ndarray, b: np.ndarray) -> bool:
     """``np.array_equal(a, b, equal_nan=True)`` for two arrays of one shape and dtype, bit for
-    bit first: on a 3601² float32 raster the bits take 0.01 s and ``equal_nan`` 0.3 s (it
-    finds the NaN of both arrays); only arrays whose bits differ (a NaN's payload, -0.0)
-    take the slow comparison."""
+    bit first: on a 3601² raster the bits take 0.01 s, ``equal_nan`` 0.3 s (float32) or
+    0.07 s (uint8). Only arrays whose bits differ (a NaN's payload, -0.0 against 0.0, or
+    other values) take the slow comparison."""
     bits = _BITS.get(a.dtype.itemsize)
     if bits is not None and a.dtype.kind in "biuf" and a.flags.c_contiguous and b.flags.c_contiguous \
             and np.array_equal(a.view(bits), b.view(bits)):

@@ -576,8 +576,8 @@ def _local_axes(grid: HeightGrid):
 
 def _sweep_grid(grid: HeightGrid, strips: bool = True) -> SurfaceGrid:
     """The grid as the sweep kernels read it (local coordinates; no copies of the heights; no
-    pyramid), with its strips' maxima or (``strips`` False: for a height, before the first
-    sweep builds its tables two at a time) without."""
+    pyramid), with its strips' maxima or (``strips`` False: for a height, read before the
+    first sweep builds its tables side by side) without."""
     xs, ys, ixw, iyw, uniform = _local_axes(grid)
     cmax, rmax = _strip_max(grid) if strips else no_strips()
     pyr, off, nxl, ltop = no_pyramid()
