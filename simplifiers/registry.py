@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from terrainvis.core.memory import check_memory
-from terrainvis.core.validate import as_int, as_nonnegative_finite, describe
+from terrainvis.core.validate import as_int, as_nonnegative_finite, describe, entry_name
 from terrainvis.errors import SimplificationError
 from terrainvis.core.terrain import TIN, HeightGrid
 
@@ -197,7 +197,9 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
     Parameters
     ----------
     name : str
-        Its name (not one of the built-in methods'; :data:`BUILTIN`).
+        Its name (not one of the built-in methods'; :data:`BUILTIN`): a letter or digit,
+        then letters, digits and ``_ . + -``, at most 64 characters, since it becomes part
+        of file names and table cells.
     function : callable
         ``kind="regular"``: ``function(grid, level, **options) -> HeightGrid`` with the
         coarse grid at the reverse Faber positions (:func:`simplifiers.levels.coarse_coords`
@@ -225,7 +227,9 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
     Raises
     ------
     ValueError
-        A name that is empty, built in or (without ``replace``) taken; an unknown kind.
+        A name that is not a valid entry name (:data:`terrainvis.core.validate.ENTRY_NAME`:
+        letters, digits and ``_ . + -``), built in or (without ``replace``) taken; an
+        unknown kind.
     TypeError
         A function that is not callable or cannot take ``(grid, level_or_n_vertices,
         **options)``.
@@ -244,8 +248,7 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
     (9, 9)
     >>> _ = unregister("every-other")
     """
-    if not isinstance(name, str) or not name.strip() or name != name.strip() or "," in name:
-        raise ValueError(f"name must be a non-empty method name without commas or surrounding spaces, got {name!r}")
+    entry_name(name, "method")
     if name in BUILTIN:
         raise ValueError(f"method {name!r} is built in: register yours under another name")
     if name in METHODS and not replace:
@@ -317,6 +320,7 @@ def load_plugins() -> list[str]:
             method = ep.load()
             if not isinstance(method, Method):
                 raise TypeError(f"its value {ep.value!r} is a {type(method).__name__}, not a simplifiers.Method")
+            entry_name(method.name, "method")
             if method.kind not in KINDS:
                 raise ValueError(f"its kind {method.kind!r} is not one of {list(KINDS)}")
             if method.name in METHODS:

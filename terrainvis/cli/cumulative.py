@@ -84,10 +84,12 @@ def run(args) -> int:
         raise UsageError(f"--png must end in .png, got {png.name!r}")
     inputs = [args.dem, args.observers]
     check_output_file(out, "-o", inputs=inputs)
+    outputs = {"-o": out}
     if png is not None:
-        check_output_file(png, "--png", inputs=inputs + [str(out)])
+        check_output_file(png, "--png", inputs=inputs, outputs=outputs)
+        outputs["--png"] = png
     fov = field_of_view_args(args)
-    extra = _check_extra_outputs(args, inputs + [str(out)] + ([str(png)] if png is not None else []))
+    extra = _check_extra_outputs(args, inputs, outputs)
     label, grid = read_terrain(args.dem, args)
     check_heights(grid, args)
     if "network" in extra:
@@ -161,23 +163,23 @@ def _write_extra(grid, xy, heights, args, result, extra: dict, written: list):
     return network
 
 
-def _check_extra_outputs(args, taken) -> dict:
-    """``--network`` and ``--observers-out``: their suffixes, and writable, before anything runs."""
+def _check_extra_outputs(args, inputs, outputs: dict) -> dict:
+    """``--network`` and ``--observers-out``: their suffixes, and writable and apart from the
+    inputs and the other ``outputs`` ({flag: path}), before anything runs."""
     from ..core.fileio import check_output_file
 
-    extra = {}
+    extra, outputs = {}, dict(outputs)
     if args.network:
         path = Path(args.network)
         if path.suffix.lower() not in (".csv", ".gpkg"):
             raise UsageError(f"--network must end in .csv or .gpkg, got {path.name!r}")
-        check_output_file(path, "--network", inputs=taken)
-        extra["network"] = path
-        taken = taken + [str(path)]
+        check_output_file(path, "--network", inputs=inputs, outputs=outputs)
+        extra["network"] = outputs["--network"] = path
     if args.observers_out:
         path = Path(args.observers_out)
         if path.suffix.lower() != ".npz":
             raise UsageError(f"--observers-out must end in .npz, got {path.name!r}")
-        check_output_file(path, "--observers-out", inputs=taken)
+        check_output_file(path, "--observers-out", inputs=inputs, outputs=outputs)
         extra["sets"] = path
     return extra
 

@@ -56,16 +56,33 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     import numpy as np
 
-    from ..experiment.evaluate import evaluate
-    from ..experiment.options import given
-
     if args.min_accuracy is not None and not (np.isfinite(args.min_accuracy) and 0.0 <= args.min_accuracy <= 1.0):
         raise UsageError(f"--min-accuracy must be a share in [0, 1] (0.95 for 95 %), got {args.min_accuracy:g}")
     label, grid = read_terrain(args.dem, args)
-    out = _check_out(args, label) if args.out else None
     for s in args.simplified:
         if not Path(s).exists():
             raise UsageError(f"SIMPLIFIED {s!r} does not exist")
+    if not args.out:
+        return _evaluate(args, label, grid, None, [])
+    from ..core.fileio import RunLock, check_writable_dir, refuse_protected
+    from ..experiment._outdir import LOCK, foreign_files
+    from .compare import _foreign_message
+
+    refuse_protected(args.out, "--out")
+    out = check_writable_dir(args.out, "--out")
+    foreign = foreign_files(out)  # a results.lock terrainvis did not write: the lock would replace it
+    if foreign:
+        raise UsageError(_foreign_message(out, foreign))
+    with RunLock(out / LOCK, f"--out {str(out)!r}", "terrainvis evaluate"):
+        return _evaluate(args, label, grid, out, _check_out(args, label, out))
+
+
+def _evaluate(args, label: str, grid, out: Path | None, earlier: list) -> int:
+    """Measure, print, and with ``out`` write the new run, then remove what is left of the
+    ``earlier`` one: until the new files are in place, the earlier run stays whole."""
+    from ..experiment.evaluate import evaluate
+    from ..experiment.options import given
+
     options = {k: v for k, v in given(args).items() if k not in _NOT_HERE}
     t0 = time.perf_counter()
     df = evaluate({label: grid}, list(args.simplified), against=args.against, frame=args.frame, repair=args.repair,
@@ -73,27 +90,50 @@ def run(args) -> int:
     seconds = time.perf_counter() - t0
     _print(df, label, seconds)
     if out is not None:
-        _write(df, grid, label, out, args, options, seconds)
+        written = _write(df, grid, label, out, args, options, seconds)
+        stale = [p for p in earlier if p.resolve() not in {w.resolve() for w in written} and p.exists()]
+        if stale:
+            from ..experiment._outdir import describe, remove
+
+            remove(out, stale)
+            print(f"terrainvis evaluate: --overwrite: removed the earlier run's {describe(stale)} that this run did "
+                  "not write again", file=sys.stderr)
     return _verdict(df, args)
 
 
-def _check_out(args, label: str) -> Path:
-    from ..core.fileio import check_writable_dir, refuse_protected
-    from ..experiment._outdir import describe, earlier_run, foreign_files, remove
+def _check_out(args, label: str, out: Path) -> list[Path]:
+    """``--out`` checked before anything is measured; the earlier run's files, which the new run replaces.
+
+    Refused: files at the names this run writes that terrainvis did not write, or that no
+    earlier run in ``out`` recorded (a simplified terrain of the user's own at the name of
+    one this run saves: not even ``--overwrite`` replaces it); an earlier run without
+    ``--overwrite``; an input (the DEM, a SIMPLIFIED) among the files the run replaces.
+    Nothing is removed here.
+    """
+    from ..experiment._outdir import _candidates, describe, earlier_run, foreign_files
+    from ..experiment.evaluate import _named
     from .compare import _foreign_message
 
-    refuse_protected(args.out, "--out")
-    out = check_writable_dir(args.out, "--out")
-    foreign = foreign_files(out, [label], [], [])
+    names = [m for m, _ in _named(list(args.simplified), None, taken=args.against)] + list(args.against)
+    foreign = foreign_files(out, [label], names, [])
     if foreign:
         raise UsageError(_foreign_message(out, foreign))
     files = earlier_run(out)
     if files and not args.overwrite:
         raise UsageError(f"--out {str(out)!r} holds the results of an earlier run ({describe(files)}); add "
                          "--overwrite to replace it, or choose another --out")
-    if files:
-        remove(out, files)
-    return out
+    ours = {p.resolve() for p in files}
+    for p in _candidates(out, [label], names, []):
+        if p.resolve() not in ours:
+            raise UsageError(f"--out {str(out)!r} holds {p.relative_to(out).as_posix()}, which this run would "
+                             "write and which no earlier run there recorded; terrainvis never replaces it: move "
+                             "it away or choose another --out")
+    inputs = [Path(args.dem)] + [Path(s) for s in args.simplified]
+    for inp in inputs:
+        if inp.is_file() and inp.resolve() in ours:
+            raise UsageError(f"--overwrite would replace {str(inp)!r}, an input of this run, with the new run's "
+                             "files; move it out of --out first, or choose another --out")
+    return files
 
 
 def _print(df, label: str, seconds: float) -> None:
@@ -112,10 +152,12 @@ def _print(df, label: str, seconds: float) -> None:
     print(f"{plural(len(df), 'row')}, {seconds:.1f} s")
 
 
-def _write(df, grid, label: str, out: Path, args, options: dict, seconds: float) -> None:
+def _write(df, grid, label: str, out: Path, args, options: dict, seconds: float) -> list[Path]:
+    """``results.csv``, its settings, ``tables.md``, the simplified terrains and the figures; the paths written."""
     from ..experiment.collect import COLUMNS, UNIT_KEY
     from ..experiment.plan import run_record, settings_for
-    from ..experiment.results import ResultStore
+    from ..experiment._outdir import figure_names
+    from ..experiment.results import ResultStore, settings_path
     from ..experiment.units import simplified_path
     from ..io import save_terrain
     from .compare import _compare_report
@@ -126,15 +168,21 @@ def _write(df, grid, label: str, out: Path, args, options: dict, seconds: float)
               "methods": sorted(set(df["method"]))}
     store = ResultStore(out / "results.csv", record, COLUMNS, UNIT_KEY, lambda key: 0, resume=False)
     store.finish(df)
+    written = [store.path, settings_path(store.path)]
     if not args.no_plots:
         from ..experiment.evaluate import _named, as_simplified
 
         for method, s in _named(list(args.simplified), None, taken=args.against):
             level = int(df[df["method"] == method]["level"].iloc[0])
             terrain = as_simplified(s, grid, frame=args.frame, repair=args.repair, label=method)
-            simplified_path(out / "simplified", label, method, level).parent.mkdir(exist_ok=True)
-            save_terrain(terrain, simplified_path(out / "simplified", label, method, level))
-    _compare_report(df, grids, settings, out, args, seconds)
+            path = simplified_path(out / "simplified", label, method, level)
+            path.parent.mkdir(exist_ok=True)
+            save_terrain(terrain, path)
+            written.append(path)
+    _compare_report(df, grids, settings, out, args, seconds)  # its exit status is compare's; evaluate's is _verdict
+    written.append(out / "tables.md")
+    written += [out / f for f in figure_names([label], set(df["relocation"])) if (out / f).is_file()]
+    return written
 
 
 def _verdict(df, args) -> int:

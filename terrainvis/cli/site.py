@@ -122,15 +122,15 @@ def _check_outputs(args) -> dict:
                                                                       "--coverage"),
               "plot": (args.plot, (".png",), "--plot")}
     inputs = [args.dem] + ([args.candidates] if args.candidates else [])
-    out = {}
+    out, flags = {}, {}
     for key, (path, suffixes, flag) in wanted.items():
         if path is None:
             continue
         p = Path(path)
         if p.suffix.lower() not in suffixes:
             raise UsageError(f"{flag} must end in {' or '.join(suffixes)}, got {p.name!r}")
-        check_output_file(p, flag, inputs=inputs + [str(q) for q in out.values()])
-        out[key] = p
+        check_output_file(p, flag, inputs=inputs, outputs=flags)
+        out[key] = flags[flag] = p
     return out
 
 

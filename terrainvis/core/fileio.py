@@ -144,19 +144,32 @@ def protected_folders() -> list[Path]:
     return out
 
 
-def refuse_protected(path, name: str, inputs=()) -> None:
-    """Refuse ``path`` as an output when it is one of ``inputs`` or lies inside the installed package.
+def refuse_protected(path, name: str, inputs=(), outputs=None) -> None:
+    """Refuse ``path`` as an output when it is one of ``inputs``, another output of the
+    command (``outputs``), or lies inside the installed package.
 
-    ``inputs`` are paths (others, e.g. bundled names, are ignored). The same file is
-    found under any spelling (``./x``, ``a/../x``), through symlinks and hard links.
+    ``inputs`` are paths (others, e.g. bundled names, are ignored). ``outputs`` maps the
+    flags of the command's other outputs to their paths, which need not exist yet. The
+    same file is found under any spelling (``./x``, ``a/../x``), through symlinks (a
+    dangling one too) and hard links.
 
     Raises
     ------
     ValueError
-        Naming ``name``, the output and the input or package folder it would overwrite.
+        Naming ``name``, the output and the input, other output or package folder it
+        would overwrite.
     """
     p = Path(path)
     real = Path(os.path.realpath(p))
+    for flag, other in (outputs or {}).items():
+        same = real == Path(os.path.realpath(other))
+        if not same and p.exists() and Path(other).exists():
+            with contextlib.suppress(OSError):
+                same = os.path.samefile(p, other)
+        if same:
+            how = "" if str(p) == str(other) else f" (the same file as {str(other)!r})"
+            raise ValueError(f"{name} {str(p)!r} is also this command's {flag}{how}: one would overwrite the "
+                             "other; give each output its own file")
     for inp in inputs:
         if not isinstance(inp, (str, Path)) or not Path(inp).exists():
             continue
@@ -178,11 +191,12 @@ def refuse_protected(path, name: str, inputs=()) -> None:
             )
 
 
-def check_output_file(path, name: str, *, inputs=()) -> Path:
+def check_output_file(path, name: str, *, inputs=(), outputs=None) -> Path:
     """``path`` as a file that can be written, checked before anything is computed.
 
-    Its folder must exist and be writable; it must not be a folder, one of ``inputs``, or
-    inside the installed package (:func:`refuse_protected`).
+    Its folder must exist and be writable; it must not be a folder, one of ``inputs``,
+    one of the command's other ``outputs`` ({flag: path}), or inside the installed package
+    (:func:`refuse_protected`).
 
     Raises
     ------
@@ -197,7 +211,7 @@ def check_output_file(path, name: str, *, inputs=()) -> Path:
         raise ValueError(f"{name} {str(p)!r}: the folder {str(folder)!r} does not exist")
     if not folder.is_dir():
         raise ValueError(f"{name} {str(p)!r} lies under {str(folder)!r}, which is a file, not a folder")
-    refuse_protected(p, name, inputs)
+    refuse_protected(p, name, inputs, outputs)
     try:
         fd, probe = tempfile.mkstemp(prefix=".write-test.", dir=folder)
     except OSError as exc:

@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from ..tolerances import CLEARANCE_REL
+
+#: What an entry's name may be (a method, relocation, engine or measure): it becomes a
+#: file name component (``simplified/<terrain>__<method>__level<k>.npz``), a CSV cell, a
+#: Markdown table cell and a command-line word, so it starts with a letter or digit and
+#: holds only letters, digits and ``_ . + -`` (no path separator, space, ``|`` or newline).
+ENTRY_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
 
 
 def file_label(text: str) -> str:
@@ -21,6 +29,24 @@ def file_label(text: str) -> str:
     'dem_\\\\xff'
     """
     return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
+def entry_name(value, what: str) -> str:
+    """``value`` if it is a valid name for a registry entry (:data:`ENTRY_NAME`), else a ValueError.
+
+    ``what`` names the entry in the message ("method", "relocation", ...).
+
+    >>> entry_name("greedy-cuts", "method")
+    'greedy-cuts'
+    >>> entry_name("v2/../../escaped", "method")
+    Traceback (most recent call last):
+    ...
+    ValueError: a method name must be 1-64 characters, a letter or digit first, then letters, digits, '_', '.', '+' or '-' (no path separator, space, '|' or newline), got 'v2/../../escaped'
+    """
+    if not isinstance(value, str) or ENTRY_NAME.fullmatch(value) is None:
+        raise ValueError(f"a {what} name must be 1-64 characters, a letter or digit first, then letters, digits, "
+                         f"'_', '.', '+' or '-' (no path separator, space, '|' or newline), got {value!r}")
+    return value
 
 
 def describe(value) -> str:

@@ -35,7 +35,7 @@ from typing import Callable
 import numpy as np
 
 from ..core.terrain import HeightGrid, fingerprint
-from ..core.validate import describe
+from ..core.validate import describe, entry_name
 
 __all__ = [
     "Measure", "MEASURES", "register", "unregister", "available", "point_sets", "observers", "pair_rows",
@@ -428,8 +428,7 @@ def register(measure: Measure, *, replace: bool = False) -> Measure:
     if not isinstance(measure, Measure):
         raise TypeError(f"measure must be a terrainvis.experiment.measures.Measure, got {describe(measure)}")
     name = measure.name
-    if not isinstance(name, str) or not name.strip() or name != name.strip():
-        raise ValueError(f"measure.name must be a non-empty name without surrounding spaces, got {name!r}")
+    entry_name(name, "measure")
     for field in ("sets", "rows", "n_points", "n_sets", "unit_bytes"):
         if not callable(getattr(measure, field)):
             raise TypeError(f"measure {name!r}: {field} must be callable, got {describe(getattr(measure, field))}")

@@ -13,6 +13,7 @@ These functions run in the worker processes; they read the run's options from
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -47,8 +48,17 @@ def end_radius_for(simplified, original: HeightGrid, level: int, predicate: str)
 
 
 def simplified_path(save_dir, name: str, method: str, level: int) -> Path:
-    """Where :func:`~terrainvis.compare` saves the simplified terrain of terrain ``name`` when given ``save_dir``."""
-    return Path(save_dir) / f"{name}__{method}__level{level}.npz"
+    """Where :func:`~terrainvis.compare` saves the simplified terrain of terrain ``name`` when given ``save_dir``.
+
+    Always a file directly in ``save_dir``: a name that would lead elsewhere (a path
+    separator in it) is a ValueError. The registries refuse such method names already
+    (:func:`terrainvis.core.validate.entry_name`); this check keeps any other caller in.
+    """
+    file = f"{name}__{method}__level{level}.npz"
+    if Path(file).name != file or any(sep and sep in file for sep in (os.sep, os.altsep)):
+        raise ValueError(f"the simplified terrain's file name {file!r} (terrain {name!r}, method {method!r}) is not "
+                         "a plain file name: it would be written outside the output folder")
+    return Path(save_dir) / file
 
 
 # ---------------------------------------------------------------------- a task

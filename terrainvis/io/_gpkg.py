@@ -86,14 +86,23 @@ def write_lines(path, lines, attributes, *, table: str = "lines", crs: str | Non
     srs = _srs_row(crs)
     with atomic_path(p) as tmp:
         tmp.unlink()  # sqlite creates its own file
-        con = sqlite3.connect(tmp)
+        journal = tmp.with_name(tmp.name + "-journal")
         try:
-            _write(con, xy, attributes, table, srs, description)
+            con = sqlite3.connect(tmp)
+            try:
+                _write(con, xy, attributes, table, srs, description)
+            finally:
+                con.close()
+        except sqlite3.Error as exc:  # a full disk is "database or disk is full", not an OSError
+            raise OSError(f"SQLite: {exc}") from exc
         finally:
-            con.close()
-    back = read_lines(p, table=table)
-    if len(back) != xy.shape[0] or not np.array_equal(np.stack(back["geometry"].to_list()) if len(back) else xy, xy):
-        raise OSError(f"{p}: the GeoPackage read back does not hold the lines written")
+            journal.unlink(missing_ok=True)
+        # read back before it replaces the destination: a failed read (a damaged file, no
+        # memory left) keeps the old file
+        back = read_lines(tmp, table=table)
+        if len(back) != xy.shape[0] or not np.array_equal(np.stack(back["geometry"].to_list()) if len(back) else xy,
+                                                           xy):
+            raise OSError("the GeoPackage read back does not hold the lines written")
     return p
 
 

@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 from ..core.terrain import as_terrain
-from ..core.validate import as_finite_scalar, as_points, describe
+from ..core.validate import as_finite_scalar, as_points, describe, entry_name
 
 __all__ = [
     "Relocation", "RELOCATIONS", "register", "unregister", "available", "default_relocations",
@@ -191,8 +191,7 @@ def register(relocation: Relocation, *, replace: bool = False) -> Relocation:
     if not isinstance(relocation, Relocation):
         raise TypeError(f"relocation must be a terrainvis.relocation.Relocation, got {describe(relocation)}")
     name = relocation.name
-    if not isinstance(name, str) or not name.strip() or name != name.strip():
-        raise ValueError(f"relocation.name must be a non-empty name without surrounding spaces, got {name!r}")
+    entry_name(name, "relocation")
     if not callable(relocation.function):
         raise TypeError(f"relocation {name!r}: function must be callable, got {describe(relocation.function)}")
     measures = relocation.measures

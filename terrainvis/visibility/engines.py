@@ -34,7 +34,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from ..core.terrain import HeightGrid
-from ..core.validate import describe
+from ..core.validate import describe, entry_name
 
 __all__ = ["Engine", "Predicate", "ENGINES", "AUTO", "register", "unregister", "engine_names", "choose"]
 
@@ -200,8 +200,9 @@ def register(engine: Engine, *, replace: bool = False) -> Engine:
     if not isinstance(engine, Engine):
         raise TypeError(f"engine must be a terrainvis.visibility.Engine, got {describe(engine)}")
     name = engine.name
-    if not isinstance(name, str) or not name.strip() or name != name.strip() or name == AUTO:
-        raise ValueError(f"engine.name must be a non-empty name other than 'auto', got {name!r}")
+    entry_name(name, "engine")
+    if name == AUTO:
+        raise ValueError("engine.name must not be 'auto' (it means: choose an engine for the terrain)")
     for field in ("pairs", "matrix"):
         fn = getattr(engine, field)
         if not callable(fn):
