@@ -10,13 +10,13 @@ allocate the output ``(A, n, B)``. Every kernel comes in two layouts:
   axis 0 of a 2-D array combines whole rows), so the inner loops stream over contiguous
   memory; blocks of columns (or of coarse rows) are spread over the threads.
 
-Each kernel ``k(..., out, t0, t1)`` is serial and runs its tasks ``t0 .. t1-1`` (a
-task is a curve, a group of curves or a block of row segments, as its docstring says);
-``k_parallel(..., out, ntasks, nchunks)`` spreads the tasks over the threads in chunks.
-Small inputs call the serial kernel directly: starting the thread pool costs more than
-they do. Every kernel returns how many tasks wrote a non-finite value (0 when all is
-well), so the public function can reject NaN or inf input without a separate pass over
-the data.
+Each kernel ``k(..., out, t0, t1, stop)`` is serial and runs its tasks ``t0 .. t1-1``
+(a task is a curve, a group of curves or a block of row segments, as its docstring
+says), returning once the stop flag ``stop`` is set (:mod:`terrainvis.core.interrupt`);
+:func:`terrainvis.core.interrupt.call` spreads the tasks over threads in chunks. Small
+inputs run in the calling thread: starting threads costs more than they do. Every kernel
+returns how many tasks wrote a non-finite value (0 when all is well), so the public
+function can reject NaN or inf input without a separate pass over the data.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def _nonfinite(v):
 
 # ----------------------------------------------------------------------------- LLS
 @nb.njit(cache=True, nogil=True)
-def lls_curves(f, w0, w1, w2, out, t0, t1):
+def lls_curves(f, w0, w1, w2, out, t0, t1, stop):
     """Five-tap filter ``w0, w1, w2, w1, w0`` at every interior coarse position, ends kept.
 
     ``f`` (A, m) holds A contiguous curves, ``out`` (A, n); task ``a`` is curve ``a``:
@@ -56,6 +56,8 @@ def lls_curves(f, w0, w1, w2, out, t0, t1):
     n = out.shape[1]
     bad = 0
     for a in range(t0, t1):
+        if stopped(stop):
+            return bad
         r = f[a]
         o = out[a]
         o[0] = r[0]
@@ -71,7 +73,7 @@ def lls_curves(f, w0, w1, w2, out, t0, t1):
 
 
 @nb.njit(cache=True, nogil=True)
-def lls_rows(f, w0, w1, w2, out, t0, t1):
+def lls_rows(f, w0, w1, w2, out, t0, t1, stop):
     """:func:`lls_curves` along the middle axis of ``f`` (A, m, B), by whole rows of length B.
 
     Task ``t`` is coarse row ``i = t % n`` of ``a = t // n`` (A * n tasks).
@@ -80,6 +82,8 @@ def lls_rows(f, w0, w1, w2, out, t0, t1):
     n = out.shape[1]
     bad = 0
     for t in range(t0, t1):
+        if stopped(stop):
+            return bad
         a = t // n
         i = t - a * n
         o = out[a, i]
@@ -118,7 +122,7 @@ def _lls_filter_row(r, w0, w1, w2, o):
 
 
 @nb.njit(cache=True, nogil=True)
-def lls_level(f, w0, w1, w2, out, t0, t1):
+def lls_level(f, w0, w1, w2, out, t0, t1, stop):
     """One fused 2-D LLS level: ``f`` (M, C) to ``out`` (N, Cn), rows then columns.
 
     Task ``t`` is coarse row ``t``. Each fine row it needs is filtered along the row once
@@ -133,6 +137,8 @@ def lls_level(f, w0, w1, w2, out, t0, t1):
     last = -1  # highest fine row filtered into the ring so far
     bad = 0
     for i in range(t0, t1):
+        if stopped(stop):
+            return bad
         o = out[i]
         if i == 0 or i == N - 1:
             _lls_filter_row(f[0] if i == 0 else f[M - 1], w0, w1, w2, o)
@@ -183,7 +189,7 @@ def _rhs(r, j, colptr, rows, vals):
 
 
 @nb.njit(cache=True, nogil=True)
-def gls_curves(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1):
+def gls_curves(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1, stop):
     """Solve ``S^T S c = S^T f`` for A contiguous curves ``f`` (A, m) into ``out`` (A, n).
 
     The LDL^T factors (``lsub``, ``dinv``) are shared by every curve. For
@@ -197,6 +203,8 @@ def gls_curves(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1):
     n = out.shape[1]
     bad = 0
     for t in range(t0, t1):
+        if stopped(stop):
+            return bad
         a = 4 * t
         i1 = min(a + 1, A - 1)  # a short last group repeats its last curve
         i2 = min(a + 2, A - 1)
@@ -253,7 +261,7 @@ def gls_curves(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1):
 
 
 @nb.njit(cache=True, nogil=True)
-def gls_rows(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1):
+def gls_rows(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1, stop):
     """:func:`gls_curves` along the middle axis of ``f`` (A, m, B), by whole row segments.
 
     Task ``t`` is the block of ``_BLOCK`` columns number ``t % nblk`` of ``a = t // nblk``
@@ -265,6 +273,8 @@ def gls_rows(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1):
     nblk = (B + _BLOCK - 1) // _BLOCK
     bad = 0
     for t in range(t0, t1):
+        if stopped(stop):
+            return bad
         a = t // nblk
         b0 = (t - a * nblk) * _BLOCK
         b1 = min(B, b0 + _BLOCK)
@@ -490,70 +500,3 @@ def critical_points_1d(g):
     crit = np.empty(g.shape[0], dtype=np.int64)
     nc = critical_points(g, crit)
     return crit[:nc].copy()
-
-
-# ------------------------------------------------------------------- parallel drivers
-@nb.njit(cache=True, nogil=True, parallel=True)
-def lls_curves_parallel(f, w0, w1, w2, out, ntasks, nchunks):
-    """:func:`lls_curves` over tasks ``0 .. ntasks-1`` in ``nchunks`` chunks spread over the threads."""
-    bad = 0
-    for c in nb.prange(nchunks):
-        t0 = c * ntasks // nchunks
-        t1 = (c + 1) * ntasks // nchunks
-        bad += lls_curves(f, w0, w1, w2, out, t0, t1)
-    return bad
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def lls_rows_parallel(f, w0, w1, w2, out, ntasks, nchunks):
-    """:func:`lls_rows` over tasks ``0 .. ntasks-1`` in ``nchunks`` chunks spread over the threads."""
-    bad = 0
-    for c in nb.prange(nchunks):
-        t0 = c * ntasks // nchunks
-        t1 = (c + 1) * ntasks // nchunks
-        bad += lls_rows(f, w0, w1, w2, out, t0, t1)
-    return bad
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def gls_curves_parallel(f, jend, colptr, rows, vals, lsub, dinv, out, ntasks, nchunks):
-    """:func:`gls_curves` over tasks ``0 .. ntasks-1`` in ``nchunks`` chunks spread over the threads."""
-    bad = 0
-    for c in nb.prange(nchunks):
-        t0 = c * ntasks // nchunks
-        t1 = (c + 1) * ntasks // nchunks
-        bad += gls_curves(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1)
-    return bad
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def gls_rows_parallel(f, jend, colptr, rows, vals, lsub, dinv, out, ntasks, nchunks):
-    """:func:`gls_rows` over tasks ``0 .. ntasks-1`` in ``nchunks`` chunks spread over the threads."""
-    bad = 0
-    for c in nb.prange(nchunks):
-        t0 = c * ntasks // nchunks
-        t1 = (c + 1) * ntasks // nchunks
-        bad += gls_rows(f, jend, colptr, rows, vals, lsub, dinv, out, t0, t1)
-    return bad
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def feature_apply_parallel(f, colptr, rows, vals, tdiag, toff, w2, out, ntasks, nchunks, stop):
-    """:func:`feature_apply` over tasks ``0 .. ntasks-1`` in ``nchunks`` chunks spread over the threads."""
-    bad = 0
-    for c in nb.prange(nchunks):
-        t0 = c * ntasks // nchunks
-        t1 = (c + 1) * ntasks // nchunks
-        bad += feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1, stop)
-    return bad
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def lls_level_parallel(f, w0, w1, w2, out, ntasks, nchunks):
-    """:func:`lls_level` over tasks ``0 .. ntasks-1`` in ``nchunks`` chunks spread over the threads."""
-    bad = 0
-    for c in nb.prange(nchunks):
-        t0 = c * ntasks // nchunks
-        t1 = (c + 1) * ntasks // nchunks
-        bad += lls_level(f, w0, w1, w2, out, t0, t1)
-    return bad

@@ -131,17 +131,26 @@ def _track(axes, ax, ay, bx, by, u0, u1, start, record, out):
     return n - start
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def track_counts(axes, p, ii, jj, delta, counts, stop):
+#: Pairs per iteration of the pair loops (:func:`track_counts`, :func:`track_fill`,
+#: :func:`pair_visible`), which :func:`terrainvis.core.interrupt.call` spreads over threads.
+PAIR_CHUNK = 256
+
+
+def pair_chunks(n_pairs: int) -> int:
+    """The iterations of the pair loops: chunks of :data:`PAIR_CHUNK` pairs."""
+    return (n_pairs + PAIR_CHUNK - 1) // PAIR_CHUNK
+
+
+@nb.njit(cache=True, nogil=True)
+def track_counts(axes, p, ii, jj, delta, counts, k0, k1, stop):
     """Breakpoints of each pair (ii[k], jj[k]) of the points p (x, y, z) (0: never tested)
-    on the grid ``axes = (xs, ys, ixw, iyw)``."""
+    on the grid ``axes = (xs, ys, ixw, iyw)``, for the pairs of chunks ``k0 .. k1 - 1``."""
     m = ii.shape[0]
     du = np.empty(0, np.float32)
     dt = np.empty(0, np.int32)
-    for k in nb.prange(m):
-        if stopped(stop):
-            counts[k] = 0
-            continue
+    for k in range(k0 * PAIR_CHUNK, min(m, k1 * PAIR_CHUNK)):
+        if k % PAIR_CHUNK == 0 and stopped(stop):
+            return
         i = ii[k]
         j = jj[k]
         u0, u1 = interval(p[j, 0], p[j, 1], p[j, 2], p[i, 0], p[i, 1], p[i, 2], delta, 0.0)
@@ -151,13 +160,15 @@ def track_counts(axes, p, ii, jj, delta, counts, stop):
             counts[k] = _track(axes, p[i, 0], p[i, 1], p[j, 0], p[j, 1], u0, u1, 0, False, (du, dt, du, du))
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def track_fill(axes, p, ii, jj, delta, ptr, out, stop):
-    """Write the breakpoints of each pair into ``out = (bu, btri, ba, bb)`` from ``ptr[k]``
-    (counts from :func:`track_counts`)."""
+@nb.njit(cache=True, nogil=True)
+def track_fill(axes, p, ii, jj, delta, ptr, out, k0, k1, stop):
+    """Write the breakpoints of each pair of chunks ``k0 .. k1 - 1`` into ``out = (bu, btri,
+    ba, bb)`` from ``ptr[k]`` (counts from :func:`track_counts`)."""
     m = ii.shape[0]
-    for k in nb.prange(m):
-        if stopped(stop) or ptr[k + 1] == ptr[k]:
+    for k in range(k0 * PAIR_CHUNK, min(m, k1 * PAIR_CHUNK)):
+        if k % PAIR_CHUNK == 0 and stopped(stop):
+            return
+        if ptr[k + 1] == ptr[k]:
             continue
         i = ii[k]
         j = jj[k]
@@ -197,11 +208,11 @@ def incidence(nv, ncx, ptr, btri, ba, bb, stop):
     return vptr, items
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
+@nb.njit(cache=True, nogil=True)
 def barycentric(xs, ys, px, py, ev, ew):
     """Vertices and weights of the coarse surface under each position (px[i], py[i])."""
     ncx = xs.shape[0] - 1
-    for i in nb.prange(px.shape[0]):
+    for i in range(px.shape[0]):
         c = locate(xs, xs, 0, xs.shape[0] - 1, False, px[i])
         r = locate(ys, ys, 0, ys.shape[0] - 1, False, py[i])
         a, b = _local(xs, ys, r, c, px[i], py[i])
@@ -214,15 +225,16 @@ def barycentric(xs, ys, px, py, ev, ew):
             ew[i, t] = w3[t]
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def pair_visible(c, z, tk, tol, out, stop):
-    """Verdict on the coarse surface ``c`` of each pair of the :data:`Tracks` ``tk``, the points at heights ``z``."""
+@nb.njit(cache=True, nogil=True)
+def pair_visible(c, z, tk, tol, out, k0, k1, stop):
+    """Verdict on the coarse surface ``c`` of each pair of chunks ``k0 .. k1 - 1`` of the
+    :data:`Tracks` ``tk``, the points at heights ``z``."""
     ncx, ii, jj, ptr, bu, btri, ba, bb = tk.ncx, tk.ii, tk.jj, tk.ptr, tk.bu, tk.btri, tk.ba, tk.bb
-    for k in nb.prange(ii.shape[0]):
-        if stopped(stop):
-            continue
-        vv = np.empty(3, np.int64)
-        ww = np.empty(3)
+    vv = np.empty(3, np.int64)
+    ww = np.empty(3)
+    for k in range(k0 * PAIR_CHUNK, min(ii.shape[0], k1 * PAIR_CHUNK)):
+        if k % PAIR_CHUNK == 0 and stopped(stop):
+            return
         zi = z[ii[k]]
         zj = z[jj[k]]
         ok = True

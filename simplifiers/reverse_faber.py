@@ -43,7 +43,6 @@ from __future__ import annotations
 import functools
 import math
 
-import numba
 import numpy as np
 
 from terrainvis.core.interrupt import call
@@ -131,23 +130,18 @@ def _raise_nonfinite(f3, op: str):
     raise FloatingPointError(f"{op}: the result overflowed float64 (max |f| = {float(np.abs(f3).max()):g})")
 
 
-def _run(kernel, parallel_kernel, args, ntasks: int, work: int, *, stoppable: bool = False) -> int:
-    """Run a kernel's tasks serially when the input is small, else spread over the threads.
+def _run(kernel, args, ntasks: int, work: int) -> int:
+    """Run a kernel's ``ntasks`` tasks: in the calling thread when the input is small, else
+    spread over the threads (:func:`terrainvis.core.interrupt.call`); the number of tasks
+    that wrote a non-finite value.
 
-    Waking the thread pool costs far more than filtering a few thousand samples (and
-    much more on a loaded machine), so inputs below ``_PARALLEL_MIN`` samples of work
-    run in the calling thread. A ``stoppable`` kernel takes the stop flag last and runs
-    through :func:`terrainvis.core.interrupt.call` (the filters stream at memory speed and
-    need none; the feature-aware solve does).
+    Starting threads costs far more than filtering a few thousand samples (and much more
+    on a loaded machine), so inputs below ``_PARALLEL_MIN`` samples of work run in the
+    calling thread.
     """
-    threads = numba.get_num_threads()
-    if work < _PARALLEL_MIN or threads == 1 or ntasks < 2:
-        head = (kernel, *args, 0, ntasks)
-    else:
-        head = (parallel_kernel, *args, ntasks, min(ntasks, 8 * threads))
-    if stoppable:
-        return call(*head, work=work)
-    return head[0](*head[1:])
+    if ntasks < 1:
+        return 0
+    return call(kernel, *args, work=work, items=ntasks, min_parallel=_PARALLEL_MIN)
 
 
 # ------------------------------------------------------------ the matrix S
@@ -300,9 +294,9 @@ def lls(f, axis: int = -1, *, weights: str = "paper"):
     A, _, B = f3.shape
     if B == 1:
         args = (f3.reshape(A, m), w0, w1, w2, out.reshape(A, n))
-        bad = _run(_k.lls_curves, _k.lls_curves_parallel, args, A, f3.size)
+        bad = _run(_k.lls_curves, args, A, f3.size)
     else:
-        bad = _run(_k.lls_rows, _k.lls_rows_parallel, (f3, w0, w1, w2, out), A * n, f3.size)
+        bad = _run(_k.lls_rows, (f3, w0, w1, w2, out), A * n, f3.size)
     # with n == 2 only the two ends are kept and the middle samples enter no output
     if bad or (n == 2 and not np.isfinite(f3).all()):
         _raise_nonfinite(f3, "lls")
@@ -342,10 +336,10 @@ def gls(f, axis: int = -1):
     A, _, B = f3.shape
     if B == 1:
         args = (f3.reshape(A, m), *factors, out.reshape(A, n))
-        bad = _run(_k.gls_curves, _k.gls_curves_parallel, args, (A + 3) // 4, f3.size)
+        bad = _run(_k.gls_curves, args, (A + 3) // 4, f3.size)
     else:
         ntasks = A * -(-B // _k._BLOCK)
-        bad = _run(_k.gls_rows, _k.gls_rows_parallel, (f3, *factors, out), ntasks, f3.size)
+        bad = _run(_k.gls_rows, (f3, *factors, out), ntasks, f3.size)
     if bad:
         _raise_nonfinite(f3, "gls")
     return out.reshape(out_shape)
@@ -406,7 +400,7 @@ def feature(f, axis: int = -1, *, weight: float = 1.0):
     ntasks = A * -(-B // (_k._FEATURE_BLOCK if B > 1 else 1))
     args = (f3, s["colptr"], s["rows"], s["vals"], s["tdiag"], s["toff"], w * w, out)
     # the solve costs ~20x a filter per sample, so smaller inputs already pay for threads
-    bad = _run(_k.feature_apply, _k.feature_apply_parallel, args, ntasks, 20 * f3.size, stoppable=True)
+    bad = _run(_k.feature_apply, args, ntasks, 20 * f3.size)
     if bad:
         _raise_nonfinite(f3, "feature")
     return out.reshape(out_shape)
@@ -471,7 +465,7 @@ def reduce_level(z, op, **options) -> np.ndarray:
     nr = (rows + 1) // 2
     out = np.empty((nr, n))
     w0, w1, w2 = LLS_WEIGHTS[weights]
-    bad = _run(_k.lls_level, _k.lls_level_parallel, (f, w0, w1, w2, out), nr, f.size)
+    bad = _run(_k.lls_level, (f, w0, w1, w2, out), nr, f.size)
     if bad or ((n == 2 or nr == 2) and not np.isfinite(f).all()):
         _raise_nonfinite(f, "lls")
     return out

@@ -167,7 +167,7 @@ class _Pairs:
         self.n_pairs_all = ii.size
         delta = float(trim_length(S0))
         counts = np.empty(ii.size, dtype=np.int64)
-        call(_vk.track_counts, self.axes, p, ii, jj, delta, counts, work=ii.size * 8)
+        call(_vk.track_counts, self.axes, p, ii, jj, delta, counts, work=ii.size * 8, items=_vk.pair_chunks(ii.size))
         total = int(counts.sum())
         work = counts.astype(np.float64) ** 2
         if total > budget or work.sum() > MAX_WORK:  # a random subset of the pairs that fits both budgets
@@ -183,7 +183,8 @@ class _Pairs:
         self.btri = np.empty(nb_, dtype=np.int32)
         self.ba = np.empty(nb_)
         self.bb = np.empty(nb_)
-        call(_vk.track_fill, self.axes, p, ii, jj, delta, self.ptr, (self.bu, self.btri, self.ba, self.bb), work=nb_)
+        call(_vk.track_fill, self.axes, p, ii, jj, delta, self.ptr, (self.bu, self.btri, self.ba, self.bb), work=nb_,
+             items=_vk.pair_chunks(ii.size))
         self.vptr, self.items = call(_vk.incidence, S0.size, self.ncx, self.ptr, self.btri, self.ba, self.bb,
                                      work=nb_)
         self.tracks = _vk.Tracks(self.ncx, self.ii, self.jj, self.ptr, self.bu, self.btri, self.ba, self.bb, self.vptr,
@@ -200,7 +201,7 @@ class _Pairs:
         from . import _visopt_kernels as _vk
 
         out = np.empty(self.ii.size, dtype=bool)
-        call(_vk.pair_visible, c, z, self.tracks, tol, out, work=self.n_breakpoints)
+        call(_vk.pair_visible, c, z, self.tracks, tol, out, work=self.n_breakpoints, items=_vk.pair_chunks(self.ii.size))
         return out
 
 

@@ -465,25 +465,17 @@ def _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, st
     out[ch, AREA_C] = ac
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def volume_between(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, stop):
-    """:func:`volume_faces` over ``nchunks`` equal runs of ``order`` spread over the threads.
+@nb.njit(cache=True, nogil=True)
+def volume_between(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, c0, c1, stop):
+    """:func:`volume_faces` over chunks ``c0 .. c1 - 1`` of ``nchunks`` equal runs of ``order``
+    (:func:`terrainvis.core.interrupt.call` spreads the chunks over threads).
 
     ``out`` is (nchunks, N_OUT): row ch receives the compensated sums of chunk ch. The
     chunks depend only on ``nchunks``, so the result does not depend on the thread count.
     Every chunk reads the stop flag ``stop`` before each face (:mod:`terrainvis.core.interrupt`).
     """
-    for ch in nb.prange(nchunks):
-        buf = np.empty((2, MAX_POLY, N_PCOL))
-        _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, stop)
-
-
-@nb.njit(cache=True, nogil=True)
-def volume_between_serial(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, stop):
-    """:func:`volume_between` in the calling thread, chunk after chunk (the same sums): with
-    one thread the ``prange`` loop gains nothing and costs a parfor compilation (about 1 s of CPU)."""
     buf = np.empty((2, MAX_POLY, N_PCOL))
-    for ch in range(nchunks):
+    for ch in range(c0, c1):
         _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, stop)
 
 

@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from . import _volume_kernels
-from .interrupt import call, for_threads
+from .interrupt import call
 from .mesh import boundary_edges, footprint_matches
 from .validate import describe
 from .terrain import TIN, HeightGrid
@@ -258,13 +258,13 @@ def _volume_exact(fine: HeightGrid, coarse: TIN) -> tuple[float, float]:
     nchunks = int(min(faces.shape[0], _VOLUME_CHUNKS))
     out = np.zeros((nchunks, vk.N_OUT))
     # work: the fine cells and the coarse faces visited
-    call(for_threads(vk.volume_between, vk.volume_between_serial), xs, ys, fine.z, vx, vy, vz, faces, order, nchunks,
-         out, work=fine.size + faces.shape[0])
+    call(vk.volume_between, xs, ys, fine.z, vx, vy, vz, faces, order, nchunks, out, work=fine.size + faces.shape[0],
+         items=nchunks)
     volume = math.fsum(np.concatenate([out[:, vk.VOL], out[:, vk.VOL_C]]))
     covered = math.fsum(np.concatenate([out[:, vk.AREA], out[:, vk.AREA_C]]))
     return volume, covered
 
 
-# Chunks of coarse faces in the parallel kernel: a constant, so that the result does not
+# Chunks of coarse faces of the kernel's loop: a constant, so that the result does not
 # depend on the thread count, and many more than the threads, so that the load balances.
 _VOLUME_CHUNKS = 256

@@ -8,7 +8,7 @@ arrays are frozen into a kernel as constants, so a kernel cannot watch a global 
 This module is the one mechanism every long kernel uses instead:
 
 1. The kernel takes a *stop flag*, a ``(1,)`` int64 array, as its last argument, and at a
-   bounded interval (an outer loop iteration, a chunk of a ``prange``) checks
+   bounded interval (an outer loop iteration, a chunk of its loop) checks
    ``if stopped(stop)`` (:func:`terrainvis.core.stopflag.stopped`, an atomic read) and
    returns early. Its partial result is never used.
 2. The Python wrapper runs it with :func:`call` (``call(kernel, *args, work=n)``), which
@@ -36,13 +36,17 @@ between their passes, when the call returns. Leaving such a call running in an
 abandoned thread is not safe: a process that exits while pymeshlab still works in
 another thread was seen to wait for it and then abort on a corrupted heap.
 
-A kernel that calls other kernels passes its flag down to the ones that loop long. A
-``prange`` kernel checks the flag at the start of each chunk and skips the chunk's
-work when it is set (a ``prange`` cannot be left early), so chunks must be small enough
-to end in well under a second. The flag is read with :func:`~terrainvis.core.stopflag.stopped`,
-never as a plain ``stop[0]``: another thread writes it, and a plain read in a ``prange``
-body was hoisted out of the loop by the compiler, so those kernels ran to their end (see
-:mod:`terrainvis.core.stopflag`). The tests in ``tests/whole/test_interrupt_kernels.py``
+A kernel that calls other kernels passes its flag down to the ones that loop long. The
+flag is read with :func:`~terrainvis.core.stopflag.stopped`, never as a plain ``stop[0]``:
+another thread writes it, and a plain read in a ``prange`` body was hoisted out of the
+loop by the compiler, so those kernels ran to their end (see :mod:`terrainvis.core.stopflag`).
+
+Parallel loops are serial kernels too: a kernel over a range of a loop's iterations
+(``kernel(*args, lo, hi, stop)``), which :func:`call` runs on numba's number of threads
+(``items=``), each thread taking the next chunk of iterations when it is done with one,
+all of them reading the one flag. terrainvis has no ``prange`` loop: numba's parfor
+passes cost a first run seconds per loop (the pair walk's took 11.6 s of the 13.7 s that
+``assert_visibility_kept`` compiled), and one thread needed a serial twin. The tests in ``tests/whole/test_interrupt_kernels.py``
 interrupt every long kernel in a subprocess and check that the caller raises and that
 the kernel's own thread ends, both within two seconds.
 
@@ -71,12 +75,16 @@ import signal
 import sys
 import threading
 
-__all__ = ["call", "new_flag", "for_threads", "THREAD_MIN_WORK", "deferred_signals", "import_library",
+__all__ = ["call", "new_flag", "THREAD_MIN_WORK", "PARALLEL_MIN_WORK", "deferred_signals", "import_library",
            "kept_interrupts", "raise_pending", "call_library", "thread_flag", "alongside"]
 
 #: Units of work (samples, faces, cells: what the caller counts) from which :func:`call`
 #: runs a kernel in a helper thread. Below it a kernel takes well under 10 ms.
 THREAD_MIN_WORK = 1 << 18
+
+#: Units of work from which :func:`call` spreads a loop (``items``) over threads: starting
+#: a thread costs about 0.1 ms, a unit (a sight line, a sample) a microsecond or more.
+PARALLEL_MIN_WORK = 1 << 12
 
 #: Seconds between two wakes of the waiting main thread (signals wake it at once anyway).
 _JOIN_STEP = 0.25
@@ -147,32 +155,41 @@ def new_flag():
     return np.zeros(1, dtype=np.int64)
 
 
-def for_threads(parallel, serial):
-    """``parallel`` (a ``prange`` kernel), or its serial twin ``serial`` when numba has one
-    thread, as in a worker of a :func:`terrainvis.compare` run: the twin computes the same,
-    and spares the parfor compilation (about 1-1.5 s of CPU) that gains nothing there
-    (``tests/whole/test_serial_twins.py`` checks each pair)."""
-    import numba
-
-    return parallel if numba.get_num_threads() > 1 else serial
-
-
-def call(kernel, *args, work: int):
-    """``kernel(*args, stop)``, interruptible by SIGINT and SIGTERM (see the module docstring).
+def call(kernel, *args, work: int, items: int | None = None, grain: int = 1, min_parallel: int | None = None):
+    """``kernel(*args, stop)``, interruptible by SIGINT and SIGTERM (see the module docstring);
+    with ``items``, a loop of independent iterations spread over threads.
 
     Parameters
     ----------
     kernel : numba dispatcher
-        A ``nogil`` kernel whose last parameter is the stop flag.
+        A ``nogil`` kernel whose last parameter is the stop flag. With ``items`` it takes
+        ``(*args, lo, hi, stop)`` and runs iterations ``lo .. hi - 1`` of a loop of
+        ``items`` iterations that write disjoint parts of its outputs.
     *args
         Its other arguments.
     work : int
-        The size of the call (samples, faces: any count proportional to its time).
-        Calls of at least :data:`THREAD_MIN_WORK` run in a helper thread.
+        The size of the call (samples, faces, sight lines: any count proportional to its
+        time). Calls of at least :data:`THREAD_MIN_WORK` run in a helper thread; with
+        ``items``, calls of at least :data:`PARALLEL_MIN_WORK` run on
+        ``numba.get_num_threads()`` helper threads.
+    items : int, optional
+        The loop's number of iterations. Run on several threads, the threads take
+        chunks of iterations in turn (:func:`_chunks`) until none is left, so that
+        iterations of uneven cost still keep every thread busy to the end. This is how
+        terrainvis runs a loop in parallel: one serial kernel, compiled once, with no
+        ``prange`` (whose parfor compilation cost seconds per loop on a first run) and
+        no serial twin for one thread.
+    grain : int
+        The fewest iterations a chunk holds (one call of the kernel costs a few
+        microseconds: a chunk should be worth far more).
+    min_parallel : int, optional
+        The least ``work`` spread over threads (default :data:`PARALLEL_MIN_WORK`).
 
     Returns
     -------
-    What the kernel returns.
+    What the kernel returns; with ``items``, the sum of what its calls return (a kernel
+    that counts returns the count over every iteration, in any order; one that returns
+    nothing, None).
 
     Raises
     ------
@@ -182,18 +199,27 @@ def call(kernel, *args, work: int):
         kernel's own exception.
     """
     raise_pending()  # an interrupt swallowed by C code since the last call (see kept_interrupts)
+    whole = () if items is None else (0, int(items))
+    spread = items is not None and items > 1 and work >= (PARALLEL_MIN_WORK if min_parallel is None else min_parallel)
     if threading.current_thread() is not threading.main_thread():
         shared = getattr(_local, "flag", None)
         if shared is None:
-            return kernel(*args, new_flag())
-        _raise_if_set(shared)
-        out = kernel(*args, shared)
-        _raise_if_set(shared)  # its result may be partial: never used
+            shared = new_flag()
+        else:
+            _raise_if_set(shared)
+        if spread and _threads() > 1:
+            out = _run_chunks(kernel, args, int(items), grain, shared)
+        else:
+            out = kernel(*args, *whole, shared)
+        if getattr(_local, "flag", None) is not None:
+            _raise_if_set(shared)  # its result may be partial: never used
         return out
     stop = new_flag()
+    if spread and _threads() > 1:
+        return _run_chunks(kernel, args, int(items), grain, stop)
     if work < THREAD_MIN_WORK:
-        return kernel(*args, stop)
-    job = _Job(kernel, *args, stop)
+        return kernel(*args, *whole, stop)
+    job = _Job(kernel, *args, *whole, stop)
     try:
         job.wait()
     except BaseException:
@@ -204,6 +230,74 @@ def call(kernel, *args, work: int):
         job.wait_through(limit=_STOP_GRACE)
         raise
     return job.result()
+
+
+def _threads() -> int:
+    """The threads a parallel loop may use: numba's number for this thread (``NUMBA_NUM_THREADS``,
+    :func:`numba.set_num_threads`; a worker of a compare run has one)."""
+    import numba
+
+    return max(1, numba.get_num_threads())
+
+
+#: Chunks per thread a loop is cut into at most: enough for threads that finish early to
+#: take over the rest of uneven work, few enough that the calls cost nothing.
+CHUNKS_PER_THREAD = 64
+
+
+def _chunks(items: int, threads: int, grain: int) -> list[tuple[int, int]]:
+    """``[0, items)`` cut into consecutive chunks of at least ``grain`` iterations, at most
+    :data:`CHUNKS_PER_THREAD` per thread.
+
+    >>> _chunks(10, 2, 1)[:3], len(_chunks(10_000, 2, 1)), _chunks(5, 4, 4)
+    ([(0, 1), (1, 2), (2, 3)], 32, [(0, 4), (4, 5)])
+    """
+    size = max(grain, -(-items // (CHUNKS_PER_THREAD * threads)), 1)
+    return [(lo, min(items, lo + size)) for lo in range(0, items, size)]
+
+
+def _run_chunks(kernel, args, items: int, grain: int, stop):
+    """``kernel(*args, lo, hi, stop)`` over the chunks of ``[0, items)`` on helper threads, each
+    taking the next chunk when it is done with one; the calling thread waits (in the main
+    thread, where signals arrive, as :func:`call` waits for one helper)."""
+    threads = _threads()
+    todo = _chunks(items, threads, grain)
+    lock = threading.Lock()
+    position = [0]
+
+    def work():
+        total = None
+        while not stop[0]:
+            with lock:
+                k = position[0]
+                position[0] += 1
+            if k >= len(todo):
+                break
+            try:
+                out = kernel(*args, *todo[k], stop)
+            except BaseException:
+                with lock:  # no thread takes another chunk: the call has failed
+                    position[0] = len(todo)
+                raise
+            if out is not None:
+                total = out if total is None else total + out
+        return total
+
+    jobs = [_Job(work) for _ in range(min(threads, len(todo)))]
+    try:
+        for job in jobs:
+            job.wait()
+    except BaseException:
+        stop[0] = 1
+        for job in jobs:
+            job.wait_through(limit=_STOP_GRACE)
+        raise
+    total = None
+    for job in jobs:
+        out = job.result()
+        if out is not None:
+            total = out if total is None else total + out
+    return total
 
 
 @contextlib.contextmanager

@@ -114,6 +114,13 @@ def borrow(typingctx, arr):
     return arr(arr), codegen
 
 
+@nb.njit(cache=True, nogil=True)
+def keep_alive(owners):
+    """Nothing: a use of ``owners`` at the end of a kernel that :func:`borrow` ed views of
+    arrays it made itself (numba frees an array after its last use)."""
+    return None
+
+
 @nb.njit(cache=True, nogil=True, inline="always")
 def borrow_grid(g):
     """The :data:`SurfaceGrid` ``g`` with every array :func:`borrow` ed (valid while ``g``'s arrays are)."""

@@ -11,7 +11,7 @@ built by ``terrainvis.visibility.grid``), keeps its descent on a
 :data:`WalkStack` (scratch arrays, one per thread, from :func:`new_stack`) and takes a
 segment as the 6-tuple ``seg = (ax, ay, az, dx, dy, dz)``, the points ``a + t * d``.
 The per-cell and per-pair functions (``_cell_min``, :func:`segment_min`, ``_pair_min``)
-are inlined at numba IR level (``inline="always"``) into the parallel pair loop. As
+are inlined at numba IR level (``inline="always"``) into the pair loop. As
 separate calls they cost 1-4 % of the LOS throughput against the earlier kernels that
 took two dozen positional arrays (every call updates the reference counts of the named
 tuples' arrays); inlined, ``line_of_sight`` is 9-17 % faster than with those kernels,
@@ -20,16 +20,21 @@ and bucket grid through a :data:`~terrainvis.core.surface.SurfaceTin` (local coo
 the bucket grid's corner at the origin). The surface itself (the cell height, ``locate``,
 the triangle plane) is :mod:`terrainvis.core.surface`'s.
 
-Compile time
-------------
-The walk inlined into a ``prange`` loop is the costliest compilation of a first run
-(numba's inlining and parfor passes over the whole walk: about 9 s of CPU per loop). So
-one parallel loop, :func:`grid_walks`, serves both the segments (``line_of_sight``,
-``min_clearance``) and the visibility matrix, with the walk inlined once; it compiles
-in about the time one of the two loops it replaced took. Moving the walk out of the
-``prange`` body into a serial function called per chunk compiles faster still, but
-ran 10-25 % slower (measured with one thread; numpy's error model and no-alias
-arguments, which numba gives a ``prange`` body, did not close the gap).
+Threads and compile time
+------------------------
+The pair loops (:func:`grid_walks`, :func:`tin_pairs`) are serial kernels over a range
+of their iterations; :func:`terrainvis.core.interrupt.call` runs them on numba's number
+of threads, each thread taking the next chunk when done, one kernel for any number of
+threads. The walk inlined into a ``prange`` loop was the costliest compilation of a
+first run (numba's inlining and parfor passes over the whole walk: 11.6 s of the 13.7 s
+that ``assert_visibility_kept`` compiled on a bundled terrain); the range kernel compiles
+in about half that. Its arrays are :func:`~terrainvis.core.surface.borrow` ed once: a
+``prange`` body's arrays carry no reference counts, and without the views the serial
+loop spent half its time in atomic counts; with them a visibility matrix runs 20-30 %
+faster than the ``prange`` loop did (same bits; ``docs/performance.md``, "First run").
+A walk whose per-cell and per-node functions are plain calls instead of inlined ones
+compiles in 4 s, but runs 3.5 times slower: numba passes a named tuple of arrays as
+dozens of scalars, and LLVM does not inline the walk's larger functions.
 
 Tested interval
 ---------------
@@ -65,7 +70,7 @@ import numba as nb
 import numpy as np
 
 from ..core.stopflag import stopped
-from ..core.surface import barycentric, cell_height, weighted
+from ..core.surface import barycentric, borrow, borrow_grid, borrow_tin, cell_height, keep_alive, weighted
 from ..tolerances import BUCKET_SLACK_REL
 from .walk import cell_diagonal
 from .walk import mid_height_inline as mid_height
@@ -150,7 +155,7 @@ def build_pyramid(z, pyr, off, nxl, nyl, ltop):
 
 
 # --------------------------------------------------------------------------- grid walk
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _vertex_min(fa, fb, ta, tb, bulge):
     """Curved clearance at the interior minimum of one piece, or inf when it has none there.
 
@@ -169,7 +174,7 @@ def _vertex_min(fa, fb, ta, tb, bulge):
     return fa + b_ * (ts - ta) - bulge * ts * (1.0 - ts)
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def curved_min(fa, fb, ta, tb, bulge):
     """Exact minimum over [ta, tb] of ``flat(t) - bulge t (1 - t)``, the flat clearance
     linear with ``fa``, ``fb`` at the ends; ``min(fa, fb)`` (the same bits) for bulge 0."""
@@ -179,7 +184,7 @@ def curved_min(fa, fb, ta, tb, bulge):
     return min(m, _vertex_min(fa, fb, ta, tb, bulge))
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
+@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _tt_range(a0, a1):
     """(min, max) of t (1 - t) over [a0, a1] (the bulge's shape, largest at t = 1/2)."""
     f0 = a0 * (1.0 - a0)
@@ -378,18 +383,28 @@ def _pair_min(g, a, b, delta, end_radius, los, tol, kc, st):
     return segment_min(g, seg, t0, 1.0 - t0, los, tol, kc * (seg[3] * seg[3] + seg[4] * seg[4]), st)
 
 
-#: Segments per ``prange`` iteration of :func:`grid_walks` (segment mode).
+#: Segments per iteration of :func:`grid_walks` (segment mode).
 PAIR_CHUNK = 512
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop):
-    """The parallel pair loops of the grid walk: segments or a visibility matrix (see "Compile time").
+def grid_walk_iterations(n_points: int, n_segments: int, matrix: bool) -> int:
+    """The iterations of :func:`grid_walks`'s loop: pairs of rows of a matrix of ``n_points``,
+    or chunks of :data:`PAIR_CHUNK` of ``n_segments`` segments."""
+    return (n_points + 1) // 2 if matrix else (n_segments + PAIR_CHUNK - 1) // PAIR_CHUNK
 
-    ``g`` is a :data:`~terrainvis.core.surface.SurfaceGrid`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
-    ``kc`` the curvature coefficient over twice the earth's radius (0: flat). ``stop`` is
-    the stop flag of :mod:`terrainvis.core.interrupt`, read at the start of every iteration
-    (an iteration with it set does nothing; the partial result is then never used).
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def grid_walks(g, a, b, index, pred, clear, vis, it0, it1, stop):
+    """Iterations ``it0 .. it1 - 1`` of the pair loops of the grid walk: segments or a
+    visibility matrix (see "Compile time"); :func:`terrainvis.core.interrupt.call` spreads
+    the :func:`grid_walk_iterations` iterations over threads.
+
+    ``g`` is a :data:`~terrainvis.core.surface.SurfaceGrid`; ``a``, ``b`` (m, 3) float64 in
+    its local coordinates; ``pred`` the predicate ``(delta, end_radius, los, tol, kc)``:
+    trim, end radius, the LOS mode of :func:`segment_min`, tolerance and the curvature
+    coefficient over twice the earth's radius (0: flat). ``stop`` is the stop flag of
+    :mod:`terrainvis.core.interrupt`, read at the start of every iteration (the loop
+    returns when it is set; the partial result is then never used).
 
     * Segments, ``vis`` empty (shape (0, 0)): ``clear[index[k]]`` = clearance of the
       segment ``a[index[k]] -> b[index[k]]`` (``los`` as in :func:`segment_min`; ``index``
@@ -400,14 +415,23 @@ def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop
       Result (i, j) of the ordered points goes to ``vis[index[i], index[j]]`` and its
       mirror (``index`` the permutation that ordered them); the diagonal is set True.
     """
+    delta, end_radius, los, tol, kc = pred
     matrix = vis.shape[0] > 0
     n = a.shape[0]
     m = index.shape[0]
-    niter = (n + 1) // 2 if matrix else (m + PAIR_CHUNK - 1) // PAIR_CHUNK
-    for it in nb.prange(niter):
+    # views without reference counts, made once (see terrainvis.core.surface.borrow): a
+    # prange body's arrays had none, and this loop's atomic counts took half its time
+    g = borrow_grid(g)
+    a = borrow(a)
+    b = borrow(b)
+    index = borrow(index)
+    clear = borrow(clear)
+    vis = borrow(vis)
+    st_own = new_stack(g.ltop)
+    st = WalkStack(borrow(st_own.level), borrow(st_own.row), borrow(st_own.col), borrow(st_own.t))
+    for it in range(it0, it1):
         if stopped(stop):
-            continue
-        st = new_stack(g.ltop)
+            return
         kk = np.int64(it)
         for h in range(2 if matrix else 1):
             i = kk
@@ -436,6 +460,7 @@ def grid_walks(g, a, b, index, delta, end_radius, los, tol, kc, clear, vis, stop
                     vis[pj, pi] = seen
                 else:
                     clear[ia] = c
+    keep_alive(st_own)
 
 
 # --------------------------------------------------------------------------- TIN
@@ -571,28 +596,29 @@ def _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc):
     return _tin_segment_min(mesh, seg, t0, 1.0 - t0, eps, kc * (seg[3] * seg[3] + seg[4] * seg[4]))
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out, stop):
-    """Exact minimum clearance of each segment over a TIN (clip against every face crossed).
+#: Segments per iteration of :func:`tin_pairs`.
+TIN_CHUNK = 64
+
+
+@nb.njit(cache=True, nogil=True)
+def tin_pairs(mesh, a, b, delta, end_radius, eps, kc, out, k0, k1, stop):
+    """Exact minimum clearance of each segment over a TIN (clip against every face crossed),
+    for the segments of chunks ``k0 .. k1 - 1`` of :data:`TIN_CHUNK`
+    (:func:`terrainvis.core.interrupt.call` spreads the chunks over threads).
 
     ``mesh`` is a :data:`~terrainvis.core.surface.SurfaceTin`; ``a``, ``b`` (m, 3) float64 in its local coordinates;
     ``kc`` the curvature coefficient over twice the earth's radius (0: flat). The segment
     is tested over the interval of :func:`interval_start` (see :func:`_tin_segment_min`).
-    Segments not started once the stop flag ``stop`` is set are skipped
-    (:mod:`terrainvis.core.interrupt`).
+    The loop returns once the stop flag ``stop`` is set (:mod:`terrainvis.core.interrupt`).
     """
     m = a.shape[0]
-    for i in nb.prange(m):
-        if stopped(stop):
-            continue
-        out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)
-
-
-@nb.njit(cache=True, nogil=True)
-def tin_pairs_serial(mesh, a, b, delta, end_radius, eps, kc, out, stop):
-    """:func:`tin_pairs` in the calling thread (the same clearances): with one thread the
-    ``prange`` loop gains nothing and costs a parfor compilation (about 1 s of CPU)."""
-    for i in range(a.shape[0]):
+    # views without reference counts (see grid_walks): each face clipped read the mesh's arrays
+    mesh = borrow_tin(mesh)
+    a = borrow(a)
+    b = borrow(b)
+    out = borrow(out)
+    for k in range(k0, k1):
         if stopped(stop):
             return
-        out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)
+        for i in range(k * TIN_CHUNK, min(m, (k + 1) * TIN_CHUNK)):
+            out[i] = _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc)

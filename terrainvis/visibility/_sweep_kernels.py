@@ -89,7 +89,7 @@ from ..tolerances import (
 )
 
 from ..core.stopflag import stopped
-from ..core.surface import borrow, borrow_grid, cell_height, line_height, tri_height
+from ..core.surface import borrow, borrow_grid, cell_height, keep_alive, line_height, tri_height
 from ..core.surface import locate as _locate
 from ._kernels import _canonical, curved_min, interval_start
 from .walk import cell_diagonal, cells_next, cells_start
@@ -98,6 +98,17 @@ _INF = np.inf
 
 #: A ring index beyond every grid (``_box_exit`` of it is inf).
 _BEYOND = 1 << 40
+
+# Arguments that are constants at a call site, as numpy scalars: numba compiles a function
+# once for each literal (Python) int or bool it is called with, and once more for the
+# plain type, so a literal argument cost a first run a second copy of the callee (and of
+# every function inlined into it); a numpy scalar is typed as its plain type.
+_NO_END = np.int64(_BEYOND)  # a walk to the end of the ray
+_NONE = np.int64(-1)  # no ring
+_UPPER = np.bool_(True)  # a cell's upper triangle
+_LOWER = np.bool_(False)
+_VERTICAL = np.int64(0)  # a grid line x = xs[c]
+_HORIZONTAL = np.int64(1)  # a grid line y = ys[r]
 
 #: Codes of the sweep's output (int8 per sample).
 BLOCKED = 0
@@ -255,17 +266,17 @@ def _absent_piece(g, r, c, upper, ray, ta, tb, bulge):
     nr, nc = z.shape
     best = _INF
     if dx == 0.0:
-        if ex == xs[c] and (_tri_present(z, r, c, True) or (c > 0 and _tri_present(z, r, c - 1, False))):
-            best = curved_min(_edge_clear(g, 0, r, c, ray, ta), _edge_clear(g, 0, r, c, ray, tb), ta, tb, bulge)
-        elif ex == xs[c + 1] and (_tri_present(z, r, c, False) or (c + 1 < nc - 1 and _tri_present(z, r, c + 1, True))):
-            best = curved_min(_edge_clear(g, 0, r, c + 1, ray, ta), _edge_clear(g, 0, r, c + 1, ray, tb), ta, tb,
+        if ex == xs[c] and (_tri_present(z, r, c, _UPPER) or (c > 0 and _tri_present(z, r, c - 1, _LOWER))):
+            best = curved_min(_edge_clear(g, _VERTICAL, r, c, ray, ta), _edge_clear(g, _VERTICAL, r, c, ray, tb), ta, tb, bulge)
+        elif ex == xs[c + 1] and (_tri_present(z, r, c, _LOWER) or (c + 1 < nc - 1 and _tri_present(z, r, c + 1, _UPPER))):
+            best = curved_min(_edge_clear(g, _VERTICAL, r, c + 1, ray, ta), _edge_clear(g, _VERTICAL, r, c + 1, ray, tb), ta, tb,
                               bulge)
     if dy == 0.0:
-        if ey == ys[r] and (_tri_present(z, r, c, False) or (r > 0 and _tri_present(z, r - 1, c, True))):
-            best = min(best, curved_min(_edge_clear(g, 1, r, c, ray, ta), _edge_clear(g, 1, r, c, ray, tb), ta, tb,
+        if ey == ys[r] and (_tri_present(z, r, c, _LOWER) or (r > 0 and _tri_present(z, r - 1, c, _UPPER))):
+            best = min(best, curved_min(_edge_clear(g, _HORIZONTAL, r, c, ray, ta), _edge_clear(g, _HORIZONTAL, r, c, ray, tb), ta, tb,
                                         bulge))
-        elif ey == ys[r + 1] and (_tri_present(z, r, c, True) or (r + 1 < nr - 1 and _tri_present(z, r + 1, c, False))):
-            best = min(best, curved_min(_edge_clear(g, 1, r + 1, c, ray, ta), _edge_clear(g, 1, r + 1, c, ray, tb),
+        elif ey == ys[r + 1] and (_tri_present(z, r, c, _UPPER) or (r + 1 < nr - 1 and _tri_present(z, r + 1, c, _LOWER))):
+            best = min(best, curved_min(_edge_clear(g, _HORIZONTAL, r + 1, c, ray, ta), _edge_clear(g, _HORIZONTAL, r + 1, c, ray, tb),
                                         ta, tb, bulge))
     other = not upper
     if _tri_present(z, r, c, other):
@@ -447,8 +458,9 @@ def walk_targets(g, eye, tx, ty, tz, delta, tol, kc, out):
     direction, length trim and earth curvature ``kc`` as in the pair engine; returns early
     below ``-tol``).
 
-    ``eye`` is ``(ex, ey, ez)``. Serial: it only answers the few targets the sweep leaves
-    undecided on a grid with nodata (the pair engine needs a NaN-free grid)."""
+    ``eye`` is ``(ex, ey, ez)``. Serial: it answers the few targets the sweep leaves
+    undecided (about 16 a viewshed, around the eye) and, on a grid with nodata, which the
+    pair engine cannot walk, all of them."""
     m = tx.shape[0]
     for i in range(m):
         seg, length = _canonical(eye, (tx[i], ty[i], tz[i]))
@@ -647,8 +659,8 @@ def _cell_edges(g, eye, r, c, win, ub, lb, lim):
     """Add the edges of the present triangles of cell (r, c) with exact clipping."""
     z, xs, ys = g.z, g.xs, g.ys
     ex, ey, ez = eye.ex, eye.ey, eye.ez
-    lower = _tri_present(z, r, c, False)
-    upper = _tri_present(z, r, c, True)
+    lower = _tri_present(z, r, c, _LOWER)
+    upper = _tri_present(z, r, c, _UPPER)
     for k in range(5):
         # bottom, right (lower triangle); left, top (upper triangle); diagonal (both)
         if k < 2 and not lower:
@@ -1081,7 +1093,7 @@ def _decide(g, eye, rules, w, j, win, tg, sl, ub_clear):
     if ub_clear:
         tau = rules.delta / np.sqrt(dist * dist + nt * nt)
         tolm = rules.tol + rules.marg
-        cl = _walk_rings(g, eye, ray, j, _BEYOND, tau, 1.0 - tau, tolm, rules.kc * (dist * dist))
+        cl = _walk_rings(g, eye, ray, j, _NO_END, tau, 1.0 - tau, tolm, rules.kc * (dist * dist))
         if cl < -tolm:
             return BLOCKED, 1
         if cl < -rules.tol + rules.marg:
@@ -1118,8 +1130,8 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
     nq = (j + QUAD - 1) // QUAD  # quads holding rings 0 .. j - 1
     qpb = BLOCK // QUAD
     ambiguous = False
-    run_lo = -1  # first ring of the piece to walk (-1: none open)
-    run_hi = -1
+    run_lo = _NONE  # first ring of the piece to walk (-1: none open)
+    run_hi = _NONE
     qk = 0
     if nfull >= 2 and not _slot_max(w.ubold, sl) > smin:
         qk = (nfull - 1) * qpb  # every old block clears
@@ -1162,7 +1174,7 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
         qk += skip * qpb if skip > 0 else 1
     # the rest of the ray beyond the bounds (annulus j, where an own target stands, or
     # annuli j and j + 1 for another target) is always walked, joined to an open piece
-    cl = _walk_rings(g, eye, ray, run_lo if run_lo >= 0 else j, _BEYOND, tau, t_end, tolm, bulge)
+    cl = _walk_rings(g, eye, ray, run_lo if run_lo >= 0 else j, _NO_END, tau, t_end, tolm, bulge)
     if cl < -tolm:
         return BLOCKED
     if cl < amb:
@@ -1307,12 +1319,12 @@ def bucket_targets(g, eye, tx, ty, nsec, jstop, tstart, torder):
     return placed
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy", parallel=True)
-def sweep(g, eye, rules, lay, tg, perm, stats, stop):
-    """Decide the targets with rigorous horizon bounds and partial exact walks.
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def sweep(g, eye, rules, lay, tg, stats, s0, s1, stop):
+    """Decide the targets of sectors ``s0 .. s1 - 1`` with rigorous horizon bounds and partial exact walks.
 
-    One task per angular sector (``lay.nsec`` sectors, a multiple of 4, ``perm`` spreads
-    them over the threads). Each task sweeps the rings outwards keeping the bounds for its
+    One task per angular sector (``lay.nsec`` sectors, a multiple of 4;
+    :func:`terrainvis.core.interrupt.call` spreads them over threads). Each task sweeps the rings outwards keeping the bounds for its
     own wedges plus one guard wedge on each side: at ring j it first decides the targets
     whose bounds are complete (the samples of sample ring j whose direction falls in the
     sector, when ``tg.own``; otherwise the targets of bucket (sector, j) of ``tg.tstart`` /
@@ -1326,8 +1338,8 @@ def sweep(g, eye, rules, lay, tg, perm, stats, stop):
     :mod:`terrainvis.core.interrupt`: every sector reads it once per ring and returns when it
     is set (the codes are then incomplete and never used).
     """
-    for it in nb.prange(lay.nsec):
-        _sector(g, eye, rules, lay, tg, perm[it], stats, stop)
+    for sector in range(s0, s1):
+        _sector(g, eye, rules, lay, tg, sector, stats, stop)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -1598,12 +1610,6 @@ def _block_line(code, vertical, line, a, top):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def _keep_alive(owners):
-    """Nothing: a use of ``owners`` (numba frees an array after its last use)."""
-    return None
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
 def _sector(g, eye, rules, lay, tg, s, stats, stop):
     """The sweep of one sector (see :func:`sweep`), on views of its inputs and of its work
     arrays without reference counts (:func:`~terrainvis.core.surface.borrow`)."""
@@ -1732,7 +1738,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     for k in range(5):
         stats[s, k] = counts[k]
     # the owners of the views are used last here, so they live until the sector is done
-    _keep_alive((w_own, tmp_own, buf_own, hidden_own, ranges_own, counts_own))
+    keep_alive((w_own, tmp_own, buf_own, hidden_own, ranges_own, counts_own))
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")

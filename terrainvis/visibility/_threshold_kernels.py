@@ -45,13 +45,13 @@ The walks
 * :func:`tin_max_slope` walks the TIN from face to face across the edges the track
   crosses (the faces' neighbours), from the face under the interval's start.
 
-Compile time
-------------
-A ``prange`` loop costs about 1.5 s of CPU to compile however small its body (numba's
-parfor lowering), and gains nothing with one thread, as in the workers of a
-:func:`terrainvis.compare` run. :func:`grid_heights` and :func:`tin_heights` have serial
-twins (:func:`grid_heights_serial`, :func:`tin_heights_serial`: the same heights) that
-:mod:`terrainvis.relocation.calibrated` calls when numba has one thread.
+Threads
+-------
+The loops over points (:func:`grid_heights`, :func:`tin_heights`) and over chunks of
+targets (:func:`grid_eye_thresholds`, :func:`tin_eye_thresholds`) are serial kernels over
+a range of their iterations; :func:`terrainvis.core.interrupt.call` runs them on numba's
+number of threads, one kernel for any number of threads (a ``prange`` loop cost about
+1.5 s of CPU to compile however small its body, and a serial twin for one thread).
 
 Best heights
 ------------
@@ -820,44 +820,17 @@ def tin_row(tin, p, q, rules, skip, out):
     _tin_row(tin, p, q, rules, skip, out)
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def grid_heights(g, p, q, vis, near, rules, out, score, stop):
-    """Best height of each point p[i] = (x, y, reference height) against the partners q
-    (x, y, height on the surface), whose verdicts on T are ``vis[i]``, keeping its
-    agreement with its :data:`Neighbours` ``near`` (thresholds ``near.lthr[i]``, verdicts
-    ``near.lvis[i]``: :func:`best_height_kept`; parallel over points)."""
-    n = p.shape[0]
-    for i in nb.prange(n):
-        if stopped(stop):
-            continue
-        st = new_stack(g.ltop)
-        thr = np.empty(q.shape[0])
-        state = np.empty(q.shape[0], dtype=np.int8)
-        out[i], score[i] = _grid_best(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
-                                      (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def tin_heights(tin, p, q, vis, near, rules, out, score, stop):
-    """:func:`grid_heights` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
-    n = p.shape[0]
-    for i in nb.prange(n):
-        if stopped(stop):
-            continue
-        thr = np.empty(q.shape[0])
-        state = np.empty(q.shape[0], dtype=np.int8)
-        out[i], score[i] = _tin_best(tin, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
-                                     (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
-
-
 @nb.njit(cache=True, nogil=True)
-def grid_heights_serial(g, p, q, vis, near, rules, out, score, stop):
-    """:func:`grid_heights` in the calling thread (the same heights): with one thread a
-    ``prange`` loop gains nothing and costs a parfor compilation (see "Compile time")."""
+def grid_heights(g, p, q, vis, near, rules, out, score, i0, i1, stop):
+    """Best height of each point p[i], i in ``i0 .. i1 - 1``, = (x, y, reference height)
+    against the partners q (x, y, height on the surface), whose verdicts on T are
+    ``vis[i]``, keeping its agreement with its :data:`Neighbours` ``near`` (thresholds
+    ``near.lthr[i]``, verdicts ``near.lvis[i]``: :func:`best_height_kept`);
+    :func:`terrainvis.core.interrupt.call` spreads the points over threads."""
     st = new_stack(g.ltop)
     thr = np.empty(q.shape[0])
     state = np.empty(q.shape[0], dtype=np.int8)
-    for i in range(p.shape[0]):
+    for i in range(i0, i1):
         if stopped(stop):
             return
         out[i], score[i] = _grid_best(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
@@ -865,11 +838,11 @@ def grid_heights_serial(g, p, q, vis, near, rules, out, score, stop):
 
 
 @nb.njit(cache=True, nogil=True)
-def tin_heights_serial(tin, p, q, vis, near, rules, out, score, stop):
-    """:func:`tin_heights` in the calling thread (see :func:`grid_heights_serial`)."""
+def tin_heights(tin, p, q, vis, near, rules, out, score, i0, i1, stop):
+    """:func:`grid_heights` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     thr = np.empty(q.shape[0])
     state = np.empty(q.shape[0], dtype=np.int8)
-    for i in range(p.shape[0]):
+    for i in range(i0, i1):
         if stopped(stop):
             return
         out[i], score[i] = _tin_best(tin, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
@@ -1005,50 +978,35 @@ def _tin_eye_one(w, eye, tx, ty, tz, rules):
     return tr.qz + _tin_span(w, tr, ub, 1.0 - ub)
 
 
-@nb.njit(cache=True, nogil=True, parallel=True)
-def grid_eye_thresholds(g, eye, t, rules, out, stop):
+@nb.njit(cache=True, nogil=True)
+def grid_eye_thresholds(g, eye, t, rules, out, k0, k1, stop):
     """``out[i]`` = the threshold height of the target point ``t[i]`` = (x, y, z) (local; z
     sets the trim) for the fixed ``eye`` = (x, y, z) on the grid ``g``: the least height at
-    which it sees the eye (-inf: the segment is not tested). Parallel over chunks of
-    :data:`EYE_CHUNK` targets."""
+    which it sees the eye (-inf: the segment is not tested), for the targets of chunks
+    ``k0 .. k1 - 1`` of :data:`EYE_CHUNK` targets (:func:`eye_chunks` of them;
+    :func:`terrainvis.core.interrupt.call` spreads them over threads)."""
     n = t.shape[0]
-    for k in nb.prange((n + EYE_CHUNK - 1) // EYE_CHUNK):
+    gb = borrow_grid(g)
+    st = new_stack(g.ltop)
+    for k in range(k0, k1):
         if stopped(stop):
-            continue
-        gb = borrow_grid(g)
-        st = new_stack(g.ltop)
+            return
         for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
             out[i] = _grid_eye_one(gb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
 
 
 @nb.njit(cache=True, nogil=True)
-def grid_eye_thresholds_serial(g, eye, t, rules, out, stop):
-    """:func:`grid_eye_thresholds` in the calling thread (the same thresholds; see "Compile time")."""
-    gb = borrow_grid(g)
-    st = new_stack(g.ltop)
-    for i in range(t.shape[0]):
-        if i % EYE_CHUNK == 0 and stopped(stop):
-            return
-        out[i] = _grid_eye_one(gb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
-
-
-@nb.njit(cache=True, nogil=True, parallel=True)
-def tin_eye_thresholds(w, eye, t, rules, out, stop):
+def tin_eye_thresholds(w, eye, t, rules, out, k0, k1, stop):
     """:func:`grid_eye_thresholds` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
     n = t.shape[0]
-    for k in nb.prange((n + EYE_CHUNK - 1) // EYE_CHUNK):
+    wb = borrow_tin(w)
+    for k in range(k0, k1):
         if stopped(stop):
-            continue
-        wb = borrow_tin(w)
+            return
         for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
             out[i] = _tin_eye_one(wb, eye, t[i, 0], t[i, 1], t[i, 2], rules)
 
 
-@nb.njit(cache=True, nogil=True)
-def tin_eye_thresholds_serial(w, eye, t, rules, out, stop):
-    """:func:`tin_eye_thresholds` in the calling thread (the same thresholds)."""
-    wb = borrow_tin(w)
-    for i in range(t.shape[0]):
-        if i % EYE_CHUNK == 0 and stopped(stop):
-            return
-        out[i] = _tin_eye_one(wb, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+def eye_chunks(n_targets: int) -> int:
+    """The chunks of :data:`EYE_CHUNK` targets of :func:`grid_eye_thresholds` and :func:`tin_eye_thresholds`."""
+    return (n_targets + EYE_CHUNK - 1) // EYE_CHUNK

@@ -176,9 +176,10 @@ def grid_clearance(
         order = _morton_order(a[:, :2], grid.extent).astype(np.int64)
     else:
         order = np.arange(m, dtype=np.int64)
-    # through the interrupt helper: Ctrl-C stops the parallel kernel within an iteration
-    call(_kernels.grid_walks, _walk_grid(grid, acc), la, lb, order, float(delta), float(end_radius), bool(los),
-         float(tol), float(kc), out, np.zeros((0, 0), dtype=np.bool_), work=m)
+    # through the interrupt helper: on threads, and Ctrl-C stops the kernel within an iteration
+    pred = (float(delta), float(end_radius), bool(los), float(tol), float(kc))
+    call(_kernels.grid_walks, _walk_grid(grid, acc), la, lb, order, pred, out, np.zeros((0, 0), dtype=np.bool_),
+         work=m, items=_kernels.grid_walk_iterations(0, m, False))
     return out
 
 
@@ -191,7 +192,8 @@ def grid_matrix(grid, points, *, delta: float, tol: float, end_radius: float = 0
     acc = grid_accel(grid)
     order = _morton_order(points[:, :2], grid.extent).astype(np.int64)
     p = np.ascontiguousarray(_local(points, acc)[order])
-    # through the interrupt helper: Ctrl-C stops the parallel kernel within an iteration
-    call(_kernels.grid_walks, _walk_grid(grid, acc), p, p, order, float(delta), float(end_radius), True, float(tol),
-         float(kc), np.zeros(0), out, work=n * n // 2)
+    # through the interrupt helper: on threads, and Ctrl-C stops the kernel within an iteration
+    pred = (float(delta), float(end_radius), True, float(tol), float(kc))
+    call(_kernels.grid_walks, _walk_grid(grid, acc), p, p, order, pred, np.zeros(0), out, work=n * n // 2,
+         items=_kernels.grid_walk_iterations(n, 0, True))
     return out

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.interrupt import call, for_threads
+from ..core.interrupt import call
 from ..core.terrain import HeightGrid
 from . import _threshold_kernels as _tk
 from .field_of_view import elevation_degrees
@@ -85,14 +85,11 @@ def eye_thresholds(terrain, eye: np.ndarray, targets: np.ndarray, kc: float) -> 
     (n,) float64
         The least height at which each target sees the eye under the LOS predicate of
         ``terrain`` (its trim and tolerance); -inf where the segment is not tested.
-        Parallel when numba has threads; interruptible.
+        On numba's number of threads; interruptible.
     """
     surf = ThresholdSurface(terrain)
     rules = surf.rules(kc=kc)
-    if isinstance(terrain, HeightGrid):
-        kernel = for_threads(_tk.grid_eye_thresholds, _tk.grid_eye_thresholds_serial)
-    else:
-        kernel = for_threads(_tk.tin_eye_thresholds, _tk.tin_eye_thresholds_serial)
+    kernel = _tk.grid_eye_thresholds if isinstance(terrain, HeightGrid) else _tk.tin_eye_thresholds
     return _run(kernel, surf, rules, eye, targets)
 
 
@@ -103,7 +100,7 @@ def tin_of_grid_thresholds(grid: HeightGrid, eye: np.ndarray, targets: np.ndarra
     :func:`terrainvis.visibility.sweep`)."""
     surf = ThresholdSurface(grid.to_tin())
     rules = surf.rules(kc=kc)._replace(delta=float(trim_length(grid)), tol=float(clearance_tolerance(grid)))
-    return _run(for_threads(_tk.tin_eye_thresholds, _tk.tin_eye_thresholds_serial), surf, rules, eye, targets)
+    return _run(_tk.tin_eye_thresholds, surf, rules, eye, targets)
 
 
 def _run(kernel, surf: ThresholdSurface, rules, eye: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -111,7 +108,8 @@ def _run(kernel, surf: ThresholdSurface, rules, eye: np.ndarray, targets: np.nda
     if targets.shape[0] == 0:
         return out
     q = (float(eye[0] - surf.x0), float(eye[1] - surf.y0), float(eye[2]))
-    call(kernel, surf.data, q, np.ascontiguousarray(surf.local(targets)), rules, out, work=64 * targets.shape[0])
+    call(kernel, surf.data, q, np.ascontiguousarray(surf.local(targets)), rules, out, work=64 * targets.shape[0],
+         items=_tk.eye_chunks(targets.shape[0]))
     return out
 
 

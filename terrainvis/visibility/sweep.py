@@ -608,10 +608,9 @@ def _max_slope(grid: HeightGrid) -> float:
 
 
 def _build_tables(grid: HeightGrid) -> None:
-    """Build a grid's tables for its first sweep at once: the steepest slope and the pair
-    engine's pyramid (for the nearest sample and the targets the bounds leave) each in a
-    helper thread, the strips' maxima here. On 3601² the three took 0.21 s one after the
-    other, 0.15 s two at a time and 0.12 s three at a time on two cores. Small grids, a
+    """Build a grid's tables for its first sweep at once: the steepest slope in a helper
+    thread, the strips' maxima here. The pair engine's pyramid is not built: the few
+    targets the bounds leave take the sweep's own walk (:func:`_exact`). Small grids, a
     grid already done, numba on one thread and threads other than the main one (units of
     :func:`terrainvis.core.runner.run_units`) build them where they are first needed, one
     after the other."""
@@ -619,14 +618,8 @@ def _build_tables(grid: HeightGrid) -> None:
     if ("viewshed_max_slope" in cached and "viewshed_strip_max" in cached) or grid.size < THREAD_MIN_WORK \
             or numba.get_num_threads() < 2 or threading.current_thread() is not threading.main_thread():
         return
-    from .grid import grid_accel
-
-    def pyramid():
-        if not grid.n_nodata:
-            grid_accel(grid)
-
-    # the helpers' kernels take no stop flag: under a tenth of a second each on 3601²
-    with alongside(lambda: _max_slope(grid)), alongside(pyramid):
+    # the helper's kernel takes no stop flag: under a tenth of a second on 3601²
+    with alongside(lambda: _max_slope(grid)):
         _strip_max(grid)
 
 
@@ -733,21 +726,28 @@ def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.nd
         _vk.bucket_targets(sg, veye, tx, ty, _N_SECTORS, jstop, tstart, torder)
         targets = _vk.Targets(False, np.zeros((1, 1), dtype=np.int8), tx, ty, tz, tstart, torder,
                               np.full(idx.size, _vk.UNDECIDED, dtype=np.int8))
-    # through the interrupt helper: Ctrl-C stops the sweep within a ring of each sector
+    # through the interrupt helper: the sectors on threads, and Ctrl-C stops the sweep within a ring of each
     call(_vk.sweep, sg, veye, _rules(grid, ez, query), _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
-         targets, _sector_order(_N_SECTORS), stats, work=int(code.size))
+         targets, stats, work=int(code.size), items=_N_SECTORS)
     if not own:
         code.ravel()[idx] = targets.tcode
     n = stats.sum(axis=0)
     return int(n[0]), int(n[1] + n[4]), int(n[2]), int(n[4])
 
 
+#: Exact verdicts of at most this many targets take the sweep's own walk (serial, cell by
+#: cell), more take the pair engine (threads, the pyramid). The sweep leaves 16 targets
+#: or so per viewshed (the cells around the eye): the pair engine's kernel, about 6 s to
+#: compile on a first run, is then not compiled at all.
+_WALK_MAX_TARGETS = 1024
+
+
 def _exact(grid: HeightGrid, eye, targets, delta: float, tol: float, kc: float) -> np.ndarray:
     """Exact verdicts eye -> targets ``(tx, ty, tz)`` (world coordinates): the pair engine on
-    a NaN-free grid, the nodata-aware walk otherwise."""
+    a NaN-free grid for many targets, the nodata-aware walk otherwise."""
     tx, ty, tz = targets
     m = tx.size
-    if grid.n_nodata == 0:
+    if grid.n_nodata == 0 and m > _WALK_MAX_TARGETS:
         from .grid import grid_clearance
 
         a = np.empty((m, 3))
@@ -779,14 +779,6 @@ def _last_ring(xs, ys, re: int, ce: int, ex: float, ey: float, dmax: float) -> i
     near = np.minimum(np.minimum(right, left), np.minimum(top, bottom))
     inside = np.flatnonzero(near <= dmax)
     return int(inside[-1]) if inside.size else 0
-
-
-def _sector_order(nsec: int) -> np.ndarray:
-    """Sector order for the parallel loop: numba hands each thread a contiguous block of
-    iterations, so interleave the sectors to give every thread all directions."""
-    nt = max(1, numba.get_num_threads())
-    order = [s for t in range(nt) for s in range(t, nsec, nt)]
-    return np.array(order, dtype=np.int64)
 
 
 # ----------------------------------------------------------------- other targets
@@ -823,7 +815,8 @@ def _rays(terrain, at: HeightGrid, eye: np.ndarray, query, own: bool, engine):
 
 
 def _mark_nearest(out: np.ndarray, terrain, at: HeightGrid, eye, query, engine) -> None:
-    """The sample nearest the observer (the ground it stands on) takes the pair engine's verdict.
+    """The sample nearest the observer (the ground it stands on) takes the exact verdict (the
+    sweep's own walk on a grid, the engine's pairs otherwise).
 
     The sweep does not decide the observer's own cell on its own: this one segment is
     answered exactly, so that with earth curvature an eye on the ground that cannot see
@@ -841,6 +834,10 @@ def _mark_nearest(out: np.ndarray, terrain, at: HeightGrid, eye, query, engine) 
         return
     if isinstance(terrain, HeightGrid) and terrain.n_nodata:
         out[r, c] = True
+        return
+    if engine.name == "grid":  # the sweep's own walk: the same verdict as the pair engine's (see _exact)
+        target = (np.array([x]), np.array([y]), np.array([zs + h_t]))
+        out[r, c] = bool(_exact(terrain, eye, target, trim_length(terrain), clearance_tolerance(terrain), kc)[0])
         return
     predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), 0.0, kc)
     out[r, c] = bool(engine.pairs(terrain, eye[None, :], np.array([[x, y, zs + h_t]]), predicate)[0])

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.interrupt import call, for_threads
+from ..core.interrupt import call
 from ..core.surface import SurfaceTin
 from ..core.terrain import TIN, HeightGrid
 from ..tolerances import THRESHOLD_MARGIN_REL
@@ -181,19 +181,16 @@ def best_heights(surface: ThresholdSurface, p: np.ndarray, q: np.ndarray, visibl
     partners ``q`` (local, (K, 3)) whose verdicts it should agree with are ``visible[i]``,
     counting its neighbours (thresholds (n, L), verdicts (n, L) int8: 1 seen, 0 not, -1
     none; each weighing ``weight`` partners). Returns the heights (n,) and the partners'
-    agreement (n,) int64. Parallel when numba has threads; interruptible. ``window`` as
+    agreement (n,) int64. On numba's number of threads; interruptible. ``window`` as
     in :func:`gauss_seidel` (the same heights; not used when ``weight`` is inf)."""
     n = p.shape[0]
     out = np.empty(n)
     score = np.empty(n, dtype=np.int64)
-    if surface.grid:
-        kernel = for_threads(_tk.grid_heights, _tk.grid_heights_serial)
-    else:
-        kernel = for_threads(_tk.tin_heights, _tk.tin_heights_serial)
+    kernel = _tk.grid_heights if surface.grid else _tk.tin_heights
     near = _tk.Neighbours(neighbour_thresholds, neighbour_verdicts, float(weight))
     rules = surface.rules(end_radius=end_radius, kc=kc, min_gain=min_gain,
                           window=np.inf if weight == np.inf else _window(window))
-    call(kernel, surface.data, p, q, visible, near, rules, out, score, work=n * q.shape[0])
+    call(kernel, surface.data, p, q, visible, near, rules, out, score, work=n * q.shape[0], items=n)
     return out, score
 
 

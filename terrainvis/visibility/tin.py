@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from ..core.interrupt import call, for_threads
+from ..core.interrupt import call
 from ..core.surface import SurfaceTin, no_neighbours
 from ..tolerances import TIN_ON_EDGE_REL
 
@@ -58,8 +58,8 @@ def tin_clearance(tin, a, b, *, delta: float, end_radius: float = 0.0, kc: float
                       bk.nby)
     # through the interrupt helper: Ctrl-C stops the kernel within a segment (work: the
     # faces a segment across the TIN crosses, about the square root of their number, each)
-    call(for_threads(_kernels.tin_pairs, _kernels.tin_pairs_serial), mesh, la, lb, float(delta), float(end_radius), eps,
-         float(kc), out, work=m * math.isqrt(tin.faces.shape[0]))
+    call(_kernels.tin_pairs, mesh, la, lb, float(delta), float(end_radius), eps, float(kc), out,
+         work=m * math.isqrt(tin.faces.shape[0]), items=(m + _kernels.TIN_CHUNK - 1) // _kernels.TIN_CHUNK)
     return out
 
 

@@ -127,7 +127,7 @@ calibration.partners(g, S, height=0.0, move=True, n_partners=2048, core=2048, sw
 def work():
     calibration.partners(g, S, height=0.0, move=True, n_partners=2048, core=2048, sweeps=3)
 """, False),
-    # the calibrated relocation's best heights of many points (parallel over points)
+    # the calibrated relocation's best heights of many points (on threads, over points)
     "calibrated-points": ("""
 import simplifiers
 from terrainvis.visibility import thresholds, _threshold_kernels as ck
@@ -145,10 +145,10 @@ def setup(size, n):
     return (surf.data, p, q, vis, near, surf.rules(), out, score), n * 512
 def warm():
     args, work_ = setup(65, 4)
-    call(ck.grid_heights, *args, work=work_)
+    call(ck.grid_heights, *args, work=work_, items=4)
 ARGS, WORK = setup(1025, 40000)
 def work():
-    call(ck.grid_heights, *ARGS, work=WORK)
+    call(ck.grid_heights, *ARGS, work=WORK, items=40000)
 """, False),
     # one coordinate-descent sweep of visopt (serial over the coarse heights): 120^2 at level 1,
     # 1200 training points, about 30 s uninterrupted
