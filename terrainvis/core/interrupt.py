@@ -242,7 +242,7 @@ def _threads() -> int:
 
 #: Chunks per thread a loop is cut into at most: enough for threads that finish early to
 #: take over the rest of uneven work, few enough that the calls cost nothing.
-CHUNKS_PER_THREAD = 64
+CHUNKS_PER_THREAD = 16
 
 
 def _chunks(items: int, threads: int, grain: int) -> list[tuple[int, int]]:
