@@ -1,98 +1,164 @@
-"""What the first run of ``terrainvis compare --quick`` spends, with an empty numba cache.
+"""First contact: each entry point with an empty numba cache (cold) and again on the cache it filled (warm).
 
-Every run below gets its own empty ``NUMBA_CACHE_DIR``, so numba compiles every kernel
-it meets, as on a fresh install. The script prints (medians over ``--repeats``):
+Every cold run gets its own empty ``NUMBA_CACHE_DIR``, so numba compiles every kernel it
+meets, as on a fresh install; the warm run follows at once on the same cache. The script
+prints, per entry point, the medians over ``--repeats`` of the cold and warm wall times,
+their ratio, and whether the cold run printed its compile line (``terrainvis: compiling
+...``, :mod:`terrainvis.core.compiling`) and the warm one did not:
 
-* ``import``: ``python -c "import terrainvis.experiment, simplifiers, terrainvis.visibility"``
-  (numba, pymeshlab, embreex, trimesh; nothing compiled);
-* ``cold quick``: ``terrainvis compare --quick --no-plots`` with an empty cache (the
-  warm-up parts compiled side by side on the pool, then the units);
-* ``warm quick``: the same command again on the filled cache;
-* one line per warm-up part of that run (:func:`terrainvis.experiment.plan.warm_up_parts`): the part
-  alone, in one process with an empty cache and one numba thread (as a worker), minus
-  the import time: what compiling its kernels costs on one core (a part that follows others, :func:`terrainvis.experiment.plan.part_needs`,
-  is timed after them, on the cache they filled, as the run takes it).
+* ``viewshed``: ``terrainvis viewshed DEM.tif --observer X Y -o out.tif`` on a 1024² float32
+  GeoTIFF (30 m cells, made in a temporary folder), beside ``gdal_viewshed`` on the same
+  file when it is installed (its median, and ours over it, warm);
+* ``assert_visibility_kept``: ``terrainvis.testing.assert_visibility_kept`` of a bundled
+  terrain and its LLS level 2, 200 points (a user's regression test in a fresh CI job);
+* ``compare --quick``: ``terrainvis compare --quick --no-plots --workers 2``;
+* ``los``: ``terrainvis los`` of one pair on the same GeoTIFF.
+
+``--kernels`` also prints, for each part of ``terrainvis compile`` run alone with an empty
+cache, the seconds each kernel that Python calls took to compile with everything it calls
+(numba's compile events): the figures behind :data:`terrainvis.core.compiling.KERNELS`.
 
 Usage::
 
-    python benchmarks/bench_cold_start.py [--repeats 1] [--workers 2]
+    python benchmarks/bench_cold_start.py [--repeats 3] [--only viewshed assert_visibility_kept] [--kernels]
 
-The machine is shared: run it when it is otherwise idle, and read the medians.
+The machine is shared: run it when it is otherwise idle, and read the medians and ratios.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
-PART = """
-import sys
-import numba
-numba.set_num_threads(1)  # as in a worker of a 2-worker run on 2 cores (terrainvis.core.runner)
-from terrainvis.experiment.plan import part_needs, resolve_terrains, settings_for, tasks, warm_up_parts
-from terrainvis.experiment.units import warm_up_part
-grids = resolve_terrains(["hills", "ridges"])
-settings = settings_for(grids, dict(levels=[1, 3], n_points=20, n_sets=2))
-parts = warm_up_parts(tasks(grids, settings), grids, settings)
-if sys.argv[1] == "list":
-    print(repr(parts))
-else:
-    import time
-    part = eval(sys.argv[1])
-    for before in part_needs(part, parts):
-        warm_up_part(before, settings)
-    t0 = time.perf_counter()
-    warm_up_part(part, settings)
-    print(time.perf_counter() - t0)
+AVK = """
+import simplifiers, terrainvis as tv
+from terrainvis.testing import assert_visibility_kept
+T = tv.bundled_terrain("hills")
+assert_visibility_kept(T, simplifiers.simplify(T, "lls", 2), min_accuracy=0.5)
+"""
+
+MAKE_DEM = """
+import sys, numpy as np, terrainvis as tv
+g = tv.synthetic_terrain("mountains", size=int(sys.argv[2]), seed=1)
+z = g.z.astype(np.float32).astype(np.float64)
+tv.save_dem(tv.HeightGrid(z, 30.0, 30.0, (500000.0, 4000000.0), attrs={"crs": "EPSG:32617"}), sys.argv[1],
+            dtype="float32")
+"""
+
+#: Prints each outermost compile (a kernel called from Python, with what it calls) and its seconds.
+KERNELS = """
+import sys, time
+from numba.core import event
+from terrainvis.cli.compile_ahead import PARTS
+depth, t0, out = [0], [0.0], []
+class L(event.Listener):
+    def on_start(self, ev):
+        if depth[0] == 0:
+            t0[0] = time.perf_counter()
+        depth[0] += 1
+    def on_end(self, ev):
+        depth[0] -= 1
+        if depth[0] == 0:
+            f = ev.data["dispatcher"].py_func
+            out.append((f"{f.__module__}.{f.__qualname__}", time.perf_counter() - t0[0]))
+event.register("numba:compile", L())
+PARTS[sys.argv[1]][1]()
+for name, s in out:
+    print(f"{s:8.2f}  {name}")
 """
 
 
-def _run(cmd, cache: str) -> tuple[float, str]:
+def _run(cmd, cache: str, cwd: str) -> tuple[float, str]:
     env = dict(os.environ, NUMBA_CACHE_DIR=cache)
     t0 = time.perf_counter()
-    out = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=cwd)
     seconds = time.perf_counter() - t0
     if out.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed ({out.returncode}): {out.stderr[-2000:]}")
-    return seconds, out.stdout + out.stderr
+    return seconds, out.stderr
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--repeats", type=int, default=1)
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--size", type=int, default=1024, help="the GeoTIFF's side (default 1024)")
+    ap.add_argument("--only", nargs="+", default=None, help="entry points to run (default: all)")
+    ap.add_argument("--kernels", action="store_true", help="also time each kernel's compilation, part by part")
     args = ap.parse_args()
     py = sys.executable
-    rows = {"import": [], "cold quick": [], "warm quick": []}
-    parts = None
-    part_rows: dict[str, list[float]] = {}
-    for _ in range(args.repeats):
-        with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
-            rows["import"].append(_run([py, "-c", "import terrainvis.experiment, simplifiers, terrainvis.visibility"],
-                                       cache)[0])
-            cmd = [py, "-m", "terrainvis.cli", "compare", "--quick", "--no-plots", "--workers", str(args.workers),
-                   "--out", out]
-            seconds, text = _run(cmd, cache)
-            rows["cold quick"].append(seconds)
-            print(text[-600:], file=sys.stderr)
-            rows["warm quick"].append(_run(cmd[:-1] + [os.path.join(out, "warm")], cache)[0])
-        with tempfile.TemporaryDirectory() as cache:
-            parts = parts or eval(_run([py, "-c", PART, "list"], cache)[1].strip().splitlines()[-1])
-        for part in parts:
-            with tempfile.TemporaryDirectory() as cache:
-                seconds, text = _run([py, "-c", PART, repr(part)], cache)
-                part_rows.setdefault(f"part {part[0]} {part[1]} ({part[2]}²)", []).append(
-                    float(text.strip().splitlines()[-1]))
-    print(f"{'what':40s} {'median s':>9s}")
-    for name, values in {**rows, **part_rows}.items():
-        print(f"{name:40s} {statistics.median(values):9.1f}")
-    total = sum(statistics.median(v) for v in part_rows.values())
-    print(f"{'sum of the parts (one core)':40s} {total:9.1f}")
+    tv = [py, "-m", "terrainvis.cli"]
+    work = tempfile.mkdtemp(prefix="bench-cold-")
+    try:
+        dem = os.path.join(work, "dem.tif")
+        subprocess.run([py, "-c", MAKE_DEM, dem, str(args.size)], check=True)
+        mid = 500000.0 + 30.0 * (args.size // 2)
+        observer = [f"{mid + 15.0:.1f}", f"{4000000.0 + 30.0 * (args.size // 3) + 15.0:.1f}"]
+        entries = {
+            "viewshed": tv + ["viewshed", dem, "--observer", *observer, "-o", "out.tif"],
+            "assert_visibility_kept": [py, "-c", AVK],
+            "compare --quick": tv + ["compare", "--quick", "--no-plots", "--workers", "2", "--out", "run"],
+            "los": tv + ["los", dem, "--from", *observer, "--to", f"{mid + 9000:.1f}", f"{4000000.0 + 9000:.1f}"],
+        }
+        chosen = args.only or list(entries)
+        rows = []
+        for name in chosen:
+            cold, warm, lines = [], [], []
+            for _ in range(args.repeats):
+                with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as cwd:
+                    seconds, err = _run(entries[name], cache, cwd)
+                    cold.append(seconds)
+                    said = [ln for ln in err.splitlines() if ln.startswith("terrainvis: compiling")
+                            or ln.startswith("terrainvis: first run: compiling")]
+                    shutil.rmtree(os.path.join(cwd, "run"), ignore_errors=True)
+                    seconds, err2 = _run(entries[name], cache, cwd)
+                    warm.append(seconds)
+                    again = [ln for ln in err2.splitlines() if "compiling" in ln]
+                    lines.append((said, again))
+            c, w = statistics.median(cold), statistics.median(warm)
+            said, again = lines[0]
+            rows.append((name, c, w, c / w, bool(said) and not again))
+            print(f"{name}: cold {', '.join(f'{v:.1f}' for v in cold)} s, warm {', '.join(f'{v:.2f}' for v in warm)} s",
+                  file=sys.stderr)
+            for ln in said:
+                print(f"    {ln}", file=sys.stderr)
+        gdal = shutil.which("gdal_viewshed")
+        if gdal and "viewshed" in chosen:
+            times = []
+            for _ in range(max(3, args.repeats)):
+                t0 = time.perf_counter()
+                subprocess.run([gdal, "-q", "-ox", observer[0], "-oy", observer[1], "-oz", "1.7", dem,
+                                os.path.join(work, "gdal.tif")], check=True, capture_output=True)
+                times.append(time.perf_counter() - t0)
+            g = statistics.median(times)
+            rows.append(("gdal_viewshed (the same file)", float("nan"), g, float("nan"), None))
+        print(f"\n{'entry point':32s} {'cold s':>8s} {'warm s':>8s} {'cold/warm':>10s}  compile line")
+        for name, c, w, r, said in rows:
+            note = "" if said is None else ("printed (cold only)" if said else "MISSING or repeated warm")
+            print(f"{name:32s} {c:8.1f} {w:8.2f} {r:10.1f}  {note}")
+        if gdal and "viewshed" in chosen:
+            ours = next(w for n, _, w, _, _ in rows if n == "viewshed")
+            print(f"{'viewshed warm / gdal_viewshed':32s} {ours / g:8.2f}")
+        if args.kernels:
+            from terrainvis.cli.compile_ahead import PARTS
+
+            print("\nseconds to compile each kernel called from Python (with what it calls), part by part:")
+            for part in PARTS:
+                with tempfile.TemporaryDirectory() as cache:
+                    env = dict(os.environ, NUMBA_CACHE_DIR=cache, TERRAINVIS_COMPILE_NOTICE="0")
+                    out = subprocess.run([py, "-c", KERNELS, part], env=env, capture_output=True, text=True,
+                                         check=True)
+                print(f"  {part}:")
+                for line in out.stdout.splitlines():
+                    print(f"    {line}")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,8 @@
 * ``terrainvis site DEM --grid STEP -k K`` chooses K observers that together see the most.
 * ``terrainvis relocate DEM --points CSV ...`` places points on a simplification.
 * ``terrainvis info DEM`` describes a terrain.
+* ``terrainvis compile`` compiles every numba kernel ahead, into numba's cache (CI images,
+  containers).
 
 Positions (``--from``, ``--to``, ``--observer``, the ``--pairs``, ``--points`` and ``--observers`` CSVs) are
 in the DEM's native CRS by default (lon/lat degrees on a lon/lat DEM), or in the terrain's
@@ -39,7 +41,7 @@ import argparse
 import contextlib
 import sys
 
-from . import compare, cumulative, evaluate, info, los, relocate, simplify, site, viewshed
+from . import compare, compile_ahead, cumulative, evaluate, info, los, relocate, simplify, site, viewshed
 from ._common import ParseError, Parser
 
 __all__ = ["main"]
@@ -48,7 +50,8 @@ __all__ = ["main"]
 #: The commands, in the order ``terrainvis --help`` lists them: each module declares its
 #: sub-parser (``add_parser(sub)``) and runs it (``run(args) -> exit status``).
 COMMANDS = {"compare": compare, "evaluate": evaluate, "simplify": simplify, "los": los, "viewshed": viewshed,
-            "cumulative": cumulative, "site": site, "relocate": relocate, "info": info}
+            "cumulative": cumulative, "site": site, "relocate": relocate, "info": info,
+            "compile": compile_ahead}
 
 
 def _parser(argv=None) -> argparse.ArgumentParser:

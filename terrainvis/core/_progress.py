@@ -43,3 +43,45 @@ def on_a_terminal() -> bool:
 def show_by_default() -> bool:
     """tqdm's convention: progress is shown where someone watches, a terminal or a notebook."""
     return on_a_terminal() or in_kernel()
+
+
+class ProgressLines:
+    """Progress as plain lines for a log file, where a bar redrawn in place leaves cursor
+    escapes: ``desc: done/total unit, elapsed`` at most every ``every`` seconds and at the
+    end (tqdm's ``update``/``close`` interface, for the calls that show a bar elsewhere).
+
+    >>> import io, contextlib
+    >>> err = io.StringIO()
+    >>> with contextlib.redirect_stderr(err):
+    ...     p = ProgressLines(3, "cumulative", "observer", every=1e9)
+    ...     p.update(1); p.update(2); p.close()
+    >>> err.getvalue().splitlines()[0].startswith("cumulative: 3/3 observers, ")
+    True
+    """
+
+    def __init__(self, total: int, desc: str, unit: str, initial: int = 0, every: float = 10.0):
+        import time
+
+        self.total, self.desc, self.unit, self.count, self.every = total, desc, unit, initial, every
+        self.start = self.last = time.perf_counter()
+        self.closed = False
+
+    def update(self, n: int = 1) -> None:
+        import time
+
+        self.count += n
+        now = time.perf_counter()
+        if self.count >= self.total or now - self.last >= self.every:
+            self.last = now
+            self._line(now)
+
+    def _line(self, now: float) -> None:
+        units = self.unit if self.total == 1 else self.unit + "s"
+        print(f"{self.desc}: {self.count}/{self.total} {units}, {now - self.start:.0f} s", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        import time
+
+        if not self.closed and self.count < self.total:  # an interrupted run: where it stopped
+            self._line(time.perf_counter())
+        self.closed = True

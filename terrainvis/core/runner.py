@@ -236,6 +236,8 @@ def _worker_init(threads: int, parent: int) -> None:
 
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="terrainvis-watch-parent").start()
+    # the main process says what is compiled (its warm-up, or compare's progress): not every worker again
+    os.environ["TERRAINVIS_COMPILE_NOTICE"] = "0"
     import numba
 
     numba.set_num_threads(max(1, threads))
@@ -363,7 +365,10 @@ def _on_dask_worker(host_threads: dict, fn, *args):
         import numba
 
         numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))
-    return fn(*args)
+    from .compiling import quiet
+
+    with quiet():  # the client's process says what is compiled, not every worker
+        return fn(*args)
 
 
 def _run_dask(tasks, fn, on_result, client, signals: _Signals) -> None:

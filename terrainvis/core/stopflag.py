@@ -14,9 +14,9 @@ Examples
 >>> import numba, numpy as np
 >>> @numba.njit
 ... def first_rows(out, stop):
-...     for i in numba.prange(out.shape[0]):
+...     for i in range(out.shape[0]):
 ...         if stopped(stop):
-...             continue
+...             return
 ...         out[i] = i
 >>> out = np.zeros(3)
 >>> first_rows(out, np.zeros(1, dtype=np.int64)); out.tolist()
@@ -29,7 +29,12 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+from .compiling import install
+
 __all__ = ["stopped"]
+
+# every kernel module imports this one: from here on, a kernel that starts compiling says so
+install()
 
 
 @intrinsic

@@ -28,12 +28,14 @@ The run goes in four stages, each in a module of its own:
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import os
 import sys
 
 import pandas as pd
 
+from ..core import compiling as _compiling
 from ..core._progress import progress_bar_class
 from ..core.validate import describe
 from .measures import MEASURES
@@ -280,8 +282,11 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
         if on_unit is not None and rows:
             on_unit(key, pd.DataFrame(rows, columns=list(COLUMNS)))
 
+    # with its progress shown, compare says what it compiles itself (the parts), not kernel by kernel
+    quiet = _compiling.quiet() if bars.show else contextlib.nullcontext()
     try:
-        run_units(work, _call, on_result=collect, workers=workers, client=client)
+        with quiet:
+            run_units(work, _call, on_result=collect, workers=workers, client=client)
     finally:
         bars.close()
     return new_rows

@@ -333,29 +333,42 @@ def _run_chunks(run: dict, unit, on_result, *, align: int = 1, desc: str) -> Non
 
     k = run["obs"].shape[0]
     threads = _local_threads(run["terrain"], run["options"]["engine"], run["workers"], run["client"])
-    groups = _chunks(-(-k // align), max(_n_slots(run["workers"], run["client"]), threads))
-    chunks = [(s * align, min(e * align, k)) for s, e in groups]
     token = uuid.uuid4().hex
-    tasks = [((s, e), (run["terrain"], run["at"], token, run["obs"][s:e], run["heights"][s:e], run["options"]))
-             for s, e in chunks]
-    bar = _progress_bar(k, run["progress"], desc)
-    try:
-        def add(key, result):
-            on_result(key, result)
-            bar.update(key[1] - key[0])
 
-        run_units(tasks, unit, on_result=add, workers=run["workers"], client=run["client"], threads=threads)
+    def task(s, e):
+        return (s, e), (run["terrain"], run["at"], token, run["obs"][s:e], run["heights"][s:e], run["options"])
+
+    # the first observers (one chunk of ``align``) here, before the bar: on a first run
+    # they compile the kernels (terrainvis.core.compiling says so), and the bar's rate and
+    # time left count the viewsheds only; the workers then load the kernels from the cache
+    first = min(align, k)
+    try:
+        key, args = task(0, first)
+        on_result(key, unit(*args))
+        groups = _chunks(-(-(k - first) // align), max(_n_slots(run["workers"], run["client"]), threads))
+        tasks = [task(first + s * align, min(first + e * align, k)) for s, e in groups]
+        bar = _progress_bar(k, run["progress"], desc, done=first)
+        try:
+            def add(key, result):
+                on_result(key, result)
+                bar.update(key[1] - key[0])
+
+            run_units(tasks, unit, on_result=add, workers=run["workers"], client=run["client"], threads=threads)
+        finally:
+            bar.close()
     finally:
-        bar.close()
         _WORKER_TERRAIN.pop(token, None)  # units that ran here held the terrain
 
 
-def _progress_bar(k: int, show: bool, desc: str):
-    """A tqdm bar counting observers (disabled unless ``show``)."""
+def _progress_bar(k: int, show: bool, desc: str, done: int = 0):
+    """A tqdm bar counting observers, ``done`` of them done already (disabled unless ``show``);
+    into a file (a log), plain lines instead (:class:`terrainvis.core._progress.ProgressLines`)."""
     from tqdm.std import tqdm
 
     if show:
-        from ..core._progress import progress_bar_class  # the notebook's bar in Jupyter
+        from ..core._progress import ProgressLines, in_kernel, on_a_terminal, progress_bar_class
 
-        tqdm = progress_bar_class()
-    return tqdm(total=k, desc=desc, unit="observer", file=sys.stderr, disable=not show)
+        if not (on_a_terminal() or in_kernel()):
+            return ProgressLines(k, desc, "observer", initial=done)
+        tqdm = progress_bar_class()  # the notebook's bar in Jupyter
+    return tqdm(total=k, initial=done, desc=desc, unit="observer", file=sys.stderr, disable=not show)

@@ -1,0 +1,153 @@
+"""Saying so when numba compiles: one line on stderr when a call starts compiling a kernel.
+
+numba compiles a kernel the first time it is called with an empty cache (a fresh install,
+a new ``NUMBA_CACHE_DIR``, an edited source file) and keeps the machine code on disk
+(``cache=True``); later runs load it in milliseconds. A first viewshed therefore takes
+seconds of compilation before it computes anything, and without a word it looks hung.
+This module listens to numba's compile events: when a kernel of :data:`KERNELS` (the
+ones called from Python whose compilation takes a second or more) starts compiling, it
+prints at once, on stderr, one line saying what, why, about how long, and that this
+happens on the first run only::
+
+    terrainvis: compiling the viewshed sweep: about 17 s, on the first run only (numba compiles its kernels once and keeps them in its cache)
+
+Each kernel is announced once per process; a kernel that another one calls is compiled
+inside its caller's announcement. The estimates are the compile times measured on this
+project's 2-core machine (``python benchmarks/bench_cold_start.py``); they are no
+promise. :func:`quiet` silences the lines (the workers of a comparison, whose main
+process shows its own compile progress), and so does ``TERRAINVIS_COMPILE_NOTICE=0``.
+
+:func:`seconds` is the wall time spent compiling in this process so far: progress
+estimates leave it out.
+
+``terrainvis compile`` compiles every kernel ahead (for CI images and containers):
+:mod:`terrainvis.cli.compile_ahead`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import threading
+import time
+
+__all__ = ["KERNELS", "install", "quiet", "seconds", "announced"]
+
+#: The kernels announced when they start compiling: ``module.function`` -> (what, seconds),
+#: the cold compile time of the kernel and every kernel it calls not compiled before it,
+#: one process, measured on this project's 2-core machine (``python
+#: benchmarks/bench_cold_start.py --kernels``, 29 November 2026). Kernels that take under
+#: a second, or that follow one of these and share its callees (the best heights after
+#: the calibration's sweeps), are not announced.
+KERNELS: dict[str, tuple[str, float]] = {
+    "terrainvis.visibility._sweep_kernels.sweep": ("the viewshed sweep", 17.0),
+    "terrainvis.visibility._kernels.grid_walks": ("the line-of-sight walk on grids", 6.0),
+    "terrainvis.visibility._kernels.tin_pairs": ("the line-of-sight clipper on TINs", 1.0),
+    "terrainvis.visibility._threshold_kernels.grid_sweep": ("the calibrated relocation's walks on grids", 9.0),
+    "terrainvis.visibility._threshold_kernels.tin_sweep": ("the calibrated relocation's walks on TINs", 5.0),
+    "terrainvis.visibility._threshold_kernels.grid_eye_thresholds": ("a viewshed's heights and angles", 5.0),
+    "terrainvis.visibility._threshold_kernels.tin_eye_thresholds": ("a viewshed's heights and angles on TINs", 2.0),
+    "terrainvis.core._volume_kernels.volume_between": ("the volume between two surfaces", 3.0),
+    "simplifiers._gc_kernels.greedy_cuts_front": ("greedy cuts", 7.0),
+    "simplifiers._gi_kernels.init_state": ("greedy insertion", 3.0),
+    "simplifiers._faber_kernels.feature_apply": ("feature-aware least squares", 2.0),
+    "simplifiers._visopt_kernels.track_counts": ("visopt", 4.0),
+}
+
+_lock = threading.Lock()
+_depth = 0  # compile events open (numba compiles one kernel at a time, holding its lock)
+_started = 0.0
+_total = 0.0
+_announced: set = set()
+_quiet = 0
+_installed = False
+
+
+def install() -> None:
+    """Listen to numba's compile events (once per process; called when a kernel module is imported)."""
+    global _installed
+    with _lock:
+        if _installed:
+            return
+        from numba.core import event
+
+        class Listener(event.Listener):
+            def on_start(self, ev):
+                _on_start(ev)
+
+            def on_end(self, ev):
+                _on_end(ev)
+
+        event.register("numba:compile", Listener())
+        _installed = True
+
+
+def seconds() -> float:
+    """Wall seconds this process has spent compiling numba kernels so far (the ones running included)."""
+    with _lock:
+        return _total + (time.perf_counter() - _started if _depth else 0.0)
+
+
+def announced() -> list[str]:
+    """The kernels announced so far in this process (``module.function``)."""
+    with _lock:
+        return sorted(_announced)
+
+
+@contextlib.contextmanager
+def quiet():
+    """No compile lines while the block runs (in any thread)."""
+    global _quiet
+    with _lock:
+        _quiet += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _quiet -= 1
+
+
+def _enabled() -> bool:
+    return _quiet == 0 and os.environ.get("TERRAINVIS_COMPILE_NOTICE", "1") not in ("0", "no", "off", "false")
+
+
+def _line(name: str) -> str | None:
+    known = KERNELS.get(name)
+    if known is None:
+        return None
+    what, estimate = known
+    return (f"terrainvis: compiling {what}: about {estimate:.0f} s, on the first run only (numba compiles its "
+            "kernels once and keeps them in its cache)")
+
+
+def _on_start(ev) -> None:
+    global _depth, _started
+    line = None
+    with _lock:
+        if _depth == 0:
+            _started = time.perf_counter()
+            name = _name(ev)
+            if name not in _announced and _enabled():
+                line = _line(name)
+                if line is not None:
+                    _announced.add(name)
+        _depth += 1
+    if line is not None:
+        print(line, file=sys.stderr, flush=True)
+
+
+def _on_end(ev) -> None:
+    global _depth, _total
+    with _lock:
+        _depth -= 1
+        if _depth == 0:
+            _total += time.perf_counter() - _started
+
+
+def _name(ev) -> str:
+    try:
+        fn = ev.data["dispatcher"].py_func
+        return f"{fn.__module__}.{fn.__qualname__}"
+    except Exception:  # numba internals: a best-effort label
+        return ""

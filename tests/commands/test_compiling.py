@@ -1,0 +1,98 @@
+"""The first run says what it compiles (issue 38): one line on stderr when a kernel of
+``terrainvis.core.compiling.KERNELS`` starts compiling, once per process; ``terrainvis
+compile`` compiles ahead and says which parts were cached already."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numba
+import numpy as np
+import pytest
+
+from terrainvis.cli import main
+from terrainvis.core import compiling
+
+
+def _toy(name: str):
+    """A fresh kernel (not cached: it compiles on its first call) registered under ``name``."""
+
+    @numba.njit(cache=False)
+    def toy(x):
+        s = 0.0
+        for v in x:
+            s += v * v
+        return s
+
+    toy.py_func.__qualname__ = name
+    return toy, f"{toy.py_func.__module__}.{name}"
+
+
+@pytest.fixture
+def toy(monkeypatch):
+    monkeypatch.delenv("TERRAINVIS_COMPILE_NOTICE", raising=False)
+    compiling.install()
+    kernel, key = _toy(f"toy_{os.getpid()}_{id(monkeypatch)}")
+    monkeypatch.setitem(compiling.KERNELS, key, ("a toy kernel", 3.0))
+    return kernel, key
+
+
+def test_a_kernel_that_starts_compiling_says_so_once(toy, capsys):
+    kernel, key = toy
+    before = compiling.seconds()
+    assert kernel(np.arange(3.0)) == 5.0
+    err = capsys.readouterr().err
+    assert err == ("terrainvis: compiling a toy kernel: about 3 s, on the first run only (numba compiles its kernels "
+                   "once and keeps them in its cache)\n")
+    assert key in compiling.announced() and compiling.seconds() > before
+    kernel(np.arange(4.0))  # compiled: nothing more
+    kernel(np.arange(4, dtype=np.int64))  # a new signature of a kernel announced already: nothing either
+    assert capsys.readouterr().err == ""
+
+
+def test_quiet_and_the_environment_silence_it(toy, capsys, monkeypatch):
+    kernel, key = toy
+    with compiling.quiet():
+        kernel(np.arange(3.0))
+    assert capsys.readouterr().err == "" and key not in compiling.announced()
+    other, key2 = _toy(key.rsplit(".", 1)[1] + "_b")
+    monkeypatch.setitem(compiling.KERNELS, key2, ("another toy", 1.0))
+    monkeypatch.setenv("TERRAINVIS_COMPILE_NOTICE", "0")
+    other(np.arange(3.0))
+    assert capsys.readouterr().err == ""
+
+
+def test_kernels_not_listed_are_compiled_silently(capsys):
+    compiling.install()
+    kernel, key = _toy(f"unlisted_{os.getpid()}")
+    kernel(np.arange(2.0))
+    assert capsys.readouterr().err == "" and key not in compiling.announced()
+
+
+def test_every_listed_kernel_exists():
+    import importlib
+
+    for key in compiling.KERNELS:
+        module, name = key.rsplit(".", 1)
+        assert hasattr(importlib.import_module(module), name), key
+
+
+def test_compile_ahead_then_cached(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    run = [sys.executable, "-m", "terrainvis.cli", "compile", "los"]
+    cold = subprocess.run(run, env=env, capture_output=True, text=True, timeout=600)
+    assert cold.returncode == 0, cold.stderr
+    assert "numba's cache is " + str(tmp_path / "cache") in cold.stderr
+    assert "los           compiled in" in cold.stdout and "terrainvis: compiling" not in cold.stderr
+    warm = subprocess.run(run, env=env, capture_output=True, text=True, timeout=600)
+    assert warm.returncode == 0, warm.stderr
+    assert "los           cached already" in warm.stdout, warm.stdout
+
+
+def test_an_unknown_part_is_one_line(capsys):
+    assert main(["compile", "viewsheds"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("terrainvis compile: error: PART must be some of viewshed, output-modes, los, methods, compare, got "
+                   "'viewsheds'"), err
