@@ -35,7 +35,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 AVK = """
 import simplifiers, terrainvis as tv

@@ -191,8 +191,10 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
 
     It is then a method like the built-in ones: :func:`simplify` runs it with the budget,
     height-field and memory checks, and :func:`terrainvis.compare` (serially, on worker
-    processes and on dask, with resume), the tables, the figures and the command line's
-    ``--methods`` take it by name.
+    processes and on dask, with resume), the tables and the figures take it by name. The
+    registry is this Python process's: the command line (``terrainvis compare --methods``)
+    sees a method of one's own through a plugin, an entry point of the group
+    ``terrainvis.simplifiers`` (:func:`load_plugins`; ``examples/plugin/README.md``).
 
     Parameters
     ----------

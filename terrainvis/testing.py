@@ -86,8 +86,9 @@ def assert_visibility_kept(original, simplified, *, min_accuracy: float, points=
     >>> kept["accuracy"] >= 0.9, kept["n_pairs"]
     (True, 1770)
     """
+    __tracebackhide__ = True  # pytest shows the failing assertion of the test, not this helper's source
     from .core.sampling import sample_points
-    from .core.validate import as_finite_scalar, as_int, as_points
+    from .core.validate import as_finite_scalar, as_int, as_nonnegative_finite, as_points
     from .core.metrics import agreement
     from .experiment.evaluate import as_simplified
     from .experiment.plan import resolve_terrains
@@ -98,6 +99,7 @@ def assert_visibility_kept(original, simplified, *, min_accuracy: float, points=
     if not 0.0 <= threshold <= 1.0:
         raise ValueError(f"min_accuracy must be a share in [0, 1] (0.95 for 95 %), got {min_accuracy!r}")
     worst = as_int(worst, "worst", minimum=0)
+    offset = as_nonnegative_finite(offset, "offset", "z units")  # a point below T sees nothing, on T or S(T)
     (_, T), = resolve_terrains([original]).items()
     S = as_simplified(simplified, T, frame=frame, repair=repair, label="simplified")
     if points is None:
@@ -118,7 +120,7 @@ def assert_visibility_kept(original, simplified, *, min_accuracy: float, points=
     i, j = np.nonzero(np.triu(v_t != v_s, 1))
     result["worst"] = _worst(T, S, P, Q, i, j, v_t, worst, on_t, on_s, min_clearance) if len(i) and worst else []
     if not counts["accuracy"] >= threshold:
-        raise AssertionError(_report(result, threshold, relocation, len(P)))
+        raise AssertionError(_report(result, threshold, relocation, len(P), T))
     return result
 
 
@@ -134,7 +136,16 @@ def _worst(T, S, P, Q, i, j, v_t, k, on_t, on_s, min_clearance) -> list[dict]:
             for m, cs in zip(pick, c_s)]
 
 
-def _report(result: dict, threshold: float, relocation: str, n: int) -> str:
+def _report(result: dict, threshold: float, relocation: str, n: int, T) -> str:
+    """The failure's text; positions with the digits that show a tenth of T's cell (``.6g``
+    rounded a UTM northing to 10 m), heights to the centimetre."""
+    from .core._positions import PositionFrame
+
+    frame = PositionFrame(T, "local")
+
+    def point(p) -> str:
+        return f"{frame.value(p[0])}, {frame.value(p[1])}, {p[2]:.2f}"
+
     lines = [
         f"the simplification keeps {100 * result['accuracy']:.2f} % of the line-of-sight verdicts, below the "
         f"required {100 * threshold:.2f} %",
@@ -145,8 +156,7 @@ def _report(result: dict, threshold: float, relocation: str, n: int) -> str:
     if result["worst"]:
         lines.append("  the wrong pairs the original decides most clearly:")
         for w in result["worst"]:
-            a = ", ".join(f"{v:.6g}" for v in w["a"])
-            b = ", ".join(f"{v:.6g}" for v in w["b"])
+            a, b = point(w["a"]), point(w["b"])
             seen = "visible" if w["visible_on_original"] else "blocked"
             lines.append(f"    ({a}) -> ({b}): {seen} on the original (clearance {w['clearance_original']:+.4g}), "
                          f"not on the simplification (clearance {w['clearance_simplified']:+.4g})")

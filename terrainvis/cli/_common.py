@@ -51,6 +51,18 @@ def distance_arg(text: str) -> float:
     return value
 
 
+def method_arg(text: str) -> str:
+    """A registered method's name; an unknown one says how a method of one's own reaches the command line."""
+    from simplifiers import METHODS
+
+    if text not in METHODS:
+        raise argparse.ArgumentTypeError(
+            f"unknown method {text!r}: the methods are {', '.join(METHODS)}; simplifiers.register() adds a method of "
+            "your own to its Python process only: the command line sees one through a plugin, an entry point of the "
+            "group 'terrainvis.simplifiers' (examples/plugin/README.md)")
+    return text
+
+
 def add_target_height(p) -> None:
     p.add_argument("--target-height", type=height_arg, default=0.0, help="target height above the surface, >= 0 (default 0)")
 

@@ -6,7 +6,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._common import UsageError, add_nodata, plural, read_terrain
+from ._common import UsageError, add_nodata, method_arg, plural, read_terrain
 
 
 #: Options of compare that do not apply: what is simplified, and how, is given.
@@ -35,7 +35,7 @@ def add_parser(sub) -> None:
     e.add_argument("simplified", nargs="+", metavar="SIMPLIFIED",
                    help=f"simplified terrains: meshes ({' '.join(MESH_SUFFIXES)}) or rasters "
                         f"({' '.join(RASTER_SUFFIXES)})")
-    e.add_argument("--against", nargs="+", default=[], metavar="M", choices=list(METHODS),
+    e.add_argument("--against", nargs="+", default=[], metavar="M", type=method_arg,
                    help=f"methods measured beside them at the same size: {', '.join(METHODS)}")
     e.add_argument("--frame", choices=["native", "local"], default=None,
                    help="the simplified terrains' coordinates: native (the DEM's CRS) or local (the terrain's own "

@@ -14,6 +14,7 @@ from ._common import (
     check_heights,
     earth_text,
     height_arg,
+    method_arg,
     outside_message,
     plural,
     position_frame,
@@ -51,7 +52,7 @@ def add_parser(sub) -> None:
     r.add_argument("--simplified", metavar="FILE",
                    help="the simplification: a grid (.npz, .tif, .asc) or a mesh (.ply, .obj, .off, .stl, .glb) as "
                         "simplify writes them")
-    r.add_argument("-m", "--method", choices=list(METHODS), metavar="METHOD",
+    r.add_argument("-m", "--method", type=method_arg, metavar="METHOD",
                    help=f"simplify the DEM here instead, with one of {', '.join(METHODS)}")
     r.add_argument("-l", "--level", type=int, default=None, help="with -m: the level (default 1)")
     r.add_argument("--how", choices=list(practical_relocations()), default="calibrated", metavar="HOW",

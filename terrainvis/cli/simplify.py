@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import UsageError, add_nodata, distance_arg, loading_kernels, plural, read_terrain, working
+from ._common import UsageError, add_nodata, distance_arg, loading_kernels, method_arg, plural, read_terrain, working
 
 
 #: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
@@ -23,7 +23,7 @@ def add_parser(sub) -> None:
         ),
     )
     s.add_argument("dem", help="DEM file or bundled name")
-    s.add_argument("-m", "--method", required=True, choices=list(METHODS), metavar="METHOD",
+    s.add_argument("-m", "--method", required=True, type=method_arg, metavar="METHOD",
                    help=f"one of {', '.join(METHODS)}")
     s.add_argument("-l", "--level", type=int, default=None,
                    help="level: each one halves both axes (default 1; with --max-error, the finest allowed)")

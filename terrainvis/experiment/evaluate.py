@@ -274,9 +274,10 @@ def _check_overlap(terrain, grid: HeightGrid, frame: str, label: str) -> None:
     gx0, gx1, gy0, gy1 = grid.extent
     if xmax < gx0 or xmin > gx1 or ymax < gy0 or ymin > gy1:
         where = PositionFrame(grid, frame)
+        v = PositionFrame(grid, "local").value  # the digits that show a tenth of a cell
         hint = ("; is it in the terrain's own frame? pass frame='local' (--frame local)" if frame == "native" else
                 "; is it in the DEM's CRS? pass frame='native' (--frame native)")
-        raise ValueError(f"simplified terrain {label!r} covers x [{xmin:.6g}, {xmax:.6g}], y [{ymin:.6g}, {ymax:.6g}] "
+        raise ValueError(f"simplified terrain {label!r} covers x [{v(xmin)}, {v(xmax)}], y [{v(ymin)}, {v(ymax)}] "
                          f"in the terrain's frame, which does not overlap the DEM's footprint "
                          f"{where.footprint()}{hint}")
 
@@ -300,6 +301,7 @@ def _checked_tin(tin: TIN, grid: HeightGrid, repair: bool, label: str) -> TIN:
 
 def _covering(s: HeightGrid, grid: HeightGrid, label: str) -> HeightGrid:
     """A raster extended by its edge samples to the grid's footprint, when it falls short by at most one of its cells."""
+    from ..core._positions import PositionFrame
     from ..tolerances import EDGE_SNAP_REL
 
     xs, ys, z = s.xs, s.ys, s.z
@@ -313,8 +315,9 @@ def _covering(s: HeightGrid, grid: HeightGrid, label: str) -> HeightGrid:
             (gy0, gy1, ys[0], ys[-1], ys[1] - ys[0] if ys.size > 1 else 0.0, "y")):
         short_lo, short_hi = max(0.0, axis_lo - lo), max(0.0, hi - axis_hi)
         if max(short_lo, short_hi) > step + EDGE_SNAP_REL * (hi - lo):  # one of its cells, and rounding
-            raise ValueError(f"simplified terrain {label!r} covers {what} [{axis_lo:.6g}, {axis_hi:.6g}], short of "
-                             f"the DEM's [{lo:.6g}, {hi:.6g}] by more than one of its cells; a simplification must "
+            v = PositionFrame(grid, "local").value  # the digits that show a tenth of a cell
+            raise ValueError(f"simplified terrain {label!r} covers {what} [{v(axis_lo)}, {v(axis_hi)}], short of "
+                             f"the DEM's [{v(lo)}, {v(hi)}] by more than one of its cells; a simplification must "
                              "cover the original's footprint")
         pads.append((short_lo > 0, short_hi > 0))
     (pad_x0, pad_x1), (pad_y0, pad_y1) = pads

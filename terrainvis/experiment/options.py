@@ -61,7 +61,9 @@ class Flag:
     """A command-line flag that takes a value (``--points 20``) or several (``--levels 1 3``).
 
     ``spelling`` defaults to ``--`` and the option's name with dashes; ``type`` converts
-    one word; ``choices`` (called when the parser is built) lists the valid words.
+    one word; ``choices`` (called when the parser is built) lists the valid words, which
+    argparse then checks; ``listed`` (called then too) lists words the help names without
+    argparse checking them (the option's own check has the better message).
     """
 
     spelling: str | None = None
@@ -69,6 +71,7 @@ class Flag:
     many: bool = False
     metavar: str | None = None
     choices: Callable[[], Sequence[str]] | None = None
+    listed: Callable[[], Sequence[str]] | None = None
 
 
 @dataclass(frozen=True)
@@ -202,8 +205,9 @@ def boolean(value, name: str) -> bool:
     return as_bool(value, name)
 
 
-def names(valid: Callable[[], Sequence[str]], default: Callable[[], Sequence[str]]):
-    """A check: distinct names drawn from ``valid()`` (a str is one name; None is ``default()``)."""
+def names(valid: Callable[[], Sequence[str]], default: Callable[[], Sequence[str]], hint: str = ""):
+    """A check: distinct names drawn from ``valid()`` (a str is one name; None is ``default()``);
+    ``hint`` ends the message of an unknown name."""
 
     def check(value, name: str) -> tuple:
         if value is None:
@@ -216,7 +220,7 @@ def names(valid: Callable[[], Sequence[str]], default: Callable[[], Sequence[str
         out = []
         for v in value:
             if not isinstance(v, str) or v not in allowed:
-                raise ValueError(f"{name} must be drawn from {allowed}, got {v!r}")
+                raise ValueError(f"{name} must be drawn from {allowed}, got {v!r}{hint}")
             if v in out:
                 raise ValueError(f"{name} must not repeat a name, got {v!r} twice")
             out.append(v)
@@ -308,7 +312,13 @@ def _methods(value, name: str) -> tuple:
         value = named
     elif isinstance(value, Method):
         return _methods([value], name)
-    return names(_method_names, _default_method_names)(value, name)
+    return names(_method_names, _default_method_names, _OWN_METHODS)(value, name)
+
+
+#: How a method of one's own reaches a run: the end of the message of an unknown method.
+_OWN_METHODS = ("; simplifiers.register() adds a method of your own to its Python process only: the command line "
+                "sees one through a plugin, an entry point of the group 'terrainvis.simplifiers' (examples/plugin/"
+                "README.md)")
 
 
 def _register_entry(method) -> None:
@@ -361,7 +371,7 @@ _DECLARED = [
              "from outside: :func:`simplifiers.register`, plugins) or :class:`simplifiers.Method` entries, which "
              "are registered under their names if they are not yet; the default is every method whose entry has "
              "``default=True`` (the paper's seven: every built-in one but ``visopt``; the practitioners' simplifiers of the ``peers`` extra are not default)."),
-        cli=Flag(many=True, metavar="M"),
+        cli=Flag(many=True, metavar="M", listed=_method_names),
     ),
     Option(
         "levels", (1, 2, 3), _levels, "simplification levels", "int or sequence of int",
@@ -727,8 +737,9 @@ def add_flags(parser: argparse.ArgumentParser, *, exclude=()) -> None:
         if isinstance(cli, Switch):
             _add_switch(parser, option, cli)
         elif isinstance(cli, Flag):
+            listed = f"; one of: {', '.join(cli.listed())}" if cli.listed is not None else ""
             kw = {"dest": option.name, "default": argparse.SUPPRESS, "type": cli.type,
-                  "help": f"{option.help}{option.scope()} (default: {option.shown_default()})"}
+                  "help": f"{option.help}{option.scope()} (default: {option.shown_default()}){listed}"}
             if cli.many:
                 kw["nargs"] = "+"
             if cli.choices is not None:

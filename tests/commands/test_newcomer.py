@@ -40,3 +40,92 @@ def test_progress_into_a_log_is_plain_lines(tmp_path):
         assert "\r" not in err and "\x1b[" not in err, repr(err)
         lines = [ln for ln in err.splitlines() if ln.startswith(desc + ": ")]
         assert lines and lines[-1].split(": ")[1].split(" ")[0].split("/")[0] == lines[-1].split("/")[1].split(" ")[0]
+
+
+# ---------------------------------------------------------------------- 4, 5, probe (e): the regression helper
+def _utm_hills():
+    from terrainvis import HeightGrid
+
+    T = bundled_terrain("hills")
+    return HeightGrid(T.z, 30.0, 30.0, (666000.0, 4893000.0), attrs={"crs": "EPSG:32618"})
+
+
+def test_a_failing_regression_test_shows_its_message_not_the_helpers_source(tmp_path):
+    test = tmp_path / "test_mine.py"
+    test.write_text(
+        "import simplifiers, terrainvis as tv\n"
+        "from terrainvis.testing import assert_visibility_kept\n"
+        "def test_coarse():\n"
+        "    T = tv.bundled_terrain('hills')\n"
+        "    assert_visibility_kept(T, simplifiers.simplify(T, 'simple', 4), min_accuracy=0.999, n=40)\n")
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", str(test)],
+                         capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert out.returncode == 1, out.stdout
+    assert "keeps" in out.stdout and "of the line-of-sight verdicts, below the required 99.90 %" in out.stdout
+    # the helper's own lines (its checks and its call of the matrices) are not in the report
+    assert "as_finite_scalar" not in out.stdout and "visibility_matrix(T, P" not in out.stdout, out.stdout
+
+
+def test_positions_in_the_report_keep_their_digits():
+    import pytest
+    import simplifiers
+
+    from terrainvis.testing import assert_visibility_kept
+
+    T = _utm_hills()
+    with pytest.raises(AssertionError) as info:
+        assert_visibility_kept(T, simplifiers.simplify(T, "simple", 4), min_accuracy=0.999, n=40)
+    text = str(info.value)
+    assert "e+06" not in text and "(66" in text and ", 489" in text, text
+    northing = text.split("(66", 1)[1].split(", ")[1]
+    assert len(northing.replace(".", "")) >= 7, text  # to the metre at least (a tenth of a 30 m cell), not 10 m
+
+
+def test_a_negative_offset_is_refused():
+    import pytest
+    import simplifiers
+
+    from terrainvis.testing import assert_visibility_kept
+
+    T = bundled_terrain("hills")
+    with pytest.raises(ValueError, match=r"offset must be finite and >= 0 \(z units\), got -5.0"):
+        assert_visibility_kept(T, simplifiers.simplify(T, "lls", 1), min_accuracy=0.5, n=20, offset=-5.0)
+
+
+def test_evaluate_messages_keep_the_northings_digits(tmp_path):
+    import pytest
+
+    from terrainvis import HeightGrid, evaluate
+
+    T = _utm_hills()
+    short = HeightGrid.from_coords(T.z[:40], T.xs, T.ys[:40], attrs=dict(T.attrs))
+    with pytest.raises(ValueError, match=r"covers y \[4893000, 4894170\], short of the DEM's \[4893000, 4896570\]"):
+        evaluate(T, short, n_points=12, n_sets=1)
+
+
+# ---------------------------------------------------------------------- 6: one's own method on the command line
+def test_an_unknown_method_says_how_the_command_line_sees_ones_own(capsys):
+    from terrainvis.cli import main
+
+    hint = "the command line sees one through a plugin, an entry point of the group 'terrainvis.simplifiers'"
+    for argv in (["simplify", "hills", "-m", "smoothed", "-l", "1", "-o", "x.npz"],
+                 ["compare", "--methods", "smoothed", "--terrain", "hills"],
+                 ["evaluate", "hills", "x.ply", "--against", "smoothed"]):
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "'smoothed'" in err and hint in err and "examples/plugin/README.md" in err, err
+
+
+def test_compare_help_lists_the_methods(capsys):
+    import pytest
+
+    import simplifiers
+    from terrainvis.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["compare", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    listed = text.split("one of: ", 1)[1]
+    for name in simplifiers.METHODS:
+        assert name in listed.replace("- ", "-"), name
