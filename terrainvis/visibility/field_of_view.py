@@ -30,9 +30,11 @@ and the eye E = (x_E, y_E, z_E) (``dx = x - x_E``, ``dy = y - y_E``, ``d = hypot
   max_distance`` (inclusive, as ``max_distance`` always was).
 
 The sample nearest the observer (the ground it stands on: the nearest x and the nearest
-y of the targets' grid) is exempt from every limit and keeps the viewshed's verdict, as it
-already was from ``max_distance``: its azimuth is undefined when the observer stands on it,
-and GIS viewsheds mark the observer's own cell.
+y of the targets' grid) is exempt from the other limits and keeps the viewshed's verdict,
+as it already was from ``max_distance``: its azimuth is undefined when the observer
+stands on it, and GIS viewsheds mark the observer's own cell. It is not exempt from
+``min_distance``: its distance is defined, and a viewshed asked to leave out what is
+nearer than ``min_distance`` leaves it out too (it is nearer than half a cell's diagonal).
 
 On a projected DEM, north is grid north (the +y axis), which differs from true north by
 the projection's meridian convergence; a lon/lat DEM read in local metres has +y on the
@@ -235,8 +237,8 @@ def field_of_view_mask(
     -------
     (rows, cols) bool
         True where the target above sample (r, c) of ``at`` (or of the terrain) is inside
-        every limit; the sample nearest the observer is True (exempt, see the module
-        docstring).
+        every limit; the sample nearest the observer is True unless it is nearer than
+        ``min_distance`` (exempt from the other limits, see the module docstring).
     """
     if not isinstance(fov, FieldOfView):
         raise TypeError(f"fov must be a FieldOfView (from field_of_view(...)), got {describe(fov)}")
@@ -250,8 +252,18 @@ def field_of_view_mask(
         raise ValueError(f"observer must be a finite pair (x, y) or an eye (x, y, z), got {describe(observer)}")
     heights = (float(observer_height), float(target_height), curvature_coefficient(curvature, earth_radius))
     inside = _inside(terrain, grid, obs, fov, np.arange(grid.size), heights).reshape(grid.shape)
-    inside[_nearest(grid, obs)] = True
+    near = _nearest(grid, obs)
+    inside[near] = _beyond_min_distance(grid, obs, fov, near)
     return inside
+
+
+def _beyond_min_distance(grid: HeightGrid, obs: np.ndarray, fov: FieldOfView, sample) -> bool:
+    """Whether ``sample`` (r, c) of ``grid`` is at least ``fov.min_distance`` from the observer (True without one)."""
+    if fov.min_distance is None:
+        return True
+    r, c = sample
+    dx, dy = grid.xs[c] - obs[0], grid.ys[r] - obs[1]
+    return bool(dx * dx + dy * dy >= fov.min_distance * fov.min_distance)
 
 
 def _nearest(grid: HeightGrid, obs: np.ndarray) -> tuple[int, int]:
@@ -318,6 +330,6 @@ def apply_field_of_view(visible: np.ndarray, terrain, observer, fov: FieldOfView
     out = np.zeros_like(visible)
     out.ravel()[idx[_inside(terrain, grid, obs, fov, idx, heights)]] = True
     near = _nearest(grid, obs)
-    out[near] = visible[near]
+    out[near] = visible[near] and _beyond_min_distance(grid, obs, fov, near)
     return out
 

@@ -199,10 +199,10 @@ def viewshed(
         the surface under test is absent) are False, and samples outside the field of
         view (beyond ``max_distance``, nearer than ``min_distance``, outside ``azimuth``
         or ``vertical``: :mod:`terrainvis.visibility.field_of_view`) are False, but for
-        the sample nearest the observer (the ground it stands on), which gets the pair
-        engine's verdict whatever the limits (with earth curvature an eye on the ground
-        may not see it). Inside the field of view every verdict is the one without
-        limits: terrain outside the field still blocks.
+        the sample nearest the observer (the ground it stands on), which gets the exact
+        verdict whatever the limits but ``min_distance`` (with earth curvature an eye on
+        the ground may not see it). Inside the field of view every verdict is the one
+        without limits: terrain outside the field still blocks.
 
     Raises
     ------

@@ -59,7 +59,9 @@ def _reference_mask(grid, obs, *, azimuth=None, vertical=None, min_distance=None
                 angle = math.degrees(math.atan2(grid.z[r, c] + h_t - kc * d * d - ez, d))
                 ok &= vertical[0] <= angle <= vertical[1]
             out[r, c] = ok
-    out[_nearest(grid, obs)] = True  # the observer's own sample is exempt, as from max_distance
+    # the observer's own sample is exempt from every limit but min_distance (its distance is defined)
+    r, c = _nearest(grid, obs)
+    out[r, c] = min_distance is None or math.hypot(grid.xs[c] - obs[0], grid.ys[r] - obs[1]) >= min_distance
     return out
 
 
@@ -178,16 +180,23 @@ def test_vertical_limits_on_a_flat_grid():
     assert level.all()
 
 
-def test_distance_limits_are_inclusive_and_spare_the_observers_sample():
+def test_distance_limits_are_inclusive_and_min_distance_leaves_out_the_observers_sample():
+    """Issue 42, item 9: samples nearer than min_distance are False, the observer's own one too
+    (it was kept, against the docstring); it stays exempt from max_distance and the angles."""
     d = np.hypot(*np.meshgrid(FLAT.xs - 2.0, FLAT.ys - 2.0))
-    np.testing.assert_array_equal(_flat(min_distance=2.0), (d >= 2) | (d == 0))
-    np.testing.assert_array_equal(_flat(min_distance=1.0, max_distance=2.0), ((d >= 1) & (d <= 2)) | (d == 0))
-    # an observer inside a cell: its nearest sample is kept whatever the limits
-    # (sample (4, 0) is 3.61 away at azimuth 94.8; (3, 0) is 2.62 away, (2, 0) at azimuth 100.6)
+    np.testing.assert_array_equal(_flat(min_distance=2.0), d >= 2)
+    np.testing.assert_array_equal(_flat(min_distance=1.0, max_distance=2.0), (d >= 1) & (d <= 2))
+    np.testing.assert_array_equal(_flat(max_distance=0.5), d == 0)
+    # an observer inside a cell: its nearest sample (0, 0), 0.5 away, is left out by min_distance 3 (and not by
+    # the azimuth limit); sample (4, 0) is 3.61 away at azimuth 94.8; (3, 0) is 2.62 away, (2, 0) at azimuth 100.6
     v = viewshed(FLAT, (0.4, 0.3), observer_height=1.0, min_distance=3.0, azimuth=(90, 100))
     expected = np.zeros((5, 5), bool)
-    expected[0, 0] = expected[0, 4] = True
+    expected[0, 4] = True
     np.testing.assert_array_equal(v, expected)
+    kept = viewshed(FLAT, (0.4, 0.3), observer_height=1.0, min_distance=0.5, azimuth=(90, 100))
+    assert kept[0, 0] and kept[0, 3] and kept[0, 4] and kept.sum() == 3  # (0, 0) 0.5 away: not nearer than 0.5
+    mask = field_of_view_mask(FLAT, (0.4, 0.3), field_of_view(min_distance=0.6))
+    assert not mask[0, 0] and mask[0, 1]  # (0, 1) is 0.67 away
 
 
 def test_observer_on_the_edge_of_the_grid():
