@@ -87,19 +87,20 @@ def run(args) -> int:
     seconds = time.perf_counter() - t0
     if args.output_mode != "visible":
         return _report_values(grid, vis, out, suffix, args, (label, observer, frame, fov, seconds))
-    valid = np.isfinite(grid.z)
-    n_vis = int(vis[valid].sum())
+    valid = np.isfinite(grid.z) if grid.n_nodata else None  # a full-size mask only where there is nodata
+    n_vis = int(np.count_nonzero(vis if valid is None else vis & valid))
+    n_valid = grid.size - grid.n_nodata
     field = _field(grid, observer, fov, args)
     _write_viewshed(grid, vis, out, suffix, args, label, observer, field)
     print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
     print(f"  {earth_text(args)}")
     inside = ""
     if field is not None:
-        n_in = int((field & valid).sum())
+        n_in = int(np.count_nonzero(field if valid is None else field & valid))
         print(f"  field of view: {fov.describe()}")
         inside = f"; {plural(n_in, 'sample')} in the field of view, {100 * n_vis / max(n_in, 1):.2f} % of them visible"
-    print(f"  visible {n_vis:,} of {plural(int(valid.sum()), 'sample')} "
-          f"({100 * n_vis / max(int(valid.sum()), 1):.2f} %{inside}), {seconds:.2f} s")
+    print(f"  visible {n_vis:,} of {plural(n_valid, 'sample')} "
+          f"({100 * n_vis / max(n_valid, 1):.2f} %{inside}), {seconds:.2f} s")
     print(f"  wrote {out}")
     return 0
 
@@ -207,7 +208,7 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observe
         return
     from ..io import write_mask_geotiff
 
-    write_mask_geotiff(grid, vis, out, nodata_mask=~np.isfinite(grid.z))
+    write_mask_geotiff(grid, vis, out, nodata_mask=np.isnan(grid.z) if grid.n_nodata else None)
 
 
 def _field_of_view_attrs(args) -> dict:

@@ -47,23 +47,29 @@ def show_by_default() -> bool:
 
 class ProgressLines:
     """Progress as plain lines for a log file, where a bar redrawn in place leaves cursor
-    escapes: ``desc: done/total unit, elapsed`` at most every ``every`` seconds and at the
-    end (tqdm's ``update``/``close`` interface, for the calls that show a bar elsewhere).
+    escapes: ``desc: done/total unit, elapsed`` every :attr:`EVERY` seconds, and at the end
+    when a line came before (a run shorter than that writes none: its own output says
+    enough). tqdm's ``update``/``close`` interface, for the calls that show a bar elsewhere.
 
     >>> import io, contextlib
     >>> err = io.StringIO()
     >>> with contextlib.redirect_stderr(err):
-    ...     p = ProgressLines(3, "cumulative", "observer", every=1e9)
+    ...     p = ProgressLines(3, "cumulative", "observer", every=0.0)
     ...     p.update(1); p.update(2); p.close()
-    >>> err.getvalue().splitlines()[0].startswith("cumulative: 3/3 observers, ")
+    >>> err.getvalue().splitlines()[-1].startswith("cumulative: 3/3 observers, ")
     True
     """
 
-    def __init__(self, total: int, desc: str, unit: str, initial: int = 0, every: float = 10.0):
+    #: Seconds between two lines.
+    EVERY = 10.0
+
+    def __init__(self, total: int, desc: str, unit: str, initial: int = 0, every: float | None = None):
         import time
 
-        self.total, self.desc, self.unit, self.count, self.every = total, desc, unit, initial, every
+        self.total, self.desc, self.unit, self.count = total, desc, unit, initial
+        self.every = self.EVERY if every is None else every
         self.start = self.last = time.perf_counter()
+        self.printed = False
         self.closed = False
 
     def update(self, n: int = 1) -> None:
@@ -71,17 +77,18 @@ class ProgressLines:
 
         self.count += n
         now = time.perf_counter()
-        if self.count >= self.total or now - self.last >= self.every:
+        if now - self.last >= self.every or (self.count >= self.total and self.printed):
             self.last = now
             self._line(now)
 
     def _line(self, now: float) -> None:
         units = self.unit if self.total == 1 else self.unit + "s"
         print(f"{self.desc}: {self.count}/{self.total} {units}, {now - self.start:.0f} s", file=sys.stderr, flush=True)
+        self.printed = True
 
     def close(self) -> None:
         import time
 
-        if not self.closed and self.count < self.total:  # an interrupted run: where it stopped
+        if not self.closed and self.printed and self.count < self.total:  # an interrupted run: where it stopped
             self._line(time.perf_counter())
         self.closed = True

@@ -52,7 +52,11 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
             scale = 1.0 if scale is None else float(scale)
             offset = 0.0 if offset is None else float(offset)
             if plain:
-                z = _read_strips(src, b, t, (scale, offset))
+                # each strip is read once, whole blocks at a time: GDAL's block cache (5 % of the
+                # memory by default) would keep every block read, the size of the band again
+                # (8192² float32: 871 MB at the end of the reading instead of 599 MB)
+                with rasterio.Env(GDAL_CACHEMAX=_strip_cache_bytes(src, b)):
+                    z = _read_strips(src, b, t, (scale, offset))
             else:
                 z = _to_heights(_masked(src.read(b, masked=True), t), (scale, offset))
             file_crs = src.crs
@@ -90,6 +94,13 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
 #: blocks), so that an interrupt is answered between strips (a 20000² band read in one
 #: call held Ctrl-C for seconds) and the file's own type is never held whole beside the heights.
 _STRIP_SAMPLES = 1 << 22
+
+
+def _strip_cache_bytes(src, b: int) -> int:
+    """GDAL's block cache while :func:`_read_strips` reads: two strips of blocks (at least 16 MiB)."""
+    block_rows = max(1, src.block_shapes[b - 1][0])
+    step = max(block_rows, _STRIP_SAMPLES // max(src.width, 1) // block_rows * block_rows)
+    return max(16 << 20, 2 * step * src.width * np.dtype(src.dtypes[b - 1]).itemsize)
 
 
 def _read_strips(src, b: int, t, scale_offset) -> np.ndarray:
@@ -170,11 +181,51 @@ def _creation_options(rows: int, cols: int, dtype: str) -> dict:
     return opts
 
 
-def _height_dtype(values: np.ndarray) -> str:
-    """float32 when every value (nodata included) survives the round trip exactly, else float64."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        z32 = values.astype(np.float32)
-    return "float32" if np.array_equal(z32.astype(np.float64), values) else "float64"
+def _height_dtype(rows_of: "_Rows") -> str:
+    """float32 when every value (nodata included) survives the round trip exactly, else
+    float64; strip by strip (two full-size copies of an 8192² grid were 768 MB)."""
+    for r0, r1 in rows_of.strips():
+        values = rows_of(r0, r1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            z32 = values.astype(np.float32)
+        if not np.array_equal(z32.astype(np.float64), values):
+            return "float64"
+    return "float32"
+
+
+class _Rows:
+    """The rows of a raster to write, north-up, made strip by strip from the grid's own
+    south-up array: ``rows(r0, r1)`` (row 0 the northernmost) in ``dtype`` (None: as they
+    are), NaN replaced by ``nodata`` when given, ``nodata_mask`` (south-up, bool) samples
+    set to ``nodata``. A full north-up copy of the raster is never made: writing an 8192²
+    viewshed held a uint8 copy and its flipped copy (128 MB), a DEM two float copies."""
+
+    def __init__(self, south_up: np.ndarray, dtype, nodata=None, nodata_mask=None):
+        self.a = south_up
+        self.dtype = None if dtype is None else np.dtype(dtype)
+        self.nodata = nodata
+        self.mask = nodata_mask
+        self.shape = south_up.shape
+
+    def strips(self):
+        """``(r0, r1)`` of the strips, about :data:`_STRIP_SAMPLES` samples each."""
+        rows, cols = self.shape
+        step = max(1, _STRIP_SAMPLES // max(cols, 1))
+        return [(r0, min(rows, r0 + step)) for r0 in range(0, rows, step)]
+
+    def __call__(self, r0: int, r1: int) -> np.ndarray:
+        n = self.shape[0]
+        part = self.a[n - r1: n - r0][::-1]
+        if self.nodata is not None and part.dtype.kind == "f":
+            part = np.where(np.isnan(part), self.nodata, part)
+        out = np.array(part, dtype=self.dtype or part.dtype, order="C")  # a copy: the masked samples are set in it
+        if self.mask is not None:
+            out[self.mask[n - r1: n - r0][::-1]] = self.nodata
+        return out
+
+    @property
+    def out_dtype(self) -> np.dtype:
+        return self.dtype if self.dtype is not None else self.a.dtype
 
 
 def _write_tif(grid: HeightGrid, p: Path, *, dtype: str | None = None) -> None:
@@ -185,8 +236,8 @@ def _write_tif(grid: HeightGrid, p: Path, *, dtype: str | None = None) -> None:
     rows, cols = z.shape
     transform = _north_up_transform(nx, ny, grid.attrs)
     nodata = _nodata_value(z, always=True)  # GIS tools expect the tag even when no sample uses it
-    north_up = np.where(np.isnan(z), nodata, z)[::-1]
-    dtype = _height_dtype(north_up) if dtype is None else dtype
+    rows_of = _Rows(z, None, nodata)
+    dtype = _height_dtype(rows_of) if dtype is None else dtype
     attrs = dict(grid.attrs)
     tags = {}
     if note is not None:
@@ -195,7 +246,7 @@ def _write_tif(grid: HeightGrid, p: Path, *, dtype: str | None = None) -> None:
     tags[_ATTRS_TAG] = _attrs_to_json(attrs)
     profile = dict(height=rows, width=cols, count=1, dtype=dtype, transform=transform, crs=crs, nodata=nodata)
     with atomic_path(p) as tmp:
-        _write_gtiff(tmp, north_up.astype(dtype, copy=False), profile, tags)
+        _write_gtiff(tmp, _Rows(z, dtype, nodata), profile, tags)
 
 
 def _gdal_path(path: Path) -> bool:
@@ -208,8 +259,9 @@ def _gdal_path(path: Path) -> bool:
     return True
 
 
-def _write_gtiff(path: Path, data: np.ndarray, profile: dict, tags: dict | None = None) -> None:
-    """One band as GDAL writes a GeoTIFF (:func:`_creation_options`); through memory when GDAL cannot take the name.
+def _write_gtiff(path: Path, data: "_Rows", profile: dict, tags: dict | None = None) -> None:
+    """One band as GDAL writes a GeoTIFF (:func:`_creation_options`), strip by strip from
+    ``data``; through memory when GDAL cannot take the name.
 
     GDAL reports some failed writes (a full disk while it flushes its tiles on closing
     the file) only as lines that libtiff prints on stderr, and closes the file as if it
@@ -222,21 +274,21 @@ def _write_gtiff(path: Path, data: np.ndarray, profile: dict, tags: dict | None 
     would have printed them.
     """
     rasterio = rasterio_module()
-    profile = dict(profile, driver="GTiff", **_creation_options(data.shape[0], data.shape[1], str(data.dtype)))
+    profile = dict(profile, driver="GTiff", **_creation_options(data.shape[0], data.shape[1], str(data.out_dtype)))
     tags = {k: str(v) for k, v in (tags or {}).items()}
     if not _gdal_path(path):
         from rasterio.io import MemoryFile
 
         with MemoryFile() as mem:
             with mem.open(**profile) as dst:
-                dst.write(data, 1)
+                _write_strips(dst, data)
                 dst.update_tags(**tags)
             path.write_bytes(mem.read())  # a failed Python write raises
         return
     with _stderr_lines() as printed:
         try:
             with rasterio.open(path, "w", **profile) as dst:
-                dst.write(data, 1)
+                _write_strips(dst, data)
                 dst.update_tags(**tags)
             failed = None if _reads_back(path, data, tags) else "the file does not read back as written"
         except rasterio.errors.RasterioError as exc:
@@ -248,14 +300,27 @@ def _write_gtiff(path: Path, data: np.ndarray, profile: dict, tags: dict | None 
         sys.stderr.write("".join(line + "\n" for line in printed))
 
 
-def _reads_back(path: Path, data: np.ndarray, tags: dict) -> bool:
-    """Whether the GeoTIFF ``path`` reads back as ``data`` with ``tags``."""
+def _write_strips(dst, data: "_Rows") -> None:
+    from rasterio.windows import Window
+
+    cols = data.shape[1]
+    for r0, r1 in data.strips():
+        dst.write(data(r0, r1), 1, window=Window(0, r0, cols, r1 - r0))
+
+
+def _reads_back(path: Path, data: "_Rows", tags: dict) -> bool:
+    """Whether the GeoTIFF ``path`` reads back as ``data`` with ``tags`` (strip by strip)."""
+    from rasterio.windows import Window
+
     rasterio = rasterio_module()
     with rasterio.open(path) as src:
-        back = src.read(1)
+        if (src.height, src.width) != data.shape or np.dtype(src.dtypes[0]) != data.out_dtype:
+            return False
+        for r0, r1 in data.strips():
+            if not _same_values(src.read(1, window=Window(0, r0, data.shape[1], r1 - r0)), data(r0, r1)):
+                return False
         stored = src.tags()
-    same = back.shape == data.shape and back.dtype == data.dtype and _same_values(back, data)
-    return same and all(stored.get(k) == v for k, v in tags.items())
+    return all(stored.get(k) == v for k, v in tags.items())
 
 
 #: Unsigned integer types by size in bytes, for comparing arrays bit for bit.
@@ -343,21 +408,26 @@ def write_geotiff(grid: HeightGrid, data: np.ndarray, path, *, nodata=None, tags
     if not isinstance(grid, HeightGrid):
         raise TypeError(f"grid must be a terrainvis.HeightGrid, got {type(grid).__name__}")
     values = np.asarray(data)
-    if values.dtype == bool:
-        values = values.astype(np.uint8)
     if values.shape != grid.shape:
         raise ValueError(f"data must have the grid's shape {grid.shape}, got {values.shape}")
+    return _write_raster(grid, _Rows(values, np.uint8 if values.dtype == bool else None), p, nodata=nodata,
+                         tags=tags)
+
+
+def _write_raster(grid: HeightGrid, rows_of: "_Rows", path, *, nodata=None, tags=None) -> Path:
+    """The checks and the write of :func:`write_geotiff` for rows made strip by strip."""
+    p = Path(path)
     if p.suffix.lower() not in (".tif", ".tiff"):
         raise ValueError(f"path must end in .tif or .tiff, got {p.name!r}")
     if not grid.is_uniform:
         raise ValueError("a GeoTIFF needs a uniform grid, and this one is rectilinear: write the raster as .npz")
     _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix)
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
-    rows, cols = values.shape
-    profile = dict(height=rows, width=cols, count=1, dtype=values.dtype.name, transform=_north_up_transform(nx, ny, grid.attrs),
-                   crs=crs, nodata=nodata)
+    rows, cols = rows_of.shape
+    profile = dict(height=rows, width=cols, count=1, dtype=rows_of.out_dtype.name,
+                   transform=_north_up_transform(nx, ny, grid.attrs), crs=crs, nodata=nodata)
     with atomic_path(p) as tmp:
-        _write_gtiff(tmp, np.ascontiguousarray(values[::-1]), profile, tags)
+        _write_gtiff(tmp, rows_of, profile, tags)
     return p
 
 
@@ -381,7 +451,7 @@ def write_mask_geotiff(grid: HeightGrid, mask: np.ndarray, path, *, nodata_mask=
     m = np.asarray(mask, dtype=bool)
     if m.shape != grid.shape:
         raise ValueError(f"mask must have the grid's shape {grid.shape}, got {m.shape}")
-    data = m.astype(np.uint8)
-    if nodata_mask is not None:
-        data[np.asarray(nodata_mask, dtype=bool)] = 255
-    return write_geotiff(grid, data, path, nodata=255)
+    holes = None if nodata_mask is None else np.asarray(nodata_mask, dtype=bool)
+    if holes is not None and holes.shape != grid.shape:
+        raise ValueError(f"nodata_mask must have the grid's shape {grid.shape}, got {holes.shape}")
+    return _write_raster(grid, _Rows(m, np.uint8, 255, holes), path, nodata=255)

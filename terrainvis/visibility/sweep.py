@@ -656,7 +656,9 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, s
         code.ravel()[todo] = np.where(vis, _vk.VISIBLE, _vk.BLOCKED)
     info = {"targets": int(code.size - np.count_nonzero(code == _vk.NOT_TARGET)), "lb": counts[0],
             "ub": counts[1], "walk": counts[2], "exact": int(todo.size), "ub_bound": counts[3]}
-    return code == _vk.VISIBLE, info
+    # the verdicts written over the codes (one byte each, as bools are): an 8192² grid's
+    # viewshed then holds one array of 64 MiB, not two
+    return np.equal(code, _vk.VISIBLE, out=code.view(np.bool_)), info
 
 
 def _target_codes(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, dmax: float, own: bool):

@@ -200,7 +200,10 @@ def test_inputs_are_not_modified(hills):
     np.testing.assert_array_equal(hills.z, before[2])
 
 
-def test_progress_bar_counts_observers(hills, capsys):
+def test_progress_bar_counts_observers(hills, capsys, monkeypatch):
+    from terrainvis.core import _progress
+
+    monkeypatch.setattr(_progress, "on_a_terminal", lambda: True)  # a bar (into a log: plain lines, test_newcomer)
     cumulative_viewshed(hills, _observers(hills, 5), workers=1, progress=True)
     err = capsys.readouterr().err
     assert "cumulative viewshed" in err and "5/5" in err and "observer" in err
