@@ -52,8 +52,8 @@ _INF = np.inf
 #: nodata. The accelerations of the LOS engines, empty where a family does not use them:
 #: ``pyr`` (k,) float32 min/max pyramid with its level tables ``off`` and ``nxl`` (ltop + 1,)
 #: int64 and ``ltop`` (int) its root level (:mod:`terrainvis.visibility._kernels`);
-#: ``cmax`` (segments, cols) and ``rmax`` (rows, segments) float64 the strip maxima of the
-#: viewshed sweep (:mod:`terrainvis.visibility._sweep_kernels`).
+#: ``cmax`` (segments, cols) and ``rmax`` (rows, segments) float32 the strip maxima of the
+#: viewshed sweep, rounded up (:mod:`terrainvis.visibility._sweep_kernels`).
 SurfaceGrid = namedtuple(
     "SurfaceGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan", "pyr", "off", "nxl", "ltop", "cmax", "rmax"]
 )
@@ -75,8 +75,8 @@ def no_pyramid():
 
 
 def no_strips():
-    """The empty strip maxima ``(cmax, rmax)`` of a :data:`SurfaceGrid`."""
-    return np.empty((0, 0)), np.empty((0, 0))
+    """The empty strip maxima ``(cmax, rmax)`` of a :data:`SurfaceGrid` (float32, as the sweep's)."""
+    return np.empty((0, 0), dtype=np.float32), np.empty((0, 0), dtype=np.float32)
 
 
 def no_neighbours():

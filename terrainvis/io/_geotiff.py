@@ -28,7 +28,7 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
     try:
         with contextlib.ExitStack() as stack:
             if _gdal_path(p):
-                src = stack.enter_context(rasterio.open(p))
+                src = stack.enter_context(rasterio.open(p, **_decoding_threads(p)))
             else:  # a name GDAL cannot take: read the bytes through memory
                 from rasterio.io import MemoryFile
 
@@ -94,6 +94,23 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
 #: blocks), so that an interrupt is answered between strips (a 20000² band read in one
 #: call held Ctrl-C for seconds) and the file's own type is never held whole beside the heights.
 _STRIP_SAMPLES = 1 << 22
+
+
+#: Samples from which a GeoTIFF is decoded on every core (GDAL's ``NUM_THREADS``): on 8192² and
+#: 20000² float32 DEFLATE tiles the reading took 0.6 and 2.0 s instead of 1.3 and 3.5 s; on
+#: 3601² the second core loads numba's kernels beside the reading, and the command was
+#: slower with it (A/B 1.065, 27 November).
+THREADED_DECODING_SAMPLES = 1 << 24
+
+
+def _decoding_threads(p: Path) -> dict:
+    """``num_threads="ALL_CPUS"`` for a raster of at least :data:`THREADED_DECODING_SAMPLES` samples."""
+    rasterio = rasterio_module()
+    with contextlib.suppress(Exception):  # what cannot be opened is reported by the read itself
+        with rasterio.open(p) as probe:
+            if probe.width * probe.height >= THREADED_DECODING_SAMPLES:
+                return {"num_threads": "ALL_CPUS"}
+    return {}
 
 
 def _strip_cache_bytes(src, b: int) -> int:

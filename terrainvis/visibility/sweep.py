@@ -589,8 +589,8 @@ def _strip_max(grid: HeightGrid):
     v = grid._cache.get("viewshed_strip_max")
     if v is None:
         rows, cols = grid.shape
-        cmax = np.empty(((rows - 2) // _vk.SEG + 1, cols))
-        rmax = np.empty((rows, (cols - 2) // _vk.SEG + 1))
+        cmax = np.empty(((rows - 2) // _vk.SEG + 1, cols), dtype=np.float32)
+        rmax = np.empty((rows, (cols - 2) // _vk.SEG + 1), dtype=np.float32)
         _vk.strip_max(grid.z, cmax, rmax)
         v = grid._cache["viewshed_strip_max"] = (cmax, rmax)
     return v

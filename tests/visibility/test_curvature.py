@@ -466,7 +466,7 @@ def _cell_case(z, X0, Y0, w, h, ez, kc):
 
     xs, ys = np.array([X0, X0 + w]), np.array([Y0, Y0 + h])
     zz = np.asarray(z, float)
-    cmax, rmax = np.empty((1, 2)), np.empty((2, 1))
+    cmax, rmax = np.empty((1, 2), dtype=np.float32), np.empty((2, 1), dtype=np.float32)
     vk.strip_max(zz, cmax, rmax)
     pyr, off, nxl, ltop = no_pyramid()
     g = SurfaceGrid(zz, xs, ys, 1.0 / np.diff(xs), 1.0 / np.diff(ys), False, False, pyr, off, nxl, ltop, cmax, rmax)

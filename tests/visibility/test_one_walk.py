@@ -278,7 +278,7 @@ def _sweep_grid(g, nodata):
 
     xs, ys = np.asarray(g.xs), np.asarray(g.ys)
     pyr, off, nxl, ltop = no_pyramid()
-    cmax, rmax = np.empty((0, 0)), np.empty((0, 0))
+    cmax, rmax = np.empty((0, 0), dtype=np.float32), np.empty((0, 0), dtype=np.float32)
     # has_nan True sends the walk cell by cell (the nodata path) over the same heights
     return SurfaceGrid(np.asarray(g.z), xs, ys, 1.0 / np.diff(xs), 1.0 / np.diff(ys), bool(g.is_uniform), nodata,
                        pyr, off, nxl, ltop, cmax, rmax)

@@ -550,3 +550,43 @@ def test_a_large_grid_s_tables_built_on_two_threads_are_the_tables():
     eye = (threaded.xs[100], threaded.ys[300])
     np.testing.assert_array_equal(viewshed(threaded, eye, observer_height=5.0), viewshed(serial, eye, observer_height=5.0))
     assert "visibility" not in threaded._cache and "visibility" not in serial._cache
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), rows=st.integers(3, 40), cols=st.integers(3, 40))
+def test_strip_maxima_are_float32_upper_bounds_of_each_segment(seed, rows, cols):
+    """The sweep's strip maxima (float32, half the memory of float64 tables) are the float32
+    rounded up of each segment's largest height: never below it, and exact for heights
+    a float32 raster holds."""
+    from terrainvis.visibility import _sweep_kernels as vk
+    from terrainvis.visibility import sweep
+
+    rng = np.random.default_rng(seed)
+    z = rng.normal(300.0, 50.0, (rows, cols))
+    z[rng.random(z.shape) < 0.1] = np.nan
+    g = HeightGrid(z)
+    cmax, rmax = sweep._strip_max(g)
+    assert cmax.dtype == np.float32 and rmax.dtype == np.float32
+    seg = vk.SEG
+    for k in range(cmax.shape[0]):
+        for c in range(cols):
+            part = z[seg * k: seg * k + seg + 1, c]
+            true = np.nanmax(part) if np.isfinite(part).any() else -np.inf
+            assert cmax[k, c] >= true and (not np.isfinite(true) or np.float32(cmax[k, c]) == _f32_up(true))
+    for r in range(rows):
+        for k in range(rmax.shape[1]):
+            part = z[r, seg * k: seg * k + seg + 1]
+            true = np.nanmax(part) if np.isfinite(part).any() else -np.inf
+            assert rmax[r, k] >= true and (not np.isfinite(true) or np.float32(rmax[r, k]) == _f32_up(true))
+    z32 = HeightGrid(z.astype(np.float32).astype(np.float64))
+    c32, _ = sweep._strip_max(z32)
+    for k in range(c32.shape[0]):
+        for c in range(cols):
+            part = z32.z[seg * k: seg * k + seg + 1, c]
+            if np.isfinite(part).any():
+                assert float(c32[k, c]) == np.nanmax(part)
+
+
+def _f32_up(v: float) -> np.float32:
+    f = np.float32(v)
+    return f if float(f) >= v else np.nextafter(f, np.float32(np.inf))
