@@ -95,9 +95,7 @@ def _check_z(z, owned: bool = False) -> np.ndarray:
             and z.flags.writeable and z.flags.owndata:
         if z.shape[0] < 2 or z.shape[1] < 2:
             raise ValueError(f"z must have at least 2x2 samples, got shape {z.shape}")
-        if np.isinf(z).any():
-            raise ValueError(f"z must hold finite heights or NaN for nodata, got {int(np.isinf(z).sum())} infinite value(s)")
-        return z
+        return z  # an infinite height shows in its range (_check_heights): no pass and no mask of its own
     if np.ma.isMaskedArray(z):
         # Masked samples are nodata, so NaN (np.asarray would expose the values under the mask).
         arr = as_float_array(np.ma.getdata(z), "z")
@@ -138,8 +136,12 @@ def _height_range(z: np.ndarray) -> tuple[float, float] | None:
 
 
 def _check_heights(z: np.ndarray, name: str) -> tuple[float, float] | None:
-    """``z``'s height range (:func:`_height_range`), or ValueError when a height is beyond ``MAX_HEIGHT``."""
+    """``z``'s height range (:func:`_height_range`), or ValueError when a height is infinite or
+    beyond ``MAX_HEIGHT``."""
     zr = _height_range(z)
+    if zr is not None and not (np.isfinite(zr[0]) and np.isfinite(zr[1])):
+        raise ValueError(f"{name} must hold finite heights or NaN for nodata, got {int(np.isinf(z).sum())} infinite "
+                         "value(s)")
     if zr is not None and max(-zr[0], zr[1]) > MAX_HEIGHT:
         worst = zr[0] if -zr[0] > zr[1] else zr[1]
         raise ValueError(f"{name} holds a height of {worst:.6g}, beyond +-{MAX_HEIGHT:g} (z units): no DEM's elevation, "

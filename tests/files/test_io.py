@@ -1002,3 +1002,16 @@ def test_a_nodata_value_the_band_cannot_hold_marks_no_sample():
     assert _as_stored(1e39, np.float32) is None  # beyond float32: inf, no sample
     assert _as_stored(-3.4028234663852886e38, np.float32) == float(np.float32(-3.4028234663852886e38))
     assert _as_stored(0.1, np.float32) == float(np.float32(0.1)) != 0.1  # the band's own rounding
+
+
+def test_a_geotiffs_nodata_is_counted_while_it_is_read(tmp_path):
+    """The reader counts the NaN of each strip (no full-size mask afterwards): the count is the grid's."""
+    from terrainvis import HeightGrid, load_dem, save_dem
+
+    rng = np.random.default_rng(3)
+    z = rng.normal(100.0, 10.0, (300, 257))
+    z[rng.random(z.shape) < 0.07] = np.nan
+    save_dem(HeightGrid(z, 30.0, 30.0, (500000.0, 4000000.0), attrs={"crs": "EPSG:32617"}), tmp_path / "d.tif")
+    g = load_dem(tmp_path / "d.tif")
+    assert g._cache["n_nodata"] == int(np.isnan(g.z).sum()) == int(np.isnan(z).sum()) > 0
+    assert g.n_nodata == int(np.isnan(z).sum())
