@@ -21,6 +21,7 @@ vertex budget, checks the result against the height-field rules
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import inspect
 import time
@@ -439,14 +440,15 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
         level = check_level(grid.shape, 0 if level is None else level)
         check_memory(info.memory_need(grid.size, 0), f"simplify({method!r}) of a {grid.shape[0]}x{grid.shape[1]} grid")
         t0 = time.perf_counter()
-        if target is None:
-            out, extra = _apply_regular(grid, info, level, options), {}
-        elif info.whole_grid:
-            out, extra = _whole_grid_within(grid, info, level, target, options)
-            level = extra.pop("level")
-        else:
-            out, extra = regular_within(grid, info.load(), level, target, options)
-            level = extra.pop("level")
+        with _calling(info, grid):
+            if target is None:
+                out, extra = _apply_regular(grid, info, level, options), {}
+            elif info.whole_grid:
+                out, extra = _whole_grid_within(grid, info, level, target, options)
+                level = extra.pop("level")
+            else:
+                out, extra = regular_within(grid, info.load(), level, target, options)
+                level = extra.pop("level")
         seconds = time.perf_counter() - t0
         _check_regular_result(out, grid, level, info)
     else:
@@ -466,6 +468,28 @@ def simplify(grid: HeightGrid, method: str, level: int | None = None, *, max_err
         max_error=err_max, rms_error=err_rms, seconds=seconds, **extra,
     )
     return out
+
+
+@contextlib.contextmanager
+def _calling(info: Method, grid: HeightGrid):
+    """A method's own code runs in this block: its failure is a SimplificationError naming it.
+
+    The errors of arguments and memory (TypeError, ValueError, MemoryError) and
+    SimplificationError pass as they are; any other exception of a library or a plugin is
+    wrapped with the method's name and the grid's shape (a plugin's KeyError was a
+    traceback of 20 lines from the command line). ``sys.exit()`` in a plugin ended a
+    whole comparison silently with its status: it is a failure of that method, recorded
+    in its unit's rows like any other. Ctrl-C passes.
+    """
+    try:
+        yield
+    except (SimplificationError, TypeError, ValueError, MemoryError):
+        raise
+    except SystemExit as exc:
+        raise SimplificationError(f"{info.name} called sys.exit({exc.code!r}) on a {grid.shape} grid: a method "
+                                  "returns its result or raises") from None
+    except Exception as exc:  # a library or a plugin failed: name the method and the cause
+        raise SimplificationError(f"{info.name} failed on a {grid.shape} grid: {type(exc).__name__}: {exc}") from exc
 
 
 def _check_regular_result(out, grid: HeightGrid, level: int, info: Method) -> None:
@@ -545,7 +569,7 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
         tin = TIN(own.vertices, own.faces)  # a fresh object: its attrs must not touch the grid's cached TIN
     else:
         build = info.load()
-        try:
+        with _calling(info, grid):
             if target is None:
                 tin = build(grid, budget, **options)
             elif info.name == "qec":
@@ -553,10 +577,6 @@ def _run_irregular(grid: HeightGrid, info: Method, level, options, target):
             else:  # greedy insertion, greedy cuts and the peers (simplifiers/peers) stop at the error themselves
                 tin = build(grid, budget, max_error=target, **options)
                 extra = _error_note(tin, target, budget)
-        except (SimplificationError, TypeError, ValueError, MemoryError):
-            raise
-        except Exception as exc:  # a library failed: name the method and the cause
-            raise SimplificationError(f"{info.name} failed on a {grid.shape} grid: {type(exc).__name__}: {exc}") from exc
         if not isinstance(tin, TIN):
             raise SimplificationError(f"{info.name} returned {describe(tin)}, not a terrainvis.TIN (an {info.kind} "
                                       "method returns a TIN)")

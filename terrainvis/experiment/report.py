@@ -448,9 +448,11 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
     if ORACLE not in mu.columns:
         return pd.DataFrame(columns=["oracle", "best", "best_accuracy", "gap"])
     practical = mu[[r for r in practical_relocations() if r in mu.columns]]
-    out = pd.DataFrame({
-        "oracle": mu[ORACLE], "best": practical.idxmax(axis=1), "best_accuracy": practical.max(axis=1),
-    })
+    # per row: a run of the oracle alone, or a row without any practical accuracy, has no best ("–")
+    best = [row.idxmax() if row.notna().any() else "–" for _, row in practical.iterrows()] if practical.shape[1] \
+        else ["–"] * len(mu)
+    out = pd.DataFrame({"oracle": mu[ORACLE], "best": best, "best_accuracy": practical.max(axis=1) if practical.shape[1]
+                        else np.nan}, index=mu.index)
     out["gap"] = out["oracle"] - out["best_accuracy"]
     idx = [(m, lv) for m in _ordered({i[0] for i in out.index}, METHODS) for lv in sorted({i[1] for i in out.index})
            if (m, lv) in out.index]

@@ -141,3 +141,68 @@ def test_compare_help_lists_the_methods(capsys):
     listed = text.split("one of: ", 1)[1]
     for name in simplifiers.METHODS:
         assert name in listed.replace("- ", "-"), name
+
+
+# ---------------------------------------------------------------------- probe crashes: the report of any relocations
+def test_the_report_works_for_every_subset_of_relocations(tmp_path, capsys):
+    """``compare --relocations oracle`` alone ran every unit, then exited 2 ("attempt to get
+    argmax of an empty sequence", the oracle's gap table); every subset of the relocations
+    must give a report."""
+    import argparse
+    import itertools
+
+    import terrainvis as tv
+    from terrainvis.cli.compare import _compare_report
+    from terrainvis.experiment.plan import settings_for
+
+    names = ["identity", "full", "half", "calibrated", "oracle"]
+    grids = {"hills": tv.synthetic_terrain("hills", size=33, seed=0)}
+    df = tv.compare(grids, methods=["lls", "greedy-insertion"], levels=[1], n_points=8, n_sets=1, relocations=names,
+                    workers=1, repeats=1)
+    args = argparse.Namespace(no_plots=True)
+    for k in range(1, len(names) + 1):
+        for subset in itertools.combinations(names, k):
+            part = df[df["relocation"].isin(subset)].reset_index(drop=True)
+            settings = settings_for(grids, {"methods": ["lls", "greedy-insertion"], "levels": [1], "n_points": 8,
+                                            "n_sets": 1, "relocations": list(subset)})
+            out = tmp_path / "-".join(subset)
+            out.mkdir()
+            assert _compare_report(part, grids, settings, out, args, 0.0) == 0, subset
+            assert (out / "tables.md").read_text().startswith("# terrainvis compare")
+    capsys.readouterr()
+
+
+# ---------------------------------------------------------------------- probe crashes: a plugin's failures
+def _raising(grid, level):
+    raise KeyError("no such thing")
+
+
+def _exiting(grid, n_vertices):
+    import sys as _sys
+
+    _sys.exit(3)
+
+
+def test_a_methods_own_failure_names_it_and_sys_exit_is_a_failure_of_its_unit():
+    import pytest
+
+    import simplifiers
+    import terrainvis as tv
+    from terrainvis.errors import SimplificationError
+
+    T = tv.synthetic_terrain("hills", size=33, seed=0)
+    simplifiers.register("raising", _raising, kind="regular")
+    simplifiers.register("exiting", _exiting, kind="irregular")
+    try:
+        with pytest.raises(SimplificationError, match=r"raising failed on a \(33, 33\) grid: KeyError: 'no such thing'"):
+            simplifiers.simplify(T, "raising", 1)
+        with pytest.raises(SimplificationError, match=r"exiting called sys.exit\(3\) on a \(33, 33\) grid"):
+            simplifiers.simplify(T, "exiting", 1)
+        df = tv.compare({"hills": T}, methods=["exiting", "lls"], levels=[1], n_points=6, n_sets=1,
+                        relocations=["full"], workers=1, repeats=1)
+        failed = df[df["method"] == "exiting"]["error"]
+        assert failed.notna().all() and failed.str.contains("sys.exit").all()
+        assert df[df["method"] == "lls"]["error"].isna().all()
+    finally:
+        simplifiers.unregister("raising")
+        simplifiers.unregister("exiting")
