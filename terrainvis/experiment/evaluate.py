@@ -370,8 +370,8 @@ def _rows(grid: HeightGrid, tname: str, terrains: dict, against: list, settings)
         if kind not in ("regular", "irregular", "semi-regular") or (kind == "regular") != isinstance(s, HeightGrid):
             kind = "regular" if isinstance(s, HeightGrid) else "irregular"
         base = _base(grid, tname, label, kind, _nearest_level(grid.shape, n), settings)
-        try:
-            rows += measured_rows(grid, s, base, settings, sets)
+        try:  # the errors of the surface as read, never those its file records
+            rows += measured_rows(grid, s, base, settings, sets, stored_errors=False)
         except Exception as exc:  # as compare records a unit that failed
             rows += failed_rows(base, exc, settings, sets)
     sizes = sorted({(s.size if isinstance(s, HeightGrid) else s.n_vertices) for s in terrains.values()})

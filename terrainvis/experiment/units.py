@@ -108,18 +108,22 @@ def _base(grid: HeightGrid, name: str, method: str, kind: str, level: int, setti
     }
 
 
-def measured_rows(grid: HeightGrid, simplified, base: dict, settings: Settings, sets) -> list[dict]:
+def measured_rows(grid: HeightGrid, simplified, base: dict, settings: Settings, sets, *,
+                  stored_errors: bool = True) -> list[dict]:
     """The rows of a unit whose simplified terrain is ``simplified``: its size, errors and volume, then the measure.
 
     ``base`` holds the unit's shared columns (terrain, method, kind, level, ...);
-    ``simplified.attrs`` may hold ``seconds`` (the simplification's time) and ``backend``.
-    :func:`terrainvis.evaluate` calls it with a terrain simplified elsewhere.
+    ``simplified.attrs`` may hold ``seconds`` (the simplification's time) and ``backend``,
+    and, with ``stored_errors``, the ``max_error`` and ``rms_error`` that
+    :func:`simplifiers.simplify` measured (a comparison's own simplification). Without it
+    the errors are measured here: :func:`terrainvis.evaluate` calls it with a terrain
+    simplified elsewhere, whose file may record the errors of other heights.
     """
     from ..core.deviation import vertical_errors, volume_error
 
     meta = simplified.attrs
     n_vertices = simplified.size if isinstance(simplified, HeightGrid) else simplified.n_vertices
-    if "max_error" in meta and "rms_error" in meta:
+    if stored_errors and "max_error" in meta and "rms_error" in meta:
         err_max, err_rms = meta["max_error"], meta["rms_error"]
     else:
         err_max, err_rms = vertical_errors(grid, simplified)

@@ -206,3 +206,20 @@ def test_a_methods_own_failure_names_it_and_sys_exit_is_a_failure_of_its_unit():
     finally:
         simplifiers.unregister("raising")
         simplifiers.unregister("exiting")
+
+
+# ---------------------------------------------------------------------- probe wrong answers (a)
+def test_evaluate_measures_the_surface_it_reads_not_the_errors_its_file_records(tmp_path):
+    """A terrainvis PLY with every height raised 50 m still showed its stored max error (0.90 m)."""
+    import simplifiers
+    import terrainvis as tv
+    from terrainvis import TIN, evaluate, load_terrain
+
+    T = tv.synthetic_terrain("hills", size=33, seed=0)
+    S = simplifiers.simplify(T, "greedy-insertion", 2)
+    raised = TIN(S.vertices + [0.0, 0.0, 50.0], S.faces, attrs=dict(S.attrs))  # the stored errors kept
+    tv.save_terrain(raised, tmp_path / "raised.ply")
+    assert load_terrain(tmp_path / "raised.ply").attrs["max_error"] == S.attrs["max_error"]
+    for given in (raised, tmp_path / "raised.ply"):
+        df = evaluate({"hills": T}, given, name="raised", n_points=6, n_sets=1, relocations=["full"])
+        assert df["max_error"].iloc[0] >= 50.0 - 1e-9 and df["rms_error"].iloc[0] > 49.0, df[["max_error", "rms_error"]]
