@@ -89,7 +89,7 @@ def _compare_in(out: Path, args) -> int:
             raise UsageError(f"--terrain names must be unique, got {label!r} twice")
         grids[label] = grid
     grids = resolve_terrains(grids)
-    settings = settings_for(grids, options)  # compare checks them again; here before anything is removed
+    settings = settings_for(grids, options, flags=True)  # compare checks them again; here before anything is removed
     _earlier_run(out, args, list(grids), settings, inputs=[t for t in terrains if Path(t).is_file()])
     client = dask_client(args.scheduler) if args.scheduler else None
     t0 = time.perf_counter()

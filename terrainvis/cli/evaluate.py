@@ -62,6 +62,12 @@ def run(args) -> int:
     for s in args.simplified:
         if not Path(s).exists():
             raise UsageError(f"SIMPLIFIED {s!r} does not exist")
+    from ..experiment.options import given
+    from ..experiment.plan import settings_for
+
+    # the options checked here, where a message names the flags (evaluate() checks them again)
+    settings_for({label: grid}, {**{k: v for k, v in given(args).items() if k not in _NOT_HERE},
+                                 "methods": args.against or ["simple"]}, flags=True)
     if not args.out:
         return _evaluate(args, label, grid, None, [])
     from ..core.fileio import RunLock, check_writable_dir, refuse_protected

@@ -206,6 +206,13 @@ def as_height(value, name: str, *, scale: float, ground: float = 0.0, tol_rel: f
     if not np.isfinite(out):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     limit = height_limit(scale, ground, tol_rel)
+    if limit <= 0.0:  # the terrain itself, not the value: no height is resolved on it
+        raise ValueError(
+            f"{name}: the terrain's heights (up to |z| = {ground:.6g}) are known to 2^-52 of their size, "
+            f"{ground * FLOAT64_EPS:.3g}, more than the line of sight's tolerance ({tol_rel:g} x its scale "
+            f"{scale:.6g}): float64 cannot decide line of sight on it; check the DEM's vertical scale, units and "
+            "nodata value"
+        )
     low = -limit if minimum is None else max(-limit, minimum)
     if not low <= out <= limit:
         raise ValueError(

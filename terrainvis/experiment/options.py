@@ -671,10 +671,12 @@ def _restore(values: dict) -> Settings:
 DEFAULTS = Settings()
 
 
-def validate(grids: dict, values: dict, *, caller: str = "compare()") -> Settings:
+def validate(grids: dict, values: dict, *, caller: str = "compare()", flags: bool = False) -> Settings:
     """``values`` (option name -> value; missing ones take their defaults) checked into :class:`Settings`.
 
     Every option's own check runs first, in :data:`OPTIONS` order, then the :data:`RULES`.
+    With ``flags`` (the command line), a message names the option's flag (``--points``),
+    not its Python keyword (``n_points``).
 
     Raises
     ------
@@ -688,7 +690,8 @@ def validate(grids: dict, values: dict, *, caller: str = "compare()") -> Setting
         raise TypeError(f"{caller} got unexpected option(s) {unknown}; the options are {list(OPTIONS)}")
     checked = {}
     for name, option in OPTIONS.items():
-        checked[name] = option.check(values.get(name, option.default), name)
+        label = option.flag if flags and option.flag else name
+        checked[name] = option.check(values.get(name, option.default), label)
     settings = Settings(**checked)
     for rule in RULES:
         rule(settings, grids)

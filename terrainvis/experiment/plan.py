@@ -67,9 +67,10 @@ def resolve_terrains(terrains) -> dict[str, HeightGrid]:
 
 
 # ---------------------------------------------------------------------- settings
-def settings_for(grids: dict, values: dict) -> Settings:
-    """The options of a run (name -> value) validated into :class:`~terrainvis.experiment.options.Settings`."""
-    return validate(grids, values)
+def settings_for(grids: dict, values: dict, *, flags: bool = False) -> Settings:
+    """The options of a run (name -> value) validated into :class:`~terrainvis.experiment.options.Settings`
+    (``flags``: messages name the command line's flags)."""
+    return validate(grids, values, flags=flags)
 
 
 def unit_bytes(settings: Settings, grids: dict) -> int:

@@ -223,3 +223,32 @@ def test_evaluate_measures_the_surface_it_reads_not_the_errors_its_file_records(
     for given in (raised, tmp_path / "raised.ply"):
         df = evaluate({"hills": T}, given, name="raised", n_points=6, n_sets=1, relocations=["full"])
         assert df["max_error"].iloc[0] >= 50.0 - 1e-9 and df["rms_error"].iloc[0] > 49.0, df[["max_error", "rms_error"]]
+
+
+# ---------------------------------------------------------------------- probe messages
+def test_the_command_line_names_its_flags_not_python_keywords(capsys):
+    from terrainvis.cli import main
+
+    for argv, expected in ((["compare", "--terrain", "hills", "--points", "1"], "--points must be >= 2, got 1"),
+                           (["compare", "--terrain", "hills", "--sets", "0"], "--sets must be >= 1, got 0"),
+                           (["evaluate", "hills", __file__, "--points", "1"], "--points must be >= 2, got 1")):
+        capsys.readouterr()
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.endswith(expected), err
+
+
+def test_heights_no_float64_resolves_blame_the_terrain_not_the_height():
+    """A DEM whose heights float64 cannot resolve against its scale said "--height must be
+    within [2.42e+08, -2.42e+08]": a reversed interval, blaming the height."""
+    import pytest
+
+    from terrainvis import HeightGrid, viewshed
+
+    z = np.full((20, 20), 1e12)
+    z[5, 5] += 1e4
+    g = HeightGrid(z, 1.0, 1.0)
+    with pytest.raises(ValueError) as info:
+        viewshed(g, (10.0, 10.0), observer_height=1.7)
+    text = str(info.value)
+    assert "the terrain's heights (up to |z| = 1e+12)" in text and "must be within" not in text, text

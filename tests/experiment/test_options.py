@@ -199,7 +199,7 @@ def test_a_toy_option_is_on_the_command_line(toy, tmp_path, capsys):
     assert json.loads(settings_path(out / "results.csv").read_text())["toy_scale"] == 3.0
     capsys.readouterr()
     assert main([*argv, "--toy-scale", "0", "--resume"]) == 2
-    assert "toy_scale must be a number > 0, got 0.0" in capsys.readouterr().err
+    assert "--toy-scale must be a number > 0, got 0.0" in capsys.readouterr().err
     assert main([*argv, "--toy-scale", "4", "--resume"]) == 2
     assert "toy_scale: 3.0 before, 4.0 now" in capsys.readouterr().err
 
