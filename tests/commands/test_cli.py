@@ -57,7 +57,7 @@ def test_compare_errors_are_one_line(tmp_path, capsys):
     assert "relocations must be drawn from ['identity', 'full', 'half', 'calibrated', 'oracle']" in err
     # zero is not silently replaced by the default
     assert "--points must be >= 2, got 0" in _one_line_error(capsys, 2, ["compare", "--points", "0", "--out", str(tmp_path)])
-    assert "n_sets must be >= 1, got 0" in _one_line_error(capsys, 2, ["compare", "--sets", "0", "--out", str(tmp_path)])
+    assert "--sets must be >= 1, got 0" in _one_line_error(capsys, 2, ["compare", "--sets", "0", "--out", str(tmp_path)])
     assert "levels must be at most 6" in _one_line_error(capsys, 2, ["compare", "--levels", "7", "--out", str(tmp_path)])
 
 
