@@ -96,6 +96,10 @@ def run(args) -> int:
         grid.require_finite("--network (the pair engine's exact clearance)")  # before the viewsheds run
     if suffix in (".tif", ".tiff") and not grid.is_uniform:
         raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
+    if suffix in (".tif", ".tiff"):
+        from ..io import check_geotiff_target
+
+        check_geotiff_target(grid, out)  # a CRS it cannot write fails now, not after the viewsheds
     table = read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))  # refuses a header alone
     frame = position_frame(grid, args)
     user = table[:, :2]

@@ -93,6 +93,10 @@ def run(args) -> int:
     check_heights(grid, args)
     if outputs.get("coverage") is not None and outputs["coverage"].suffix.lower() != ".npz" and not grid.is_uniform:
         raise UsageError("--coverage: a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write an .npz")
+    if outputs.get("coverage") is not None and outputs["coverage"].suffix.lower() != ".npz":
+        from ..io import check_geotiff_target
+
+        check_geotiff_target(grid, outputs["coverage"])  # a CRS it cannot write fails now, not after the siting
     frame = position_frame(grid, args)
     xy, heights, source = _candidates(grid, frame, args)
     if args.k > len(xy):

@@ -76,6 +76,10 @@ def run(args) -> int:
     from ..visibility import viewshed
 
     check_heights(grid, args)
+    if suffix in (".tif", ".tiff"):
+        from ..io import check_geotiff_target
+
+        check_geotiff_target(grid, out)  # a grid it cannot write fails now, not after the viewshed
     frame = position_frame(grid, args)
     observer = tuple(float(v) for v in frame.to_grid(args.observer))
     if np.isnan(grid.height_at([observer])[0]):

@@ -37,6 +37,8 @@ for bit. The command line's ``--frame native`` (the default) goes through them
 
 from __future__ import annotations
 
+import os
+
 import math
 import re
 import warnings
@@ -100,16 +102,19 @@ def parse_crs(text, name: str = "crs"):
 
     if not isinstance(text, str) or not text.strip():
         raise ValueError(f"{name} must be a non-empty CRS string such as 'EPSG:32633', got {text!r}")
-    try:
-        return CRS.from_user_input(text)
-    except (rasterio.errors.CRSError, ValueError, TypeError):
-        pass
-    codes = set(_EPSG.findall(text))
-    if len(codes) == 1:
+    # PROJ's own "ERROR 1: ..." lines of a text it cannot read go to GDAL's log, not to stderr
+    # beside the one-line message raised here
+    with rasterio.Env(CPL_LOG=os.devnull):
         try:
-            return CRS.from_epsg(int(codes.pop()))
-        except (rasterio.errors.CRSError, ValueError) as exc:
-            raise ValueError(f"{name} {text!r} names an EPSG code that rasterio does not know: {exc}") from None
+            return CRS.from_user_input(text)
+        except (rasterio.errors.CRSError, ValueError, TypeError):
+            pass
+        codes = set(_EPSG.findall(text))
+        if len(codes) == 1:
+            try:
+                return CRS.from_epsg(int(codes.pop()))
+            except (rasterio.errors.CRSError, ValueError) as exc:
+                raise ValueError(f"{name} {text!r} names an EPSG code that rasterio does not know: {exc}") from None
     raise ValueError(
         f"{name} {text!r} is not a CRS rasterio can read (tried the whole text, then one EPSG:<code> in it); "
         "use e.g. 'EPSG:32633' or a WKT string"

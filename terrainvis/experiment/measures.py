@@ -39,7 +39,7 @@ from ..core.validate import describe, entry_name
 
 __all__ = [
     "Measure", "MEASURES", "register", "unregister", "available", "point_sets", "observers", "pair_rows",
-    "viewshed_rows", "min_height_error", "siting_coverage", "SITING_LATTICE",
+    "viewshed_rows", "min_height_error", "siting_coverage", "siting_candidates", "SITING_LATTICE",
 ]
 
 #: The siting's candidates (:func:`siting_coverage`): every ``ceil(max(rows, cols) / SITING_LATTICE)``-th
@@ -265,6 +265,14 @@ def min_height_error(h_true: np.ndarray, h_test: np.ndarray, counted=None) -> di
             "min_height_p95": float(np.percentile(np.abs(err), 95))}
 
 
+def siting_candidates(grid: HeightGrid) -> np.ndarray:
+    """The siting's candidates on T (:func:`siting_coverage`): a lattice of its samples, at most
+    :data:`SITING_LATTICE` per side (:func:`terrainvis.candidate_grid`)."""
+    from ..visibility import candidate_grid
+
+    return candidate_grid(grid, -(-max(grid.shape) // SITING_LATTICE))
+
+
 def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0, target_height: float = 0.0,
                     **los) -> dict:
     """How S(T) changes an observer siting: the area of T that k observers chosen on S(T) see, against k chosen on T.
@@ -319,9 +327,9 @@ def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0
     >>> siting_coverage(T, T, 2, offset=1.7)["siting_ratio"]
     1.0
     """
-    from ..visibility import candidate_grid, site_observers
+    from ..visibility import site_observers
 
-    candidates = candidate_grid(grid, -(-max(grid.shape) // SITING_LATTICE))
+    candidates = siting_candidates(grid)
     if candidates.shape[0] == 0:
         return {"siting_share": np.nan, "siting_share_original": np.nan, "siting_ratio": np.nan}
     k = min(int(k), candidates.shape[0])

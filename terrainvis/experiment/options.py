@@ -597,10 +597,24 @@ def _relocations_serve_the_measure(settings: Settings, grids: dict) -> None:
                              f"the measure(s) {list(RELOCATIONS[name].measures)})")
 
 
+def _siting_fits_the_candidates(settings: Settings, grids: dict) -> None:
+    """``siting`` k at most the siting's candidates on every terrain (``terrainvis site -k`` refuses more;
+    the measure chose all of them without a word)."""
+    if settings.measure != "viewshed" or not settings.siting:
+        return
+    from .measures import siting_candidates
+
+    for name, grid in grids.items():
+        n = siting_candidates(grid).shape[0]
+        if settings.siting > n:
+            raise ValueError(f"siting must be at most the siting candidates of terrain {name!r}, {n} (a lattice of "
+                             f"its samples), got {settings.siting}")
+
+
 #: Checks across options (and the terrains), run after every option's own check:
 #: ``rule(settings, grids)`` raises a ValueError naming the options involved.
 RULES: list[Callable] = [_engine_runs_on_every_surface, _measure_supports_the_predicate, _relocations_serve_the_measure,
-                         _heights_resolve_on_every_terrain, _levels_fit]
+                         _heights_resolve_on_every_terrain, _levels_fit, _siting_fits_the_candidates]
 
 
 # ---------------------------------------------------------------------- settings

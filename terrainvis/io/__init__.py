@@ -135,7 +135,7 @@ from ._common import (
     _Corrupt,
     _UserError,
 )
-from ._geotiff import _read_tif, _write_tif, write_geotiff, write_mask_geotiff
+from ._geotiff import _read_tif, _write_tif, check_geotiff_target, write_geotiff, write_mask_geotiff
 from ._gpkg import read_lines as read_geopackage_lines
 from ._gpkg import write_lines as write_geopackage_lines
 from ._outputs import FIGURE_SOFTWARE, figure_metadata, save_figure, write_csv
@@ -162,7 +162,7 @@ from ._sample import bundled_terrain, sample_dem
 #   _metric    to_metric: a lon/lat grid resampled onto a local transverse Mercator grid
 
 __all__ = [
-    "load_terrain", "HEIGHT_DTYPES", "write_geotiff", "write_mask_geotiff", "save_figure", "write_csv", "figure_metadata",
+    "load_terrain", "HEIGHT_DTYPES", "write_geotiff", "write_mask_geotiff", "check_geotiff_target", "save_figure", "write_csv", "figure_metadata",
     "FIGURE_SOFTWARE", "save_terrain", "load_dem", "save_dem", "sample_dem", "bundled_terrain", "native_coords",
     "metres_per_degree", "to_metric", "write_geopackage_lines", "read_geopackage_lines",
     "SUFFIXES", "DEM_SUFFIXES", "MESH_SUFFIXES", "TERRAIN_SUFFIXES", "FORMAT", "FORMAT_VERSION",

@@ -454,8 +454,17 @@ def write_geotiff(grid: HeightGrid, data: np.ndarray, path, *, nodata=None, tags
                          tags=tags)
 
 
-def _write_raster(grid: HeightGrid, rows_of: "_Rows", path, *, nodata=None, tags=None) -> Path:
-    """The checks and the write of :func:`write_geotiff` for rows made strip by strip."""
+def check_geotiff_target(grid: HeightGrid, path) -> tuple:
+    """What a GeoTIFF over ``grid``'s samples at ``path`` needs, checked before anything is computed:
+    ``(path, native x, native y, CRS)``. A command calls it before its work, so that a grid
+    without a uniform layout or with a CRS that cannot be written fails at once, not after
+    a viewshed of minutes.
+
+    Raises
+    ------
+    ValueError
+        A suffix other than ``.tif``/``.tiff``, a rectilinear grid, or a CRS that cannot be read.
+    """
     p = Path(path)
     if p.suffix.lower() not in (".tif", ".tiff"):
         raise ValueError(f"path must end in .tif or .tiff, got {p.name!r}")
@@ -463,6 +472,12 @@ def _write_raster(grid: HeightGrid, rows_of: "_Rows", path, *, nodata=None, tags
         raise ValueError("a GeoTIFF needs a uniform grid, and this one is rectilinear: write the raster as .npz")
     _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix)
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
+    return p, nx, ny, crs
+
+
+def _write_raster(grid: HeightGrid, rows_of: "_Rows", path, *, nodata=None, tags=None) -> Path:
+    """The checks and the write of :func:`write_geotiff` for rows made strip by strip."""
+    p, nx, ny, crs = check_geotiff_target(grid, path)
     rows, cols = rows_of.shape
     profile = dict(height=rows, width=cols, count=1, dtype=rows_of.out_dtype.name,
                    transform=_north_up_transform(nx, ny, grid.attrs), crs=crs, nodata=nodata)

@@ -184,6 +184,10 @@ def fresnel_clearance(
         raise ValueError(f"a and b must be farther apart than twice the trim length, got a = {a.tolist()}, "
                          f"b = {b.tolist()}")
     length = float(np.hypot(*(b - a)[:2]))
+    if length == 0.0:
+        raise ValueError(f"a and b must be apart horizontally, got a vertical link a = {a.tolist()}, b = "
+                         f"{b.tolist()}: its first Fresnel zone is not over the terrain (the zone's radius is 0 at "
+                         "every point of it); line_of_sight answers whether it is clear")
     wavelength = SPEED_OF_LIGHT / f
     pieces = _Pieces(t, flat, kc * length * length)
     ts = np.unique(np.concatenate([t, pieces.critical_points()]))

@@ -252,3 +252,55 @@ def test_heights_no_float64_resolves_blame_the_terrain_not_the_height():
         viewshed(g, (10.0, 10.0), observer_height=1.7)
     text = str(info.value)
     assert "the terrain's heights (up to |z| = 1e+12)" in text and "must be within" not in text, text
+
+
+def test_a_crs_it_cannot_write_fails_before_the_viewshed_in_one_line(tmp_path):
+    """A CRS the GeoTIFF writer cannot read failed only after the viewshed was computed (and
+    PROJ printed its own two lines beside the message)."""
+    import terrainvis as tv
+
+    g = tv.bundled_terrain("hills")
+    dem = tmp_path / "bad_crs.npz"
+    tv.save_terrain(tv.HeightGrid(g.z, 30.0, 30.0, (500000.0, 4000000.0), attrs={"crs": "EPSG:99999999"}), dem)
+    # the viewshed of the DEM (not the 3 x 3 one that loads the kernels) must not run
+    guard = (
+        "import sys\n"
+        "from terrainvis.visibility import sweep\n"
+        "real = sweep._viewshed\n"
+        "def computed(t, *a, **k):\n"
+        "    assert t.size <= 9, 'the viewshed was computed before the output was checked'\n"
+        "    return real(t, *a, **k)\n"
+        "sweep._viewshed = computed\n"
+        "from terrainvis.cli import main\n"
+        "sys.exit(main(sys.argv[1:]))\n"
+    )
+    for argv in (["viewshed", str(dem), "--observer", "501000", "4001000", "-o", str(tmp_path / "v.tif")],
+                 ["cumulative", str(dem), "--observers", str(_observers(tmp_path / "o.csv")), "--frame", "local",
+                  "-o", str(tmp_path / "c.tif")]):
+        out = subprocess.run([sys.executable, "-c", guard, *argv], capture_output=True, text=True, timeout=300)
+        assert out.returncode == 2, out.stderr
+        lines = out.stderr.strip().splitlines()
+        assert len(lines) == 1 and "names an EPSG code that rasterio does not know" in lines[0], out.stderr
+
+
+def test_a_vertical_link_has_no_fresnel_zone_over_the_terrain():
+    import warnings
+
+    import pytest
+
+    import terrainvis as tv
+
+    g = tv.bundled_terrain("hills")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's "divide by zero" leaked from the command line
+        with pytest.raises(ValueError, match="a and b must be apart horizontally, got a vertical link"):
+            tv.fresnel_clearance(g, [500.0, 500.0, 330.0], [500.0, 500.0, 400.0], 900e6)
+
+
+def test_compare_refuses_more_sited_observers_than_candidates(capsys):
+    from terrainvis.cli import main
+
+    assert main(["compare", "--terrain", "hills", "--measure", "viewshed", "--siting", "1000", "--out", "/nonexistent"
+                 "/run"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "siting must be at most the siting candidates of terrain 'hills', 64" in err and "\n" not in err, err
