@@ -93,7 +93,11 @@ def main(argv=None) -> int:
         with kept_interrupts():
             try:
                 argv = sys.argv[1:] if argv is None else list(argv)
-                args = _parser(argv).parse_args(argv)
+                wanted = _command_in(argv)
+                # building a command's parser can import the simplifiers, whose plugins warn when
+                # they fail to load: one line too, as every warning of the command
+                with _one_line_warnings(f"terrainvis {wanted}" if wanted else name):
+                    args = _parser(argv).parse_args(argv)
             except ParseError as exc:
                 print(exc, file=sys.stderr)
                 return 2

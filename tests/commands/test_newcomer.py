@@ -304,3 +304,22 @@ def test_compare_refuses_more_sited_observers_than_candidates(capsys):
                  "/run"]) == 2
     err = capsys.readouterr().err.strip()
     assert "siting must be at most the siting candidates of terrain 'hills', 64" in err and "\n" not in err, err
+
+
+def test_a_broken_plugins_warning_is_one_line_in_every_command(tmp_path):
+    """simplify, evaluate and relocate build their parsers from the methods: a plugin that
+    failed to load warned in Python's two-line format with its install path there."""
+    info = tmp_path / "broken_plugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: broken-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[terrainvis.simplifiers]\nbroken = no_such_module_here:METHOD\n")
+    env = dict(__import__("os").environ, PYTHONPATH=str(tmp_path))
+    for argv in (["simplify", "hills", "-m", "lls", "-l", "1", "-o", str(tmp_path / "s.npz")],
+                 ["info", "hills"]):
+        out = subprocess.run([sys.executable, "-m", "terrainvis.cli", *argv], capture_output=True, text=True,
+                             env=env, timeout=300)
+        assert out.returncode == 0, out.stderr
+        warned = [ln for ln in out.stderr.splitlines() if "broken" in ln]
+        assert warned and all(ln.startswith(f"terrainvis {argv[0]}: warning: simplifier plugin 'broken'")
+                              for ln in warned), out.stderr
+        assert "warnings.warn" not in out.stderr and ".py:" not in out.stderr, out.stderr
