@@ -97,16 +97,37 @@ def _write_mesh(terrain, p: Path, suffix: str) -> None:
         tmp.write_bytes(data)
 
 
+def _ply_header(p: Path) -> list[str]:
+    """The lines of a PLY file's header (before ``end_header``)."""
+    with open(p, "rb") as fh:
+        head = b""
+        while b"end_header" not in head:
+            chunk = fh.read(1 << 16)
+            if not chunk:
+                break
+            head += chunk
+    return head.split(b"end_header")[0].decode("ascii", errors="replace").splitlines()
+
+
+def _check_ply_counts(p: Path, n_vertices: int, n_faces: int) -> None:
+    """The vertices and faces read are the ones a PLY's header declares: trimesh read the face
+    lines of an ASCII file that holds fewer vertices than it declares as vertices, and such a
+    mesh was measured (and repaired) as if it were whole."""
+    declared = {}
+    for line in _ply_header(p):
+        words = line.split()
+        if len(words) == 3 and words[0] == "element" and words[1] in ("vertex", "face") and words[2].isdigit():
+            declared[words[1]] = int(words[2])
+    nv, nf = declared.get("vertex"), declared.get("face")
+    # a polygon is read as triangles: at least as many faces as declared, never fewer
+    if (nv is not None and nv != n_vertices) or (nf is not None and n_faces < nf):
+        raise _Corrupt(f"its header declares {nv} vertices and {nf} faces, but {n_vertices} vertices and {n_faces} "
+                       "faces were read: the file is cut off or damaged")
+
+
 def _mesh_attrs(p: Path, suffix: str, loaded) -> dict:
     if suffix == ".ply":
-        with open(p, "rb") as fh:
-            head = b""
-            while b"end_header" not in head:
-                chunk = fh.read(1 << 16)
-                if not chunk:
-                    break
-                head += chunk
-        for line in head.split(b"end_header")[0].decode("ascii", errors="replace").splitlines():
+        for line in _ply_header(p):
             if line.startswith(_PLY_ATTRS):
                 return _attrs_from_json(line[len(_PLY_ATTRS):])
     elif suffix == ".obj":
@@ -136,6 +157,8 @@ def _read_mesh(p: Path, suffix: str) -> TIN:
         raise _Corrupt(f"it holds no triangle mesh (trimesh read {type(mesh).__name__})")
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
+    if suffix == ".ply":
+        _check_ply_counts(p, vertices.shape[0], faces.shape[0])
     if suffix == ".stl":
         # STL repeats each vertex for every face: merge exact duplicates.
         vertices, inverse = np.unique(vertices, axis=0, return_inverse=True)

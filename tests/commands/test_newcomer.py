@@ -323,3 +323,29 @@ def test_a_broken_plugins_warning_is_one_line_in_every_command(tmp_path):
         assert warned and all(ln.startswith(f"terrainvis {argv[0]}: warning: simplifier plugin 'broken'")
                               for ln in warned), out.stderr
         assert "warnings.warn" not in out.stderr and ".py:" not in out.stderr, out.stderr
+
+
+# ---------------------------------------------------------------------- probe wrong answers (d)
+def test_a_ply_read_with_other_counts_than_its_header_declares_is_refused(tmp_path, monkeypatch):
+    """A PLY whose header declares more vertices than it holds was read (trimesh took face lines
+    for vertices) and scored with --repair. Here trimesh is made to read fewer vertices than the
+    header of a good file declares, as it did."""
+    import pytest
+    import trimesh
+
+    import simplifiers
+    import terrainvis as tv
+
+    S = simplifiers.simplify(tv.bundled_terrain("hills"), "greedy-insertion", 3)
+    tv.save_terrain(S, tmp_path / "s.ply")
+    assert tv.load_terrain(tmp_path / "s.ply").n_vertices == S.n_vertices  # a whole file reads
+    real = trimesh.load
+
+    def short(*a, **k):
+        m = real(*a, **k)
+        return trimesh.Trimesh(m.vertices[:-3], m.faces[(m.faces < len(m.vertices) - 3).all(axis=1)], process=False)
+
+    monkeypatch.setattr(trimesh, "load", short)
+    with pytest.raises(ValueError, match=rf"its header declares {S.n_vertices} vertices and {S.n_faces} faces, but "
+                                         rf"{S.n_vertices - 3} vertices and \d+ faces were read"):
+        tv.load_terrain(tmp_path / "s.ply")
