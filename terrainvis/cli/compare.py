@@ -173,6 +173,10 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
     if len(failed):
         lines += ["", "### Failed units", ""]
         lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
+    changed = df[df["repair"].notna()].drop_duplicates(["terrain", "method"]) if "repair" in df else df.iloc[:0]
+    if len(changed):  # evaluate's meshes that were changed to be measured (reversed faces, --repair)
+        lines += ["", "### Meshes changed to be measured", ""]
+        lines += [f"- {r.terrain} / {r.method}: {r.repair}" for r in changed.itertuples()]
     summary = (f"{plural(units, 'unit')}, {plural(len(df), 'row')}, {plural(len(grids), 'terrain')}, "
                f"predicate {settings.predicate}, {seconds:.1f} s")
     atomic_write_text(out / "tables.md", f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")

@@ -155,6 +155,8 @@ def _print(df, label: str, seconds: float) -> None:
         print(t.to_string(float_format=lambda v: f"{v:.2f}"))
     for r in df[df["error"].notna()].drop_duplicates("method").itertuples():
         print(f"{label}: {r.method}: failed: {r.error}", file=sys.stderr)
+    for r in df[df["repair"].notna()].drop_duplicates("method").itertuples():
+        print(f"{label}: {r.method}: changed to be measured: {r.repair}", file=sys.stderr)
     print(f"{plural(len(df), 'row')}, {seconds:.1f} s")
 
 

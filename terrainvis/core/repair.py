@@ -46,7 +46,7 @@ from ..tolerances import DIVISOR_FLOOR, FACE_AREA_REL, STAR_MARGIN_MIN
 from .mesh import NotADiskError, boundary_loop, edge_keys, footprint_matches, half_edges, signed_area2
 from .terrain import TIN, HeightGrid
 
-__all__ = ["PostError", "PostProcessor", "height_field_problems", "repair_tin"]
+__all__ = ["reversed_winding", "repair_summary", "PostError", "PostProcessor", "height_field_problems", "repair_tin"]
 
 # side codes of a vertex: INTERIOR, k in 0..3 on side k (from corner k to corner k+1,
 # counter-clockwise from (xmin, ymin)), CORNER + k for corner k
@@ -547,13 +547,16 @@ def height_field_problems(tin, grid, *, budget: int | None = None) -> list[str]:
                         f"{v[k, 1]:.6g}))")
     area2 = signed_area2(v, tin.faces)
     bad = area2 <= 0
-    if bad.any():
+    if (area2 < 0).all():
+        problems.append(f"every face ({area2.size:,}) is wound clockwise: the mesh's orientation is reversed (rows "
+                        "going down), not folded; reversing its faces makes it counter-clockwise")
+    elif bad.any():
         f = int(np.flatnonzero(bad)[0])
         cx, cy = v[tin.faces[f], :2].mean(axis=0)
         problems.append(f"{int(bad.sum())} of {area2.size:,} faces fold over (not counter-clockwise; the first "
                         f"around ({cx:.6g}, {cy:.6g}))")
     area = (xmax - xmin) * (ymax - ymin)
-    if not footprint_matches(0.5 * area2.sum(), area):
+    if not footprint_matches(0.5 * abs(area2.sum()) if (area2 < 0).all() else 0.5 * area2.sum(), area):
         problems.append(f"the projected area is {0.5 * area2.sum() / area:.6%} of the extent's")
     used = np.zeros(tin.n_vertices, dtype=bool)
     used[tin.faces.ravel()] = True
@@ -581,6 +584,38 @@ def height_field_problems(tin, grid, *, budget: int | None = None) -> list[str]:
         if abs(tin.n_vertices - budget) > tol:
             problems.append(f"it has {tin.n_vertices} vertices for a budget of {budget} +- {tol}")
     return problems
+
+
+def reversed_winding(tin) -> bool:
+    """Whether every face of ``tin`` is wound clockwise in projection: the other orientation of
+    one consistent mesh (a raster's rows written going down), not a fold."""
+    return bool((signed_area2(tin.vertices, tin.faces) < 0).all())
+
+
+def repair_summary(record: dict) -> str:
+    """One line of what :func:`repair_tin` (or a reversed winding) changed: ``"319 boundary vertices
+    snapped onto the sides (by up to 204.5), 4 corners inserted, 6 vertices collapsed"``; "" for nothing.
+
+    >>> repair_summary({"snapped": 2, "max_snap": 0.25, "corners_inserted": 1, "repairs": 0, "collapses": 0})
+    '2 boundary vertices snapped onto the sides (by up to 0.25), 1 corner inserted'
+    """
+    parts = []
+    if record.get("reversed"):
+        parts.append("faces reversed (the mesh was wound clockwise)")
+    if record.get("unused_removed"):
+        parts.append(f"{record['unused_removed']} vertices of no face removed")
+    if record.get("snapped"):
+        parts.append(f"{record['snapped']} boundary vertices snapped onto the sides (by up to {record['max_snap']:.4g})")
+    if record.get("corners_inserted"):
+        n = record["corners_inserted"]
+        parts.append(f"{n} corner{'s' if n != 1 else ''} inserted")
+    if record.get("reordered"):
+        parts.append(f"the order along {record['reordered']} side(s) restored")
+    if record.get("repairs"):
+        parts.append(f"{record['repairs']} vertices moved to unfold faces")
+    if record.get("collapses"):
+        parts.append(f"{record['collapses']} vertices collapsed")
+    return ", ".join(parts)
 
 
 def _budget_window() -> float:

@@ -12,7 +12,7 @@ import pandas as pd
 
 from .options import Settings
 
-__all__ = ["COLUMNS", "MEASURE_COLUMNS", "UNIT_KEY", "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table",
+__all__ = ["COLUMNS", "MEASURE_COLUMNS", "EVALUATE_COLUMNS", "UNIT_KEY", "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table",
            "order"]
 
 #: Columns of the result table, in order.
@@ -24,12 +24,16 @@ COLUMNS = (
     "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
     "max_error", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
-    "seed", "max_distance", "distance_unit", "offset", "error",
+    "seed", "max_distance", "distance_unit", "offset", "repair", "repair_max_snap", "error",
 )
 #: Columns that only one measure fills (NaN in the other measures' rows), by that measure;
 #: they came after the first results files, so an older file lacks them (:func:`optional_columns`).
 MEASURE_COLUMNS = {"viewshed": ("min_height_rms", "min_height_p95", "siting_share", "siting_share_original",
                                 "siting_ratio")}
+#: Columns only :func:`terrainvis.evaluate` fills: what it changed in a mesh to measure it (faces
+#: reversed, a ``repair=True`` repair: :func:`terrainvis.core.repair.repair_summary`) and the
+#: farthest a vertex was snapped; empty in a comparison's rows, and absent from older files.
+EVALUATE_COLUMNS = ("repair", "repair_max_snap")
 #: Columns that identify a unit.
 UNIT_KEY = ("terrain", "method", "level")
 #: Columns holding times (they differ between runs; everything else is deterministic).
@@ -45,8 +49,9 @@ def rows_per_unit(settings: Settings) -> int:
 
 def optional_columns(measure: str) -> tuple:
     """The columns a results file of ``measure`` may lack and still resume: those only other
-    measures fill (read back as NaN, which is what this measure's rows hold there)."""
-    return tuple(c for m, cols in MEASURE_COLUMNS.items() if m != measure for c in cols)
+    measures fill, and :data:`EVALUATE_COLUMNS` (read back as NaN, which is what a
+    comparison's rows hold there)."""
+    return tuple(c for m, cols in MEASURE_COLUMNS.items() if m != measure for c in cols) + EVALUATE_COLUMNS
 
 
 def table(rows: list[dict]) -> pd.DataFrame:

@@ -283,20 +283,38 @@ def _check_overlap(terrain, grid: HeightGrid, frame: str, label: str) -> None:
 
 
 def _checked_tin(tin: TIN, grid: HeightGrid, repair: bool, label: str) -> TIN:
-    from ..core.repair import height_field_problems, repair_tin
+    from ..core.repair import height_field_problems, repair_tin, reversed_winding
 
+    done = {}
+    if reversed_winding(tin):  # the other orientation of one consistent mesh: the same surface
+        tin = TIN(tin.vertices, tin.faces[:, [0, 2, 1]], attrs=dict(tin.attrs))
+        done["reversed"] = 1
     problems = height_field_problems(tin, grid)
     if not problems:
-        return tin
+        return _with_repair(tin, done) if done else tin
     if not repair:
-        raise ValueError(f"simplified terrain {label!r} is not a height field over the DEM's footprint: {problems[0]}"
-                         + (f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})"
-                            if len(problems) > 1 else "")
-                         + "; repair it with repair=True (--repair), as terrainvis repairs QEC's meshes")
+        raise ValueError(f"simplified terrain {label!r} is not a height field over the DEM's footprint: "
+                         + "; ".join(problems) + "; repair it with repair=True (--repair), as terrainvis repairs "
+                         "QEC's meshes")
     try:
-        return repair_tin(tin, grid, source=f"simplified terrain {label!r}")
+        fixed = repair_tin(tin, grid, source=f"simplified terrain {label!r}")
     except ValueError as exc:
         raise ValueError(str(exc)) from None
+    attrs = dict(fixed.attrs)
+    record = attrs.pop("repair")  # this run's repair, apart from a method's own record (QEC's post-processing)
+    if "repair" in tin.attrs:
+        attrs["repair"] = tin.attrs["repair"]
+    return _with_repair(TIN(fixed.vertices, fixed.faces, attrs=attrs), {**done, **record})
+
+
+#: The attrs key of what :func:`evaluate` changed in a mesh to measure it (reversed faces, a
+#: repair): the ``repair`` and ``repair_max_snap`` columns.
+EVALUATE_REPAIR = "evaluate_repair"
+
+
+def _with_repair(tin: TIN, record: dict) -> TIN:
+    tin.attrs[EVALUATE_REPAIR] = record
+    return tin
 
 
 def _covering(s: HeightGrid, grid: HeightGrid, label: str) -> HeightGrid:
@@ -358,6 +376,7 @@ def _nearest_level(shape, n_vertices: int) -> int:
 def _rows(grid: HeightGrid, tname: str, terrains: dict, against: list, settings) -> pd.DataFrame:
     from simplifiers import METHODS, simplify
 
+    from ..core.repair import repair_summary
     from .collect import order, table
     from .measures import MEASURES
     from .units import _base, failed_rows, measured_rows
@@ -370,6 +389,9 @@ def _rows(grid: HeightGrid, tname: str, terrains: dict, against: list, settings)
         if kind not in ("regular", "irregular", "semi-regular") or (kind == "regular") != isinstance(s, HeightGrid):
             kind = "regular" if isinstance(s, HeightGrid) else "irregular"
         base = _base(grid, tname, label, kind, _nearest_level(grid.shape, n), settings)
+        record = s.attrs.get(EVALUATE_REPAIR) or {}
+        base["repair"] = repair_summary(record) or None
+        base["repair_max_snap"] = float(record.get("max_snap", 0.0)) if record else np.nan
         try:  # the errors of the surface as read, never those its file records
             rows += measured_rows(grid, s, base, settings, sets, stored_errors=False)
         except Exception as exc:  # as compare records a unit that failed

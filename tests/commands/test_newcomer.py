@@ -349,3 +349,57 @@ def test_a_ply_read_with_other_counts_than_its_header_declares_is_refused(tmp_pa
     with pytest.raises(ValueError, match=rf"its header declares {S.n_vertices} vertices and {S.n_faces} faces, but "
                                          rf"{S.n_vertices - 3} vertices and \d+ faces were read"):
         tv.load_terrain(tmp_path / "s.ply")
+
+
+# ---------------------------------------------------------------------- 2, 3: what evaluate changes in a mesh
+def _meshes(tmp_path):
+    import simplifiers
+    import terrainvis as tv
+
+    T = tv.bundled_terrain("hills")
+    S = simplifiers.simplify(T, "greedy-insertion", 2)
+    tv.save_terrain(S, tmp_path / "ccw.ply")
+    tv.save_terrain(tv.TIN(S.vertices, S.faces[:, [0, 2, 1]]), tmp_path / "cw.ply")  # rows going down
+    v = S.vertices.copy()
+    border = np.flatnonzero((v[:, 0] == v[:, 0].max()) & (v[:, 1] > v[:, 1].min()) & (v[:, 1] < v[:, 1].max()))
+    v[border[0], 0] -= 200.0  # a border vertex drifted inside
+    tv.save_terrain(tv.TIN(v, S.faces), tmp_path / "drifted.ply")
+    return T, S
+
+
+def test_a_mesh_wound_clockwise_is_named_as_such_and_measured_as_its_counter_clockwise_twin(tmp_path):
+    """pydelatin's TIN written with rows going down was "11398 of 11,398 faces fold over"."""
+    from terrainvis import evaluate
+    from terrainvis.core.repair import height_field_problems
+    from terrainvis.io import load_terrain
+
+    T, S = _meshes(tmp_path)
+    problems = height_field_problems(load_terrain(tmp_path / "cw.ply"), T)
+    assert problems[0].startswith(f"every face ({S.n_faces:,}) is wound clockwise") and "fold over" not in problems[0]
+    kw = dict(n_points=12, n_sets=1, relocations=["full"])
+    cw = evaluate({"hills": T}, tmp_path / "cw.ply", name="m", **kw)
+    ccw = evaluate({"hills": T}, tmp_path / "ccw.ply", name="m", **kw)
+    same = ["accuracy", "n_pairs", "agree_visible", "max_error", "rms_error", "n_vertices"]
+    assert cw[same].equals(ccw[same])
+    assert cw["repair"].iloc[0] == "faces reversed (the mesh was wound clockwise)" and ccw["repair"].isna().all()
+
+
+def test_every_problem_is_named_and_a_repair_is_said_and_recorded(tmp_path, capsys):
+    import pandas as pd
+
+    from terrainvis.cli import main
+
+    _meshes(tmp_path)
+    argv = ["evaluate", "hills", str(tmp_path / "drifted.ply"), "--points", "8", "--sets", "1", "--relocations",
+            "full"]
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "more problem" not in err and err.count(";") >= 2 and "boundary edges lie off" in err, err
+    assert main(argv + ["--repair", "--out", str(tmp_path / "o"), "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    line = "hills: drifted: changed to be measured: 1 boundary vertices snapped onto the sides (by up to 200)"
+    assert line in err, err
+    rows = pd.read_csv(tmp_path / "o" / "results.csv")
+    assert rows["repair"].iloc[0] == line.split("measured: ")[1] and rows["repair_max_snap"].iloc[0] == 200.0
+    assert "### Meshes changed to be measured" in (tmp_path / "o" / "tables.md").read_text()
