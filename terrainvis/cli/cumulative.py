@@ -91,15 +91,7 @@ def run(args) -> int:
     fov = field_of_view_args(args)
     extra = _check_extra_outputs(args, inputs, outputs)
     label, grid = read_terrain(args.dem, args)
-    check_heights(grid, args)
-    if "network" in extra:
-        grid.require_finite("--network (the pair engine's exact clearance)")  # before the viewsheds run
-    if suffix in (".tif", ".tiff") and not grid.is_uniform:
-        raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
-    if suffix in (".tif", ".tiff"):
-        from ..io import check_geotiff_target
-
-        check_geotiff_target(grid, out)  # a CRS it cannot write fails now, not after the viewsheds
+    _check_grid(grid, args, out, extra)
     table = read_columns(args.observers, "--observers", ("x", "y"), optional=("height",))  # refuses a header alone
     frame = position_frame(grid, args)
     user = table[:, :2]
@@ -165,6 +157,19 @@ def _write_extra(grid, xy, heights, args, result, extra: dict, written: list):
     network = _write_network(grid, xy, heights, args, position_frame(grid, args), extra["network"])
     written.append(extra["network"])
     return network
+
+
+def _check_grid(grid, args, out: Path, extra: dict) -> None:
+    """What the DEM must be for the outputs asked, before any viewshed runs."""
+    check_heights(grid, args)
+    if "network" in extra:
+        grid.require_finite("--network (the pair engine's exact clearance)")
+    if out.suffix.lower() in (".tif", ".tiff"):
+        if not grid.is_uniform:
+            raise UsageError("a GeoTIFF needs a uniform grid, and this DEM is rectilinear: write the counts as .npz")
+        from ..io import check_geotiff_target
+
+        check_geotiff_target(grid, out)  # a CRS it cannot write fails now, not after the viewsheds
 
 
 def _check_extra_outputs(args, inputs, outputs: dict) -> dict:

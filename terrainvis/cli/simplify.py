@@ -92,7 +92,10 @@ def run(args) -> int:
 
         z = result.z if regular else result.vertices[:, 2]
         loss = float(np.nanmax(np.abs(z.astype(np.float32).astype(np.float64) - z))) if z.size else 0.0
-        print(f"  heights stored as float32, rounded by up to {loss:.3g} (z units; --dtype float64 keeps them)")
+        if loss > 0.0:
+            print(f"  heights stored as float32, rounded by up to {loss:.3g} (z units; --dtype float64 keeps them)")
+        else:  # "rounded by up to 0" said nothing
+            print("  heights stored as float32, exactly (every height is a float32 number)")
     print(f"  wrote {out}")
     return 0
 

@@ -403,3 +403,17 @@ def test_every_problem_is_named_and_a_repair_is_said_and_recorded(tmp_path, caps
     rows = pd.read_csv(tmp_path / "o" / "results.csv")
     assert rows["repair"].iloc[0] == line.split("measured: ")[1] and rows["repair_max_snap"].iloc[0] == 200.0
     assert "### Meshes changed to be measured" in (tmp_path / "o" / "tables.md").read_text()
+
+
+# ---------------------------------------------------------------------- 10: smaller
+def test_float32_heights_stored_exactly_say_so_not_rounded_by_up_to_0(tmp_path, capsys):
+    import terrainvis as tv
+    from terrainvis.cli import main
+
+    g = tv.bundled_terrain("hills")
+    dem = tmp_path / "d32.npz"
+    tv.save_terrain(tv.HeightGrid(g.z.round(), 30.0, 30.0), dem)  # whole metres: every simplify-by-simple height is exact
+    capsys.readouterr()
+    assert main(["simplify", str(dem), "-m", "simple", "-l", "1", "-o", str(tmp_path / "s.tif")]) == 0
+    out = capsys.readouterr().out
+    assert "rounded by up to 0" not in out and "heights stored as float32, exactly" in out, out
