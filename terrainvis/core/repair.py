@@ -558,6 +558,12 @@ def height_field_problems(tin, grid, *, budget: int | None = None) -> list[str]:
     area = (xmax - xmin) * (ymax - ymin)
     if not footprint_matches(0.5 * abs(area2.sum()) if (area2 < 0).all() else 0.5 * area2.sum(), area):
         problems.append(f"the projected area is {0.5 * area2.sum() / area:.6%} of the extent's")
+    _, first, counts = np.unique(v[:, :2], axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():  # a disk's check below would only say "not a disk"
+        k = int(first[np.flatnonzero(counts > 1)[0]])
+        problems.append(f"{int((counts - 1).sum())} vertices share their x, y with another vertex (the first at "
+                        f"({v[k, 0]:.6g}, {v[k, 1]:.6g})): a height field has one vertex, and one height, per point; "
+                        "split vertices (one per face) must be merged")
     used = np.zeros(tin.n_vertices, dtype=bool)
     used[tin.faces.ravel()] = True
     if not used.all():
@@ -600,6 +606,8 @@ def repair_summary(record: dict) -> str:
     '2 boundary vertices snapped onto the sides (by up to 0.25), 1 corner inserted'
     """
     parts = []
+    if record.get("merged"):
+        parts.append(f"{record['merged']} repeated vertices merged (the mesh was written face by face)")
     if record.get("reversed"):
         parts.append("faces reversed (the mesh was wound clockwise)")
     if record.get("unused_removed"):

@@ -286,6 +286,9 @@ def _checked_tin(tin: TIN, grid: HeightGrid, repair: bool, label: str) -> TIN:
     from ..core.repair import height_field_problems, repair_tin, reversed_winding
 
     done = {}
+    tin, merged = _merged_duplicates(tin)
+    if merged:  # a mesh written face by face (PLY and OBJ keep such copies; STL's reader merges them)
+        done["merged"] = merged
     if reversed_winding(tin):  # the other orientation of one consistent mesh: the same surface
         tin = TIN(tin.vertices, tin.faces[:, [0, 2, 1]], attrs=dict(tin.attrs))
         done["reversed"] = 1
@@ -305,6 +308,18 @@ def _checked_tin(tin: TIN, grid: HeightGrid, repair: bool, label: str) -> TIN:
     if "repair" in tin.attrs:
         attrs["repair"] = tin.attrs["repair"]
     return _with_repair(TIN(fixed.vertices, fixed.faces, attrs=attrs), {**done, **record})
+
+
+def _merged_duplicates(tin: TIN) -> tuple[TIN, int]:
+    """``tin`` with its exactly repeated vertices (x, y and z) made one, and how many went: the
+    same surface, as one connected mesh."""
+    v, inverse = np.unique(tin.vertices, axis=0, return_inverse=True)
+    merged = tin.n_vertices - v.shape[0]
+    if not merged:
+        return tin, 0
+    faces = inverse.reshape(-1)[tin.faces]
+    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    return TIN(v, faces[keep], attrs=dict(tin.attrs)), merged
 
 
 #: The attrs key of what :func:`evaluate` changed in a mesh to measure it (reversed faces, a

@@ -432,3 +432,30 @@ def test_a_raster_terrainvis_wrote_is_not_padded_for_its_rounding_noise(tmp_path
     assert s.shape == (30, 30) and (s.ys[0] != 0.0 or s.ys[-1] != 3570.0 or s.xs[-1] != 3570.0)  # the noise is there
     df = tv.evaluate("hills", tmp_path / "s.tif", name="s", n_points=8, n_sets=1, relocations=["full"])
     assert int(df["n_vertices"].iloc[0]) == 900, df["n_vertices"]
+
+
+# ---------------------------------------------------------------------- probe messages: repeated and split vertices
+def test_a_mesh_written_face_by_face_is_merged_and_split_vertices_are_named(tmp_path):
+    """Meshes with duplicated or split vertices were refused, even with --repair, as "not a
+    disk" without saying why (STL's reader merges duplicates, PLY and OBJ do not)."""
+    import pytest
+
+    import simplifiers
+    import terrainvis as tv
+
+    T = tv.bundled_terrain("hills")
+    S = simplifiers.simplify(T, "greedy-insertion", 3)
+    v = S.vertices[S.faces.reshape(-1)]
+    f = np.arange(v.shape[0]).reshape(-1, 3)  # every face its own three vertices
+    for suffix in (".ply", ".obj"):
+        tv.save_terrain(tv.TIN(v, f), tmp_path / f"faces{suffix}")
+        kw = dict(n_points=10, n_sets=1, relocations=["full"])
+        loose = tv.evaluate({"hills": T}, tmp_path / f"faces{suffix}", name="m", **kw)
+        whole = tv.evaluate({"hills": T}, S, name="m", **kw)
+        assert loose["n_vertices"].iloc[0] == S.n_vertices and loose["accuracy"].equals(whole["accuracy"])
+        assert loose["repair"].iloc[0].startswith(f"{v.shape[0] - S.n_vertices} repeated vertices merged")
+    split = v.copy()
+    split[::3, 2] += 1e-3 * (np.arange(v.shape[0] // 3) % 2)  # same x, y, another height
+    with pytest.raises(ValueError, match=r"vertices share their x, y with another vertex \(the first at .*split "
+                                         r"vertices \(one per face\) must be merged"):
+        tv.evaluate({"hills": T}, tv.TIN(split, f), name="s", n_points=8, n_sets=1, relocations=["full"])
