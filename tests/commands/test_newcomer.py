@@ -459,3 +459,20 @@ def test_a_mesh_written_face_by_face_is_merged_and_split_vertices_are_named(tmp_
     with pytest.raises(ValueError, match=r"vertices share their x, y with another vertex \(the first at .*split "
                                          r"vertices \(one per face\) must be merged"):
         tv.evaluate({"hills": T}, tv.TIN(split, f), name="s", n_points=8, n_sets=1, relocations=["full"])
+
+
+# ---------------------------------------------------------------------- probe crashes: --network's memory
+def test_network_memory_is_checked_before_the_viewsheds_with_what_the_format_takes(tmp_path, capsys, monkeypatch):
+    """--network's check assumed 128 bytes a pair where a GeoPackage takes about 1.3 kB: the run
+    failed after all its viewsheds."""
+    from terrainvis.cli import main
+    from terrainvis.core import memory
+
+    obs = _observers(tmp_path / "obs.csv", n=1000)
+    monkeypatch.setattr(memory, "available_memory", lambda: 200 << 20)
+    capsys.readouterr()
+    code = main(["cumulative", "hills", "--observers", str(obs), "--frame", "local", "-o", str(tmp_path / "c.npz"),
+                 "--network", str(tmp_path / "n.gpkg")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "--network 'n.gpkg': the intervisibility network of 1,000 observers (499,500 pairs) needs" in err
+    assert not (tmp_path / "c.npz").exists()  # refused before the viewsheds and their counts
