@@ -162,9 +162,10 @@ def read_terrain(name: str, args=None):
     from ..io._names import resolve_one
 
     from ..core.synthetic import BUNDLED
+    from ..io._sample import BUNDLED_DEMS
 
     # a folder named like a bundled terrain shadows nothing (only a file does): the bundled one is read
-    if Path(name).is_dir() and name not in (*BUNDLED, "jacksboro"):
+    if Path(name).is_dir() and name not in (*BUNDLED, *BUNDLED_DEMS, "jacksboro"):
         raise UsageError(f"DEM {name!r} is a folder, not a DEM file")
     if Path(name).suffix and not Path(name).exists():
         raise UsageError(f"DEM file {name!r} does not exist")

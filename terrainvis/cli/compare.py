@@ -35,7 +35,8 @@ def add_parser(sub) -> None:
         ),
     )
     c.add_argument("--terrain", nargs="+", default=None, metavar="T",
-                   help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}) or DEM files (.npz .npy .asc .tif)")
+                   help=f"bundled names ({', '.join(DEFAULT_TERRAINS)}; cumberland, a GeoTIFF, is not a default) or DEM "
+                        "files (.npz .npy .asc .tif)")
     add_flags(c)
     c.add_argument("--workers", type=int, default=None, help="local worker processes (default: number of CPUs)")
     c.add_argument("--scheduler", default=None, metavar="ADDRESS", help="run on this dask.distributed scheduler (needs the dask extra)")

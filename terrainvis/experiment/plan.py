@@ -37,7 +37,8 @@ DEFAULT_TERRAINS = ("hills", "mesas", "rough", "mountains", "ridges", "jacksboro
 def resolve_terrains(terrains) -> dict[str, HeightGrid]:
     """Turn the ``terrains`` argument of :func:`~terrainvis.compare` into ``{name: HeightGrid}``.
 
-    Accepted: a HeightGrid; a bundled name (:data:`terrainvis.core.synthetic.BUNDLED`);
+    Accepted: a HeightGrid; a bundled name (:data:`terrainvis.core.synthetic.BUNDLED`, or
+    ``"cumberland"``, the bundled GeoTIFF);
     ``"jacksboro"`` (see :data:`JACKSBORO_WINDOW`); a path to a DEM file (any format of
     :func:`terrainvis.load_dem`; named by its stem); a list of these; or a dict
     ``{name: HeightGrid or str}``. Every terrain must be free of nodata.

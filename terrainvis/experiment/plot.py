@@ -459,7 +459,11 @@ def viewshed_values(terrain: HeightGrid, values, output: str, *, observer=None, 
                           cmap="RdBu_r", norm=TwoSlopeNorm(0.0, low, high), alpha=0.85)
         bar = fig.colorbar(image, ax=ax, shrink=0.85, label="degrees above (+) or below (-) the horizon",
                            extend="both")
-        bar.set_ticks(np.unique(np.round(np.r_[np.linspace(low, 0.0, 5), np.linspace(0.0, high, 4)], 2)))
+        # ticks rounded inwards: one past an end of the norm's range has no place on the bar (matplotlib's
+        # layout then multiplies by NaN and warns)
+        ends = np.ceil(low * 100.0) / 100.0, np.floor(high * 100.0) / 100.0
+        ticks = np.round(np.r_[np.linspace(ends[0], 0.0, 5), np.linspace(0.0, ends[1], 4)], 2)
+        bar.set_ticks(np.unique(np.clip(ticks, *ends)))
     if observer is not None:
         ax.plot([observer[0]], [observer[1]], marker="*", color="red", markersize=14, markeredgecolor="k")
         from matplotlib.lines import Line2D

@@ -1,4 +1,5 @@
-"""A terrain by name or path, as ``compare`` and every command take it: a bundled name, ``jacksboro``, a DEM file.
+"""A terrain by name or path, as ``compare`` and every command take it: a bundled name (the
+five synthetic terrains, the ``cumberland`` GeoTIFF), ``jacksboro``, a DEM file.
 
 Kept apart from the experiment so that a command that reads one terrain (``viewshed``,
 ``los``, ``info``) imports the readers and nothing of the experiment.
@@ -29,13 +30,14 @@ def resolve_one(name, t, i):
     """
     from ..core.synthetic import BUNDLED
     from ..io import bundled_terrain
+    from ._sample import BUNDLED_DEMS
 
     if isinstance(t, HeightGrid):
         return name or t.attrs.get("name") or f"terrain{i}", t
     if not isinstance(t, (str, Path)):
         raise TypeError(f"terrains must hold HeightGrids, names or paths, got {describe(t)}")
     text = str(t)
-    known = list(BUNDLED) + ["jacksboro"]
+    known = [*BUNDLED, *BUNDLED_DEMS, "jacksboro"]
     path = Path(text)
     if path.is_file():
         shadows = text in known
@@ -53,7 +55,7 @@ def resolve_one(name, t, i):
                 UserWarning, stacklevel=3,
             )
         return name or file_label(path.stem if path.suffix else path.name), grid
-    if text in BUNDLED:
+    if text in BUNDLED or text in BUNDLED_DEMS:
         return name or text, bundled_terrain(text)
     if text == "jacksboro":
         return name or text, _jacksboro()

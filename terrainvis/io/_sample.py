@@ -82,20 +82,32 @@ def _data_dir() -> Path:
     return Path(str(resources.files("terrainvis.data")))
 
 
+#: Real DEMs shipped as GeoTIFFs in ``terrainvis/data`` (read with rasterio), by name.
+BUNDLED_DEMS = {"cumberland": "cumberland.tif"}
+
+
 def bundled_terrain(name: str) -> HeightGrid:
-    """One of the project's five frozen 120x120 terrains (``terrainvis/data/<name>.npz``).
+    """A terrain that ships with terrainvis: one of the five frozen 120x120 synthetic
+    terrains (``terrainvis/data/<name>.npz``) or the real DEM ``"cumberland"``.
+
+    ``"cumberland"`` is a projected GeoTIFF as GIS users hold one (``cumberland.tif``,
+    337 x 321 samples at 90 m in NAD83 / UTM zone 16N, EPSG:26916): the USGS DEM of the
+    Jacksboro fault, Tennessee, from matplotlib's sample data, warped (see
+    ``terrainvis/data/README.md``). It is read with :func:`terrainvis.load_dem`, which needs
+    rasterio (``pip install "terrainvis[geo]"``); the user guide's GIS examples run on it.
 
     Parameters
     ----------
     name : str
-        One of :data:`BUNDLED`.
+        One of :data:`BUNDLED` or ``"cumberland"``.
 
     Returns
     -------
     HeightGrid
-        Read with the same reader as :func:`terrainvis.io.load_terrain` (the files are in
-        the terrainvis ``.npz`` format); ``attrs`` are ``name``, ``seed``, ``synthetic``
-        and ``bundled``.
+        The synthetic ones are read with the same reader as
+        :func:`terrainvis.io.load_terrain` (the files are in the terrainvis ``.npz``
+        format); their ``attrs`` are ``name``, ``seed``, ``synthetic`` and ``bundled``.
+        ``"cumberland"`` carries its CRS and transform as :func:`terrainvis.load_dem` reads them.
 
     Examples
     --------
@@ -103,8 +115,12 @@ def bundled_terrain(name: str) -> HeightGrid:
     >>> g.shape, g.dx, g.attrs["name"]
     ((120, 120), 30.0, 'hills')
     """
+    if isinstance(name, str) and name in BUNDLED_DEMS:
+        from . import load_dem
+
+        return load_dem(_data_dir() / BUNDLED_DEMS[name])
     if not isinstance(name, str) or name not in BUNDLED:
-        raise ValueError(f"name must be one of the bundled terrains {list(BUNDLED)}, got {name!r}")
+        raise ValueError(f"name must be one of the bundled terrains {[*BUNDLED, *BUNDLED_DEMS]}, got {name!r}")
     grid = _read_npz(_data_dir() / f"{name}.npz")
     if not isinstance(grid, HeightGrid):
         raise ValueError(f"terrainvis/data/{name}.npz must hold a grid, got a {type(grid).__name__}; reinstall terrainvis")

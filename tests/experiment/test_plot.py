@@ -99,3 +99,23 @@ def test_viewshed_figure():
     assert legend[0] == f"visible ({100 * v.mean():.1f} %)"
     with pytest.raises(ValueError, match="visible must have the terrain's shape"):
         plot.viewshed(g, v[:3])
+
+
+@pytest.mark.parametrize("low, high", [(-12.998, 3.289), (-0.004, 0.006), (-5.0, 2.0)])
+def test_angle_figure_draws_without_warnings(low, high):
+    """The angle bar's ticks stay inside the norm's range: -12.998 rounded to -13.0 lay past
+    its end, and matplotlib's layout warned 'invalid value encountered in scalar multiply'."""
+    import io
+    import warnings
+
+    import numpy as np
+
+    g = synthetic_terrain("hills", size=20, seed=0)
+    values = np.linspace(low, high, g.size).reshape(g.shape)
+    values[0, 0] = np.nan
+    fig = plot.viewshed_values(g, values, "angle", observer=(100.0, 100.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fig.savefig(io.BytesIO(), format="png")
+    ticks = fig.axes[1].get_yticks()
+    assert ticks.min() >= low and ticks.max() <= high and 0.0 in ticks

@@ -166,6 +166,49 @@ def test_bundled_files_are_pinned_and_read_one_way(name):
         np.testing.assert_array_equal(raw["z"], g.z)
 
 
+#: SHA-256 of z, xs and ys bytes (float64, HeightGrid order) of the bundled GeoTIFF cumberland.
+CUMBERLAND_SHA256 = "ede7fc391555f780e283deee22e410388f2b8df59a5324e97c1f676694f8a903"
+
+
+def test_bundled_geotiff_is_pinned_and_georeferenced():
+    pytest.importorskip("rasterio", reason="the bundled GeoTIFF is read with rasterio (the geo extra)")
+    from terrainvis.io._names import resolve_one
+
+    g = bundled_terrain("cumberland")
+    digest = hashlib.sha256(g.z.tobytes() + g.xs.tobytes() + g.ys.tobytes()).hexdigest()
+    assert digest == CUMBERLAND_SHA256
+    assert g.shape == (337, 321) and (g.dx, g.dy) == (90.0, 90.0) and g.attrs["crs"] == "EPSG:26916"
+    assert (g.xs[0], g.ys[-1]) == (731925.0, 4068045.0)  # sample centres: corners on whole multiples of 90 m
+    assert np.isfinite(g.z).all()
+    # sizes 16 k + 1: the coarse grids of levels 1-4 keep samples of the DEM's own grid
+    assert all((n - 1) % 16 == 0 for n in g.shape)
+    name, same = resolve_one(None, "cumberland", 0)
+    assert name == "cumberland"
+    assert_grid_equal(same, g)
+
+
+def test_bundled_geotiff_is_the_source_interpolated_bilinearly():
+    """Each sample is matplotlib's lon/lat DEM interpolated bilinearly (by hand here) at the
+    sample's position taken to NAD83, to float32 rounding."""
+    pytest.importorskip("rasterio", reason="the bundled GeoTIFF is read with rasterio (the geo extra)")
+    from rasterio.warp import transform
+
+    from terrainvis.data.make_bundled import cumberland_source
+
+    g = bundled_terrain("cumberland")
+    z, lon, lat = cumberland_source()  # rows north to south, sample centres
+    rng = np.random.default_rng(7)
+    r, c = rng.integers(0, g.shape[0], 300), rng.integers(0, g.shape[1], 300)
+    lons, lats = map(np.asarray, transform("EPSG:26916", "EPSG:4269", g.xs[c], g.ys[r]))
+    fc = (lons - lon[0]) / (lon[1] - lon[0])
+    fr = (lats - lat[0]) / (lat[1] - lat[0])
+    c0, r0 = np.floor(fc).astype(int), np.floor(fr).astype(int)
+    tc, tr = fc - c0, fr - r0
+    expected = ((1 - tr) * ((1 - tc) * z[r0, c0] + tc * z[r0, c0 + 1])
+                + tr * ((1 - tc) * z[r0 + 1, c0] + tc * z[r0 + 1, c0 + 1]))
+    np.testing.assert_allclose(g.z[r, c], expected, rtol=0, atol=1e-3)
+
+
 @pytest.mark.parametrize("name", KINDS)
 def test_bundled_terrains_match_generator(name):
     g = bundled_terrain(name)
