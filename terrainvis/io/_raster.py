@@ -151,7 +151,9 @@ def _uniform_layout(grid: HeightGrid, suffix: str):
         note = (
             f"{suffix} needs a uniform grid: the rectilinear {grid.shape[0]}x{grid.shape[1]} grid was resampled onto "
             f"uniform coordinates over the same sample extent with the same number of samples; moved "
-            f"{' and '.join(moved)}; heights there are read from the grid's surface. Save to .npz to keep it exactly."
+            f"{' and '.join(moved)}; heights there are read from the grid's surface. Save to .npz to keep it exactly (a "
+            "reverse-subdivision level L is uniform, on the DEM's own samples, when the DEM has 2^L k + 1 samples a "
+            "side: cut it to n - (n - 1) mod 2^L)."
         )
         warnings.warn(note, UserWarning, stacklevel=4)
         z = grid.height_on_grid(ux, uy)
