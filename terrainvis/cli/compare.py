@@ -178,8 +178,12 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
     if len(changed):  # evaluate's meshes that were changed to be measured (reversed faces, --repair)
         lines += ["", "### Meshes changed to be measured", ""]
         lines += [f"- {r.terrain} / {r.method}: {r.repair}" for r in changed.itertuples()]
+    from ..visibility.engines import verdicts_text
+
+    tins = bool((df["kind"] == "irregular").any()) if "kind" in df else False
     summary = (f"{plural(units, 'unit')}, {plural(len(df), 'row')}, {plural(len(grids), 'terrain')}, "
-               f"predicate {settings.predicate}, {seconds:.1f} s")
+               f"predicate {settings.predicate}, {verdicts_text(settings.engine, tins, settings.curvature)}, "
+               f"{seconds:.1f} s")
     atomic_write_text(out / "tables.md", f"# terrainvis compare\n\n{summary}\n\n{text}\n" + "\n".join(lines) + "\n")
     print(text)
     print("\n".join(lines))

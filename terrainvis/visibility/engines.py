@@ -23,6 +23,10 @@ The built-in engines:
     Embree's occlusion rays in float32 on the terrain's TIN (:mod:`terrainvis.visibility.embree`);
     flat earth only; within :func:`terrainvis.visibility.embree_tolerance` of the exact
     answer.
+``"exact"``
+    The exact predicate on any terrain: ``"grid"`` on a HeightGrid, ``"tin"`` on a TIN
+    (for ``compare`` and ``evaluate``, which ask one engine for T, a grid, and for S(T),
+    often a TIN: ``"auto"`` answers on TINs with Embree on a flat earth).
 """
 
 from __future__ import annotations
@@ -36,7 +40,8 @@ import numpy as np
 from ..core.terrain import HeightGrid
 from ..core.validate import describe, entry_name
 
-__all__ = ["Engine", "Predicate", "ENGINES", "AUTO", "register", "unregister", "engine_names", "choose"]
+__all__ = ["Engine", "Predicate", "ENGINES", "AUTO", "register", "unregister", "engine_names", "choose",
+           "verdicts_text"]
 
 #: The engine name that picks one by terrain and curvature (see the module docstring).
 AUTO = "auto"
@@ -138,6 +143,14 @@ def _embree_matrix(terrain, points, p: Predicate) -> np.ndarray:
     return embree_matrix(terrain, points, delta=p.delta, end_radius=p.end_radius)
 
 
+def _exact_pairs(terrain, a, b, p: Predicate) -> np.ndarray:
+    return (_grid_pairs if isinstance(terrain, HeightGrid) else _tin_pairs)(terrain, a, b, p)
+
+
+def _exact_matrix(terrain, points, p: Predicate) -> np.ndarray:
+    return (_grid_matrix if isinstance(terrain, HeightGrid) else _tin_matrix)(terrain, points, p)
+
+
 #: Every engine by name.
 ENGINES: dict[str, Engine] = {
     e.name: e for e in (
@@ -146,10 +159,23 @@ ENGINES: dict[str, Engine] = {
                terrains=("tin",)),
         Engine("embree", _embree_pairs, _embree_matrix, "Embree's float32 rays on the terrain's TIN (flat earth)",
                curvature=False, exact=False),
+        Engine("exact", _exact_pairs, _exact_matrix,
+               "the exact predicate on any terrain: the grid walk on a HeightGrid, the TIN clipper on a TIN"),
     )
 }
 #: The engines terrainvis ships, which :func:`register` never replaces.
 BUILTIN = frozenset(ENGINES)
+
+
+def verdicts_text(engine: str, tins: bool, kc: float = 0.0) -> str:
+    """Which engine decides the verdicts of a run, in a phrase for its summary: the exact
+    grid walk on grids, and on TINs (``tins``) what ``engine`` picks there."""
+    if not tins:
+        return "verdicts exact"
+    on_tin = ENGINES["embree" if kc == 0.0 else "tin"] if engine == AUTO else ENGINES[engine]
+    if on_tin.exact:
+        return "verdicts exact"
+    return f"verdicts on TINs by engine {on_tin.name!r}, not exact (--engine exact: the exact TIN clipper)"
 
 
 def engine_names() -> list[str]:

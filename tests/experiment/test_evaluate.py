@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 import simplifiers
-from terrainvis import TIN, HeightGrid, bundled_terrain, compare, evaluate, sample_dem, save_terrain
+from terrainvis import TIN, HeightGrid, bundled_terrain, compare, evaluate, sample_dem, save_terrain, synthetic_terrain
 from terrainvis.cli import main
 from terrainvis.core._positions import PositionFrame
 from terrainvis.testing import assert_visibility_kept
@@ -228,3 +228,25 @@ def test_assert_visibility_kept_passes_and_reports():
     assert 1 <= len(worst) <= 3 and all("clearance" in line for line in worst)
     with pytest.raises(ValueError, match=r"min_accuracy must be a share in \[0, 1\] \(0.95 for 95 %\), got 95"):
         assert_visibility_kept(T, fine, min_accuracy=95)
+
+
+def test_the_terrains_own_tin_keeps_every_verdict_with_the_exact_engine(tmp_path, capsys):
+    """Issue 42, wrong answer (b): the DEM's own TIN measured by evaluate kept 99.84 % of the
+    verdicts, because 'auto' answers on TINs with Embree's float32 rays. engine='exact'
+    (refused before: 'tin' does not run on T's grid) keeps every verdict, and the summary
+    says which engine decided the TIN's verdicts."""
+    T = synthetic_terrain("rough", size=48, seed=5)
+    own = T.to_tin()
+    kw = dict(n_points=40, n_sets=2, seed=3, relocations=["identity"], repeats=1, volume=False)
+    ev = evaluate({"r": T}, {"own": own}, engine="exact", **kw)
+    assert len(ev) == 2 and (ev["accuracy"] == 1.0).all() and (ev["false_visible"] == 0).all()
+    save_terrain(T, tmp_path / "r.npz")
+    save_terrain(own, tmp_path / "own.npz")
+    base = ["evaluate", str(tmp_path / "r.npz"), str(tmp_path / "own.npz"), "--points", "40", "--sets", "2",
+            "--relocations", "identity", "--no-plots", "--no-volume"]
+    assert main([*base, "--out", str(tmp_path / "auto")]) == 0
+    assert "verdicts on TINs by engine 'embree', not exact (--engine exact: the exact TIN clipper)" in \
+        capsys.readouterr().out
+    assert main([*base, "--out", str(tmp_path / "exact"), "--engine", "exact"]) == 0
+    assert "predicate exact, verdicts exact," in capsys.readouterr().out
+    assert "verdicts exact" in (tmp_path / "exact" / "tables.md").read_text()

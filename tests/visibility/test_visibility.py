@@ -857,3 +857,22 @@ def test_end_radius_unchanged_by_vertical_shift(pairs, r, shift):
     np.testing.assert_array_equal(
         line_of_sight(_G, a, b, end_radius=r), line_of_sight(g2, a + up, b + up, end_radius=r)
     )
+
+
+def test_the_exact_engine_is_the_grid_walk_on_grids_and_the_tin_clipper_on_tins():
+    """engine='exact' runs on both kinds (compare and evaluate ask one engine for T and S(T)),
+    and on each it is the exact engine of that kind, pair for pair and in the matrix."""
+    g = terrain("rough")
+    tin = g.to_tin()
+    a, b = random_pairs(g, 400, 1.0, seed=11)
+    pts = sample_points(g, 60, seed=12, offset=1.0)
+    for surface, own in ((g, "grid"), (tin, "tin")):
+        np.testing.assert_array_equal(line_of_sight(surface, a, b, engine="exact"),
+                                      line_of_sight(surface, a, b, engine=own))
+        np.testing.assert_array_equal(visibility_matrix(surface, pts, engine="exact"),
+                                      visibility_matrix(surface, pts, engine=own))
+        for kc in (0.0, 0.85714):
+            np.testing.assert_array_equal(line_of_sight(surface, a, b, engine="exact", curvature=kc),
+                                          line_of_sight(surface, a, b, engine=own, curvature=kc))
+    # the TIN of the grid's own surface: the exact engines agree across the two kinds
+    np.testing.assert_array_equal(line_of_sight(tin, a, b, engine="exact"), line_of_sight(g, a, b, engine="exact"))
