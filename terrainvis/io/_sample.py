@@ -93,7 +93,7 @@ def bundled_terrain(name: str) -> HeightGrid:
     ``"cumberland"`` is a projected GeoTIFF as GIS users hold one (``cumberland.tif``,
     337 x 321 samples at 90 m in NAD83 / UTM zone 16N, EPSG:26916): the USGS DEM of the
     Jacksboro fault, Tennessee, from matplotlib's sample data, warped (see
-    ``terrainvis/data/README.md``). It is read with :func:`terrainvis.load_dem`, which needs
+    ``terrainvis/data/README.md``). It is read as :func:`terrainvis.load_dem` reads a GeoTIFF, which needs
     rasterio (``pip install "terrainvis[geo]"``); the user guide's GIS examples run on it.
 
     Parameters
@@ -116,9 +116,11 @@ def bundled_terrain(name: str) -> HeightGrid:
     ((120, 120), 30.0, 'hills')
     """
     if isinstance(name, str) and name in BUNDLED_DEMS:
-        from . import load_dem
+        from ._geotiff import _read_tif  # load_dem's reader (terrainvis.io imports this module)
 
-        return load_dem(_data_dir() / BUNDLED_DEMS[name])
+        grid = _read_tif(_data_dir() / BUNDLED_DEMS[name], crs=None, band=None)
+        grid.attrs["name"] = name
+        return grid
     if not isinstance(name, str) or name not in BUNDLED:
         raise ValueError(f"name must be one of the bundled terrains {[*BUNDLED, *BUNDLED_DEMS]}, got {name!r}")
     grid = _read_npz(_data_dir() / f"{name}.npz")
