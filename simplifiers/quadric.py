@@ -74,7 +74,7 @@ import time
 
 import numpy as np
 
-from terrainvis.core.interrupt import call_library, import_library
+from terrainvis.core.interrupt import abandonable, call_in_child, call_library, import_library
 from terrainvis.core.memory import release_freed_memory
 from terrainvis.core.mesh import boundary_edges
 from terrainvis.core.validate import as_int, describe
@@ -342,8 +342,17 @@ def _pymeshlab_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: i
     """One pymeshlab pass: (vertices, faces) of the decimated mesh, in the input's coordinates.
 
     pymeshlab sees the mesh in units of its longest edge (see the module notes). With
-    ``keep_border`` no border vertex is removed or moved.
+    ``keep_border`` no border vertex is removed or moved. A command runs a long pass in a
+    child process, which Ctrl-C abandons at once (:func:`terrainvis.core.interrupt.abandonable`).
     """
+    if abandonable(vertices.shape[0]):
+        return call_in_child(_pymeshlab_pass, vertices, faces, target_faces, settings, keep_border,
+                             what="pymeshlab's quadric edge collapse")
+    return _pymeshlab_pass(vertices, faces, target_faces, settings, keep_border)
+
+
+def _pymeshlab_pass(vertices, faces, target_faces, settings, keep_border):
+    """:func:`_pymeshlab_decimate`'s pass, in this process."""
     pymeshlab = import_library("pymeshlab")  # an interrupt during its import would become an ImportError
     unit = _longest_edge(vertices, faces) or 1.0
     ms = pymeshlab.MeshSet()
@@ -367,6 +376,7 @@ def _fast_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int, s
     """One fast-simplification pass: (vertices, faces) of the decimated mesh, in the input's units.
 
     With ``keep_border`` no edge touching a border vertex collapses (border vertices stay).
+    A command runs a long pass in a child process, as :func:`_pymeshlab_decimate` does.
 
     Its collapse threshold grows as 1e-9 (iteration + 3) ** agg, in squared mesh units
     (metres for a grid in metres), for at most 100 iterations, so a rough terrain may stop
@@ -375,6 +385,14 @@ def _fast_decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int, s
     threshold (errors far above 1e5 squared units, e.g. a grid in millimetres): it is
     repeated in units ten times larger, up to :data:`_FAST_RESCALES` times.
     """
+    if abandonable(vertices.shape[0]):
+        return call_in_child(_fast_pass, vertices, faces, target_faces, settings, keep_border,
+                             what="fast-simplification's edge collapse")
+    return _fast_pass(vertices, faces, target_faces, settings, keep_border)
+
+
+def _fast_pass(vertices, faces, target_faces, settings, keep_border):
+    """:func:`_fast_decimate`'s passes, in this process."""
     fast_simplification = import_library("fast_simplification")
     faces = np.ascontiguousarray(faces, dtype=np.int32)  # the library copies its input
     asked = faces.shape[0] - int(target_faces)

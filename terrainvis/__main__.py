@@ -4,4 +4,5 @@ import sys
 
 from .cli import main
 
-sys.exit(main())
+if __name__ == "__main__":  # a spawned process imports this module again (as __mp_main__): it must not run a command
+    sys.exit(main())

@@ -83,7 +83,7 @@ def main(argv=None) -> int:
     """Entry point of the ``terrainvis`` console script."""
     import signal
 
-    from ..core.interrupt import kept_interrupts, raise_pending
+    from ..core.interrupt import child_calls, kept_interrupts, raise_pending
     from ..errors import Interrupted
 
     name = "terrainvis"
@@ -102,7 +102,7 @@ def main(argv=None) -> int:
                 print(exc, file=sys.stderr)
                 return 2
             name = f"terrainvis {args.command}"
-            with _one_line_warnings(name), _file_names_print():
+            with _one_line_warnings(name), _file_names_print(), child_calls():
                 status = _run(args, name)
                 raise_pending()  # swallowed where no kernel came after it: the run is still not a success
                 return status

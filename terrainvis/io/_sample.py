@@ -92,7 +92,7 @@ def bundled_terrain(name: str) -> HeightGrid:
 
     ``"cumberland"`` is a projected GeoTIFF as GIS users hold one (``cumberland.tif``,
     337 x 321 samples at 90 m in NAD83 / UTM zone 16N, EPSG:26916): the USGS DEM of the
-    Jacksboro fault, Tennessee, from matplotlib's sample data, warped (see
+    Jacksboro fault, Tennessee, from matplotlib's sample data, resampled (see
     ``terrainvis/data/README.md``). It is read as :func:`terrainvis.load_dem` reads a GeoTIFF, which needs
     rasterio (``pip install "terrainvis[geo]"``); the user guide's GIS examples run on it.
 
