@@ -16,6 +16,19 @@ DEM_NAMES = ("jacksboro_fault_tn", "mount_st_helens_wa", "green_mountains_vt", "
 REAL_DEM_NAMES = DEM_NAMES + ("jacksboro_window",)
 
 
+def one_line_error(capsys, code: int, argv: list) -> str:
+    """Run the command line on ``argv``: it must exit with ``code`` and print one line on
+    stderr, without a traceback; that line."""
+    from terrainvis.cli import main
+
+    capsys.readouterr()
+    got = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert got == code, err
+    assert "\n" not in err and "Traceback" not in err, err
+    return err
+
+
 def shared_dem_path(name: str, suffix: str = ".npz") -> Path:
     """Path of a shared DEM, skipping the test (with the reason) when it is absent."""
     path = SHARED_DEM / f"{name}{suffix}"

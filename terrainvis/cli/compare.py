@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -61,16 +62,24 @@ def _quick_flags() -> str:
 
 
 def run(args) -> int:
+    with locked_out(args.out, "terrainvis compare") as out:
+        return _compare_in(out, args)
+
+
+@contextlib.contextmanager
+def locked_out(path: str, command: str):
+    """``--out`` checked (not a protected folder, writable, no lock file of another tool)
+    and held by this run's lock for the block, which gets the folder's Path."""
     from ..core.fileio import RunLock, check_writable_dir, refuse_protected
     from ..experiment._outdir import LOCK, foreign_files
 
-    refuse_protected(args.out, "--out")
-    out = check_writable_dir(args.out, "--out")
+    refuse_protected(path, "--out")
+    out = check_writable_dir(path, "--out")
     foreign = foreign_files(out)  # a results.lock terrainvis did not write: the lock would replace it
     if foreign:
         raise UsageError(_foreign_message(out, foreign))
-    with RunLock(out / LOCK, f"--out {str(out)!r}", "terrainvis compare"):
-        return _compare_in(out, args)
+    with RunLock(out / LOCK, f"--out {str(out)!r}", command):
+        yield out
 
 
 def _compare_in(out: Path, args) -> int:

@@ -70,16 +70,9 @@ def run(args) -> int:
                                  "methods": args.against or ["simple"]}, flags=True)
     if not args.out:
         return _evaluate(args, label, grid, None, [])
-    from ..core.fileio import RunLock, check_writable_dir, refuse_protected
-    from ..experiment._outdir import LOCK, foreign_files
-    from .compare import _foreign_message
+    from .compare import locked_out
 
-    refuse_protected(args.out, "--out")
-    out = check_writable_dir(args.out, "--out")
-    foreign = foreign_files(out)  # a results.lock terrainvis did not write: the lock would replace it
-    if foreign:
-        raise UsageError(_foreign_message(out, foreign))
-    with RunLock(out / LOCK, f"--out {str(out)!r}", "terrainvis evaluate"):
+    with locked_out(args.out, "terrainvis evaluate") as out:
         return _evaluate(args, label, grid, out, _check_out(args, label, out))
 
 

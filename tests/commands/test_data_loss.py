@@ -27,18 +27,13 @@ from terrainvis.experiment import measures
 from terrainvis.experiment.units import simplified_path
 from terrainvis.relocation import registry as relocations
 from terrainvis.visibility import engines
+from conftest import one_line_error
 
 BAD_NAMES = ["v2/../../../escaped", "../up", "a\\b", "new\nline", "pipe|name", " evil ", "--quick", "", ".hidden",
              "x" * 65, "tab\tname", "-", 7]
 
 
-def _err(capsys, code, argv):
-    capsys.readouterr()
-    got = main(argv)
-    err = capsys.readouterr().err.strip()
-    assert got == code, err
-    assert "\n" not in err and "Traceback" not in err, err
-    return err
+_err = one_line_error  # the command must exit with the code and print one line, no traceback
 
 
 # ---------------------------------------------------------------------- (a) names

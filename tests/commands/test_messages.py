@@ -26,16 +26,10 @@ import pytest
 from terrainvis import HeightGrid, bundled_terrain, compare, save_dem
 from terrainvis.cli import main
 
-from conftest import shared_dem_path
+from conftest import one_line_error, shared_dem_path
 
 
-def _err(capsys, code, argv):
-    capsys.readouterr()
-    got = main(argv)
-    err = capsys.readouterr().err.strip()
-    assert got == code, err
-    assert "\n" not in err and "Traceback" not in err, err
-    return err
+_err = one_line_error  # the command must exit with the code and print one line, no traceback
 
 
 @pytest.fixture

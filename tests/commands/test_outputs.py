@@ -23,18 +23,13 @@ import pytest
 from terrainvis import bundled_terrain, save_dem
 from terrainvis.core.fileio import OutputBusyError, RunLock, protected_folders
 from terrainvis.cli import main
+from conftest import one_line_error
 
 SMALL = ["--terrain", "hills", "--levels", "1", "--methods", "simple", "lls", "--points", "8", "--sets", "1",
          "--workers", "1", "--repeats", "1", "--no-plots"]
 
 
-def _err(capsys, code, argv):
-    capsys.readouterr()
-    got = main(argv)
-    err = capsys.readouterr().err.strip()
-    assert got == code, err
-    assert "\n" not in err and "Traceback" not in err, err
-    return err
+_err = one_line_error  # the command must exit with the code and print one line, no traceback
 
 
 @pytest.fixture
