@@ -187,6 +187,26 @@ def test_bundled_geotiff_is_pinned_and_georeferenced():
     assert_grid_equal(same, g)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_the_largest_valid_rectangle_of_a_footprint_against_brute_force(seed):
+    """make_bundled's cut of the warped footprint: a rotated rectangle's largest all-valid
+    rectangle, against every rectangle of the mask; and the 16 k + 1 fit, by hand."""
+    from terrainvis.data.make_bundled import _fit_levels, _largest_valid_rectangle
+
+    rng = np.random.default_rng(seed)
+    angle, (h, w) = rng.uniform(-0.3, 0.3), rng.integers(6, 14, 2)
+    rr, cc = np.mgrid[0:20, 0:20] - 9.5
+    u, v = np.cos(angle) * cc + np.sin(angle) * rr, -np.sin(angle) * cc + np.cos(angle) * rr
+    valid = (np.abs(u) <= w / 2) & (np.abs(v) <= h / 2)
+    r0, r1, c0, c1 = _largest_valid_rectangle(valid)
+    assert valid[r0:r1 + 1, c0:c1 + 1].all()
+    best = max((b - a + 1) * (d - c + 1) for a in range(20) for b in range(a, 20) for c in range(20)
+               for d in range(c, 20) if valid[a:b + 1, c:d + 1].all())
+    assert (r1 - r0 + 1) * (c1 - c0 + 1) == best
+    assert _fit_levels(3, 346) == (3 + 3, 3 + 3 + 336)  # 344 samples -> 337 = 21 * 16 + 1, centred
+    assert _fit_levels(0, 16) == (0, 16) and _fit_levels(0, 17) == (0, 16)
+
+
 def test_bundled_geotiff_is_the_source_interpolated_bilinearly():
     """Each sample is matplotlib's lon/lat DEM interpolated bilinearly (by hand here) at the
     sample's position taken to NAD83, to float32 rounding."""
