@@ -42,6 +42,7 @@ import contextlib
 import sys
 
 from . import compare, compile_ahead, cumulative, evaluate, info, los, relocate, simplify, site, viewshed
+from . import _common
 from ._common import ParseError, Parser
 
 __all__ = ["main"]
@@ -87,6 +88,7 @@ def main(argv=None) -> int:
     from ..errors import Interrupted
 
     name = "terrainvis"
+    _common.on_interrupt()  # no note of an earlier command of this process
     # SIGTERM ends the command like Ctrl-C does (cleanly, with a message), from the start;
     # an interrupt that C code swallowed still ends it (kept_interrupts)
     try:
@@ -110,11 +112,10 @@ def main(argv=None) -> int:
         _stdout_to_devnull()
         return 128 + signal.SIGPIPE
     except Interrupted as exc:
-        note = "; finished units are in results.csv (use --resume)" if name == "terrainvis compare" else ""
-        print(f"{name}: interrupted ({exc}){note}", file=sys.stderr)
+        print(f"{name}: interrupted ({exc}){_common.on_interrupt()}", file=sys.stderr)
         return 128 + exc.signum
     except KeyboardInterrupt:
-        print(f"{name}: interrupted", file=sys.stderr)
+        print(f"{name}: interrupted{_common.on_interrupt()}", file=sys.stderr)
         return 130
 
 

@@ -15,6 +15,22 @@ class UsageError(ValueError):
     """A mistake on the command line: reported in one line, exit status 2."""
 
 
+#: What the running command's "interrupted" line adds: where its finished work is (:func:`on_interrupt`).
+_INTERRUPT_NOTE = [""]
+
+
+def on_interrupt(note: str = "") -> str:
+    """Set what an interrupt of the running command adds to its one line ("; the ... are in X (--resume
+    continues)"), once it writes work that survives one; the note before."""
+    before, _INTERRUPT_NOTE[0] = _INTERRUPT_NOTE[0], note
+    return before
+
+
+def interrupt_note() -> str:
+    """The note set by :func:`on_interrupt` ("" when none)."""
+    return _INTERRUPT_NOTE[0]
+
+
 class ParseError(ValueError):
     """argparse's complaint, reported in one line by :func:`main` (exit status 2)."""
 

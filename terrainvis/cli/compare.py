@@ -62,6 +62,9 @@ def _quick_flags() -> str:
 
 
 def run(args) -> int:
+    from ._common import on_interrupt
+
+    on_interrupt("; finished units are in results.csv (use --resume)")
     with locked_out(args.out, "terrainvis compare") as out:
         return _compare_in(out, args)
 

@@ -46,8 +46,15 @@ def add_parser(sub) -> None:
     e.add_argument("--min-accuracy", type=float, default=None, metavar="A",
                    help="exit 1 unless every simplified terrain keeps at least this share of verdicts (0.95 for 95 "
                         "%%) under every relocation of the run")
-    e.add_argument("--out", default=None, help="also write results.csv, tables.md and the figures into this folder")
-    e.add_argument("--overwrite", action="store_true", help="replace an earlier run's files in --out")
+    e.add_argument("--out", default=None,
+                   help="also write results.csv, tables.md and the figures into this folder (each measured terrain's "
+                        "rows are kept in results.partial.csv until the run is complete)")
+    again = e.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="keep the terrains already measured in --out (an interrupted run: same settings, same "
+                            "simplified terrains) and measure only the rest")
+    again.add_argument("--overwrite", action="store_true",
+                       help="replace an earlier run's files in --out (once the new run is complete)")
     e.add_argument("--no-plots", action="store_true", help="with --out: do not write the figures")
     add_flags(e, exclude=_NOT_HERE)
     add_nodata(e)
@@ -69,6 +76,8 @@ def run(args) -> int:
     settings_for({label: grid}, {**{k: v for k, v in given(args).items() if k not in _NOT_HERE},
                                  "methods": args.against or ["simple"]}, flags=True)
     if not args.out:
+        if args.resume:
+            raise UsageError("--resume continues the run stored in --out; give --out")
         return _evaluate(args, label, grid, None, [])
     from .compare import locked_out
 
@@ -78,18 +87,32 @@ def run(args) -> int:
 
 def _evaluate(args, label: str, grid, out: Path | None, earlier: list) -> int:
     """Measure, print, and with ``out`` write the new run, then remove what is left of the
-    ``earlier`` one: until the new files are in place, the earlier run stays whole."""
-    from ..experiment.evaluate import evaluate
+    ``earlier`` one: until the new files are in place, the earlier run stays whole.
+
+    With ``out`` each measured terrain's rows go to ``results.partial.csv`` as they are
+    measured (``--resume`` continues it); the complete table is then renamed over
+    ``results.csv``. ``--resume`` of a finished run continues its ``results.csv`` in place.
+    """
+    from ..experiment._outdir import PARTIAL, RESULTS
+    from ..experiment.evaluate import prepared
     from ..experiment.options import given
+    from ._common import on_interrupt
 
     options = {k: v for k, v in given(args).items() if k not in _NOT_HERE}
     t0 = time.perf_counter()
-    df = evaluate({label: grid}, list(args.simplified), against=args.against, frame=args.frame, repair=args.repair,
-                  **options)
+    run = prepared({label: grid}, list(args.simplified), against=args.against, frame=args.frame, repair=args.repair,
+                   **options)
+    rows = None
+    if out is not None:
+        rows = out / PARTIAL
+        if args.resume and not rows.exists() and (out / RESULTS).exists():
+            rows = out / RESULTS
+        on_interrupt(f"; the terrains measured so far are in {rows} (--resume continues)")
+    df = run.measure(rows, resume=args.resume)
     seconds = time.perf_counter() - t0
     _print(df, label, seconds)
     if out is not None:
-        written = _write(df, grid, label, out, args, options, seconds)
+        written = _write(df, run, rows, out, args, seconds)
         stale = [p for p in earlier if p.resolve() not in {w.resolve() for w in written} and p.exists()]
         if stale:
             from ..experiment._outdir import describe, remove
@@ -106,8 +129,8 @@ def _check_out(args, label: str, out: Path) -> list[Path]:
     Refused: files at the names this run writes that terrainvis did not write, or that no
     earlier run in ``out`` recorded (a simplified terrain of the user's own at the name of
     one this run saves: not even ``--overwrite`` replaces it); an earlier run without
-    ``--overwrite``; an input (the DEM, a SIMPLIFIED) among the files the run replaces.
-    Nothing is removed here.
+    ``--overwrite`` or ``--resume``; an input (the DEM, a SIMPLIFIED) among the files the
+    run replaces. Nothing is removed here; with ``--resume`` nothing is (the run goes on).
     """
     from ..experiment._outdir import _candidates, describe, earlier_run, foreign_files
     from ..experiment.evaluate import _named
@@ -118,9 +141,9 @@ def _check_out(args, label: str, out: Path) -> list[Path]:
     if foreign:
         raise UsageError(_foreign_message(out, foreign))
     files = earlier_run(out)
-    if files and not args.overwrite:
+    if files and not (args.overwrite or args.resume):
         raise UsageError(f"--out {str(out)!r} holds the results of an earlier run ({describe(files)}); add "
-                         "--overwrite to replace it, or choose another --out")
+                         "--resume to continue it (same settings), --overwrite to replace it, or choose another --out")
     ours = {p.resolve() for p in files}
     for p in _candidates(out, [label], names, []):
         if p.resolve() not in ours:
@@ -130,9 +153,10 @@ def _check_out(args, label: str, out: Path) -> list[Path]:
     inputs = [Path(args.dem)] + [Path(s) for s in args.simplified]
     for inp in inputs:
         if inp.is_file() and inp.resolve() in ours:
-            raise UsageError(f"--overwrite would replace {str(inp)!r}, an input of this run, with the new run's "
-                             "files; move it out of --out first, or choose another --out")
-    return files
+            raise UsageError(f"{'--resume' if args.resume else '--overwrite'} would replace {str(inp)!r}, an input "
+                             "of this run, with the new run's files; move it out of --out first, or choose another "
+                             "--out")
+    return [] if args.resume else files
 
 
 def _print(df, label: str, seconds: float) -> None:
@@ -153,36 +177,34 @@ def _print(df, label: str, seconds: float) -> None:
     print(f"{plural(len(df), 'row')}, {seconds:.1f} s")
 
 
-def _write(df, grid, label: str, out: Path, args, options: dict, seconds: float) -> list[Path]:
-    """``results.csv``, its settings, ``tables.md``, the simplified terrains and the figures; the paths written."""
-    from ..experiment.collect import COLUMNS, UNIT_KEY
-    from ..experiment.plan import run_record, settings_for
-    from ..experiment._outdir import figure_names
-    from ..experiment.results import ResultStore, settings_path
+def _write(df, run, rows: Path, out: Path, args, seconds: float) -> list[Path]:
+    """``results.csv`` (``rows``, the complete table, renamed into place), its settings, ``tables.md``,
+    the simplified terrains and the figures; the paths written."""
+    import os
+
+    from ..experiment._outdir import RESULTS, figure_names
+    from ..experiment.results import settings_path
     from ..experiment.units import simplified_path
     from ..io import save_terrain
     from .compare import _compare_report
 
-    grids = {label: grid}
-    settings = settings_for(grids, {**options, "methods": args.against or ["simple"]})
-    record = {**run_record(settings, grids), "evaluated": [str(s) for s in args.simplified],
-              "methods": sorted(set(df["method"]))}
-    store = ResultStore(out / "results.csv", record, COLUMNS, UNIT_KEY, lambda key: 0, resume=False)
-    store.finish(df)
-    written = [store.path, settings_path(store.path)]
+    results = out / RESULTS
+    if rows != results:
+        # two renames, each atomic; cut off between them, the folder holds the new results.csv beside the
+        # earlier settings and the new ones' partial file, all recognised as terrainvis's (--overwrite clears them)
+        os.replace(rows, results)
+        os.replace(settings_path(rows), settings_path(results))
+    written = [results, settings_path(results)]
     if not args.no_plots:
-        from ..experiment.evaluate import _named, as_simplified
-
-        for method, s in _named(list(args.simplified), None, taken=args.against):
+        for method, terrain in run.terrains.items():
             level = int(df[df["method"] == method]["level"].iloc[0])
-            terrain = as_simplified(s, grid, frame=args.frame, repair=args.repair, label=method)
-            path = simplified_path(out / "simplified", label, method, level)
+            path = simplified_path(out / "simplified", run.name, method, level)
             path.parent.mkdir(exist_ok=True)
             save_terrain(terrain, path)
             written.append(path)
-    _compare_report(df, grids, settings, out, args, seconds)  # its exit status is compare's; evaluate's is _verdict
+    _compare_report(df, {run.name: run.grid}, run.settings, out, args, seconds)  # its exit status is compare's; evaluate's is _verdict
     written.append(out / "tables.md")
-    written += [out / f for f in figure_names([label], set(df["relocation"])) if (out / f).is_file()]
+    written += [out / f for f in figure_names([run.name], set(df["relocation"])) if (out / f).is_file()]
     return written
 
 

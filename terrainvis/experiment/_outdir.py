@@ -2,7 +2,10 @@
 
 A run writes ``results.csv`` and ``results.settings.json`` (:class:`~terrainvis.experiment.results.ResultStore`),
 ``tables.md``, the figures and ``simplified/<terrain>__<method>__level<k>.npz``, and holds
-``results.lock`` while it runs (:class:`~terrainvis.core.fileio.RunLock`). A file is an earlier
+``results.lock`` while it runs (:class:`~terrainvis.core.fileio.RunLock`); ``terrainvis evaluate`` keeps
+its rows in ``results.partial.csv`` (and ``results.partial.settings.json``) until its run is
+complete, then renames them over ``results.csv``, so an earlier run stays whole until the new
+one exists. A file is an earlier
 run's only when it can be recognised as written by terrainvis: the settings file by its
 settings, ``results.csv`` by its columns beside such a settings file, ``tables.md`` by its
 first line, the figures by the mark terrainvis puts in their PNG text
@@ -22,10 +25,12 @@ from pathlib import Path
 
 from ..io import FIGURE_SOFTWARE
 
-__all__ = ["RESULTS", "TABLES", "SIMPLIFIED", "LOCK", "figure_names", "earlier_run", "foreign_files",
+__all__ = ["RESULTS", "PARTIAL", "TABLES", "SIMPLIFIED", "LOCK", "figure_names", "earlier_run", "foreign_files",
            "written_by_terrainvis", "describe", "remove"]
 
 RESULTS = "results.csv"
+#: The rows of an ``evaluate`` run that has not finished (renamed to :data:`RESULTS` when it has).
+PARTIAL = "results.partial.csv"
 TABLES = "tables.md"
 SIMPLIFIED = "simplified"
 LOCK = "results.lock"
@@ -67,16 +72,17 @@ def _png_text(path: Path, limit: int = 1 << 20) -> dict:
     return out
 
 
-def _settings_file(out: Path) -> Path:
+def _settings_file(out: Path, results: str = RESULTS) -> Path:
     from .results import settings_path
 
-    return settings_path(out / RESULTS)
+    return settings_path(out / results)
 
 
-def _stored_settings(out: Path) -> dict | None:
-    """The earlier run's settings, or None when there is no settings file terrainvis wrote."""
+def _stored_settings(out: Path, results: str = RESULTS) -> dict | None:
+    """The earlier run's settings stored beside ``results`` (:data:`RESULTS` or :data:`PARTIAL`),
+    or None when there is no settings file terrainvis wrote."""
     with contextlib.suppress(OSError, ValueError):
-        stored = json.loads(_settings_file(out).read_text(encoding="utf-8"))
+        stored = json.loads(_settings_file(out, results).read_text(encoding="utf-8"))
         if isinstance(stored, dict) and _SETTINGS_KEYS <= stored.keys():
             return stored
     return None
@@ -111,10 +117,12 @@ def written_by_terrainvis(path) -> bool:
     out = p.parent.parent if p.parent.name == SIMPLIFIED else p.parent
     if p.parent.name == SIMPLIFIED and p.suffix == ".npz":
         return _terrainvis_npz(p)
-    if p.name == _settings_file(out).name:
-        return _stored_settings(out) is not None
-    if p.name == RESULTS:
-        return _stored_settings(out) is not None and _first_line(p).split(",")[:3] == list(_RESULT_COLUMNS)
+    for results in (RESULTS, PARTIAL):
+        if p.name == _settings_file(out, results).name:
+            return _stored_settings(out, results) is not None
+        if p.name == results:
+            return (_stored_settings(out, results) is not None
+                    and _first_line(p).split(",")[:3] == list(_RESULT_COLUMNS))
     if p.name == TABLES:
         return _first_line(p) == TABLES_TITLE
     if p.name == LOCK:
@@ -134,17 +142,22 @@ def _leftover(name: str, of: str) -> bool:
 
 
 def _recorded(out: Path) -> tuple[list, list, list]:
-    """The terrains, methods and relocations the earlier run recorded in its settings."""
-    stored = _stored_settings(out) or {}
-    return list(stored.get("terrains") or []), list(stored.get("methods") or []), list(
-        stored.get("relocations") or [])
+    """The terrains, methods and relocations the earlier run recorded in its settings (a finished
+    run's and an unfinished ``evaluate`` run's together)."""
+    terrains, methods, relocations = {}, {}, {}
+    for results in (RESULTS, PARTIAL):
+        stored = _stored_settings(out, results) or {}
+        terrains.update(dict.fromkeys(stored.get("terrains") or []))
+        methods.update(dict.fromkeys(stored.get("methods") or []))
+        relocations.update(dict.fromkeys(stored.get("relocations") or []))
+    return list(terrains), list(methods), list(relocations)
 
 
 def _candidates(out: Path, terrains, methods, relocations) -> list[Path]:
     """Every existing file at a name a run on these terrains, methods and relocations writes."""
     from ..relocation import registry as relocation
 
-    fixed = [out / RESULTS, _settings_file(out), out / TABLES]
+    fixed = [out / RESULTS, _settings_file(out), out / PARTIAL, _settings_file(out, PARTIAL), out / TABLES]
     relocations = list(dict.fromkeys(list(relocations) + list(relocation.RELOCATIONS)))
     found = [p for p in fixed if p.is_file()]
     found += [out / f for f in figure_names(terrains, relocations) if (out / f).is_file()]
@@ -162,18 +175,18 @@ def earlier_run(out) -> list[Path]:
     """The files an earlier run wrote in the folder ``out`` (none: no earlier run).
 
     Only files recognised as written by terrainvis (:func:`written_by_terrainvis`):
-    ``results.csv``, its settings file, ``tables.md``, their leftover temporary files (a
-    write cut off by SIGKILL), the figures of the terrains and relocations the run
+    ``results.csv``, its settings file, an unfinished ``evaluate`` run's ``results.partial.csv``
+    and its settings file, ``tables.md``, their leftover temporary files (a write cut off by SIGKILL), the figures of the terrains and relocations the run
     recorded, and its simplified terrains (``simplified/<terrain>__<method>__level<k>.npz``).
     """
     out = Path(out)
-    if _stored_settings(out) is None and not (out / TABLES).is_file():
+    if _stored_settings(out) is None and _stored_settings(out, PARTIAL) is None and not (out / TABLES).is_file():
         return []
     terrains, methods, relocations = _recorded(out)
     found = [p for p in _candidates(out, terrains, methods, relocations) if written_by_terrainvis(p)]
     if not found:
         return []
-    names = (RESULTS, _settings_file(out).name, TABLES)
+    names = (RESULTS, _settings_file(out).name, PARTIAL, _settings_file(out, PARTIAL).name, TABLES)
     found += [q for q in out.iterdir() if q.is_file() and any(_leftover(q.name, n) for n in names)]
     return sorted(set(found))
 
@@ -194,9 +207,10 @@ def foreign_files(out, terrains=(), methods=(), relocations=()) -> list[Path]:
 
 
 def describe(files) -> str:
-    """A short account of an earlier run's files: ``results.csv, tables.md, 6 figures and 28 simplified terrains``."""
+    """A short account of an earlier run's files: ``results.csv, tables.md, 6 figures and 28 simplified terrains``
+    (an unfinished ``evaluate`` run's rows: ``the unfinished run's results.partial.csv``)."""
     names = [p.name for p in files]
-    parts = [n for n in (RESULTS, TABLES) if n in names]
+    parts = [n if n != PARTIAL else f"the unfinished run's {n}" for n in (RESULTS, PARTIAL, TABLES) if n in names]
     figures = sum(1 for p in files if p.suffix == ".png")
     simplified = sum(1 for p in files if p.parent.name == SIMPLIFIED)
     if figures:

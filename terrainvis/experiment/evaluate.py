@@ -28,6 +28,7 @@ checked:
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +48,7 @@ FRAMES = ("native", "local")
 
 
 def evaluate(original, simplified, *, name: str | None = None, against=(), frame: str | None = None,
-             repair: bool = False, **options) -> pd.DataFrame:
+             repair: bool = False, out_csv=None, resume: bool = False, on_unit=None, **options) -> pd.DataFrame:
     """Measure simplifications made elsewhere as :func:`terrainvis.compare` measures a method's.
 
     Parameters
@@ -75,6 +76,19 @@ def evaluate(original, simplified, *, name: str | None = None, against=(), frame
         other files.
     repair : bool
         Repair a mesh that is not a valid height field instead of refusing it.
+    out_csv : str or Path, optional
+        Write each measured terrain's rows (and each ``against`` method's) to this CSV as
+        soon as they are measured, atomically, with the run's settings beside it, as
+        :func:`terrainvis.compare` does (:class:`~terrainvis.experiment.results.ResultStore`);
+        the settings record the content of every simplified terrain as measured.
+    resume : bool
+        With ``out_csv``: keep the terrains already measured there (same settings, same
+        simplified terrains) and measure only the rest.
+    on_unit : callable, optional
+        ``on_unit(key, rows)``, called as each terrain (or ``against`` method at one size)
+        is measured, after its rows are stored: ``key`` is ``(terrain, method, level)`` and
+        ``rows`` a DataFrame of its rows. An exception it raises ends the run; the rows
+        stored so far stay in ``out_csv``.
     **options
         The options of :func:`terrainvis.compare` that concern the measure (``relocations``,
         ``n_points``, ``n_sets``, ``seed``, ``predicate``, ``measure``, ``curvature``,
@@ -92,7 +106,10 @@ def evaluate(original, simplified, *, name: str | None = None, against=(), frame
     ValueError
         A simplified terrain that cannot be read, is in another frame than said, does
         not overlap or cover the original, or is not a height field (without
-        ``repair``): one line naming it and the first problem.
+        ``repair``): one line naming it and the first problem. Also a resume whose
+        settings or simplified terrains differ from the stored run's, naming the
+        differences. Every terrain is read and checked before anything is measured or
+        written.
 
     Examples
     --------
@@ -103,6 +120,47 @@ def evaluate(original, simplified, *, name: str | None = None, against=(), frame
     >>> df["method"].unique().tolist(), int(df["n_vertices"].iloc[0])
     (['mine'], 225)
     """
+    if resume and out_csv is None:
+        raise ValueError("resume=True continues the run stored in out_csv; give out_csv (the results file to resume)")
+    if on_unit is not None and not callable(on_unit):
+        raise TypeError(f"on_unit must be a function of (key, rows) or None, got {describe(on_unit)}")
+    run = prepared(original, simplified, name=name, against=against, frame=frame, repair=repair, **options)
+    from .comparison import _lock
+
+    with _lock(out_csv):
+        return run.measure(out_csv, resume=resume, on_unit=on_unit)
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """An :func:`evaluate` run with everything read and checked, nothing measured:
+    :meth:`measure` runs it (the command line holds its own lock on ``--out`` meanwhile)."""
+
+    grid: HeightGrid
+    name: str
+    terrains: dict
+    against: list
+    settings: object
+
+    def record(self) -> dict:
+        """What its results file stores about the run: the comparison's record
+        (:func:`terrainvis.experiment.plan.run_record`), the content of each simplified
+        terrain as measured (after its frame and any repair), and the methods of its rows."""
+        from .plan import run_record
+
+        return {**run_record(self.settings, {self.name: self.grid}),
+                "evaluated": {label: _content(t) for label, t in self.terrains.items()},
+                "methods": sorted(set(self.terrains) | set(self.against))}
+
+    def measure(self, out_csv=None, *, resume: bool = False, on_unit=None) -> pd.DataFrame:
+        """The rows, each unit's stored in ``out_csv`` as it finishes (see :func:`evaluate`)."""
+        units = _units(self.grid, self.name, self.terrains, self.against, self.settings)
+        store, done = _store(out_csv, self.record(), units, self.settings, resume)
+        return _rows(self.grid, self.name, units, store, done, on_unit)
+
+
+def prepared(original, simplified, *, name=None, against=(), frame=None, repair=False, **options) -> Prepared:
+    """Read and check everything :func:`evaluate` measures (its arguments, less the output's)."""
     from .plan import resolve_terrains, settings_for
 
     grids = resolve_terrains(original if isinstance(original, dict) else [original])
@@ -116,7 +174,21 @@ def evaluate(original, simplified, *, name: str | None = None, against=(), frame
         frame = choice(frame, "frame", FRAMES)
     terrains = {label: as_simplified(s, grid, frame=frame, repair=repair, label=label) for label, s in items}
     _check_engine(settings, terrains)
-    return _rows(grid, tname, terrains, against, settings)
+    return Prepared(grid, tname, terrains, against, settings)
+
+
+def _content(terrain) -> str:
+    """16 hex digits of the SHA-256 of a terrain's arrays: a changed simplified terrain is a changed run."""
+    import hashlib
+
+    from ..core.terrain import fingerprint
+
+    if isinstance(terrain, HeightGrid):
+        return fingerprint(terrain)
+    h = hashlib.sha256()
+    for a in (terrain.vertices, terrain.faces):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
 
 
 def _named(simplified, name, taken=()) -> list[tuple[str, object]]:
@@ -410,16 +482,33 @@ def _nearest_level(shape, n_vertices: int) -> int:
     return min(levels, key=lambda lv: (abs(np.log(vertex_budget(shape, lv) / max(n_vertices, 1))), lv))
 
 
-def _rows(grid: HeightGrid, tname: str, terrains: dict, against: list, settings) -> pd.DataFrame:
+def _units(grid: HeightGrid, tname: str, terrains: dict, against: list, settings) -> list[tuple[tuple, object]]:
+    """The run's units in order, each ``(key, measure)``: a simplified terrain, then each ``against``
+    method at each size. ``key`` is ``(terrain, method, level)`` (:data:`~terrainvis.experiment.collect.UNIT_KEY`);
+    an irregular method measured at two sizes nearest one level has two units under one key.
+    ``measure()`` gives the unit's rows; a unit that fails gives its rows with the message in ``error``."""
     from simplifiers import METHODS, simplify
 
     from ..core.repair import repair_summary
-    from .collect import order, table
     from .measures import MEASURES
     from .units import _base, failed_rows, measured_rows
 
-    sets = MEASURES[settings.measure].sets(grid, tname, settings)
-    rows = []
+    sets = []  # the point sets, made once, when the first unit needs them
+
+    def point_sets():
+        if not sets:
+            sets.append(MEASURES[settings.measure].sets(grid, tname, settings))
+        return sets[0]
+
+    def rows_of(base, get, stored_errors=True):
+        def measure():
+            try:  # as compare records a unit that failed
+                return measured_rows(grid, get(), base, settings, point_sets(), stored_errors=stored_errors)
+            except Exception as exc:
+                return failed_rows(base, exc, settings, point_sets())
+        return measure
+
+    units = []
     for label, s in terrains.items():
         n = s.size if isinstance(s, HeightGrid) else s.n_vertices
         kind = "regular" if isinstance(s, HeightGrid) else str(s.attrs.get("kind") or "irregular")
@@ -429,10 +518,8 @@ def _rows(grid: HeightGrid, tname: str, terrains: dict, against: list, settings)
         record = s.attrs.get(EVALUATE_REPAIR) or {}
         base["repair"] = repair_summary(record) or None
         base["repair_max_snap"] = float(record.get("max_snap", 0.0)) if record else np.nan
-        try:  # the errors of the surface as read, never those its file records
-            rows += measured_rows(grid, s, base, settings, sets, stored_errors=False)
-        except Exception as exc:  # as compare records a unit that failed
-            rows += failed_rows(base, exc, settings, sets)
+        # the errors of the surface as read, never those its file records
+        units.append(((tname, label, base["level"]), rows_of(base, lambda s=s: s, stored_errors=False)))
     sizes = sorted({(s.size if isinstance(s, HeightGrid) else s.n_vertices) for s in terrains.values()})
     for method in against:
         info = METHODS[method]
@@ -443,10 +530,43 @@ def _rows(grid: HeightGrid, tname: str, terrains: dict, against: list, settings)
                 continue
             done.add(level if info.regular else n)
             base = _base(grid, tname, method, info.kind, level, settings)
-            try:
-                out = simplify(grid, method, level) if info.regular else simplify(grid, method, level, n_vertices=n)
-                rows += measured_rows(grid, out, base, settings, sets)
-            except Exception as exc:
-                rows += failed_rows(base, exc, settings, sets)
-    df = table(rows)
-    return order(df, {tname: grid})
+            get = ((lambda method=method, level=level: simplify(grid, method, level)) if info.regular else
+                   (lambda method=method, level=level, n=n: simplify(grid, method, level, n_vertices=n)))
+            units.append(((tname, method, level), rows_of(base, get)))
+    return units
+
+
+def _store(out_csv, record: dict, units: list, settings, resume: bool):
+    """The results file of a run with ``out_csv`` (None without), and the unit keys it holds complete."""
+    if out_csv is None:
+        return None, frozenset()
+    from collections import Counter
+
+    from .collect import COLUMNS, UNIT_KEY, optional_columns, rows_per_unit
+    from .results import ResultStore
+
+    per_unit = rows_per_unit(settings)
+    count = Counter(key for key, _ in units)
+    store = ResultStore(out_csv, record, COLUMNS, UNIT_KEY, lambda key: count.get(key, 0) * per_unit, resume=resume,
+                        optional=optional_columns(settings.measure))
+    return store, frozenset(store.done)
+
+
+def _rows(grid: HeightGrid, tname: str, units: list, store, done, on_unit) -> pd.DataFrame:
+    """Measure the units not ``done``, each one's rows stored as it finishes; the table of every row."""
+    from .collect import COLUMNS, order, table
+
+    rows = []
+    for key, measure in units:
+        if key in done:
+            continue
+        unit = measure()
+        rows += unit
+        if store is not None:
+            store.add(unit)
+        if on_unit is not None:
+            on_unit(key, pd.DataFrame(unit, columns=list(COLUMNS)))
+    df = order(store.rows() if store is not None else table(rows), {tname: grid})
+    if store is not None:
+        store.finish(df)
+    return df

@@ -147,7 +147,9 @@ def test_evaluate_overwrite_keeps_the_earlier_run_until_the_new_one_exists(meshe
 
     monkeypatch.setattr("terrainvis.experiment.evaluate._rows", interrupted)
     assert main(["evaluate", str(dem), str(good), "--out", str(out), "--overwrite", *ARGS]) == 130
-    assert _snapshot(out) == before
+    after = _snapshot(out)  # beside the earlier run, whole, the new run's rows so far (none): --resume goes on
+    assert {k: v for k, v in after.items() if k in before} == before
+    assert sorted(set(after) - set(before)) == ["results.partial.csv", "results.partial.settings.json"]
     monkeypatch.undo()
     # a real replacement: the new run's files, and the earlier run's files it did not write again are gone
     other = tmp_path / "other.ply"
@@ -155,6 +157,84 @@ def test_evaluate_overwrite_keeps_the_earlier_run_until_the_new_one_exists(meshe
     assert main(["evaluate", str(dem), str(other), "--out", str(out), "--overwrite", *ARGS]) == 0
     assert "removed the earlier run's" not in capsys.readouterr().err  # the same files, rewritten
     assert set(pd.read_csv(out / "results.csv")["method"]) == {"other"}
+
+
+def _counting(monkeypatch, stop_at=None):
+    """Count the terrains measured (``units.measured_rows`` calls); Ctrl-C at call ``stop_at``."""
+    from terrainvis.experiment import units
+
+    calls, real = [], units.measured_rows
+
+    def measured(grid, simplified, base, *a, **k):
+        calls.append(base["method"])
+        if len(calls) == stop_at:
+            raise KeyboardInterrupt
+        return real(grid, simplified, base, *a, **k)
+
+    monkeypatch.setattr(units, "measured_rows", measured)
+    return calls
+
+
+def test_evaluate_keeps_each_measured_terrain_and_resumes(meshes, tmp_path, capsys, monkeypatch):
+    dem, good = meshes
+    other = tmp_path / "other.ply"
+    save_terrain(simplifiers.simplify(bundled_terrain("hills").crop(rows=(0, 33), cols=(0, 33)), "qec", 2), other)
+    argv = ["evaluate", str(dem), str(good), str(other), "--against", "lls", *ARGS]
+    clean = tmp_path / "clean"
+    assert main([*argv, "--out", str(clean)]) == 0
+    out = tmp_path / "o"
+    # Ctrl-C while the second terrain is measured: the first one's rows are kept, and said where
+    calls = _counting(monkeypatch, stop_at=2)
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert f"interrupted; the terrains measured so far are in {out / 'results.partial.csv'} (--resume continues)" in err
+    assert calls == ["good", "other"] and not (out / "results.csv").exists()
+    assert set(pd.read_csv(out / "results.partial.csv")["method"]) == {"good"}
+    # without a flag the unfinished run is named and kept
+    err = _err(capsys, 2, [*argv, "--out", str(out)])
+    assert "the unfinished run's results.partial.csv" in err and "--resume" in err, err
+    # --resume measures only the rest, and gives the clean run's table
+    monkeypatch.undo()
+    calls = _counting(monkeypatch)
+    assert main([*argv, "--out", str(out), "--resume"]) == 0
+    assert calls == ["other", "lls"]
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in clean.iterdir())
+    got, want = pd.read_csv(out / "results.csv"), pd.read_csv(clean / "results.csv")
+    from terrainvis.experiment.collect import TIMING_COLUMNS
+
+    timing = list(TIMING_COLUMNS)
+    pd.testing.assert_frame_equal(got.drop(columns=timing), want.drop(columns=timing))
+    # --resume of the finished run measures nothing and rewrites the same table
+    calls.clear()
+    assert main([*argv, "--out", str(out), "--resume"]) == 0
+    assert calls == [] and not (out / "results.partial.csv").exists()
+    pd.testing.assert_frame_equal(pd.read_csv(out / "results.csv"), got)
+
+
+def test_evaluate_resume_refuses_a_changed_terrain_or_setting(meshes, tmp_path, capsys, monkeypatch):
+    dem, good = meshes
+    out = tmp_path / "o"
+    argv = ["evaluate", str(dem), str(good), "--against", "lls", *ARGS, "--out", str(out)]
+    _counting(monkeypatch, stop_at=2)
+    assert main(argv) == 130
+    monkeypatch.undo()
+    before = _snapshot(out)
+    err = _err(capsys, 2, [*argv, "--resume", "--seed", "3"])
+    assert "cannot resume" in err and "seed: " in err, err
+    import trimesh
+
+    m = trimesh.load(good, process=False)
+    m.vertices[:, 2] += 1.0  # the same name, other heights
+    m.export(good)
+    err = _err(capsys, 2, [*argv, "--resume"])
+    assert "cannot resume" in err and "evaluated: " in err, err
+    assert _snapshot(out) == before
+    # --overwrite starts again; the unfinished run's files are replaced, none is left over
+    assert main([*argv, "--overwrite"]) == 0
+    assert not (out / "results.partial.csv").exists() and not (out / "results.partial.settings.json").exists()
+    assert set(pd.read_csv(out / "results.csv")["method"]) == {"good", "lls"}
+    _err(capsys, 2, argv[:-2] + ["--resume"])  # --resume without --out
 
 
 def test_evaluate_overwrite_never_removes_its_inputs(meshes, tmp_path, capsys):

@@ -179,18 +179,19 @@ def test_coordinates_print_to_the_grid_s_resolution(capsys):
 
 
 # ---------------------------------------------------------------------- words
-def test_sigterm_message_ends_cleanly(capsys, monkeypatch):
+def test_sigterm_message_ends_cleanly(capsys, monkeypatch, tmp_path):
     from terrainvis import cli
     from terrainvis.core.runner import Interrupted
 
-    def stopped(args):
+    def stopped(*args):
         raise Interrupted(signal.SIGTERM)
 
+    monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(cli.COMMANDS["info"], "run", stopped)
     capsys.readouterr()
     assert main(["info", "hills"]) == 143
     assert capsys.readouterr().err.strip() == "terrainvis info: interrupted (interrupted by SIGTERM)"
-    monkeypatch.setattr(cli.COMMANDS["compare"], "run", stopped)
+    monkeypatch.setattr(cli.compare, "_compare_in", stopped)  # compare's folder is held: it says what it keeps
     assert main(["compare"]) == 143
     assert capsys.readouterr().err.strip().endswith("(interrupted by SIGTERM); finished units are in results.csv "
                                                     "(use --resume)")

@@ -211,6 +211,48 @@ def test_the_command_line(run, tmp_path, capsys):
     assert "SIMPLIFIED" in capsys.readouterr().err
 
 
+def test_out_csv_keeps_each_terrain_and_resume_measures_only_the_rest(run, tmp_path):
+    from terrainvis import load_terrain
+    from terrainvis.experiment.collect import TIMING_COLUMNS
+
+    df, folder = run
+    meshes = {m: load_terrain(folder / f"hills__{m}__level2.npz") for m in ("qec", "greedy-insertion")}
+    meshes = {f"my-{m}": t for m, t in meshes.items()}
+    kw = dict(against=["lls", "greedy-insertion"], **KW)
+    want = evaluate({"hills": bundled_terrain("hills")}, meshes, **kw)
+    keys = []
+
+    def stop_after_two(key, rows):
+        keys.append(key)
+        assert list(rows["method"].unique()) == [key[1]] and len(rows) == 2 * 3  # sets x relocations
+        if len(keys) == 2:
+            raise RuntimeError("stop")
+
+    out = tmp_path / "r.csv"
+    with pytest.raises(RuntimeError, match="stop"):
+        evaluate({"hills": bundled_terrain("hills")}, meshes, out_csv=out, on_unit=stop_after_two, **kw)
+    assert keys == [("hills", "my-qec", 2), ("hills", "my-greedy-insertion", 2)]
+    assert list(pd.read_csv(out)["method"].unique()) == ["my-qec", "my-greedy-insertion"]
+    keys.clear()
+    got = evaluate({"hills": bundled_terrain("hills")}, meshes, out_csv=out, resume=True,
+                   on_unit=lambda key, rows: keys.append(key), **kw)
+    # only the rest; greedy-insertion at the two meshes' sizes, both nearest level 2: two units under one key
+    assert keys == [("hills", "lls", 2), ("hills", "greedy-insertion", 2), ("hills", "greedy-insertion", 2)]
+    assert len(want) == 5 * 2 * 3 and sorted(want["n_vertices"][want["method"] == "greedy-insertion"].unique()) == \
+        sorted(t.n_vertices for t in meshes.values())
+    pd.testing.assert_frame_equal(got.drop(columns=list(TIMING_COLUMNS)), want.drop(columns=list(TIMING_COLUMNS)))
+    from terrainvis.experiment.collect import COLUMNS
+    from terrainvis.experiment.results import read_results
+
+    pd.testing.assert_frame_equal(read_results(out, COLUMNS), got)  # the file holds the final table
+    # another simplified terrain under the same name is another run
+    changed = {**meshes, "my-qec": TIN(meshes["my-qec"].vertices + [0, 0, 1], meshes["my-qec"].faces)}
+    with pytest.raises(ValueError, match=r"cannot resume .*evaluated: "):
+        evaluate({"hills": bundled_terrain("hills")}, changed, out_csv=out, resume=True, **kw)
+    with pytest.raises(ValueError, match="resume=True continues the run stored in out_csv"):
+        evaluate("hills", meshes["my-qec"], resume=True)
+
+
 def test_assert_visibility_kept_passes_and_reports():
     T = bundled_terrain("ridges")
     fine = simplifiers.simplify(T, "lls", 1)
