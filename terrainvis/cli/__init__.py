@@ -80,8 +80,28 @@ def _command_in(argv) -> str | None:
     return argv[0] if argv and argv[0] in COMMANDS else None
 
 
+def console() -> None:
+    """The ``terrainvis`` script and ``python -m terrainvis``: :func:`main` in a process of its own.
+
+    OpenBLAS runs on one thread unless ``OPENBLAS_NUM_THREADS`` says otherwise: no command
+    does BLAS work, and the threads OpenBLAS starts when numpy loads it (and numba, looking
+    for BLAS, loads scipy's) busy-wait for a while, which on 2 cores took about 0.1 s of a
+    warm 3601² ``viewshed`` command (``benchmarks/bench_startup.py``). The objects made
+    while a command loads its kernels are frozen out of the garbage collector's passes
+    (:func:`terrainvis.cli._common.loading_kernels`), which only a process of its own may do.
+    """
+    import os
+
+    if "numpy" not in sys.modules:  # read when OpenBLAS loads
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    _common.own_process()
+    sys.exit(main())
+
+
 def main(argv=None) -> int:
-    """Entry point of the ``terrainvis`` console script."""
+    """The command line: run the command ``argv`` names (default ``sys.argv[1:]``), return its exit status.
+
+    The ``terrainvis`` script calls it through :func:`console`."""
     import signal
 
     from ..core.interrupt import child_calls, kept_interrupts, raise_pending

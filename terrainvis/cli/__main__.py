@@ -1,7 +1,5 @@
 """``python -m terrainvis.cli``: the command line, as the ``terrainvis`` script runs it."""
 
-import sys
+from . import console
 
-from . import main
-
-sys.exit(main())
+console()

@@ -110,3 +110,54 @@ def test_an_error_while_reading_waits_for_the_kernels_to_load():
         with loading_kernels(load, "test"):
             raise UsageError("no such DEM")
     assert seen == {"loaded": True}  # no LLVM left running in another thread as the process exits
+
+
+def test_the_collector_pauses_while_kernels_load_and_freezes_only_in_a_process_of_its_own(monkeypatch):
+    import gc
+    from types import SimpleNamespace
+
+    from terrainvis.cli import _common
+
+    calls, states = [], {}
+    monkeypatch.setattr(gc, "freeze", lambda: calls.append("freeze"))
+    monkeypatch.setattr(gc, "collect", lambda *a: calls.append("collect") or 0)
+    monkeypatch.setitem(sys.modules, "terrainvis.core.compiling", SimpleNamespace(seconds=lambda: 0.0))
+    assert gc.isenabled()
+
+    def load():
+        states["load"] = gc.isenabled()
+
+    with _common.loading_kernels(load, "test"):
+        states["block"] = gc.isenabled()
+    assert states == {"load": False, "block": False} and gc.isenabled()
+    assert calls == []  # main() inside a program's process: nothing frozen, and nothing compiled to collect
+    # the command's own process, after a compile (its garbage collected before the rest is frozen), and an error
+
+    def broken():
+        raise ImportError("no kernels")
+
+    monkeypatch.setattr(_common, "_OWN_PROCESS", [True])
+    monkeypatch.setitem(sys.modules, "terrainvis.core.compiling", SimpleNamespace(seconds=lambda: 2.5))
+    with pytest.raises(ImportError, match="no kernels"):
+        with _common.loading_kernels(broken, "test"):
+            pass
+    assert calls == ["collect", "freeze"] and gc.isenabled()
+
+
+@pytest.mark.parametrize("preset, want", [(None, "1"), ("3", "3")])
+def test_the_script_runs_openblas_on_one_thread_unless_told_and_freezes_its_kernels(preset, want):
+    import os
+
+    code = ("import atexit, gc, os, sys\n"
+            "atexit.register(lambda: print(f'OPENBLAS={os.environ.get(\"OPENBLAS_NUM_THREADS\")} "
+            "frozen={gc.get_freeze_count() > 0}'))\n"
+            "sys.argv = ['terrainvis', 'los', 'hills', '--from', '100', '100', '--to', '3000', '3000', "
+            "'--frame', 'local']\n"
+            "from terrainvis.cli import console\n"
+            "console()\n")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if preset is not None:
+        env["OPENBLAS_NUM_THREADS"] = preset
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines()[-1] == f"OPENBLAS={want} frozen=True", out.stdout
