@@ -4,6 +4,7 @@ compile`` compiles ahead and says which parts were cached already."""
 
 from __future__ import annotations
 
+import gc
 import os
 import subprocess
 import sys
@@ -62,6 +63,31 @@ def test_quiet_and_the_environment_silence_it(toy, capsys, monkeypatch):
     monkeypatch.setenv("TERRAINVIS_COMPILE_NOTICE", "0")
     other(np.arange(3.0))
     assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("module, raised", [("terrainvis._probe", True), ("simplifiers._probe", True),
+                                            ("someone_elses_module", False)])
+def test_the_collectors_older_passes_are_rarer_while_our_kernels_compile(module, raised):
+    from numba.core import event
+
+    compiling.install()
+    kernel, _ = _toy(f"gc_{abs(hash(module))}_{os.getpid()}")
+    kernel.py_func.__module__ = module
+    seen = []
+
+    class After(event.Listener):  # registered after terrainvis's listener: sees what it set
+        def on_start(self, ev):
+            seen.append(gc.get_threshold())
+
+        def on_end(self, ev):
+            pass
+
+    before = gc.get_threshold()
+    with event.install_listener("numba:compile", After()):
+        assert kernel(np.arange(3.0)) == 5.0
+    young, middle, old = before
+    want = (young, max(middle, compiling.COMPILE_GC_THRESHOLD), old) if raised else before
+    assert seen[0] == want and gc.get_threshold() == before  # restored once the compilation ends
 
 
 def test_kernels_not_listed_are_compiled_silently(capsys):
