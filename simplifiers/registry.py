@@ -32,6 +32,7 @@ from typing import Callable
 import numpy as np
 
 from terrainvis.core.memory import check_memory
+from terrainvis.core.registry import Registry
 from terrainvis.core.validate import as_int, as_nonnegative_finite, describe, entry_name
 from terrainvis.errors import SimplificationError
 from terrainvis.core.terrain import TIN, HeightGrid
@@ -139,7 +140,7 @@ _RF = "simplifiers.reverse_faber"
 _BYTES_PER_SAMPLE_BEYOND = 72
 
 #: Every method, in the paper's row order (irregular first, then regular).
-METHODS: dict[str, Method] = {
+METHODS: Registry = Registry("method", {
     m.name: m
     for m in (
         Method(
@@ -178,11 +179,11 @@ METHODS: dict[str, Method] = {
             memory=(48, 0, None),
         ),
     )
-}
+})
 
 
 #: The methods terrainvis ships: :func:`register` refuses their names.
-BUILTIN = frozenset(METHODS)
+BUILTIN = METHODS.builtin
 
 
 # ---------------------------------------------------------------------- methods from outside
@@ -251,12 +252,7 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
     (9, 9)
     >>> _ = unregister("every-other")
     """
-    entry_name(name, "method")
-    if name in BUILTIN:
-        raise ValueError(f"method {name!r} is built in: register yours under another name")
-    if name in METHODS and not replace:
-        raise ValueError(f"a method named {name!r} is registered already; pass replace=True to replace it, or "
-                         "choose another name")
+    METHODS.check_new(name, replace=replace)
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {list(KINDS)}, got {kind!r}")
     if not callable(function):
@@ -272,8 +268,7 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
         description, options=tuple(options), cost_rank=as_int(cost_rank, "cost_rank"), style=tuple(style),
         memory=tuple(memory), default=bool(default), whole_grid=kind == "regular", function=function,
     )
-    METHODS[name] = method
-    return method
+    return METHODS.add(name, method, replace=replace)
 
 
 def _check_signature(name: str, function, kind: str, options: tuple) -> None:
@@ -291,11 +286,7 @@ def _check_signature(name: str, function, kind: str, options: tuple) -> None:
 
 def unregister(name: str) -> Method:
     """Remove a method added by :func:`register` (or a plugin) and return it; built-in methods stay."""
-    if name in BUILTIN:
-        raise ValueError(f"method {name!r} is built in and cannot be removed")
-    if name not in METHODS:
-        raise ValueError(f"no method named {name!r} is registered; the methods are {list(METHODS)}")
-    return METHODS.pop(name)
+    return METHODS.remove(name)
 
 
 #: The plugins that failed to load, by entry-point name (each reported once).
@@ -342,15 +333,16 @@ def load_plugins() -> list[str]:
     return added
 
 
-def available() -> dict[str, str]:
-    """Every registered method and its kind, in the paper's order.
+def available() -> list[str]:
+    """Every registered method's name, in the paper's order (built-in, then registered ones);
+    ``METHODS[name].kind`` is its kind. The other registries' ``available()`` answer alike.
 
     Examples
     --------
-    >>> available()["lls"], available()["qec"]
-    ('regular', 'irregular')
+    >>> available()[:3], METHODS["lls"].kind
+    (['qec', 'greedy-cuts', 'greedy-insertion'], 'regular')
     """
-    return {name: m.kind for name, m in METHODS.items()}
+    return METHODS.names()
 
 
 def default_methods() -> list[str]:

@@ -34,8 +34,9 @@ from typing import Callable
 
 import numpy as np
 
+from ..core.registry import Registry
 from ..core.terrain import HeightGrid, fingerprint
-from ..core.validate import describe, entry_name
+from ..core.validate import describe
 
 __all__ = [
     "Measure", "MEASURES", "register", "unregister", "available", "point_sets", "observers", "pair_rows",
@@ -410,7 +411,7 @@ def _observer_sets(grid, name, settings) -> list:
 
 
 #: Every measure by name.
-MEASURES: dict[str, Measure] = {
+MEASURES: Registry = Registry("measure", {
     m.name: m for m in (
         Measure("pairs", _pair_sets, pair_rows, "pairs", "the paper's visibility matrices of random point sets",
                 n_points=lambda s: s.n_points, n_sets=lambda s: s.n_sets, unit_bytes=_pair_bytes),
@@ -418,9 +419,9 @@ MEASURES: dict[str, Measure] = {
                 "each observer's viewshed of every sample of T", n_points=lambda s: 1,
                 n_sets=lambda s: s.n_observers, unit_bytes=_viewshed_bytes, predicates=("exact",)),
     )
-}
+})
 #: The measures terrainvis ships, which :func:`register` never replaces.
-BUILTIN = frozenset(MEASURES)
+BUILTIN = MEASURES.builtin
 
 
 def register(measure: Measure, *, replace: bool = False) -> Measure:
@@ -435,31 +436,21 @@ def register(measure: Measure, *, replace: bool = False) -> Measure:
     """
     if not isinstance(measure, Measure):
         raise TypeError(f"measure must be a terrainvis.experiment.measures.Measure, got {describe(measure)}")
-    name = measure.name
-    entry_name(name, "measure")
+    name = MEASURES.check_new(measure.name, replace=replace)
     for field in ("sets", "rows", "n_points", "n_sets", "unit_bytes"):
         if not callable(getattr(measure, field)):
             raise TypeError(f"measure {name!r}: {field} must be callable, got {describe(getattr(measure, field))}")
     if not measure.predicates or any(p not in ("exact", "paper") for p in measure.predicates):
         raise ValueError(f"measure {name!r}: predicates must be some of ['exact', 'paper'], got "
                          f"{list(measure.predicates)}")
-    if name in BUILTIN:
-        raise ValueError(f"measure {name!r} is built in and cannot be replaced; register yours under another name")
-    if name in MEASURES and not replace:
-        raise ValueError(f"a measure named {name!r} is registered already; pass replace=True to replace it")
-    MEASURES[name] = measure
-    return measure
+    return MEASURES.add(name, measure, replace=replace)
 
 
 def unregister(name: str) -> Measure:
     """Remove a measure added with :func:`register` and return it (built-in ones stay)."""
-    if name in BUILTIN:
-        raise ValueError(f"measure {name!r} is built in and cannot be removed")
-    if name not in MEASURES:
-        raise ValueError(f"no measure named {name!r} is registered; the measures are {available()}")
-    return MEASURES.pop(name)
+    return MEASURES.remove(name)
 
 
 def available() -> list[str]:
-    """Every measure's name."""
-    return list(MEASURES)
+    """Every measure's name, in registry order."""
+    return MEASURES.names()

@@ -33,8 +33,9 @@ from typing import Callable
 
 import numpy as np
 
+from ..core.registry import Registry
 from ..core.terrain import as_terrain
-from ..core.validate import as_finite_scalar, as_points, describe, entry_name
+from ..core.validate import as_finite_scalar, as_points, describe
 
 __all__ = [
     "Relocation", "RELOCATIONS", "register", "unregister", "available", "default_relocations",
@@ -137,7 +138,7 @@ _ORACLE_OPTIONS = ("reference", "mask", "original", "end_radius", "engine", "n_c
                    "earth_radius")
 
 #: Every relocation by name, in the order of the tables and figures.
-RELOCATIONS: dict[str, Relocation] = {
+RELOCATIONS: Registry = Registry("relocation", {
     r.name: r for r in (
         Relocation("identity", _paper("identity"), "the points do not move", default=True, color="tab:red",
                    marker="o"),
@@ -152,9 +153,9 @@ RELOCATIONS: dict[str, Relocation] = {
                    options=_ORACLE_OPTIONS, bound=True, measures=("pairs",), starts_from=(CALIBRATED,),
                    predicate=True, color="black", marker="*", linestyle="--"),
     )
-}
+})
 #: The relocations terrainvis ships, which :func:`register` never replaces.
-BUILTIN = frozenset(RELOCATIONS)
+BUILTIN = RELOCATIONS.builtin
 
 
 def register(relocation: Relocation, *, replace: bool = False) -> Relocation:
@@ -190,8 +191,7 @@ def register(relocation: Relocation, *, replace: bool = False) -> Relocation:
     """
     if not isinstance(relocation, Relocation):
         raise TypeError(f"relocation must be a terrainvis.relocation.Relocation, got {describe(relocation)}")
-    name = relocation.name
-    entry_name(name, "relocation")
+    name = RELOCATIONS.check_new(relocation.name, replace=replace)
     if not callable(relocation.function):
         raise TypeError(f"relocation {name!r}: function must be callable, got {describe(relocation.function)}")
     measures = relocation.measures
@@ -199,19 +199,11 @@ def register(relocation: Relocation, *, replace: bool = False) -> Relocation:
                                  or not all(isinstance(m, str) and m for m in measures)):
         raise ValueError(f"relocation {name!r}: measures must be None (every measure) or a non-empty tuple of "
                          f"measure names, got {measures!r}")
-    if name in RELOCATIONS:
-        if name in BUILTIN:
-            raise ValueError(f"relocation {name!r} is built in and cannot be replaced; register yours under "
-                             "another name")
-        if not replace:
-            raise ValueError(f"a relocation named {name!r} is registered already; pass replace=True to replace "
-                             "it, or choose another name")
     for start in relocation.starts_from:
         if start not in RELOCATIONS and start != name:
             raise ValueError(f"relocation {name!r}: starts_from names {start!r}, which is not registered")
     _check_signature(relocation)
-    RELOCATIONS[name] = relocation
-    return relocation
+    return RELOCATIONS.add(name, relocation, replace=replace)
 
 
 def _check_signature(relocation: Relocation) -> None:
@@ -231,16 +223,12 @@ def _check_signature(relocation: Relocation) -> None:
 
 def unregister(name: str) -> Relocation:
     """Remove a relocation added with :func:`register` and return it (built-in ones stay)."""
-    if name not in RELOCATIONS:
-        raise ValueError(f"no relocation named {name!r} is registered; the relocations are {available()}")
-    if name in BUILTIN:
-        raise ValueError(f"relocation {name!r} is built in and cannot be removed")
-    return RELOCATIONS.pop(name)
+    return RELOCATIONS.remove(name)
 
 
 def available() -> list[str]:
     """Every relocation's name, practical ones and bounds, in registry order."""
-    return list(RELOCATIONS)
+    return RELOCATIONS.names()
 
 
 def default_relocations() -> tuple:

@@ -37,11 +37,12 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..core.registry import Registry
 from ..core.terrain import HeightGrid
-from ..core.validate import describe, entry_name
+from ..core.validate import describe
 
-__all__ = ["Engine", "Predicate", "ENGINES", "AUTO", "register", "unregister", "engine_names", "choose",
-           "verdicts_text"]
+__all__ = ["Engine", "Predicate", "ENGINES", "AUTO", "register", "unregister", "available", "engine_names",
+           "choose", "verdicts_text"]
 
 #: The engine name that picks one by terrain and curvature (see the module docstring).
 AUTO = "auto"
@@ -152,7 +153,7 @@ def _exact_matrix(terrain, points, p: Predicate) -> np.ndarray:
 
 
 #: Every engine by name.
-ENGINES: dict[str, Engine] = {
+ENGINES: Registry = Registry("engine", {
     e.name: e for e in (
         Engine("grid", _grid_pairs, _grid_matrix, "the exact walk over a HeightGrid's surface", terrains=("grid",)),
         Engine("tin", _tin_pairs, _tin_matrix, "the exact clip of each segment against a TIN's faces",
@@ -162,9 +163,9 @@ ENGINES: dict[str, Engine] = {
         Engine("exact", _exact_pairs, _exact_matrix,
                "the exact predicate on any terrain: the grid walk on a HeightGrid, the TIN clipper on a TIN"),
     )
-}
+})
 #: The engines terrainvis ships, which :func:`register` never replaces.
-BUILTIN = frozenset(ENGINES)
+BUILTIN = ENGINES.builtin
 
 
 def verdicts_text(engine: str, tins: bool, kc: float = 0.0) -> str:
@@ -226,9 +227,9 @@ def register(engine: Engine, *, replace: bool = False) -> Engine:
     if not isinstance(engine, Engine):
         raise TypeError(f"engine must be a terrainvis.visibility.Engine, got {describe(engine)}")
     name = engine.name
-    entry_name(name, "engine")
     if name == AUTO:
         raise ValueError("engine.name must not be 'auto' (it means: choose an engine for the terrain)")
+    ENGINES.check_new(name, replace=replace)
     for field in ("pairs", "matrix"):
         fn = getattr(engine, field)
         if not callable(fn):
@@ -237,12 +238,7 @@ def register(engine: Engine, *, replace: bool = False) -> Engine:
     if not engine.terrains or any(k not in TERRAIN_KINDS for k in engine.terrains):
         raise ValueError(f"engine {name!r}: terrains must be some of {list(TERRAIN_KINDS)}, got "
                          f"{list(engine.terrains)}")
-    if name in BUILTIN:
-        raise ValueError(f"engine {name!r} is built in and cannot be replaced; register yours under another name")
-    if name in ENGINES and not replace:
-        raise ValueError(f"an engine named {name!r} is registered already; pass replace=True to replace it")
-    ENGINES[name] = engine
-    return engine
+    return ENGINES.add(name, engine, replace=replace)
 
 
 def _check_arity(name: str, field: str, fn, n: int) -> None:
@@ -259,8 +255,9 @@ def _check_arity(name: str, field: str, fn, n: int) -> None:
 
 def unregister(name: str) -> Engine:
     """Remove an engine added with :func:`register` and return it (built-in ones stay)."""
-    if name in BUILTIN:
-        raise ValueError(f"engine {name!r} is built in and cannot be removed")
-    if name not in ENGINES:
-        raise ValueError(f"no engine named {name!r} is registered; the engines are {list(ENGINES)}")
-    return ENGINES.pop(name)
+    return ENGINES.remove(name)
+
+
+def available() -> list[str]:
+    """Every engine's name, in registry order (``"auto"`` chooses among them)."""
+    return ENGINES.names()

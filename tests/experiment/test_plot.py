@@ -84,7 +84,9 @@ def test_accuracy_vs_distance():
     assert len(fig.axes) == 2
     ax = fig.axes[0]
     assert [t.get_text() for t in ax.get_xticklabels()] == ["5", "10", "all"]
-    assert {ln.get_label() for ln in ax.get_lines()} == {"identity", "full", "half", "calibrated"}
+    from terrainvis.relocation import default_relocations
+
+    assert {ln.get_label() for ln in ax.get_lines()} == set(default_relocations())  # the run's relocations
     with pytest.raises(ValueError, match="no distance sweep"):
         plot.accuracy_vs_distance(df[df["max_distance"].isna()])
 

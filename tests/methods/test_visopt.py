@@ -216,7 +216,7 @@ def test_registered_regular_method_not_in_the_default_list():
     S = simplifiers.simplify(T, "visopt", 2, n_train=40, seed=2)
     np.testing.assert_array_equal(S.z, vo.visopt(T, 2, n_train=40, seed=2).z)
     assert S.attrs["method"] == "visopt" and S.attrs["kind"] == "regular" and S.attrs["n_vertices"] == 81
-    assert simplifiers.available()["visopt"] == "regular" and simplifiers.METHODS["visopt"].halo is None
+    assert simplifiers.METHODS["visopt"].kind == "regular" and simplifiers.METHODS["visopt"].halo is None
     from terrainvis.experiment.options import _DECLARED
 
     methods = next(o for o in _DECLARED if o.name == "methods")

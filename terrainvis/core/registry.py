@@ -1,0 +1,97 @@
+"""One registry of named entries, the rules every registry of terrainvis shares.
+
+The simplification methods (:data:`simplifiers.METHODS`), the relocations
+(:data:`terrainvis.relocation.RELOCATIONS`), the LOS engines
+(:data:`terrainvis.visibility.engines.ENGINES`) and the comparison's measures
+(:data:`terrainvis.experiment.measures.MEASURES`) are each a :class:`Registry`: a dict from
+name to entry, in registry order (the order of tables and figures), that knows which
+entries are built in. Each family's ``register`` checks what is particular to its entries
+(a method's signature, an engine's terrains) and leaves to the registry what is common:
+
+* a name is a plain word (:func:`terrainvis.core.validate.entry_name`), since it becomes
+  part of file names and table cells;
+* a built-in entry is never replaced or removed;
+* a name taken by an entry registered earlier is replaced only with ``replace=True``;
+* :meth:`Registry.names` lists the names, :meth:`Registry.remove` removes one, each
+  family's ``available()`` and ``unregister()`` are these.
+"""
+
+from __future__ import annotations
+
+from .validate import entry_name
+
+__all__ = ["Registry"]
+
+
+class Registry(dict):
+    """Named entries of one kind, in registry order, with the entries built in.
+
+    Parameters
+    ----------
+    kind : str
+        What an entry is, for messages: ``"method"``, ``"relocation"``, ...
+    entries : dict
+        The built-in entries, by name (every one of them is built in).
+
+    Examples
+    --------
+    >>> r = Registry("colour", {"red": 1})
+    >>> r.add("teal", 2)
+    2
+    >>> r.names(), sorted(r.builtin)
+    (['red', 'teal'], ['red'])
+    >>> r.add("red", 3)
+    Traceback (most recent call last):
+    ...
+    ValueError: colour 'red' is built in and cannot be replaced; register yours under another name
+    >>> r.remove("teal")
+    2
+    """
+
+    def __init__(self, kind: str, entries: dict):
+        super().__init__(entries)
+        self.kind = kind
+        self.builtin = frozenset(self)
+
+    def __reduce__(self):  # a registry travels (to a worker) with its kind and what is built in
+        return _rebuild, (self.kind, dict(self), tuple(self.builtin))
+
+    def _a(self) -> str:
+        return "an" if self.kind[:1] in "aeiou" else "a"
+
+    def check_new(self, name, *, replace: bool = False) -> str:
+        """``name`` if an entry may be registered under it (a plain word, not built in, free or
+        ``replace``), else a ValueError saying why."""
+        entry_name(name, self.kind)
+        if name in self.builtin:
+            raise ValueError(f"{self.kind} {name!r} is built in and cannot be replaced; register yours under another "
+                             "name")
+        if name in self and not replace:
+            raise ValueError(f"{self._a()} {self.kind} named {name!r} is registered already; pass replace=True to "
+                             "replace it, or choose another name")
+        return name
+
+    def add(self, name, entry, *, replace: bool = False):
+        """Register ``entry`` under ``name`` (after the others, or in place of the entry it
+        replaces) and return it; see :meth:`check_new`."""
+        self[self.check_new(name, replace=replace)] = entry
+        return entry
+
+    def remove(self, name):
+        """Remove an entry registered from outside and return it (built-in ones stay)."""
+        if name in self.builtin:
+            raise ValueError(f"{self.kind} {name!r} is built in and cannot be removed")
+        if name not in self:
+            raise ValueError(f"no {self.kind} named {name!r} is registered; the {self.kind}s are {self.names()}")
+        return self.pop(name)
+
+    def names(self) -> list[str]:
+        """Every entry's name, in registry order."""
+        return list(self)
+
+
+def _rebuild(kind: str, entries: dict, builtin: tuple) -> Registry:
+    r = Registry(kind, {})
+    r.update(entries)
+    r.builtin = frozenset(builtin)
+    return r
