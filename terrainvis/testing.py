@@ -110,8 +110,8 @@ def assert_visibility_kept(original, simplified, *, min_accuracy: float, points=
             raise ValueError(f"points must hold at least 2 points, got {P.shape[0]}")
     on_s = {k: v for k, v in predicate.items()}
     on_t = {k: v for k, v in predicate.items() if k != "end_radius"}
-    extra = {"original": T} if relocation == "calibrated" else {}
-    Q = relocate(P, S, relocation, offset=offset, **extra, **on_s)
+    # T to every relocation: one that takes no original ignores it (terrainvis.relocate)
+    Q = relocate(P, S, relocation, offset=offset, original=T, **on_s)
     v_t = visibility_matrix(T, P, **on_t)
     v_s = visibility_matrix(S, Q, **on_s)
     counts = agreement(v_t, v_s)

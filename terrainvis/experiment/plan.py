@@ -76,16 +76,26 @@ def settings_for(grids: dict, values: dict, *, flags: bool = False) -> Settings:
 
 def unit_bytes(settings: Settings, grids: dict) -> int:
     """A lower bound of the memory one unit allocates, in bytes (on the largest terrain): the
-    measure's own estimate (:attr:`terrainvis.experiment.measures.Measure.unit_bytes`); the
-    terrains and S(T) themselves are not counted."""
-    from ..relocation.calibrated import memory_need
-    from ..relocation.registry import CALIBRATED
+    measure's own estimate (:attr:`terrainvis.experiment.measures.Measure.unit_bytes`) and
+    each relocation's (:attr:`terrainvis.relocation.Relocation.memory`); the terrains and
+    S(T) themselves are not counted."""
     from .measures import MEASURES
 
     need = int(MEASURES[settings.measure].unit_bytes(settings, grids))
-    if CALIBRATED in settings.relocations:  # its partners, whatever the measure
-        need += memory_need(settings.n_partners, settings.n_points)
-    return need
+    return need + sum(nbytes for nbytes, _ in _relocation_memory(settings))
+
+
+def _relocation_memory(settings: Settings) -> list[tuple[int, str]]:
+    """``(bytes, what)`` of each relocation of the run that declares its memory."""
+    from ..relocation.registry import RELOCATIONS
+
+    out = []
+    for name in settings.relocations:
+        estimate = RELOCATIONS[name].memory
+        if estimate is not None:
+            nbytes, what = estimate(settings)
+            out.append((int(nbytes), str(what)))
+    return out
 
 
 def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
@@ -105,11 +115,9 @@ def check_memory(settings: Settings, grids: dict, at_once: int = 1) -> None:
     have = available_memory()
     if have is None or need <= have:
         return
-    from ..relocation.calibrated import memory_need
-    from ..relocation.registry import CALIBRATED
-
-    if CALIBRATED in settings.relocations and memory_need(settings.n_partners, settings.n_points) > have:
-        what = f"n_partners={settings.n_partners:,} (the calibrated relocation's partners)"
+    alone = [what for nbytes, what in _relocation_memory(settings) if nbytes > have]
+    if alone:
+        what = alone[0]
     elif settings.measure == "pairs":
         what = f"n_points={settings.n_points:,} (visibility matrices of {settings.n_points:,}² pairs)"
     else:

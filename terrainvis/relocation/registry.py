@@ -88,6 +88,13 @@ class Relocation:
         of the run's line-of-sight predicate too (``engine``, ``curvature``,
         ``earth_radius`` and any option declared ``los=True``), as it hands them to the
         visibility computations.
+    memory : callable, optional
+        ``memory(settings) -> (bytes, what)``: a lower bound of what it allocates in one
+        unit of :func:`terrainvis.compare` beyond the measure's own, from the run's
+        :class:`~terrainvis.experiment.options.Settings`, and the option that sets it, as a
+        message names it (``"n_partners=2,048 (the calibrated relocation's partners)"``).
+        The run is refused before it starts when the units could not fit
+        (:func:`terrainvis.experiment.plan.check_memory`). None: nothing beyond the measure's.
     color, marker, linestyle : str
         Its style in the figures (matplotlib names).
     """
@@ -101,6 +108,7 @@ class Relocation:
     measures: tuple | None = None
     starts_from: tuple = ()
     predicate: bool = False
+    memory: Callable | None = None
     color: str = "black"
     marker: str = "o"
     linestyle: str = "-"
@@ -126,6 +134,13 @@ def _calibrated(points, simplified, **options):
     return relocate_calibrated(points, simplified, **options)
 
 
+def _calibrated_memory(settings) -> tuple[int, str]:
+    from .calibrated import memory_need
+
+    return (memory_need(settings.n_partners, settings.n_points),
+            f"n_partners={settings.n_partners:,} (the calibrated relocation's partners)")
+
+
 def _oracle(points, simplified, **options):
     from .oracle import oracle
 
@@ -147,7 +162,8 @@ RELOCATIONS: Registry = Registry("relocation", {
         Relocation("half", _paper("half"), "points below S(T) moved up onto it, the others kept", default=True,
                    color="tab:green", marker="^"),
         Relocation(CALIBRATED, _calibrated, "the height on S(T) that keeps the most verdicts against partners "
-                   "spread over T", options=_CALIBRATED_OPTIONS, default=True, predicate=True, color="tab:purple",
+                   "spread over T", options=_CALIBRATED_OPTIONS, default=True, predicate=True, memory=_calibrated_memory,
+                   color="tab:purple",
                    marker="D"),
         Relocation(ORACLE, _oracle, "an upper bound fitted to T's verdicts of the evaluated pairs",
                    options=_ORACLE_OPTIONS, bound=True, measures=("pairs",), starts_from=(CALIBRATED,),

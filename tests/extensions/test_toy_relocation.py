@@ -158,3 +158,26 @@ def test_the_command_line_picks_it_up(toy, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["relocate", "--help"])
     assert "toy: full projection, lifted" in " ".join(capsys.readouterr().out.split())
+
+
+def test_its_memory_estimate_is_checked_before_a_run_and_named(tmp_path, monkeypatch):
+    # a relocation declares what it allocates per unit; the run is refused before it starts, naming it
+    from terrainvis.errors import NotEnoughMemoryError
+    from terrainvis.experiment import plan
+
+    def huge(settings):
+        return 10 * 2**40, f"the toy's table of {settings.n_points:,} points"
+
+    register(Relocation("toy-memory", lambda points, simplified, *, offset=0.0: points.copy(), "keeps the points",
+                        memory=huge))
+    try:
+        monkeypatch.setattr("terrainvis.core.memory.available_memory", lambda: 2**30)
+        grids = {"h": synthetic_terrain("hills", size=17, seed=0)}
+        settings = plan.settings_for(grids, _small(relocations=["full", "toy-memory"]))
+        assert plan.unit_bytes(settings, grids) - plan.unit_bytes(
+            plan.settings_for(grids, _small(relocations=["full"])), grids) == 10 * 2**40
+        with pytest.raises(NotEnoughMemoryError,
+                           match=r"^the toy.s table of 8 points needs at least 10 TiB of memory, but this machine has 1 GiB "):
+            compare(grids, relocations=["full", "toy-memory"], workers=1, **{k: v for k, v in _small().items()})
+    finally:
+        unregister("toy-memory")
