@@ -156,24 +156,19 @@ def _foreign_message(out: Path, files) -> str:
 def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int:
     """Print and write the tables, draw the figures; the exit status."""
     from ..experiment import report
+    from ..experiment.measures import MEASURES
     from ..core.fileio import atomic_write_text
 
-    extra = {}
-    beyond = report.beyond_paper(df) if settings.measure == "pairs" else None
-    if beyond is not None and not beyond.empty:
-        extra["beyond"] = beyond
-    elif (df["relocation"] == "oracle").any():
+    measure = MEASURES[settings.measure]
+    extra = {k: t for k, t in (measure.tables(df) if measure.tables is not None else {}).items() if not t.empty}
+    if "beyond" not in extra and (df["relocation"] == "oracle").any():
         extra["oracle"] = report.oracle_gap(df)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
-    if settings.measure == "viewshed":
-        if df["accuracy"].notna().any():
-            extra["viewsheds"] = report.viewshed_table(df)
-        text = report.to_markdown({**report.paper_tables(df), **extra})
-        lines = []  # the paper's findings are about pairs
-    else:
-        text = (report.to_markdown({**report.paper_tables(df), **extra}) + "\n"
-                + report.comparison_markdown(report.paper_comparison(df)))
+    text = report.to_markdown({**report.paper_tables(df), **extra})
+    lines = []  # the paper's side by side and its findings are about its matrices of pairs
+    if measure.paper:
+        text += "\n" + report.comparison_markdown(report.paper_comparison(df))
         lines = report.findings_markdown(report.findings(df)) + report.beyond_paper_findings(df)
     fast = sorted(set(df[(df["method"] == "qec") & (df["backend"] == "fast-simplification")]["terrain"]))
     if fast:

@@ -83,6 +83,13 @@ class Measure:
         allocates (the run is refused before it starts when its units cannot fit).
     predicates : tuple of str
         The predicates it supports (``"exact"``, ``"paper"``).
+    tables : callable, optional
+        ``tables(df) -> dict``: the report's tables of its own (title -> DataFrame with a
+        ``"title"`` in its ``attrs``), printed and written to ``tables.md`` after Tables
+        1-4; an empty DataFrame is left out. None: none.
+    paper : bool
+        Its rows compare with the paper's matrices: the report sets them beside the
+        paper's published cells and checks the paper's findings on them.
     """
 
     name: str
@@ -94,6 +101,8 @@ class Measure:
     n_sets: Callable
     unit_bytes: Callable
     predicates: tuple = ("exact", "paper")
+    tables: Callable | None = None
+    paper: bool = False
 
 
 def _set_seed(seed: int, name: str, index: int) -> np.random.SeedSequence:
@@ -385,6 +394,20 @@ def _row(base, s, how, d, t_test, t_true, counts) -> dict:
 
 
 # ---------------------------------------------------------------------- the registry
+def _pair_tables(df) -> dict:
+    """The pairs measure's own table: what the relocations beyond the paper's keep."""
+    from . import report
+
+    return {"beyond": report.beyond_paper(df)}
+
+
+def _viewshed_tables(df) -> dict:
+    """The viewshed measure's own table: the viewsheds kept, by method and level."""
+    from . import report
+
+    return {"viewsheds": report.viewshed_table(df)} if df["accuracy"].notna().any() else {}
+
+
 def _pair_bytes(settings, grids) -> int:
     """The visibility matrices on T and on S(T) (a byte per ordered pair each),
     :func:`terrainvis.agreement`'s indices of the upper triangle (16 bytes per pair), and
@@ -414,10 +437,12 @@ def _observer_sets(grid, name, settings) -> list:
 MEASURES: Registry = Registry("measure", {
     m.name: m for m in (
         Measure("pairs", _pair_sets, pair_rows, "pairs", "the paper's visibility matrices of random point sets",
-                n_points=lambda s: s.n_points, n_sets=lambda s: s.n_sets, unit_bytes=_pair_bytes),
+                n_points=lambda s: s.n_points, n_sets=lambda s: s.n_sets, unit_bytes=_pair_bytes,
+                tables=_pair_tables, paper=True),
         Measure("viewshed", _observer_sets, viewshed_rows, "cells",
                 "each observer's viewshed of every sample of T", n_points=lambda s: 1,
-                n_sets=lambda s: s.n_observers, unit_bytes=_viewshed_bytes, predicates=("exact",)),
+                n_sets=lambda s: s.n_observers, unit_bytes=_viewshed_bytes, predicates=("exact",),
+                tables=_viewshed_tables),
     )
 })
 #: The measures terrainvis ships, which :func:`register` never replaces.
@@ -440,6 +465,8 @@ def register(measure: Measure, *, replace: bool = False) -> Measure:
     for field in ("sets", "rows", "n_points", "n_sets", "unit_bytes"):
         if not callable(getattr(measure, field)):
             raise TypeError(f"measure {name!r}: {field} must be callable, got {describe(getattr(measure, field))}")
+    if measure.tables is not None and not callable(measure.tables):
+        raise TypeError(f"measure {name!r}: tables must be callable or None, got {describe(measure.tables)}")
     if not measure.predicates or any(p not in ("exact", "paper") for p in measure.predicates):
         raise ValueError(f"measure {name!r}: predicates must be some of ['exact', 'paper'], got "
                          f"{list(measure.predicates)}")

@@ -63,6 +63,12 @@ def n_points(settings):
 
 def n_sets(settings):
     return settings.n_sets
+
+
+def tables(df):
+    t = df.groupby("relocation")[["n_pairs"]].sum()
+    t.attrs["title"] = "Stars: the pairs counted, by relocation"
+    return {"stars": t}
 '''
 
 
@@ -75,7 +81,8 @@ def toy(tmp_path, monkeypatch):
 
     entry = measures.register(measures.Measure(
         "stars", toy_stars.sets, toy_stars.rows, "pairs", "the first point of each set against the others",
-        n_points=toy_stars.n_points, n_sets=toy_stars.n_sets, unit_bytes=toy_stars.unit_bytes))
+        n_points=toy_stars.n_points, n_sets=toy_stars.n_sets, unit_bytes=toy_stars.unit_bytes,
+        tables=toy_stars.tables))
     yield entry
     measures.unregister("stars")
 
@@ -111,6 +118,9 @@ def test_the_registry_is_checked(toy):
     with pytest.raises(ValueError, match=r"predicates must be some of \['exact', 'paper'\], got \['fuzzy'\]"):
         measures.register(measures.Measure("fuzzy", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
                                            toy.unit_bytes, predicates=("fuzzy",)))
+    with pytest.raises(TypeError, match="measure 'broken': tables must be callable or None, got str"):
+        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
+                                           toy.unit_bytes, tables="stars"))
     with pytest.raises(TypeError, match="measure 'broken': rows must be callable"):
         measures.register(measures.Measure("broken", toy.sets, None, "pairs", "x", toy.n_points, toy.n_sets,
                                            toy.unit_bytes))
@@ -134,6 +144,10 @@ def test_the_command_line_offers_it(toy, tmp_path, capsys):
                  "--out", str(out)]) == 0
     df = pd.read_csv(out / "results.csv")
     assert set(df["measure"]) == {"stars"} and (df["n_pairs"] == 7).all()
+    # its own table in the report; not the paper's side by side, whose cells are the paper's matrices
+    text = (out / "tables.md").read_text()
+    assert "### Stars: the pairs counted, by relocation\n" in text and "| full | 7 |" in text, text
+    assert "The paper side by side" not in text and "Table 1: accuracy" in text
     with pytest.raises(SystemExit):
         main(["compare", "--help"])
     assert "stars" in capsys.readouterr().out
