@@ -274,19 +274,23 @@ def _gc_paused(block):
     during the command and when the process ends took about 0.2 s of a warm 3601²
     ``viewshed`` command of 1.0 s (``benchmarks/bench_startup.py``). A cold cache's
     compilation makes garbage too (about 230 MB while a 1024² viewshed's kernels compile):
-    after one, the garbage is collected first. Called in another program's process
+    after one in the block, the garbage is collected first. Called in another program's process
     (``main()`` from Python), nothing is frozen: that process's garbage stays collectable.
     """
     import gc
 
+    def compiled() -> float:  # seconds numba has compiled in this process so far
+        compiling = sys.modules.get("terrainvis.core.compiling")
+        return compiling.seconds() if compiling is not None else 0.0
+
     was = gc.isenabled()
+    before = compiled()
     gc.disable()
     try:
         with block:
             yield
     finally:
-        compiling = sys.modules.get("terrainvis.core.compiling")
-        if compiling is not None and compiling.seconds() > 0:
+        if compiled() > before:  # a cold cache's compilation in the block: its garbage first
             gc.collect()
         if _OWN_PROCESS[0]:
             gc.freeze()

@@ -137,9 +137,19 @@ def test_the_collector_pauses_while_kernels_load_and_freezes_only_in_a_process_o
         raise ImportError("no kernels")
 
     monkeypatch.setattr(_common, "_OWN_PROCESS", [True])
-    monkeypatch.setitem(sys.modules, "terrainvis.core.compiling", SimpleNamespace(seconds=lambda: 2.5))
+    clock = SimpleNamespace(spent=2.5)  # compiled before the block (an earlier command of the process): no pass
+    monkeypatch.setitem(sys.modules, "terrainvis.core.compiling", SimpleNamespace(seconds=lambda: clock.spent))
+    with _common.loading_kernels(load, "test"):
+        pass
+    assert calls == ["freeze"]
+
+    def compiles_then_breaks():
+        clock.spent += 1.0
+        raise ImportError("no kernels")
+
+    calls.clear()
     with pytest.raises(ImportError, match="no kernels"):
-        with _common.loading_kernels(broken, "test"):
+        with _common.loading_kernels(compiles_then_breaks, "test"):
             pass
     assert calls == ["collect", "freeze"] and gc.isenabled()
 
