@@ -14,13 +14,26 @@ entries are built in. Each family's ``register`` checks what is particular to it
 * a name taken by an entry registered earlier is replaced only with ``replace=True``;
 * :meth:`Registry.names` lists the names, :meth:`Registry.remove` removes one, each
   family's ``available()`` and ``unregister()`` are these.
+
+:func:`registry` finds a family's registry by its kind, for code that reads entries
+without importing the module that defines them (the report reads a measure's ``counts``,
+and the measures' entries name report tables of their own).
 """
 
 from __future__ import annotations
 
 from .validate import entry_name
 
-__all__ = ["Registry"]
+__all__ = ["Registry", "registry"]
+
+#: The first registry made of each kind.
+_BY_KIND: dict[str, "Registry"] = {}
+
+
+def registry(kind: str) -> "Registry | None":
+    """The registry of ``kind`` (``"method"``, ``"relocation"``, ``"engine"``, ``"measure"``),
+    None while the module that makes it is not imported."""
+    return _BY_KIND.get(kind)
 
 
 class Registry(dict):
@@ -52,6 +65,7 @@ class Registry(dict):
         super().__init__(entries)
         self.kind = kind
         self.builtin = frozenset(self)
+        _BY_KIND.setdefault(kind, self)
 
     def __reduce__(self):  # a registry travels (to a worker) with its kind and what is built in
         return _rebuild, (self.kind, dict(self), tuple(self.builtin))

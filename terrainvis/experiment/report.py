@@ -63,12 +63,15 @@ def _ordered(index_values, order):
 
 def _counts(data: pd.DataFrame) -> str:
     """What the rows' agreement counts (the measure's :attr:`~terrainvis.experiment.measures.Measure.counts`):
-    ``"pairs"`` unless every row is of one measure that counts something else."""
-    from .measures import MEASURES
+    ``"pairs"`` unless every row is of one measure that counts something else. The
+    registry is looked up by kind (:func:`terrainvis.core.registry.registry`): its entries
+    name tables of this module."""
+    from ..core.registry import registry
 
+    known = registry("measure") or {}
     measures = set(data["measure"]) if "measure" in data.columns else set()
-    if len(measures) == 1 and next(iter(measures)) in MEASURES:
-        return MEASURES[next(iter(measures))].counts
+    if len(measures) == 1 and next(iter(measures)) in known:
+        return known[next(iter(measures))].counts
     return "pairs"
 
 
