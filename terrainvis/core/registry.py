@@ -105,7 +105,8 @@ class Registry(dict):
 
 
 def _rebuild(kind: str, entries: dict, builtin: tuple) -> Registry:
-    r = Registry(kind, {})
+    """An unpickled copy: not :func:`registry`'s, which stays the one its module made."""
+    r = Registry.__new__(Registry)
     r.update(entries)
-    r.builtin = frozenset(builtin)
+    r.kind, r.builtin = kind, frozenset(builtin)
     return r
