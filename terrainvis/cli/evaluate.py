@@ -108,7 +108,7 @@ def _evaluate(args, label: str, grid, out: Path | None, earlier: list) -> int:
         if args.resume and not rows.exists() and (out / RESULTS).exists():
             rows = out / RESULTS
         on_interrupt(f"; the terrains measured so far are in {rows} (--resume continues)")
-    df = run.measure(rows, resume=args.resume)
+    df = run.measure(rows, resume=args.resume, on_unit=_measured_line())
     seconds = time.perf_counter() - t0
     _print(df, label, seconds)
     if out is not None:
@@ -121,6 +121,26 @@ def _evaluate(args, label: str, grid, out: Path | None, earlier: list) -> int:
             print(f"terrainvis evaluate: --overwrite: removed the earlier run's {describe(stale)} that this run did "
                   "not write again", file=sys.stderr)
     return _verdict(df, args)
+
+
+def _measured_line():
+    """On a terminal, a line as each terrain (or ``--against`` method at one size) is measured,
+    as :func:`~terrainvis.cli._common.working` says what a long step does; a log gets the
+    results only. None elsewhere."""
+    from ..core._progress import on_a_terminal
+
+    if not on_a_terminal():
+        return None
+    last = [time.perf_counter()]
+
+    def line(key, rows):
+        now = time.perf_counter()
+        what = "failed" if rows["error"].notna().any() else f"{int(rows['n_vertices'].iloc[0]):,} vertices"
+        print(f"terrainvis evaluate: measured {key[1]} ({what}, {now - last[0]:.1f} s)", file=sys.stderr,
+              flush=True)
+        last[0] = now
+
+    return line
 
 
 def _check_out(args, label: str, out: Path) -> list[Path]:
@@ -202,7 +222,8 @@ def _write(df, run, rows: Path, out: Path, args, seconds: float) -> list[Path]:
             path.parent.mkdir(exist_ok=True)
             save_terrain(terrain, path)
             written.append(path)
-    _compare_report(df, {run.name: run.grid}, run.settings, out, args, seconds)  # its exit status is compare's; evaluate's is _verdict
+    # its exit status is compare's; evaluate's is _verdict
+    _compare_report(df, {run.name: run.grid}, run.settings, out, args, seconds)
     written.append(out / "tables.md")
     written += [out / f for f in figure_names([run.name], set(df["relocation"])) if (out / f).is_file()]
     return written

@@ -352,3 +352,19 @@ def test_a_full_disk_in_sqlite_is_an_output_error_and_leaves_nothing(tmp_path, m
         _gpkg.write_lines(path, xy, attrs)
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["net.gpkg"]
+
+
+def test_evaluate_says_on_a_terminal_as_each_terrain_is_measured(meshes, tmp_path, capsys, monkeypatch):
+    dem, good = meshes
+    argv = ["evaluate", str(dem), str(good), "--against", "lls", *ARGS]
+    capsys.readouterr()
+    assert main(argv) == 0
+    assert capsys.readouterr().err == ""  # a log gets the results only
+    monkeypatch.setattr("terrainvis.core._progress.on_a_terminal", lambda: True)
+    assert main(argv) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert [line.split(" (")[0] for line in lines] == ["terrainvis evaluate: measured good",
+                                                       "terrainvis evaluate: measured lls"], lines
+    T = bundled_terrain("hills").crop(rows=(0, 33), cols=(0, 33))
+    n = simplifiers.simplify(T, "greedy-insertion", 2).n_vertices
+    assert lines[0].startswith(f"terrainvis evaluate: measured good ({n:,} vertices, ") and lines[0].endswith(" s)")

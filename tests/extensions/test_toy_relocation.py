@@ -177,7 +177,8 @@ def test_its_memory_estimate_is_checked_before_a_run_and_named(tmp_path, monkeyp
         assert plan.unit_bytes(settings, grids) - plan.unit_bytes(
             plan.settings_for(grids, _small(relocations=["full"])), grids) == 10 * 2**40
         with pytest.raises(NotEnoughMemoryError,
-                           match=r"^the toy.s table of 8 points needs at least 10 TiB of memory, but this machine has 1 GiB "):
+                           match=r"^the toy.s table of 8 points needs at least 10 TiB of memory, but this machine "
+                                 r"has 1 GiB "):
             compare(grids, relocations=["full", "toy-memory"], workers=1, **{k: v for k, v in _small().items()})
     finally:
         unregister("toy-memory")
