@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -156,7 +157,7 @@ class Prepared:
         """The rows, each unit's stored in ``out_csv`` as it finishes (see :func:`evaluate`)."""
         units = _units(self.grid, self.name, self.terrains, self.against, self.settings)
         store, done = _store(out_csv, self.record(), units, self.settings, resume)
-        return _rows(self.grid, self.name, units, store, done, on_unit)
+        return _rows(self.grid, self.name, units, store, done, on_unit, self.settings)
 
 
 def prepared(original, simplified, *, name=None, against=(), frame=None, repair=False, **options) -> Prepared:
@@ -482,31 +483,24 @@ def _nearest_level(shape, n_vertices: int) -> int:
     return min(levels, key=lambda lv: (abs(np.log(vertex_budget(shape, lv) / max(n_vertices, 1))), lv))
 
 
-def _units(grid: HeightGrid, tname: str, terrains: dict, against: list, settings) -> list[tuple[tuple, object]]:
-    """The run's units in order, each ``(key, measure)``: a simplified terrain, then each ``against``
-    method at each size. ``key`` is ``(terrain, method, level)`` (:data:`~terrainvis.experiment.collect.UNIT_KEY`);
-    an irregular method measured at two sizes nearest one level has two units under one key.
-    ``measure()`` gives the unit's rows; a unit that fails gives its rows with the message in ``error``."""
-    from simplifiers import METHODS, simplify
+class _Unit(NamedTuple):
+    """One unit of an :func:`evaluate` run: ``key`` is ``(terrain, method, level)``
+    (:data:`~terrainvis.experiment.collect.UNIT_KEY`), ``base`` its rows' shared columns, and
+    ``source`` what is measured: a simplified terrain as read, or ``(method, level,
+    n_vertices)`` of an ``against`` method (``n_vertices`` None for a regular one)."""
+
+    key: tuple
+    base: dict
+    source: object
+
+
+def _units(grid: HeightGrid, tname: str, terrains: dict, against: list, settings) -> list[_Unit]:
+    """The run's units in order: each simplified terrain, then each ``against`` method at each
+    size. An irregular method measured at two sizes nearest one level has two units under one key."""
+    from simplifiers import METHODS
 
     from ..core.repair import repair_summary
-    from .measures import MEASURES
-    from .units import _base, failed_rows, measured_rows
-
-    sets = []  # the point sets, made once, when the first unit needs them
-
-    def point_sets():
-        if not sets:
-            sets.append(MEASURES[settings.measure].sets(grid, tname, settings))
-        return sets[0]
-
-    def rows_of(base, get, stored_errors=True):
-        def measure():
-            try:  # as compare records a unit that failed
-                return measured_rows(grid, get(), base, settings, point_sets(), stored_errors=stored_errors)
-            except Exception as exc:
-                return failed_rows(base, exc, settings, point_sets())
-        return measure
+    from .units import _base
 
     units = []
     for label, s in terrains.items():
@@ -518,8 +512,7 @@ def _units(grid: HeightGrid, tname: str, terrains: dict, against: list, settings
         record = s.attrs.get(EVALUATE_REPAIR) or {}
         base["repair"] = repair_summary(record) or None
         base["repair_max_snap"] = float(record.get("max_snap", 0.0)) if record else np.nan
-        # the errors of the surface as read, never those its file records
-        units.append(((tname, label, base["level"]), rows_of(base, lambda s=s: s, stored_errors=False)))
+        units.append(_Unit((tname, label, base["level"]), base, s))
     sizes = sorted({(s.size if isinstance(s, HeightGrid) else s.n_vertices) for s in terrains.values()})
     for method in against:
         info = METHODS[method]
@@ -530,9 +523,7 @@ def _units(grid: HeightGrid, tname: str, terrains: dict, against: list, settings
                 continue
             done.add(level if info.regular else n)
             base = _base(grid, tname, method, info.kind, level, settings)
-            get = ((lambda method=method, level=level: simplify(grid, method, level)) if info.regular else
-                   (lambda method=method, level=level, n=n: simplify(grid, method, level, n_vertices=n)))
-            units.append(((tname, method, level), rows_of(base, get)))
+            units.append(_Unit((tname, method, level), base, (method, level, None if info.regular else n)))
     return units
 
 
@@ -546,21 +537,38 @@ def _store(out_csv, record: dict, units: list, settings, resume: bool):
     from .results import ResultStore
 
     per_unit = rows_per_unit(settings)
-    count = Counter(key for key, _ in units)
+    count = Counter(unit.key for unit in units)
     store = ResultStore(out_csv, record, COLUMNS, UNIT_KEY, lambda key: count.get(key, 0) * per_unit, resume=resume,
                         optional=optional_columns(settings.measure))
     return store, frozenset(store.done)
 
 
-def _rows(grid: HeightGrid, tname: str, units: list, store, done, on_unit) -> pd.DataFrame:
-    """Measure the units not ``done``, each one's rows stored as it finishes; the table of every row."""
-    from .collect import COLUMNS, order, table
+def _rows(grid: HeightGrid, tname: str, units: list, store, done, on_unit, settings) -> pd.DataFrame:
+    """Measure the units not ``done``, each one's rows stored as it finishes; the table of every row.
 
-    rows = []
-    for key, measure in units:
+    A unit that fails keeps its rows with the message in ``error``, as in
+    :func:`terrainvis.compare`. A simplified terrain's errors are those of the surface as
+    read, never those its file records."""
+    from simplifiers import simplify
+
+    from .collect import COLUMNS, order, table
+    from .measures import MEASURES
+    from .units import failed_rows, measured_rows
+
+    rows, sets = [], None
+    for key, base, source in units:
         if key in done:
             continue
-        unit = measure()
+        if sets is None:  # the point sets, made once, when the first unit needs them
+            sets = MEASURES[settings.measure].sets(grid, tname, settings)
+        made = isinstance(source, tuple)
+        try:
+            if made:
+                method, level, n = source
+                source = simplify(grid, method, level) if n is None else simplify(grid, method, level, n_vertices=n)
+            unit = measured_rows(grid, source, base, settings, sets, stored_errors=made)
+        except Exception as exc:
+            unit = failed_rows(base, exc, settings, sets)
         rows += unit
         if store is not None:
             store.add(unit)
