@@ -268,7 +268,8 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
         description, options=tuple(options), cost_rank=as_int(cost_rank, "cost_rank"), style=tuple(style),
         memory=tuple(memory), default=bool(default), whole_grid=kind == "regular", function=function,
     )
-    return METHODS.add(name, method, replace=replace)
+    METHODS[name] = method
+    return method
 
 
 def _check_signature(name: str, function, kind: str, options: tuple) -> None:

@@ -28,11 +28,6 @@ def on_interrupt(note: str = "") -> str:
     return before
 
 
-def interrupt_note() -> str:
-    """The note set by :func:`on_interrupt` ("" when none)."""
-    return _INTERRUPT_NOTE[0]
-
-
 class ParseError(ValueError):
     """argparse's complaint, reported in one line by :func:`main` (exit status 2)."""
 
@@ -270,12 +265,13 @@ def _gc_paused(block):
     of the collector's later passes (:func:`gc.freeze`).
 
     Importing numba and loading a viewshed's kernels makes about 110,000 objects tracked by
-    the collector, which live as long as the process (a full pass over them: 0.03 s); the collector's passes over them while they are made,
-    during the command and when the process ends took about 0.2 s of a warm 3601²
-    ``viewshed`` command of 1.0 s (``benchmarks/bench_startup.py``). A cold cache's
-    compilation makes garbage too (about 230 MB while a 1024² viewshed's kernels compile):
-    after one in the block, the garbage is collected first. Called in another program's process
-    (``main()`` from Python), nothing is frozen: that process's garbage stays collectable.
+    the collector, which live as long as the process (a full pass over them: 0.03 s); the
+    collector's passes over them while they are made, during the command and when the
+    process ends took about 0.2 s of a warm 3601² ``viewshed`` command of 1.0 s
+    (``benchmarks/bench_startup.py``). A cold cache's compilation makes garbage too (about
+    230 MB while a 1024² viewshed's kernels compile): after one in the block, the garbage
+    is collected first. Called in another program's process (``main()`` from Python),
+    nothing is frozen: that process's garbage stays collectable.
     """
     import gc
 

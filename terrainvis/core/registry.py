@@ -65,10 +65,7 @@ class Registry(dict):
         super().__init__(entries)
         self.kind = kind
         self.builtin = frozenset(self)
-        _BY_KIND.setdefault(kind, self)
-
-    def __reduce__(self):  # a registry travels (to a worker) with its kind and what is built in
-        return _rebuild, (self.kind, dict(self), tuple(self.builtin))
+        _BY_KIND.setdefault(kind, self)  # an unpickled copy skips __init__: it is never registry(kind)'s
 
     def _a(self) -> str:
         return "an" if self.kind[:1] in "aeiou" else "a"
@@ -87,7 +84,8 @@ class Registry(dict):
 
     def add(self, name, entry, *, replace: bool = False):
         """Register ``entry`` under ``name`` (after the others, or in place of the entry it
-        replaces) and return it; see :meth:`check_new`."""
+        replaces) and return it; see :meth:`check_new`. A family whose ``register`` checks
+        the name first, before its own checks, then stores the entry itself."""
         self[self.check_new(name, replace=replace)] = entry
         return entry
 
@@ -103,10 +101,3 @@ class Registry(dict):
         """Every entry's name, in registry order."""
         return list(self)
 
-
-def _rebuild(kind: str, entries: dict, builtin: tuple) -> Registry:
-    """An unpickled copy: not :func:`registry`'s, which stays the one its module made."""
-    r = Registry.__new__(Registry)
-    r.update(entries)
-    r.kind, r.builtin = kind, frozenset(builtin)
-    return r

@@ -175,8 +175,9 @@ def earlier_run(out) -> list[Path]:
     """The files an earlier run wrote in the folder ``out`` (none: no earlier run).
 
     Only files recognised as written by terrainvis (:func:`written_by_terrainvis`):
-    ``results.csv``, its settings file, an unfinished ``evaluate`` run's ``results.partial.csv``
-    and its settings file, ``tables.md``, their leftover temporary files (a write cut off by SIGKILL), the figures of the terrains and relocations the run
+    ``results.csv``, its settings file, an unfinished ``evaluate`` run's
+    ``results.partial.csv`` and its settings file, ``tables.md``, their leftover temporary
+    files (a write cut off by SIGKILL), the figures of the terrains and relocations the run
     recorded, and its simplified terrains (``simplified/<terrain>__<method>__level<k>.npz``).
     """
     out = Path(out)

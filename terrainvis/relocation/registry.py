@@ -162,8 +162,8 @@ RELOCATIONS: Registry = Registry("relocation", {
         Relocation("half", _paper("half"), "points below S(T) moved up onto it, the others kept", default=True,
                    color="tab:green", marker="^"),
         Relocation(CALIBRATED, _calibrated, "the height on S(T) that keeps the most verdicts against partners "
-                   "spread over T", options=_CALIBRATED_OPTIONS, default=True, predicate=True, memory=_calibrated_memory,
-                   color="tab:purple",
+                   "spread over T", options=_CALIBRATED_OPTIONS, default=True, predicate=True,
+                   memory=_calibrated_memory, color="tab:purple",
                    marker="D"),
         Relocation(ORACLE, _oracle, "an upper bound fitted to T's verdicts of the evaluated pairs",
                    options=_ORACLE_OPTIONS, bound=True, measures=("pairs",), starts_from=(CALIBRATED,),
@@ -219,7 +219,8 @@ def register(relocation: Relocation, *, replace: bool = False) -> Relocation:
         if start not in RELOCATIONS and start != name:
             raise ValueError(f"relocation {name!r}: starts_from names {start!r}, which is not registered")
     _check_signature(relocation)
-    return RELOCATIONS.add(name, relocation, replace=replace)
+    RELOCATIONS[name] = relocation
+    return relocation
 
 
 def _check_signature(relocation: Relocation) -> None:

@@ -238,7 +238,8 @@ def register(engine: Engine, *, replace: bool = False) -> Engine:
     if not engine.terrains or any(k not in TERRAIN_KINDS for k in engine.terrains):
         raise ValueError(f"engine {name!r}: terrains must be some of {list(TERRAIN_KINDS)}, got "
                          f"{list(engine.terrains)}")
-    return ENGINES.add(name, engine, replace=replace)
+    ENGINES[name] = engine
+    return engine
 
 
 def _check_arity(name: str, field: str, fn, n: int) -> None:
