@@ -170,8 +170,6 @@ def earth_text(args) -> str:
 
 def read_terrain(name: str, args=None):
     """One terrain from a bundled name or a DEM file, with --fill / --crop-valid applied."""
-    import numpy as np
-
     from ..io._names import resolve_one
 
     from ..core.synthetic import BUNDLED
@@ -183,7 +181,7 @@ def read_terrain(name: str, args=None):
     if Path(name).suffix and not Path(name).exists():
         raise UsageError(f"DEM file {name!r} does not exist")
     label, grid = resolve_one(None, name, 0)
-    if not np.isfinite(grid.z).any():
+    if grid.n_nodata == grid.size:
         raise UsageError(f"DEM {name!r} has no valid sample: all {plural(grid.size, 'cell')} are nodata")
     if args is not None and getattr(args, "metric", False):
         grid = metric_grid(name, grid)

@@ -25,12 +25,17 @@ def _viewsheds() -> None:
     import numpy as np
 
     from ..core.synthetic import synthetic_terrain
+    from ..core.terrain import HeightGrid
     from ..visibility import cumulative_viewshed, site_observers, viewshed
 
     g = synthetic_terrain("hills", size=65, seed=0)
     eye = (float(g.xs[20]), float(g.ys[30]))
     viewshed(g, eye)
     viewshed(g, eye, curvature=0.85714, max_distance=float(g.xs[40]))
+    # a float32 raster's grid holds its own samples (HeightGrid.heights): the sweep's float32 kernels
+    g32 = HeightGrid._from_coords(g.z.astype(np.float32), g.xs, g.ys, None, owned=True)
+    g32.height_at([eye])
+    viewshed(g32, eye)
     z = g.z.copy()
     z[5:8, 50:53] = np.nan  # the nodata-aware walks
     viewshed(g.copy_with(z=z), eye)

@@ -91,7 +91,7 @@ def run(args) -> int:
     seconds = time.perf_counter() - t0
     if args.output_mode != "visible":
         return _report_values(grid, vis, out, suffix, args, (label, observer, frame, fov, seconds))
-    valid = np.isfinite(grid.z) if grid.n_nodata else None  # a full-size mask only where there is nodata
+    valid = np.isfinite(grid.heights) if grid.n_nodata else None  # a full-size mask only where there is nodata
     n_vis = int(np.count_nonzero(vis if valid is None else vis & valid))
     n_valid = grid.size - grid.n_nodata
     field = _field(grid, observer, fov, args)
@@ -201,7 +201,7 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observe
         from ..core.terrain import HeightGrid
 
         # a grid of the same samples: 1 visible, 0 not, NaN nodata (with the DEM's georeferencing)
-        z = np.where(np.isfinite(grid.z), vis.astype(np.float64), np.nan)
+        z = np.where(np.isfinite(grid.heights), vis.astype(np.float64), np.nan)
         # the observer in the grid's frame (that of its xs, ys) and in the DEM's native CRS
         attrs = {**grid.attrs, "viewshed_observer": [float(v) for v in observer],
                  "viewshed_observer_native": [float(v) for v in position_frame(grid, None).from_grid(observer)],
@@ -212,7 +212,7 @@ def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observe
         return
     from ..io import write_mask_geotiff
 
-    write_mask_geotiff(grid, vis, out, nodata_mask=np.isnan(grid.z) if grid.n_nodata else None)
+    write_mask_geotiff(grid, vis, out, nodata_mask=np.isnan(grid.heights) if grid.n_nodata else None)
 
 
 def _field_of_view_attrs(args) -> dict:

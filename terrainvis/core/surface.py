@@ -46,7 +46,10 @@ from .stopflag import stopped
 _INF = np.inf
 
 #: A grid as the kernels read it, in local coordinates (origin at ``xs[0], ys[0]``):
-#: ``z`` (rows, cols) float64 heights (NaN: nodata); ``xs`` (cols,) and ``ys`` (rows,)
+#: ``z`` (rows, cols) float64 heights, or float32 (NaN: nodata; the viewshed's kernels take a
+#: float32 raster's own samples, :attr:`terrainvis.HeightGrid.heights`: every kernel reads a
+#: height as ``np.float64(z[r, c])``, so that its answers are the float64 grid's bit for bit,
+#: as a difference of two float32 heights computed in float32 would be rounded); ``xs`` (cols,) and ``ys`` (rows,)
 #: float64 coordinates; ``ixw`` (cols - 1,) and ``iyw`` (rows - 1,) float64 inverse cell
 #: widths; ``uniform`` (bool) both spacings uniform; ``has_nan`` (bool) the grid holds
 #: nodata. The accelerations of the LOS engines, empty where a family does not use them:
@@ -174,13 +177,14 @@ def locate(v, iw, lo, hi, uniform, x):
 @nb.njit(cache=True, nogil=True, inline="always")
 def tri_uv(z, r, c, upper, u, v):
     """Height of one triangle of cell (r, c) (``upper`` False: the lower one, u >= v) at the
-    cell's local coordinates (u, v), extended as a plane beyond the triangle."""
-    z00 = z[r, c]
-    z11 = z[r + 1, c + 1]
+    cell's local coordinates (u, v), extended as a plane beyond the triangle. Each height is
+    read as float64 (:data:`SurfaceGrid`)."""
+    z00 = np.float64(z[r, c])
+    z11 = np.float64(z[r + 1, c + 1])
     if not upper:
-        z01 = z[r, c + 1]
+        z01 = np.float64(z[r, c + 1])
         return z00 + u * (z01 - z00) + v * (z11 - z01)
-    z10 = z[r + 1, c]
+    z10 = np.float64(z[r + 1, c])
     return z00 + v * (z10 - z00) + u * (z11 - z10)
 
 
@@ -218,9 +222,10 @@ def tri_height(z, xs, ys, ixw, iyw, r, c, upper, x, y):
 def line_height(z, r, c, vertical, s):
     """Height on a grid line at its local coordinate s in [0, 1]: ``vertical`` the line
     x = xs[c] from row r to r + 1, otherwise the line y = ys[r] from column c to c + 1."""
+    z0 = np.float64(z[r, c])
     if vertical:
-        return z[r, c] + s * (z[r + 1, c] - z[r, c])
-    return z[r, c] + s * (z[r, c + 1] - z[r, c])
+        return z0 + s * (np.float64(z[r + 1, c]) - z0)
+    return z0 + s * (np.float64(z[r, c + 1]) - z0)
 
 
 @nb.njit(cache=True, nogil=True)

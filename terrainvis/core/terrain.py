@@ -90,9 +90,10 @@ def _check_coords(values, name: str, length: int) -> np.ndarray:
 
 def _check_z(z, owned: bool = False) -> np.ndarray:
     """``z`` checked, as a fresh C-contiguous float64 array (``owned``: a reader's own fresh
-    float64 buffer, which nobody else holds, is kept instead of copied)."""
-    if owned and isinstance(z, np.ndarray) and z.dtype == np.float64 and z.ndim == 2 and z.flags.c_contiguous \
-            and z.flags.writeable and z.flags.owndata:
+    float64 or float32 buffer, which nobody else holds, is kept instead of copied; a float32
+    one stays float32, :attr:`HeightGrid.heights`)."""
+    if owned and isinstance(z, np.ndarray) and z.dtype in (np.float64, np.float32) and z.ndim == 2 \
+            and z.flags.c_contiguous and z.flags.writeable and z.flags.owndata:
         if z.shape[0] < 2 or z.shape[1] < 2:
             raise ValueError(f"z must have at least 2x2 samples, got shape {z.shape}")
         return z  # an infinite height shows in its range (_check_heights): no pass and no mask of its own
@@ -207,7 +208,7 @@ class HeightGrid:
     1.0
     """
 
-    __slots__ = ("z", "xs", "ys", "attrs", "_cache", "__weakref__")
+    __slots__ = ("_z", "xs", "ys", "attrs", "_cache", "__weakref__")
 
     def __init__(self, z, dx: float = 1.0, dy: float = 1.0, origin=(0.0, 0.0), *, attrs=None):
         zz = _check_z(z)
@@ -314,7 +315,7 @@ class HeightGrid:
 
     def _init(self, z, xs, ys, attrs):
         zr = _check_heights(z, "z")
-        self.z = _frozen(z)
+        self._z = _frozen(z)
         self.xs = _frozen(xs)
         self.ys = _frozen(ys)
         self.attrs = _as_attrs(attrs)
@@ -322,18 +323,45 @@ class HeightGrid:
 
     def __reduce__(self):
         # Pickle the data only: cached acceleration structures (pyramid, Embree scene,
-        # TIN) are rebuilt on demand in the receiving process.
-        return (_rebuild_grid, (self.z, self.xs, self.ys, self.attrs))
+        # TIN) are rebuilt on demand in the receiving process. Heights kept as float32
+        # travel as float32.
+        return (_rebuild_grid, (self._z, self.xs, self.ys, self.attrs))
 
     # ------------------------------------------------------------------ basics
     @property
+    def z(self) -> np.ndarray:
+        """(rows, cols) read-only float64 heights; NaN marks nodata.
+
+        A grid read from a float32 raster keeps the file's float32 samples
+        (:attr:`heights`) until something asks for ``z``: the float64 array is then made
+        once (every float32 value is a float64 value, so nothing changes) and replaces
+        them.
+        """
+        z = self._z
+        if z.dtype != np.float64:
+            z = _frozen(z.astype(np.float64))
+            self._z = z
+        return z
+
+    @property
+    def heights(self) -> np.ndarray:
+        """The heights as the grid holds them: :attr:`z`, or a float32 raster's own samples
+        (read-only float32, equal to ``z`` value for value) until ``z`` is first asked for.
+
+        The viewshed reads these (its kernels convert each height to float64 as they read
+        it, so its verdicts are those of ``z``): a float32 DEM's viewshed holds 4 bytes a
+        sample of heights instead of 8.
+        """
+        return self._z
+
+    @property
     def shape(self) -> tuple[int, int]:
-        return self.z.shape
+        return self._z.shape
 
     @property
     def size(self) -> int:
         """Number of samples."""
-        return int(self.z.size)
+        return int(self._z.size)
 
     @property
     def extent(self) -> tuple[float, float, float, float]:
@@ -342,8 +370,8 @@ class HeightGrid:
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by z and the two coordinate vectors."""
-        return int(self.z.nbytes + self.xs.nbytes + self.ys.nbytes)
+        """Bytes held by the heights (:attr:`heights`) and the two coordinate vectors."""
+        return int(self._z.nbytes + self.xs.nbytes + self.ys.nbytes)
 
     @property
     def is_uniform(self) -> bool:
@@ -364,7 +392,7 @@ class HeightGrid:
     def n_nodata(self) -> int:
         """Number of NaN (nodata) samples."""
         if "n_nodata" not in self._cache:
-            self._cache["n_nodata"] = int(np.isnan(self.z).sum())
+            self._cache["n_nodata"] = int(np.isnan(self._z).sum())
         return self._cache["n_nodata"]
 
     def require_finite(self, operation: str) -> None:
@@ -377,7 +405,7 @@ class HeightGrid:
         kind = "uniform" if self.is_uniform else "rectilinear"
         return (
             f"HeightGrid({self.shape[0]}x{self.shape[1]} {kind}, x [{xmin:g}, {xmax:g}], "
-            f"y [{ymin:g}, {ymax:g}], z [{np.nanmin(self.z):g}, {np.nanmax(self.z):g}]"
+            f"y [{ymin:g}, {ymax:g}], z [{np.nanmin(self._z):g}, {np.nanmax(self._z):g}]"
             + (f", {self.n_nodata} nodata" if self.n_nodata else "")
             + ")"
         )
@@ -457,7 +485,7 @@ class HeightGrid:
         out = np.full(pts.shape[0], np.nan)
         if pts.shape[0] == 0:
             return out
-        call(_surface().heights_at, self.z, self.xs, self.ys,
+        call(_surface().heights_at, self._z, self.xs, self.ys,
              np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), out, work=out.size)
         return out
 
@@ -470,7 +498,7 @@ class HeightGrid:
         qx = np.ascontiguousarray(as_float_array(xs, "xs").ravel())
         qy = np.ascontiguousarray(as_float_array(ys, "ys").ravel())
         out = np.full((qy.size, qx.size), np.nan)
-        call(_kn().grid_on_grid, self.xs, self.ys, self.z, qx, qy, out, work=out.size)
+        call(_kn().grid_on_grid, self.xs, self.ys, self._z, qx, qy, out, work=out.size)
         return out
 
     def sample_xy(self) -> np.ndarray:
@@ -857,7 +885,9 @@ class TIN:
 
 
 def _rebuild_grid(z, xs, ys, attrs):
-    return HeightGrid.from_coords(z, xs, ys, attrs=attrs)
+    # the unpickled arrays are this call's own: a float32 one stays float32
+    z = np.require(z, requirements=["C", "W", "O"])
+    return HeightGrid._from_coords(z, xs, ys, attrs, owned=True)
 
 
 def _rebuild_tin(vertices, faces, attrs):

@@ -240,7 +240,7 @@ def load_terrain(path, *, nodata: float | None = None, crs: str | None = None, b
         z = terrain.z.copy()
         z[z == nodata] = np.nan
         terrain = terrain.copy_with(z)
-    if isinstance(terrain, HeightGrid) and not np.isfinite(terrain.z).any():
+    if isinstance(terrain, HeightGrid) and terrain.n_nodata == terrain.size:
         raise ValueError(
             f"{p.name!r} holds no height: all {terrain.shape[0]}x{terrain.shape[1]} samples are nodata"
             + (f" (the file's nodata value or nodata={nodata!r})" if nodata is not None else "")

@@ -89,7 +89,7 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
         attrs.pop(key, None)  # the file's own georeferencing decides
     lattice = (t.c if t.a > 0 else t.c + t.a * cols, dx, t.f if t.e < 0 else t.f + t.e * rows, dy)
     grid = _georeference(z, xs, ys, attrs, crs_text, crs, p.name, dlon=dx, dlat=dy, lattice=lattice, owned=True)
-    if n_nan is not None and grid.z is z:  # the grid adopted the buffer the strips counted
+    if n_nan is not None and grid.heights is z:  # the grid adopted the buffer the strips counted
         grid._cache["n_nodata"] = n_nan
     return grid
 
@@ -125,14 +125,19 @@ def _strip_cache_bytes(src, b: int) -> int:
 
 
 def _read_strips(src, b: int, t, scale_offset) -> np.ndarray:
-    """Band ``b`` of an open raster as heights: float64, rows in increasing y (and x), its
-    nodata value NaN, ``(scale, offset)`` applied, read in strips of rows
-    (:data:`_STRIP_SAMPLES`) into a fresh buffer the grid adopts; and the number of NaN
-    (counted strip by strip: a grid's ``n_nodata`` without a pass and a mask of its own)."""
+    """Band ``b`` of an open raster as heights: rows in increasing y (and x), its nodata
+    value NaN, ``(scale, offset)`` applied, read in strips of rows (:data:`_STRIP_SAMPLES`)
+    into a fresh buffer the grid adopts; and the number of NaN (counted strip by strip: a
+    grid's ``n_nodata`` without a pass and a mask of its own).
+
+    The buffer is float32 for a float32 band that has no scale or offset (the samples are
+    the heights: the grid keeps them, :attr:`~terrainvis.HeightGrid.heights`, half the
+    memory of a float64 copy) and float64 otherwise."""
     from rasterio.windows import Window
 
     rows, cols = src.height, src.width
-    z = _fresh_heights((rows, cols))
+    keep32 = np.dtype(src.dtypes[b - 1]) == np.float32 and tuple(scale_offset) == (1.0, 0.0)
+    z = _fresh_heights((rows, cols), np.float32 if keep32 else np.float64)
     nodata = src.nodatavals[b - 1]
     stored = None
     if nodata is not None and not np.isnan(nodata):
@@ -153,18 +158,18 @@ def _read_strips(src, b: int, t, scale_offset) -> np.ndarray:
     return z, n_nan
 
 
-def _fresh_heights(shape) -> np.ndarray:
-    """An empty float64 array for a raster's heights, without numpy's advice to back it with
+def _fresh_heights(shape, dtype=np.float64) -> np.ndarray:
+    """An empty array for a raster's heights, without numpy's advice to back it with
     huge pages: the kernel's synchronous compaction of huge pages on first touch made filling
     a 20000² grid take 2.3 to 6.7 s instead of 1.1 to 1.8 s (reading 8192²: 1.0-1.5 s against
     0.75 s), and the sweep over it was no slower without them."""
     multiarray = getattr(getattr(np, "_core", None), "multiarray", None) or getattr(np.core, "multiarray", None)
     toggle = getattr(multiarray, "_set_madvise_hugepage", None)
     if toggle is None:
-        return np.empty(shape, dtype=np.float64)
+        return np.empty(shape, dtype=dtype)
     before = toggle(False)
     try:
-        return np.empty(shape, dtype=np.float64)
+        return np.empty(shape, dtype=dtype)
     finally:
         toggle(before)
 
@@ -470,7 +475,7 @@ def check_geotiff_target(grid: HeightGrid, path) -> tuple:
         raise ValueError(f"path must end in .tif or .tiff, got {p.name!r}")
     if not grid.is_uniform:
         raise ValueError("a GeoTIFF needs a uniform grid, and this one is rectilinear: write the raster as .npz")
-    _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix)
+    _, nx, ny, crs_text, _ = _uniform_layout(grid, p.suffix, values=False)
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None
     return p, nx, ny, crs
 

@@ -123,8 +123,9 @@ def _nodata_value(z: np.ndarray, *, always: bool = False) -> float | None:
     return -3.4028234663852886e38
 
 
-def _uniform_layout(grid: HeightGrid, suffix: str):
-    """What a uniform raster of ``grid`` holds: heights, native sample axes, CRS text, resampling note."""
+def _uniform_layout(grid: HeightGrid, suffix: str, *, values: bool = True):
+    """What a uniform raster of ``grid`` holds: heights, native sample axes, CRS text, resampling note
+    (``values`` False: the heights are None, and none is read or resampled)."""
     affine = xy_to_native(grid.attrs)
     crs_text = grid.attrs.get("crs") or None
     if crs_text is not None and not isinstance(crs_text, str):
@@ -136,7 +137,8 @@ def _uniform_layout(grid: HeightGrid, suffix: str):
             UserWarning, stacklevel=4,
         )
         affine, crs_text = IDENTITY, None
-    xs, ys, z = grid.xs, grid.ys, grid.z
+    xs, ys = grid.xs, grid.ys
+    z = grid.z if values else None
     note = None
     if not grid.is_uniform:
         ux = xs if _is_uniform(xs) else np.linspace(xs[0], xs[-1], xs.size)
@@ -156,7 +158,8 @@ def _uniform_layout(grid: HeightGrid, suffix: str):
             "side: cut it to n - (n - 1) mod 2^L)."
         )
         warnings.warn(note, UserWarning, stacklevel=4)
-        z = grid.height_on_grid(ux, uy)
+        if values:
+            z = grid.height_on_grid(ux, uy)
         xs, ys = ux, uy
     nx, ny = native_axes(xs, ys, affine)
     return z, nx, ny, crs_text, note

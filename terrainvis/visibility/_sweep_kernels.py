@@ -383,7 +383,7 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
         td = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
         if td > t and td < tn:
             u = (ex + td * dx - xs[c]) * ixw[c]
-            fd = ez + td * dz - (z[r, c] + u * (z[r + 1, c + 1] - z[r, c]))
+            fd = ez + td * dz - (np.float64(z[r, c]) + u * (np.float64(z[r + 1, c + 1]) - np.float64(z[r, c])))
             e = fd if bulge == 0.0 else curved_min(fa, fd, t, td, bulge)
             if e < best:
                 best = e
@@ -679,8 +679,8 @@ def _cell_edges(g, eye, r, c, win, ub, lb, lim):
             ra, ca, rb, cb = r + 1, c, r + 1, c + 1
         else:
             ra, ca, rb, cb = r, c, r + 1, c + 1
-        _edge_update((xs[ca] - ex, ys[ra] - ey, z[ra, ca]), (xs[cb] - ex, ys[rb] - ey, z[rb, cb]), ez, win,
-                     ub, lb, lim)
+        _edge_update((xs[ca] - ex, ys[ra] - ey, np.float64(z[ra, ca])), (xs[cb] - ex, ys[rb] - ey, np.float64(z[rb, cb])),
+                     ez, win, ub, lb, lim)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -724,7 +724,7 @@ def _sample_val(g, eye, r, c, q, kc):
     dx = g.xs[c] - eye.ex
     dy = g.ys[r] - eye.ey
     d = np.sqrt(dx * dx + dy * dy)
-    return (g.z[r, c] - eye.ez) / d - kc * d, _unwrap(diamond(dx, dy), q)
+    return (np.float64(g.z[r, c]) - eye.ez) / d - kc * d, _unwrap(diamond(dx, dy), q)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -984,7 +984,7 @@ def _fill(g, eye, q, run, lo, k0, k1, buf, kc):
             dx = g.xs[cc] - eye.ex
             dy = g.ys[rr] - eye.ey
             d = np.sqrt(dx * dx + dy * dy)
-            buf[0, line, k] = (g.z[rr, cc] - eye.ez) / d - kc * d
+            buf[0, line, k] = (np.float64(g.z[rr, cc]) - eye.ez) / d - kc * d
             buf[1, line, k] = _unwrap(diamond(dx, dy), q)
             buf[2, line, k] = d
 
@@ -1213,7 +1213,7 @@ def strip_max(z, cmax, rmax):
     rmax[:, :] = -_INF
     for r in range(nr):
         for c in range(nc):
-            v = z[r, c]
+            v = np.float64(z[r, c])
             if not v == v:
                 continue
             up = _f32_up(v)
@@ -1566,7 +1566,7 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
                 if dist > rules.dmax:
                     tg.code[rr, cc] = NOT_TARGET
                     continue
-                nt = g.z[rr, cc] + rules.ht - eye.ez
+                nt = np.float64(g.z[rr, cc]) + rules.ht - eye.ez
                 # on the ground the target's slope is its sample's, bit for bit (z + 0.0 is z)
                 st = buf[0, outer, k] if rules.ht == 0.0 else nt / dist - rules.kc * dist
                 sl = _slot(p, bsz, glo)
@@ -1745,25 +1745,59 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def max_slope(z, xs, ys, out):
-    """``out[r]`` = largest |slope| of the edges of cell row r (NaN edges ignored)."""
+def max_slope(z, xs, ys, even, out):
+    """``out[r]`` = largest |slope| of the edges of cell row r (NaN edges ignored).
+
+    ``even``: every ``xs[c + 1] - xs[c]`` is the same number, as on most rasters. The
+    row's largest height step of each kind of edge is then divided once: a correctly
+    rounded division by one positive number never reverses an order, so the largest
+    quotient is the quotient of the largest step, bit for bit (8192²: 0.33 s -> 0.09 s).
+    The steps along y share ``ys[r + 1] - ys[r]`` on any grid.
+    """
     nr, nc = z.shape
+    if even:
+        hx = xs[1] - xs[0]
+        for r in range(nr):
+            bx = 0.0
+            by = 0.0
+            bd = 0.0
+            last = r + 1 == nr
+            for c in range(nc):
+                v = np.float64(z[r, c])
+                if c + 1 < nc:
+                    e = abs(np.float64(z[r, c + 1]) - v)
+                    if e > bx:
+                        bx = e
+                if not last:
+                    e = abs(np.float64(z[r + 1, c]) - v)
+                    if e > by:
+                        by = e
+                    if c + 1 < nc:
+                        e = abs(np.float64(z[r + 1, c + 1]) - v)
+                        if e > bd:
+                            bd = e
+            best = bx / hx
+            if not last:
+                hy = ys[r + 1] - ys[r]
+                best = max(best, by / hy, bd / np.sqrt(hx * hx + hy * hy))
+            out[r] = best
+        return
     for r in range(nr):
         best = 0.0
         for c in range(nc):
-            v = z[r, c]
+            v = np.float64(z[r, c])
             if c + 1 < nc:
-                e = abs(z[r, c + 1] - v) / (xs[c + 1] - xs[c])
+                e = abs(np.float64(z[r, c + 1]) - v) / (xs[c + 1] - xs[c])
                 if e > best:
                     best = e
             if r + 1 < nr:
-                e = abs(z[r + 1, c] - v) / (ys[r + 1] - ys[r])
+                e = abs(np.float64(z[r + 1, c]) - v) / (ys[r + 1] - ys[r])
                 if e > best:
                     best = e
                 if c + 1 < nc:
                     hx = xs[c + 1] - xs[c]
                     hy = ys[r + 1] - ys[r]
-                    e = abs(z[r + 1, c + 1] - v) / np.sqrt(hx * hx + hy * hy)
+                    e = abs(np.float64(z[r + 1, c + 1]) - v) / np.sqrt(hx * hx + hy * hy)
                     if e > best:
                         best = e
         out[r] = best

@@ -290,7 +290,7 @@ def _inside(terrain, grid: HeightGrid, obs: np.ndarray, fov: FieldOfView, idx: n
     if fov.vertical is not None:
         h_o, h_t, kc = heights
         ez = obs[2] if obs.size == 3 else _ground(terrain, float(obs[0]), float(obs[1])) + h_o
-        zt = _target_surface(terrain, grid).ravel()[idx] + h_t
+        zt = _target_surface(terrain, grid).ravel()[idx].astype(np.float64) + h_t
         angle = elevation_degrees(np.sqrt(d2), zt - ez, kc)
         inside &= (angle >= fov.vertical[0]) & (angle <= fov.vertical[1])
     return inside
@@ -302,14 +302,14 @@ def _ground(terrain, x: float, y: float) -> float:
         c = np.flatnonzero(terrain.xs == x)
         r = np.flatnonzero(terrain.ys == y)
         if c.size and r.size:
-            return float(terrain.z[r[0], c[0]])
+            return float(terrain.heights[r[0], c[0]])
     return float(terrain.height_at([[x, y]])[0])
 
 
 def _target_surface(terrain, grid: HeightGrid) -> np.ndarray:
     """The surface under test at the targets' samples (the viewshed's own rule: a grid's own heights)."""
     if isinstance(terrain, HeightGrid) and np.array_equal(grid.xs, terrain.xs) and np.array_equal(grid.ys, terrain.ys):
-        return terrain.z
+        return terrain.heights  # float32 for a float32 raster: callers make the heights they use float64
     return terrain.height_on_grid(grid.xs, grid.ys)
 
 

@@ -530,8 +530,8 @@ def _surface_at(terrain, x: float, y: float) -> float:
     r = int(np.searchsorted(ys, y))
     if c < xs.size and r < ys.size and xs[c] == x and ys[r] == y:
         # exactly on a sample: its own height (the triangle formula may round it)
-        v = float(terrain.z[r, c])
-        if np.isfinite(v) and _touches_present(terrain.z, r, c):
+        v = float(terrain.heights[r, c])
+        if np.isfinite(v) and _touches_present(terrain.heights, r, c):
             return v
         return math.nan
     lx = min(max(x, xs[0]), xs[-1]) - xs[0]
@@ -581,7 +581,7 @@ def _sweep_grid(grid: HeightGrid, strips: bool = True) -> SurfaceGrid:
     xs, ys, ixw, iyw, uniform = _local_axes(grid)
     cmax, rmax = _strip_max(grid) if strips else no_strips()
     pyr, off, nxl, ltop = no_pyramid()
-    return SurfaceGrid(grid.z, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0), pyr, off, nxl, ltop, cmax, rmax)
+    return SurfaceGrid(grid.heights, xs, ys, ixw, iyw, uniform, bool(grid.n_nodata > 0), pyr, off, nxl, ltop, cmax, rmax)
 
 
 def _strip_max(grid: HeightGrid):
@@ -591,7 +591,7 @@ def _strip_max(grid: HeightGrid):
         rows, cols = grid.shape
         cmax = np.empty(((rows - 2) // _vk.SEG + 1, cols), dtype=np.float32)
         rmax = np.empty((rows, (cols - 2) // _vk.SEG + 1), dtype=np.float32)
-        _vk.strip_max(grid.z, cmax, rmax)
+        _vk.strip_max(grid.heights, cmax, rmax)
         v = grid._cache["viewshed_strip_max"] = (cmax, rmax)
     return v
 
@@ -601,7 +601,8 @@ def _max_slope(grid: HeightGrid) -> float:
     g = grid._cache.get("viewshed_max_slope")
     if g is None:
         rows = np.empty(grid.shape[0])
-        _vk.max_slope(grid.z, grid.xs, grid.ys, rows)
+        hx = np.diff(grid.xs)
+        _vk.max_slope(grid.heights, grid.xs, grid.ys, bool((hx == hx[0]).all()), rows)
         g = float(rows.max())
         grid._cache["viewshed_max_slope"] = g
     return g
@@ -652,7 +653,7 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, s
     todo = np.flatnonzero(code.ravel() == _vk.UNDECIDED)
     if todo.size:
         r, c = np.divmod(todo, at.shape[1])
-        vis = _exact(grid, eye, (at.xs[c], at.ys[r], zt[r, c] + h_t), delta, tol, kc)
+        vis = _exact(grid, eye, (at.xs[c], at.ys[r], zt[r, c].astype(np.float64) + h_t), delta, tol, kc)
         code.ravel()[todo] = np.where(vis, _vk.VISIBLE, _vk.BLOCKED)
     info = {"targets": int(code.size - np.count_nonzero(code == _vk.NOT_TARGET)), "lb": counts[0],
             "ub": counts[1], "walk": counts[2], "exact": int(todo.size), "ub_bound": counts[3]}
@@ -666,14 +667,14 @@ def _target_codes(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, dmax: float
     it, beyond ``dmax``), and the heights of the surface under test there."""
     code = np.full(at.shape, _vk.UNDECIDED, dtype=np.int8)
     if own:
-        zt = grid.z
+        zt = grid.heights  # float32 for a float32 raster: the heights of targets are made float64 where they are used
         if grid.n_nodata:
-            code[~_on_surface(grid.z)] = _vk.NOT_TARGET
+            code[~_on_surface(zt)] = _vk.NOT_TARGET
     else:
         zt = grid.height_on_grid(at.xs, at.ys)
         code[np.isnan(zt)] = _vk.NOT_TARGET
     if at.n_nodata:
-        code[np.isnan(at.z)] = _vk.NOT_TARGET
+        code[np.isnan(at.heights)] = _vk.NOT_TARGET
     if math.isfinite(dmax):
         code[(at.xs[None, :] - eye[0]) ** 2 + (at.ys[:, None] - eye[1]) ** 2 > dmax * dmax] = _vk.NOT_TARGET
     return code, zt
@@ -828,7 +829,7 @@ def _mark_nearest(out: np.ndarray, terrain, at: HeightGrid, eye, query, engine) 
     h_t, _, kc = query  # the ground the observer stands on counts at any max_distance
     c = int(np.argmin(np.abs(at.xs - eye[0])))
     r = int(np.argmin(np.abs(at.ys - eye[1])))
-    if at.n_nodata and not np.isfinite(at.z[r, c]):
+    if at.n_nodata and not np.isfinite(at.heights[r, c]):
         return
     x, y = float(at.xs[c]), float(at.ys[r])
     zs = _surface_at(terrain, x, y)
