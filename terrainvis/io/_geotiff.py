@@ -274,7 +274,7 @@ class _Rows:
 
 
 def _write_tif(grid: HeightGrid, p: Path, *, dtype: str | None = None) -> None:
-    rasterio = rasterio_module()
+    rasterio_module()  # the geo extra's one-line error before any work
 
     z, nx, ny, crs_text, note = _uniform_layout(grid, p.suffix)
     crs = parse_crs(crs_text, "grid.attrs['crs']") if crs_text else None  # before any file is touched

@@ -1496,7 +1496,7 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
     others (see :func:`sweep`). ``last`` as in :func:`_last_ring_bound`.
     """
     j, q, i0, i1, lo, cells, plo, phi = span
-    r0, c0, dr, dc = rn[0], rn[1], rn[2], rn[3]
+    r0, c0, dc = rn[0], rn[1], rn[3]
     vertical = dc == 0
     if vertical:
         outer = 1 if c0 > eye.ce else 0
@@ -1642,7 +1642,7 @@ def _sector(g, eye, rules, lay, tg, s, stats, stop):
     hidden = borrow(hidden_own)
     ranges = borrow(ranges_own)
     counts = borrow(counts_own)
-    xs, ys, z = g.xs, g.ys, g.z
+    xs, ys = g.xs, g.ys
     ntg = tg.tx.shape[0]
     nr = ys.shape[0]
     nc = xs.shape[0]

@@ -365,10 +365,11 @@ def _progress_bar(k: int, show: bool, desc: str, done: int = 0):
     into a file (a log), plain lines instead (:class:`terrainvis.core._progress.ProgressLines`)."""
     from tqdm.std import tqdm
 
+    bar = tqdm
     if show:
         from ..core._progress import ProgressLines, in_kernel, on_a_terminal, progress_bar_class
 
         if not (on_a_terminal() or in_kernel()):
             return ProgressLines(k, desc, "observer", initial=done)
-        tqdm = progress_bar_class()  # the notebook's bar in Jupyter
-    return tqdm(total=k, initial=done, desc=desc, unit="observer", file=sys.stderr, disable=not show)
+        bar = progress_bar_class()  # the notebook's bar in Jupyter
+    return bar(total=k, initial=done, desc=desc, unit="observer", file=sys.stderr, disable=not show)

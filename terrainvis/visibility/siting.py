@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.memory import check_memory
-from ..core.terrain import HeightGrid, as_terrain
+from ..core.terrain import HeightGrid
 from ..core.validate import as_int, describe
 from .cumulative import _keep_terrain, _prepare, _run_chunks
 from .observers import _eyes
