@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.fileio import atomic_path
+from ..core.memory import fresh_array
 from ..core._georef import GEOREF_KEYS, parse_crs, rasterio_module
 from ..core.terrain import HeightGrid
 from ._attrs import _attrs_from_json, _attrs_to_json
@@ -137,7 +138,7 @@ def _read_strips(src, b: int, t, scale_offset) -> np.ndarray:
 
     rows, cols = src.height, src.width
     keep32 = np.dtype(src.dtypes[b - 1]) == np.float32 and tuple(scale_offset) == (1.0, 0.0)
-    z = _fresh_heights((rows, cols), np.float32 if keep32 else np.float64)
+    z = fresh_array((rows, cols), np.float32 if keep32 else np.float64)
     nodata = src.nodatavals[b - 1]
     stored = None
     if nodata is not None and not np.isnan(nodata):
@@ -156,22 +157,6 @@ def _read_strips(src, b: int, t, scale_offset) -> np.ndarray:
         _to_heights(dst, scale_offset)
         n_nan += int(np.count_nonzero(np.isnan(dst)))
     return z, n_nan
-
-
-def _fresh_heights(shape, dtype=np.float64) -> np.ndarray:
-    """An empty array for a raster's heights, without numpy's advice to back it with
-    huge pages: the kernel's synchronous compaction of huge pages on first touch made filling
-    a 20000² grid take 2.3 to 6.7 s instead of 1.1 to 1.8 s (reading 8192²: 1.0-1.5 s against
-    0.75 s), and the sweep over it was no slower without them."""
-    multiarray = getattr(getattr(np, "_core", None), "multiarray", None) or getattr(np.core, "multiarray", None)
-    toggle = getattr(multiarray, "_set_madvise_hugepage", None)
-    if toggle is None:
-        return np.empty(shape, dtype=dtype)
-    before = toggle(False)
-    try:
-        return np.empty(shape, dtype=dtype)
-    finally:
-        toggle(before)
 
 
 def _to_heights(z: np.ndarray, scale_offset) -> np.ndarray:

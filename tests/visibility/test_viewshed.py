@@ -590,3 +590,19 @@ def test_strip_maxima_are_float32_upper_bounds_of_each_segment(seed, rows, cols)
 def _f32_up(v: float) -> np.float32:
     f = np.float32(v)
     return f if float(f) >= v else np.nextafter(f, np.float32(np.inf))
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 5), (700, 3000), (5, (1 << 20) + 3)])
+def test_undecided_codes_found_block_by_block(shape):
+    """The sweep's leftover targets, found a block of rows at a time: every UNDECIDED code's flat
+    index, in order, as a comparison of the whole array finds them."""
+    from terrainvis.visibility import _sweep_kernels as vk
+    from terrainvis.visibility.sweep import _undecided
+
+    rng = np.random.default_rng(shape[0] * 7 + shape[1])
+    code = rng.choice(np.array([vk.UNDECIDED, vk.VISIBLE, vk.BLOCKED, vk.NOT_TARGET], dtype=np.int8), size=shape,
+                      p=[0.01, 0.4, 0.4, 0.19])
+    got = _undecided(code)
+    assert np.array_equal(got, np.flatnonzero(code.ravel() == vk.UNDECIDED)) and got.dtype == np.int64
+    code[:] = vk.VISIBLE
+    assert _undecided(code).size == 0
