@@ -159,7 +159,7 @@ def _foreign_message(out: Path, files) -> str:
 def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int:
     """Print and write the tables, draw the figures; the exit status."""
     from ..experiment import report
-    from ..experiment.collect import step_column
+    from ..experiment.report import step_column
     from ..experiment.measures import MEASURES
     from ..core.fileio import atomic_write_text
 
@@ -246,7 +246,7 @@ def _write_plots(df, grids, out: Path) -> None:
     def save(fig, name, dpi):
         save_figure(fig, out / name, dpi=dpi)
 
-    from ..experiment.collect import step_column
+    from ..experiment.report import step_column
 
     ok = df[df["error"].isna()]
     if ok.empty:

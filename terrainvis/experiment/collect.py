@@ -14,7 +14,7 @@ import pandas as pd
 from .options import Settings
 
 __all__ = ["COLUMNS", "MEASURE_COLUMNS", "EVALUATE_COLUMNS", "BUDGET_COLUMNS", "UNIT_KEY", "BUDGET_KEY", "unit_key",
-           "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table", "order", "budgeted_rows", "step_column"]
+           "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table", "order"]
 
 #: Columns of the result table, in order.
 COLUMNS = (
@@ -54,31 +54,6 @@ def unit_key(settings: Settings) -> tuple:
     from .options import budgeted
 
     return BUDGET_KEY if budgeted(settings) else UNIT_KEY
-
-
-def budgeted_rows(df: pd.DataFrame) -> pd.Series:
-    """Which rows of a table belong to a run budgeted in maximum vertical error (a ``max_error_budget``)."""
-    if "max_error_budget" not in df.columns:
-        return pd.Series(False, index=df.index)
-    return df["max_error_budget"].notna()
-
-
-def step_column(df: pd.DataFrame) -> str:
-    """The column a table's units are by: ``"level"``, or ``"max_error_budget"`` when its rows are of a
-    run budgeted in maximum vertical error (the tables and figures put the budget in the level's place).
-
-    Raises
-    ------
-    ValueError
-        When ``df`` holds rows of both kinds of run.
-    """
-    budget = budgeted_rows(df)
-    if not budget.any():
-        return "level"
-    if not budget.all():
-        raise ValueError(f"df holds rows of a run by levels ({int((~budget).sum())}, max_error_budget empty) and of "
-                         f"a run budgeted in maximum vertical error ({int(budget.sum())}); select one kind first")
-    return "max_error_budget"
 
 
 def rows_per_unit(settings: Settings) -> int:

@@ -20,7 +20,7 @@ from matplotlib.ticker import NullFormatter
 
 from ..core.validate import as_points, describe
 from ..core.terrain import TIN, HeightGrid, as_terrain
-from .collect import step_column
+from .report import step_column
 
 __all__ = [
     "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "accuracy_vs_budget", "tradeoff",

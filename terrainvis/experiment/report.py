@@ -29,15 +29,38 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .collect import budgeted_rows as _budgeted
-from .collect import step_column as _step
-
 __all__ = [
     "paper_tables", "to_markdown", "findings", "findings_markdown", "paper_reference", "paper_comparison",
-    "comparison_markdown", "oracle_gap", "localized", "viewshed_table",
+    "comparison_markdown", "oracle_gap", "localized", "viewshed_table", "budgeted_rows", "step_column",
 ]
 
 _LEVEL_FRACTION = {1: "25%", 2: "6%", 3: "1.5%"}
+
+
+def budgeted_rows(df: pd.DataFrame) -> pd.Series:
+    """Which rows of a table belong to a run budgeted in maximum vertical error (a ``max_error_budget``)."""
+    if "max_error_budget" not in df.columns:
+        return pd.Series(False, index=df.index)
+    return df["max_error_budget"].notna()
+
+
+def step_column(df: pd.DataFrame) -> str:
+    """The column a table's units are by: ``"level"``, or ``"max_error_budget"`` when its rows are of a
+    run budgeted in maximum vertical error (the tables and figures put the budget in the level's place).
+
+    Raises
+    ------
+    ValueError
+        When ``df`` holds rows of both kinds of run.
+    """
+    budget = budgeted_rows(df)
+    if not budget.any():
+        return "level"
+    if not budget.all():
+        raise ValueError(f"df holds rows of a run by levels ({int((~budget).sum())}, max_error_budget empty) and of "
+                         f"a run budgeted in maximum vertical error ({int(budget.sum())}); select one kind first")
+    return "max_error_budget"
+
 
 def _step_label(step: str, value) -> str:
     """``"level 2"``, or ``"max error ≤ 2.5"`` for a budget."""
@@ -123,7 +146,7 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
     if missing:
         raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
     every = _ok(df, predicate)
-    step = _step(every)
+    step = step_column(every)
     as_step = int if step == "level" else float
     data = every[every["relocation"].isin(RELOCATIONS)]  # the paper's tables: its relocations only
     counts = _counts(data)
@@ -350,7 +373,7 @@ def findings(df: pd.DataFrame) -> list[dict]:
     rows = df[df["error"].fillna("").astype(str) == ""] if "error" in df.columns else df
     if "max_distance" in rows.columns and rows["max_distance"].nunique(dropna=False) > 1:
         rows = rows[rows["max_distance"].isna()]
-    by_budget = _budgeted(rows)
+    by_budget = budgeted_rows(rows)
     rows = rows[~by_budget]  # the paper's findings are about its levels
     measured = rows[rows["accuracy"].notna()]
     rows = measured[measured["relocation"].isin(RELOCATIONS)]
@@ -427,7 +450,7 @@ def paper_comparison(df: pd.DataFrame, *, predicate: str | None = None) -> pd.Da
         with the number of cells each.
     """
     data = _ok(df, predicate)
-    data = _paper_convention(data[~_budgeted(data)])  # the paper's cells are its levels
+    data = _paper_convention(data[~budgeted_rows(data)])  # the paper's cells are its levels
     ref = paper_reference()
     rows = []
     for r in ref.itertuples():
@@ -474,7 +497,7 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
     from ..relocation.registry import ORACLE, practical_relocations
 
     data = _ok(df, predicate)
-    mu = 100 * data.groupby(["method", _step(data), "relocation"])["accuracy"].mean().unstack("relocation")
+    mu = 100 * data.groupby(["method", step_column(data), "relocation"])["accuracy"].mean().unstack("relocation")
     if ORACLE not in mu.columns:
         return pd.DataFrame(columns=["oracle", "best", "best_accuracy", "gap"])
     practical = mu[[r for r in practical_relocations() if r in mu.columns]]
@@ -511,7 +534,7 @@ def beyond_paper(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFr
     from ..relocation.registry import CALIBRATED, ORACLE, PAPER_RELOCATIONS, RELOCATIONS
 
     data = _ok(df, predicate)
-    mu = 100 * data.groupby(["method", _step(data), "relocation"])["accuracy"].mean().unstack("relocation")
+    mu = 100 * data.groupby(["method", step_column(data), "relocation"])["accuracy"].mean().unstack("relocation")
     beyond = [r for r in RELOCATIONS if r not in PAPER_RELOCATIONS and not RELOCATIONS[r].bound and r in mu.columns]
     if not beyond:
         return pd.DataFrame()
@@ -587,7 +610,7 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
     elif "predicate" in data.columns and data["predicate"].nunique() > 1:
         raise ValueError(f"df holds rows of several predicates {sorted(set(data['predicate']))}; pass predicate=")
     d = data["max_distance"].fillna(np.inf)
-    mu = 100 * data.assign(_d=d).groupby([_step(data), "relocation", "_d"])["accuracy"].mean().unstack("_d")
+    mu = 100 * data.assign(_d=d).groupby([step_column(data), "relocation", "_d"])["accuracy"].mean().unstack("_d")
     mu.columns = ["all" if c == np.inf else _fmt(float(c)) for c in mu.columns]
     idx = [(lv, r) for lv in sorted({i[0] for i in mu.index}) for r in RELOCATIONS if (lv, r) in mu.index]
     mu = mu.loc[idx]
@@ -621,7 +644,7 @@ def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
     if "measure" not in data.columns or not (data["measure"] == "viewshed").any():
         raise ValueError("df holds no viewshed rows (run compare with measure='viewshed')")
     data = data[data["measure"] == "viewshed"]
-    g = data.groupby(["method", _step(data), "relocation"])
+    g = data.groupby(["method", step_column(data), "relocation"])
     t = pd.DataFrame({
         "cells_kept": 100 * g["accuracy"].mean(), "visible_kept": 100 * g["visible_kept"].mean(),
         "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].median(),

@@ -47,7 +47,6 @@ def end_radius_for(simplified, original: HeightGrid, level: int | None, predicat
 
     if level is None or level != level:  # None, or NaN as a table holds it
         level = nearest_level(original.shape, simplified.n_vertices)
-
     rows, cols = coarse_shape(original.shape, level)
     xmin, xmax, ymin, ymax = original.extent
     return float(max((xmax - xmin) / max(cols - 1, 1), (ymax - ymin) / max(rows - 1, 1)))
