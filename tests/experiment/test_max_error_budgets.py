@@ -224,3 +224,16 @@ def test_the_figures_go_by_budget(budget_run):
     levels = df.assign(max_error_budget=np.nan, level=1)
     with pytest.raises(ValueError, match="df holds no budget in vertical error"):
         plot.accuracy_vs_budget(levels)
+
+
+def test_a_results_file_from_before_budgets_resumes_as_a_run_by_levels(tmp_path, monkeypatch):
+    out = tmp_path / "results.csv"
+    run = dict(methods=["lls"], levels=[1], n_points=8, n_sets=1, relocations=["full"], workers=1, out_csv=out)
+    first = tv.compare(["hills"], **run)
+    old = pd.read_csv(out).drop(columns=["max_error_budget", "stopped_by"])  # as terrainvis wrote it before
+    old.to_csv(out, index=False, lineterminator="\n")
+    seen = []
+    again = tv.compare(["hills"], **run, resume=True, on_unit=lambda key, rows: seen.append(key))
+    assert seen == []
+    pd.testing.assert_frame_equal(again, first)
+    assert {"max_error_budget", "stopped_by"} <= set(pd.read_csv(out).columns)  # written back with them
