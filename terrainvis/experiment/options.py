@@ -421,8 +421,9 @@ _DECLARED = [
              "method its coarsest level within E, greedy insertion and greedy cuts stopping at E, QEC a search on "
              "the vertex count). The rows carry E in ``max_error_budget``, the error reached in ``max_error``, "
              "the level a regular method reached in ``level`` (empty for the irregular ones) and in ``stopped_by`` "
-             "``\"max_error\"`` when E was met, or ``\"budget\"`` when the method could not reach E at any size "
-             "it allows (the row is kept). Not with ``levels`` given too, nor with ``cascade=True`` (each budget "
+             "``\"max_error\"`` when E was met, ``\"budget\"`` when the method could not reach E at any size "
+             "it allows, or ``\"exceeded\"`` when it said E was met and the measured error exceeds it (such rows "
+             "are kept). Not with ``levels`` given too, nor with ``cascade=True`` (each budget "
              "is simplified from T: ``\"auto\"`` never cascades budgets)."),
         cli=Flag("--max-error", _error_word, many=True, metavar="E"),
     ),
