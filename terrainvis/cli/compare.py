@@ -32,7 +32,9 @@ def add_parser(sub) -> None:
             "simplification, and count the line-of-sight verdicts that survive. Defaults reproduce the "
             "paper's protocol: the five bundled 120x120 terrains plus the central 120x120 window of the "
             "Jacksboro DEM, 6 sets of 50 points, levels 1-3, every default method (the paper's seven), the "
-            "default relocations (the paper's identity, full and half, and the calibrated one)."
+            "default relocations (the paper's identity, full and half, and the calibrated one). --max-error E [E ...] "
+            "budgets the run in maximum vertical error instead of levels: each method at its smallest result within "
+            "each E."
         ),
     )
     c.add_argument("--terrain", nargs="+", default=None, metavar="T",
@@ -93,8 +95,9 @@ def _compare_in(out: Path, args) -> int:
 
     terrains = args.terrain or (QUICK["terrains"] if args.quick else list(DEFAULT_TERRAINS))
     options = given(args)
-    if args.quick:
-        options = {**{k: v for k, v in QUICK.items() if k != "terrains"}, **options}
+    if args.quick:  # a run budgeted in vertical error keeps its budgets in place of the quick levels
+        skip = {"terrains"} | ({"levels"} if options.get("max_errors") is not None else set())
+        options = {**{k: v for k, v in QUICK.items() if k not in skip}, **options}
     grids = {}
     for t in terrains:
         label, grid = read_terrain(t, args)
@@ -156,31 +159,40 @@ def _foreign_message(out: Path, files) -> str:
 def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int:
     """Print and write the tables, draw the figures; the exit status."""
     from ..experiment import report
+    from ..experiment.report import step_column
     from ..experiment.measures import MEASURES
     from ..core.fileio import atomic_write_text
 
     measure = MEASURES[settings.measure]
+    step = step_column(df)  # level, or max_error_budget in a run budgeted in vertical error
     extra = {k: t for k, t in (measure.tables(df) if measure.tables is not None else {}).items() if not t.empty}
     if "beyond" not in extra and (df["relocation"] == "oracle").any():
         extra["oracle"] = report.oracle_gap(df)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
     text = report.to_markdown({**report.paper_tables(df), **extra})
-    lines = []  # the paper's side by side and its findings are about its matrices of pairs
-    if measure.paper:
+    lines = []  # the paper's side by side and its findings are about its matrices of pairs, at its levels
+    if measure.paper and step == "level":
         text += "\n" + report.comparison_markdown(report.paper_comparison(df))
         lines = report.findings_markdown(report.findings(df)) + report.beyond_paper_findings(df)
+    elif measure.paper:
+        lines = ["", "The paper side by side and its findings are at its levels (shares of the samples): a run "
+                     "budgeted in maximum vertical error (--max-error) leaves them out."]
+        lines += report.beyond_paper_findings(df)
+    if step != "level":
+        lines += _budgets_not_met(df)
     fast = sorted(set(df[(df["method"] == "qec") & (df["backend"] == "fast-simplification")]["terrain"]))
     if fast:
         from simplifiers.quadric import AUTO_MAX_SAMPLES
 
         lines += ["", f"Note: QEC ran on fast-simplification for {', '.join(fast)} (more than {AUTO_MAX_SAMPLES:,} "
                       "samples, where pymeshlab takes minutes per level); pymeshlab, the paper's QEC, ran elsewhere."]
-    units = df[["terrain", "method", "level"]].drop_duplicates().shape[0]
-    failed = df[df["error"].notna()].drop_duplicates(["terrain", "method", "level"])
+    units = df[["terrain", "method", step]].drop_duplicates().shape[0]
+    failed = df[df["error"].notna()].drop_duplicates(["terrain", "method", step])
     if len(failed):
         lines += ["", "### Failed units", ""]
-        lines += [f"- {r.terrain} / {r.method} / level {r.level}: {r.error}" for r in failed.itertuples()]
+        lines += [f"- {r.terrain} / {r.method} / {_step_text(step, getattr(r, step))}: {r.error}"
+                  for r in failed.itertuples()]
     changed = df[df["repair"].notna()].drop_duplicates(["terrain", "method"]) if "repair" in df else df.iloc[:0]
     if len(changed):  # evaluate's meshes that were changed to be measured (reversed faces, --repair)
         lines += ["", "### Meshes changed to be measured", ""]
@@ -207,6 +219,24 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
     return 1
 
 
+def _step_text(step: str, value) -> str:
+    """``level 2``, or ``max error 2.5`` for a unit of a run budgeted in vertical error."""
+    return f"level {value}" if step == "level" else f"max error {value:g}"
+
+
+def _budgets_not_met(df) -> list[str]:
+    """The units of a run budgeted in vertical error whose result is not within its budget, as markdown lines
+    (their rows are kept, with what stopped the method in ``stopped_by``)."""
+    ok = df[df["error"].isna()]
+    missed = ok[ok["stopped_by"].fillna("") != "max_error"].drop_duplicates(["terrain", "method", "max_error_budget"])
+    if not len(missed):
+        return []
+    lines = ["", "### Budgets not met", ""]
+    lines += [f"- {r.terrain} / {r.method} / max error {r.max_error_budget:g}: its result's max error is "
+              f"{r.max_error:.4g} with {r.n_vertices:,} vertices (stopped by {r.stopped_by})" for r in missed.itertuples()]
+    return lines
+
+
 def _write_plots(df, grids, out: Path) -> None:
     """The figures, drawn from the rows and the saved simplified terrains (nothing is simplified again)."""
     from ..experiment import plot
@@ -216,21 +246,28 @@ def _write_plots(df, grids, out: Path) -> None:
     def save(fig, name, dpi):
         save_figure(fig, out / name, dpi=dpi)
 
+    from ..experiment.report import step_column
+
     ok = df[df["error"].isna()]
     if ok.empty:
         return
+    budgets = step_column(ok) == "max_error_budget"
     save(plot.accuracy_vs_size(ok), "accuracy_vs_size.png", 110)
+    if budgets:
+        save(plot.accuracy_vs_budget(ok), "accuracy_vs_budget.png", 110)
     for rel in sorted(set(ok["relocation"])):
         save(plot.tradeoff(ok, relocation=rel), f"tradeoff_{rel}.png", 110)
     if ok["max_distance"].nunique(dropna=True) >= 1:
         save(plot.accuracy_vs_distance(ok), "accuracy_vs_distance.png", 110)
-    level = int(ok["level"].min())
+    # the finest results: the shallowest level, or the smallest budget
+    level = float(ok["max_error_budget"].min()) if budgets else int(ok["level"].min())
     for name, grid in grids.items():
         views = {}
         for m in dict.fromkeys(ok[ok["terrain"] == name]["method"]):
-            path = simplified_path(out / "simplified", name, m, level)
+            path = (simplified_path(out / "simplified", name, m, None, max_error=level) if budgets else
+                    simplified_path(out / "simplified", name, m, level))
             if path.exists():  # a failed unit saved nothing and is reported in the tables already
                 views[m] = load_terrain(path)
         fig = plot.terrain_views(grid, views)
-        fig.suptitle(f"{name}: level {level}")
+        fig.suptitle(f"{name}: max error ≤ {level:g}" if budgets else f"{name}: level {level}")
         save(fig, f"views_{name}.png", 90)

@@ -10,7 +10,7 @@ from ._common import UsageError, add_nodata, method_arg, plural, read_terrain
 
 
 #: Options of compare that do not apply: what is simplified, and how, is given.
-_NOT_HERE = ("methods", "levels", "cascade")
+_NOT_HERE = ("methods", "levels", "max_errors", "cascade")
 
 
 #: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).

@@ -1,7 +1,8 @@
 """The output folder of ``terrainvis compare``: which files a run writes there, and which it wrote.
 
 A run writes ``results.csv`` and ``results.settings.json`` (:class:`~terrainvis.experiment.results.ResultStore`),
-``tables.md``, the figures and ``simplified/<terrain>__<method>__level<k>.npz``, and holds
+``tables.md``, the figures and ``simplified/<terrain>__<method>__level<k>.npz`` (or
+``__max_error<E>.npz`` in a run budgeted in vertical error), and holds
 ``results.lock`` while it runs (:class:`~terrainvis.core.fileio.RunLock`); ``terrainvis evaluate`` keeps
 its rows in ``results.partial.csv`` (and ``results.partial.settings.json``) until its run is
 complete, then renames them over ``results.csv``, so an earlier run stays whole until the new
@@ -35,7 +36,7 @@ TABLES = "tables.md"
 SIMPLIFIED = "simplified"
 LOCK = "results.lock"
 #: Figures every run may write, whatever its terrains and relocations.
-FIXED_FIGURES = ("accuracy_vs_size.png", "accuracy_vs_distance.png")
+FIXED_FIGURES = ("accuracy_vs_size.png", "accuracy_vs_budget.png", "accuracy_vs_distance.png")
 #: The first line of every ``tables.md`` a run writes.
 TABLES_TITLE = "# terrainvis compare"
 #: Settings every stored settings file of ``compare`` holds, whatever its version.
@@ -162,13 +163,24 @@ def _candidates(out: Path, terrains, methods, relocations) -> list[Path]:
     found = [p for p in fixed if p.is_file()]
     found += [out / f for f in figure_names(terrains, relocations) if (out / f).is_file()]
     folder = out / SIMPLIFIED
-    prefixes = [f"{t}__{m}__level" for t in terrains for m in methods]
+    prefixes = [f"{t}__{m}__" for t in terrains for m in methods]
     if folder.is_dir():
         for q in folder.iterdir():
             if q.is_file() and q.suffix == ".npz" and any(
-                    q.name.startswith(p) and q.name[len(p):-len(".npz")].isdigit() for p in prefixes):
+                    q.name.startswith(p) and _step_name(q.name[len(p):-len(".npz")]) for p in prefixes):
                 found.append(q)
     return found
+
+
+def _step_name(text: str) -> bool:
+    """Whether ``text`` names a unit's step in a simplified terrain's file: ``level<k>`` or ``max_error<E>``
+    (:func:`terrainvis.experiment.units.simplified_path`)."""
+    if text.startswith("level"):
+        return text[len("level"):].isdigit()
+    if text.startswith("max_error"):
+        with contextlib.suppress(ValueError):
+            return float(text[len("max_error"):]) > 0
+    return False
 
 
 def earlier_run(out) -> list[Path]:

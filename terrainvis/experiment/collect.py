@@ -1,8 +1,9 @@
 """Collecting the rows of a :func:`terrainvis.compare` run into its table.
 
-The columns (:data:`COLUMNS`), which of them identify a unit (:data:`UNIT_KEY`) or hold
-times (:data:`TIMING_COLUMNS`), how many rows a complete unit has
-(:func:`rows_per_unit`), and the order of the final table (:func:`order`).
+The columns (:data:`COLUMNS`), which of them identify a unit (:data:`UNIT_KEY`, or
+:data:`BUDGET_KEY` in a run budgeted in vertical error: :func:`unit_key`) or hold times
+(:data:`TIMING_COLUMNS`), how many rows a complete unit has (:func:`rows_per_unit`), and
+the order of the final table (:func:`order`).
 """
 
 from __future__ import annotations
@@ -12,17 +13,17 @@ import pandas as pd
 
 from .options import Settings
 
-__all__ = ["COLUMNS", "MEASURE_COLUMNS", "EVALUATE_COLUMNS", "UNIT_KEY", "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table",
-           "order"]
+__all__ = ["COLUMNS", "MEASURE_COLUMNS", "EVALUATE_COLUMNS", "BUDGET_COLUMNS", "UNIT_KEY", "BUDGET_KEY", "unit_key",
+           "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table", "order"]
 
 #: Columns of the result table, in order.
 COLUMNS = (
-    "terrain", "set", "method", "kind", "level", "relocation", "measure", "predicate",
+    "terrain", "set", "method", "kind", "level", "max_error_budget", "relocation", "measure", "predicate",
     "accuracy", "visible_kept", "blocked_kept", "accuracy_paper", "visible_area_ratio",
     "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
     "min_height_rms", "min_height_p95", "siting_share", "siting_share_original", "siting_ratio",
     "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
-    "max_error", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
+    "max_error", "stopped_by", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
     "seed", "max_distance", "distance_unit", "offset", "repair", "repair_max_snap", "error",
 )
@@ -34,10 +35,25 @@ MEASURE_COLUMNS = {"viewshed": ("min_height_rms", "min_height_p95", "siting_shar
 #: reversed, a ``repair=True`` repair: :func:`terrainvis.core.repair.repair_summary`) and the
 #: farthest a vertex was snapped; empty in a comparison's rows, and absent from older files.
 EVALUATE_COLUMNS = ("repair", "repair_max_snap")
-#: Columns that identify a unit.
+#: Columns only a run budgeted in vertical error fills (``max_errors``): the budget E of the
+#: row's unit and ``stopped_by``, ``"max_error"`` when the result is within E, else what stopped
+#: the method first (:func:`terrainvis.experiment.units.stopped_by`); empty in a run by levels, and
+#: absent from files written before budgets existed.
+BUDGET_COLUMNS = ("max_error_budget", "stopped_by")
+#: Columns that identify a unit of a run by levels.
 UNIT_KEY = ("terrain", "method", "level")
+#: Columns that identify a unit of a run budgeted in vertical error (its level is what the method reached).
+BUDGET_KEY = ("terrain", "method", "max_error_budget")
 #: Columns holding times (they differ between runs; everything else is deterministic).
 TIMING_COLUMNS = ("simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds")
+
+
+def unit_key(settings: Settings) -> tuple:
+    """The columns that identify a unit of a run with ``settings``: :data:`BUDGET_KEY` with
+    ``max_errors``, else :data:`UNIT_KEY`."""
+    from .options import budgeted
+
+    return BUDGET_KEY if budgeted(settings) else UNIT_KEY
 
 
 def rows_per_unit(settings: Settings) -> int:
@@ -49,9 +65,11 @@ def rows_per_unit(settings: Settings) -> int:
 
 def optional_columns(measure: str) -> tuple:
     """The columns a results file of ``measure`` may lack and still resume: those only other
-    measures fill, and :data:`EVALUATE_COLUMNS` (read back as NaN, which is what a
-    comparison's rows hold there)."""
-    return tuple(c for m, cols in MEASURE_COLUMNS.items() if m != measure for c in cols) + EVALUATE_COLUMNS
+    measures fill, :data:`EVALUATE_COLUMNS` (read back as NaN, which is what a
+    comparison's rows hold there) and :data:`BUDGET_COLUMNS` (empty in a run by levels; a
+    run by budgets cannot resume a file written before them, whose settings have no budgets)."""
+    return (tuple(c for m, cols in MEASURE_COLUMNS.items() if m != measure for c in cols) + EVALUATE_COLUMNS
+            + BUDGET_COLUMNS)
 
 
 def table(rows: list[dict]) -> pd.DataFrame:
@@ -63,7 +81,8 @@ def table(rows: list[dict]) -> pd.DataFrame:
 
 def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
     """The table sorted: terrains as given, then set, methods in the registry's (the paper's) order,
-    level, relocation (identity, full, half, then the others), distance (unlimited last)."""
+    budget (in a run budgeted in vertical error), level, relocation (identity, full, half, then
+    the others), distance (unlimited last)."""
     from simplifiers import METHODS
 
     from ..relocation import registry as relocation
@@ -75,5 +94,5 @@ def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
     df = df.assign(
         _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r),
         _d=df["max_distance"].fillna(np.inf),
-    ).sort_values(["_t", "set", "_m", "level", "_r", "_d"], kind="stable")
+    ).sort_values(["_t", "set", "_m", "max_error_budget", "level", "_r", "_d"], kind="stable")
     return df.drop(columns=["_t", "_m", "_r", "_d"]).reset_index(drop=True)

@@ -13,8 +13,8 @@ The run goes in four stages, each in a module of its own:
 1. **plan** (:mod:`terrainvis.experiment.plan`): every option is validated up front
    (:mod:`terrainvis.experiment.options` declares them: methods, levels against each terrain's size,
    relocations, engine, predicate, ...) and the work is split into tasks of one unit (one
-   terrain x method x level) or, with ``cascade``, of every level of a method that
-   continues from its finer result, the most expensive first;
+   terrain x method x level, or x budget E with ``max_errors``) or, with ``cascade``, of
+   every level of a method that continues from its finer result, the most expensive first;
 2. **resume**: with ``out_csv`` the results go to a :class:`~terrainvis.experiment.results.ResultStore`,
    which keeps the complete units of an earlier run with the same settings and refuses
    a resume with other settings;
@@ -39,7 +39,7 @@ from ..core import compiling as _compiling
 from ..core._progress import progress_bar_class
 from ..core.validate import describe
 from .measures import MEASURES
-from .collect import COLUMNS, UNIT_KEY, optional_columns, order, rows_per_unit, table
+from .collect import COLUMNS, optional_columns, order, rows_per_unit, table, unit_key
 from .options import (
     CASCADE_AUTO_MIN_SAMPLES,
     DEFAULTS,
@@ -49,6 +49,7 @@ from .options import (
     Settings,
     docstring_section,
     signature_parameters,
+    steps,
 )
 from .plan import DEFAULT_TERRAINS, JACKSBORO_WINDOW, resolve_terrains, run_record
 from . import plan as _plan  # kernels_cached is read at call time: a test stands in for a fresh install
@@ -114,7 +115,8 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     on_unit : callable, optional
         ``on_unit(key, rows)``, called in this process as each unit finishes, after its
         rows are stored in ``out_csv``: ``key`` is ``(terrain, method, levels)`` (a tuple
-        of the levels the unit ran: one, or several when ``cascade`` chains them) and
+        of the levels the unit ran: one, or several when ``cascade`` chains them; with
+        ``max_errors``, ``(terrain, method, (E,))``, the unit's budget) and
         ``rows`` a DataFrame of its rows (the columns :data:`COLUMNS`). For live
         figures, logs, or a stop rule: an exception it raises ends the run as an
         interrupt does (the units stored so far stay in ``out_csv``; ``resume=True``
@@ -123,10 +125,17 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     The options (between ``terrains`` and ``workers``) are declared in
     :data:`terrainvis.experiment.options.OPTIONS`; their defaults are :data:`DEFAULTS`.
 
+    Budgets in maximum vertical error (``max_errors=[E, ...]``) replace the levels: each
+    method is simplified to its smallest result within each E
+    (:func:`simplifiers.simplify` with ``max_error=E``), a unit is terrain x method x E,
+    each row has E in ``max_error_budget`` and in ``stopped_by`` whether the result met it
+    (``"max_error"``), and ``cascade`` does not apply (``"auto"`` never cascades budgets;
+    ``True`` is refused).
+
     Returns
     -------
     pandas.DataFrame
-        One row per terrain x point set x method x level x relocation (x distance), with the columns
+        One row per terrain x point set x method x level (or budget) x relocation (x distance), with the columns
         :data:`COLUMNS`, sorted (terrains as given, methods in the paper's order,
         relocations identity, full, half). A unit whose simplification failed keeps its
         rows, with the message in ``error`` and NaN measurements; the ``error`` of a unit that did
@@ -198,7 +207,7 @@ def _remove_partial_saves(save_dir) -> list[str]:
     import os
     import re
 
-    pattern = re.compile(r"^\.(?P<target>[^/]+__[^/]+__level\d+\.npz)\.[A-Za-z0-9_]{6,}\.npz$")
+    pattern = re.compile(r"^\.(?P<target>[^/]+__[^/]+__(level\d+|max_error[0-9.e+-]+)\.npz)\.[A-Za-z0-9_]{6,}\.npz$")
     removed = []
     with os.scandir(save_dir) as entries:
         for entry in entries:
@@ -232,7 +241,7 @@ def _at_once(settings: Settings, grids: dict, workers, client) -> int:
     if client is not None:
         return 1
     n_local = (os.cpu_count() or 1) if workers is None else workers
-    return max(1, min(n_local, len(grids) * len(settings.methods) * len(settings.levels)))
+    return max(1, min(n_local, len(grids) * len(settings.methods) * len(steps(settings))))
 
 
 def _store(out_csv, settings: Settings, grids: dict, resume: bool):
@@ -245,8 +254,8 @@ def _store(out_csv, settings: Settings, grids: dict, resume: bool):
     # a settings file written before an option existed ran it at its default
     absent = {name: option.check(option.default, name) for name, option in OPTIONS.items()}
     # a results file written before a measure's columns existed resumes when this measure leaves them empty
-    store = ResultStore(out_csv, run_record(settings, grids), COLUMNS, UNIT_KEY, lambda key: per_unit, resume=resume,
-                        absent=absent, optional=optional_columns(settings.measure))
+    store = ResultStore(out_csv, run_record(settings, grids), COLUMNS, unit_key(settings), lambda key: per_unit,
+                        resume=resume, absent=absent, optional=optional_columns(settings.measure))
     return store, frozenset(store.done)
 
 
@@ -259,6 +268,7 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
     from .plan import work_order
 
     todo = sum(1 for t, m, levels in tasks for lv in levels if (t, m, lv) not in done)
+    step = unit_key(settings)[-1]  # the rows' column of a task's levels: level, or the budget
     n_local = (os.cpu_count() or 1) if workers is None else workers
     cold = bool(tasks) and client is None and _plan.kernels_cached() is False
     parts = _warm_up_parts(tasks, grids, settings) if cold and ((n_local > 1 and len(tasks) > 1) or progress) else []
@@ -274,11 +284,11 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
         if key[0] == "warm-up":
             bars.compiled(key[1])
             return
-        rows = [r for r in rows if (r["terrain"], r["method"], r["level"]) not in done]
+        rows = [r for r in rows if (r["terrain"], r["method"], r[step]) not in done]
         new_rows.extend(rows)
         if store is not None:
             store.add(rows)
-        bars.finished(len({r["level"] for r in rows}))
+        bars.finished(len({r[step] for r in rows}))
         if on_unit is not None and rows:
             on_unit(key, pd.DataFrame(rows, columns=list(COLUMNS)))
 

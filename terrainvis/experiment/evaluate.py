@@ -477,10 +477,9 @@ def _check_engine(settings, terrains: dict) -> None:
 
 # ---------------------------------------------------------------------- the rows
 def _nearest_level(shape, n_vertices: int) -> int:
-    from simplifiers.levels import max_level, vertex_budget
+    from .units import nearest_level
 
-    levels = range(0, max_level(shape) + 1)
-    return min(levels, key=lambda lv: (abs(np.log(vertex_budget(shape, lv) / max(n_vertices, 1))), lv))
+    return nearest_level(shape, n_vertices)
 
 
 class _Unit(NamedTuple):

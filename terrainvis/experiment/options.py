@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import inspect
+import numbers
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -35,7 +36,7 @@ from ..visibility import EARTH_RADIUS
 
 __all__ = [
     "Option", "Flag", "Switch", "OPTIONS", "RULES", "Settings", "DEFAULTS", "validate", "los_keywords",
-    "add_flags", "given", "PREDICATES", "DISTANCE_UNITS", "CASCADE_AUTO_MIN_SAMPLES",
+    "add_flags", "given", "PREDICATES", "DISTANCE_UNITS", "CASCADE_AUTO_MIN_SAMPLES", "budgeted", "steps",
 ]
 
 
@@ -248,6 +249,39 @@ def _levels(value, name: str) -> tuple:
     return tuple(levels)
 
 
+def _budgets(value, name: str) -> tuple | None:
+    """Distinct maximum vertical errors > 0 (z units) as a tuple of floats, or None (a run by levels)."""
+    if value is None:
+        return None
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        value = value.tolist()
+    values = list(value) if isinstance(value, (list, tuple)) else [value]
+    if not values:
+        raise ValueError(f"{name} must hold at least one maximum vertical error (a number > 0, z units), got an "
+                         "empty list")
+    out = []
+    for v in values:
+        expected = f"{name} must hold finite numbers > 0 (maximum vertical errors, z units)"
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+            raise ValueError(f"{expected}, got {describe(v)}")
+        e = float(v)
+        if not np.isfinite(e) or e <= 0:
+            raise ValueError(f"{expected}, got {e!r}")
+        if e in out:
+            raise ValueError(f"{name} must not repeat an error, got {e!r} twice")
+        out.append(e)
+    return tuple(out)
+
+
+def _error_word(text: str) -> float:
+    """``--max-error`` words: numbers (whether each is finite and > 0 is the option's own check)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a maximum vertical error (a number > 0, z units), "
+                                         f"got {text!r}") from None
+
+
 def _distances(value, name: str) -> tuple:
     """Distinct distances > 0 (None: unlimited) as a tuple."""
     values = list(value) if isinstance(value, (list, tuple)) else [value]
@@ -377,6 +411,21 @@ _DECLARED = [
         "levels", (1, 2, 3), _levels, "simplification levels", "int or sequence of int",
         doc="For 120x120 grids 1, 2, 3 are the paper's 25 %, 6 % and 1.5 %.",
         cli=Flag(type=int, many=True),
+    ),
+    Option(
+        "max_errors", None, _budgets,
+        "budgets in maximum vertical error (z units), in place of levels: each method simplified to its "
+        "smallest result within each", "float or sequence of float", default_text="none: budgets by levels",
+        doc=("With budgets, a unit is a terrain x method x budget E: :func:`simplifiers.simplify` ``(grid, "
+             "method, max_error=E)`` gives the smallest result whose maximum vertical error is <= E (a regular "
+             "method its coarsest level within E, greedy insertion and greedy cuts stopping at E, QEC a search on "
+             "the vertex count). The rows carry E in ``max_error_budget``, the error reached in ``max_error``, "
+             "the level a regular method reached in ``level`` (empty for the irregular ones) and in ``stopped_by`` "
+             "``\"max_error\"`` when E was met, ``\"budget\"`` when the method could not reach E at any size "
+             "it allows, or ``\"exceeded\"`` when it said E was met and the measured error exceeds it (such rows "
+             "are kept). Not with ``levels`` given too, nor with ``cascade=True`` (each budget "
+             "is simplified from T: ``\"auto\"`` never cascades budgets)."),
+        cli=Flag("--max-error", _error_word, many=True, metavar="E"),
     ),
     Option(
         "relocations", None, names(_relocation_names, _default_relocations),
@@ -533,7 +582,7 @@ def _levels_fit(settings: Settings, grids: dict) -> None:
         if top == 0:
             raise ValueError(f"terrain {name!r} ({grid.shape[0]}x{grid.shape[1]}) is too small to simplify: each level "
                              "needs at least 3 samples per axis")
-        if max(settings.levels) > top:
+        if settings.levels and max(settings.levels) > top:
             raise ValueError(
                 f"levels must be at most {top} for terrain {name!r} ({grid.shape[0]}x{grid.shape[1]}: each "
                 f"level needs at least 3 samples per axis), got {max(settings.levels)}"
@@ -611,10 +660,19 @@ def _siting_fits_the_candidates(settings: Settings, grids: dict) -> None:
                              f"its samples), got {settings.siting}")
 
 
+def _budgets_do_not_cascade(settings: Settings, grids: dict) -> None:
+    """``cascade=True`` chains levels, finest first; a budget run has none: each budget is simplified from T."""
+    if settings.max_errors is not None and settings.cascade is True:
+        raise ValueError("cascade=True (--cascade) chains the levels of a run, and max_errors (--max-error) runs "
+                         "budgets in place of levels, each simplified from the terrain itself; leave cascade at 'auto' "
+                         "(or False) with max_errors")
+
+
 #: Checks across options (and the terrains), run after every option's own check:
 #: ``rule(settings, grids)`` raises a ValueError naming the options involved.
 RULES: list[Callable] = [_engine_runs_on_every_surface, _measure_supports_the_predicate, _relocations_serve_the_measure,
-                         _heights_resolve_on_every_terrain, _levels_fit, _siting_fits_the_candidates]
+                         _heights_resolve_on_every_terrain, _levels_fit, _siting_fits_the_candidates,
+                         _budgets_do_not_cascade]
 
 
 # ---------------------------------------------------------------------- settings
@@ -702,14 +760,31 @@ def validate(grids: dict, values: dict, *, caller: str = "compare()", flags: boo
     unknown = [k for k in values if k not in OPTIONS]
     if unknown:
         raise TypeError(f"{caller} got unexpected option(s) {unknown}; the options are {list(OPTIONS)}")
+    label = {name: option.flag if flags and option.flag else name for name, option in OPTIONS.items()}
+    budgets = values.get("max_errors") is not None
+    if budgets and "levels" in values:
+        raise ValueError(f"{label['levels']} and {label['max_errors']} cannot be given together: "
+                         f"{label['max_errors']} runs budgets in maximum vertical error in place of levels; "
+                         "give one of them")
     checked = {}
     for name, option in OPTIONS.items():
-        label = option.flag if flags and option.flag else name
-        checked[name] = option.check(values.get(name, option.default), label)
+        checked[name] = option.check(values.get(name, option.default), label[name])
+    if budgets:
+        checked["levels"] = ()  # a run by budgets has no levels (the stored settings say so)
     settings = Settings(**checked)
     for rule in RULES:
         rule(settings, grids)
     return settings
+
+
+def budgeted(settings: Settings) -> bool:
+    """Whether the run is budgeted in maximum vertical error (``max_errors``) rather than by levels."""
+    return settings.max_errors is not None
+
+
+def steps(settings: Settings) -> tuple:
+    """What each unit of a terrain and method is run at: the budgets (``max_errors``) or the levels."""
+    return tuple(settings.max_errors) if budgeted(settings) else tuple(settings.levels)
 
 
 def los_keywords(settings: Settings) -> dict:

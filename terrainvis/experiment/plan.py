@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.validate import describe
-from .options import CASCADE_AUTO_MIN_SAMPLES, Settings, validate
+from .options import CASCADE_AUTO_MIN_SAMPLES, Settings, budgeted, steps, validate
 from ..core.terrain import HeightGrid, fingerprint
 from ..io._names import JACKSBORO_WINDOW, resolve_one  # noqa: F401  (resolve_one: the commands' reader)
 
@@ -139,10 +139,13 @@ def run_record(settings: Settings, grids: dict) -> dict:
 # ---------------------------------------------------------------------- tasks
 def cascades(settings: Settings, grid: HeightGrid, method: str, *,
              auto_min_samples: int = CASCADE_AUTO_MIN_SAMPLES) -> bool:
-    """Whether ``method``'s levels on ``grid`` run as a cascade (each from the previous level's result)."""
+    """Whether ``method``'s levels on ``grid`` run as a cascade (each from the previous level's result).
+
+    Never in a run budgeted in vertical error (``max_errors``): each budget is simplified from T.
+    """
     from simplifiers import METHODS
 
-    if not METHODS[method].cascades or len(settings.levels) < 2:
+    if budgeted(settings) or not METHODS[method].cascades or len(settings.levels) < 2:
         return False
     if settings.cascade == "auto":
         return grid.size > auto_min_samples
@@ -220,7 +223,9 @@ def tasks(grids: dict, settings: Settings, done=frozenset(), *,
     A task is one level, or all the levels of a method that cascades (``settings.cascade``;
     a task of several levels is a cascade). Tasks whose every unit is ``done`` are left
     out; a cascade with some levels done runs them all again (each level starts from the
-    previous one), and their rows are dropped.
+    previous one), and their rows are dropped. In a run budgeted in vertical error
+    (``max_errors``) the third item holds one budget instead of levels: (terrain, method,
+    (E,)), and ``done`` holds (terrain, method, E).
     """
     from simplifiers import METHODS
 
@@ -230,7 +235,7 @@ def tasks(grids: dict, settings: Settings, done=frozenset(), *,
             if cascades(settings, grids[t], m, auto_min_samples=auto_min_samples):
                 groups = [tuple(sorted(settings.levels))]
             else:
-                groups = [(lv,) for lv in settings.levels]
+                groups = [(step,) for step in steps(settings)]
             out += [(t, m, g) for g in groups if any((t, m, lv) not in done for lv in g)]
     return sorted(out, key=lambda u: (-grids[u[0]].size, METHODS[u[1]].cost_rank, u[2]))
 

@@ -1,4 +1,9 @@
-"""Figures: hillshades, LOS pairs, accuracy against size, and the speed/accuracy trade-off.
+"""Figures: hillshades, LOS pairs, accuracy against size (or against a budget in vertical error), and the
+speed/accuracy trade-off.
+
+A run budgeted in maximum vertical error (``compare(..., max_errors=[E, ...])``) is drawn by
+budget where a run by levels is drawn by level: :func:`accuracy_vs_budget` puts the budget on
+the x axis, and :func:`tradeoff` and :func:`accuracy_vs_distance` label and split by budget.
 
 This is the only module of terrainvis that imports matplotlib. Every function returns a
 :class:`matplotlib.figure.Figure` and never calls ``show()``; in a notebook the figure
@@ -15,9 +20,11 @@ from matplotlib.ticker import NullFormatter
 
 from ..core.validate import as_points, describe
 from ..core.terrain import TIN, HeightGrid, as_terrain
+from .report import step_column
 
 __all__ = [
-    "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "tradeoff", "accuracy_vs_distance", "viewshed",
+    "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "accuracy_vs_budget", "tradeoff",
+    "accuracy_vs_distance", "viewshed",
     "viewshed_values", "cumulative_viewshed", "siting", "observer_network",
 ]
 
@@ -212,22 +219,24 @@ def _check_df(df, needed, *, sweep: bool = False):
 def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
     """Accuracy against terrain size (% of the original samples), per method and relocation.
 
-    One panel per relocation; each method is a line through its levels, with the
-    standard deviation over terrains x point sets as an error bar (the methods' bars
-    side by side at each size, so that wide ones do not merge into one block).
+    One panel per relocation; each method is a line through its levels (or its budgets, in
+    a run budgeted in vertical error), with the standard deviation over terrains x point
+    sets as an error bar (the methods' bars side by side at each size, so that wide ones do
+    not merge into one block).
     """
     from simplifiers import METHODS
 
     from ..relocation.registry import practical_relocations
 
     data = _check_df(df, {"method", "relocation", "size_fraction", "accuracy", "level"})
+    step = step_column(data)
     rels = [r for r in practical_relocations() if r in set(data["relocation"])]
     fig, axes = _panels(max(1, len(rels)), 4.2, 3.8, figsize)
     for ax, rel in zip(axes, rels):
         sub = data[data["relocation"] == rel]
         present = [m for m in METHODS if m in set(sub["method"])] + sorted(set(sub["method"]) - set(METHODS))
         for k, m in enumerate(present):
-            g = sub[sub["method"] == m].groupby("level").agg(
+            g = sub[sub["method"] == m].groupby(step).agg(
                 size=("size_fraction", "median"), mu=("accuracy", "mean"), sd=("accuracy", "std")
             ).sort_values("size")
             color, marker = _style(m)
@@ -238,11 +247,58 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
             ax.errorbar(x, mu, yerr=sd, marker=marker, color=color, label=m, capsize=2, elinewidth=0.8,
                         markersize=5)
         ax.set_xscale("log")
-        sizes = sorted({round(100 * v, 2) for v in sub.groupby("level")["size_fraction"].median()})
+        sizes = sorted({round(100 * v, 2) for v in sub.groupby(step)["size_fraction"].median()})
         ax.set_xticks(sizes, [f"{v:g}%" for v in sizes])
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(f"relocation: {rel}", fontsize=10)
         ax.set_xlabel("size of S(T) (% of samples of T)")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_ylabel("accuracy (% of pairs agreeing)")
+    _legend_outside(axes[-1])
+    return fig
+
+
+def accuracy_vs_budget(df: pd.DataFrame, *, figsize=None) -> Figure:
+    """Accuracy against the budget in maximum vertical error, per method and relocation.
+
+    For a run budgeted in vertical error (``compare(..., max_errors=[E, ...])``): one panel
+    per relocation; each method is a line through its budgets E (x axis, log scale), each
+    point the mean accuracy of its smallest results within E, with the standard deviation
+    over terrains x point sets as an error bar (the methods' bars side by side at each
+    budget). A result that could not reach its budget (``stopped_by`` other than
+    ``"max_error"``) is drawn as its row says: its accuracy counts at that budget.
+
+    Raises
+    ------
+    ValueError
+        When ``df`` holds no budget (a run by levels: :func:`accuracy_vs_size`).
+    """
+    from simplifiers import METHODS
+
+    from ..relocation.registry import practical_relocations
+
+    data = _check_df(df, {"method", "relocation", "accuracy", "max_error_budget"})
+    if step_column(data) != "max_error_budget":
+        raise ValueError("df holds no budget in vertical error (max_error_budget is empty in every row); run compare "
+                         "with max_errors=[...], or draw a run by levels with accuracy_vs_size")
+    rels = [r for r in practical_relocations() if r in set(data["relocation"])]
+    fig, axes = _panels(max(1, len(rels)), 4.2, 3.8, figsize)
+    budgets = sorted(float(b) for b in data["max_error_budget"].unique())
+    for ax, rel in zip(axes, rels):
+        sub = data[data["relocation"] == rel]
+        present = [m for m in METHODS if m in set(sub["method"])] + sorted(set(sub["method"]) - set(METHODS))
+        for k, m in enumerate(present):
+            g = sub[sub["method"] == m].groupby("max_error_budget").agg(mu=("accuracy", "mean"),
+                                                                         sd=("accuracy", "std")).sort_index()
+            color, marker = _style(m)
+            x = g.index.to_numpy(dtype=float) * 1.045 ** (k - (len(present) - 1) / 2)
+            ax.errorbar(x, 100 * g["mu"].to_numpy(), yerr=100 * g["sd"].fillna(0).to_numpy(), marker=marker,
+                        color=color, label=m, capsize=2, elinewidth=0.8, markersize=5)
+        ax.set_xscale("log")
+        ax.set_xticks(budgets, [f"{v:g}" for v in budgets])
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_title(f"relocation: {rel}", fontsize=10)
+        ax.set_xlabel("max vertical error budget (z units)")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")
     _legend_outside(axes[-1])
@@ -268,7 +324,8 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
 
     Left: LOS speedup (time on T / time on S(T)) against accuracy lost; right: memory
     (bytes of S(T) / bytes of T) against accuracy lost. One point per method and level
-    (medians over terrains and point sets), for one relocation.
+    (per method and budget, labelled with the budget, in a run budgeted in vertical
+    error), medians over terrains and point sets, for one relocation.
     """
     data = _check_df(df, {"method", "level", "relocation", "accuracy", "los_seconds", "los_seconds_original",
                           "nbytes", "nbytes_original"})
@@ -280,7 +337,8 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
         speedup=data["los_seconds_original"] / data["los_seconds"],
         memory=data["nbytes"] / data["nbytes_original"],
     )
-    g = data.groupby(["method", "level"]).agg(lost=("lost", "mean"), speedup=("speedup", "median"), memory=("memory", "median"))
+    step = step_column(data)
+    g = data.groupby(["method", step]).agg(lost=("lost", "mean"), speedup=("speedup", "median"), memory=("memory", "median"))
     fig, (ax1, ax2) = _panels(2, 5.0, 4.0, figsize, sharey=False)
     from simplifiers import METHODS
 
@@ -293,8 +351,8 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
         for k, (lv, row) in enumerate(g.loc[m].iterrows()):
             for ax, col in ((ax1, "speedup"), (ax2, "memory")):
                 ax.scatter(row["lost"], row[col], color=color, marker=marker, label=m if k == 0 else None)
-                ax.annotate(str(lv), (row["lost"], row[col]), fontsize=7, color=color, xytext=sides[j % len(sides)],
-                            textcoords="offset points")
+                ax.annotate(str(lv) if step == "level" else f"{lv:g}", (row["lost"], row[col]), fontsize=7,
+                            color=color, xytext=sides[j % len(sides)], textcoords="offset points")
     for ax in (ax1, ax2):
         ax.set_yscale("log")
         _log_labels(ax)
@@ -304,7 +362,8 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
     ax2.set_xlabel("accuracy lost (percentage points)")
     ax1.set_ylabel("LOS speedup on S(T) (×)")
     ax2.set_ylabel("memory of S(T) / memory of T")
-    ax1.set_title(f"speed gained ({relocation}; labels: level)", fontsize=10)
+    ax1.set_title(f"speed gained ({relocation}; labels: {'level' if step == 'level' else 'max error budget'})",
+                  fontsize=10)
     ax2.set_title("memory kept", fontsize=10)
     _legend_outside(ax2)
     for ax in (ax1, ax2):
@@ -315,7 +374,7 @@ def tradeoff(df: pd.DataFrame, *, relocation: str = "full", figsize=None) -> Fig
 def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     """Accuracy of localized tests against the pair distance, per relocation (a distance sweep).
 
-    One panel per level; each relocation is a line through the distances of the run
+    One panel per level (or budget); each relocation is a line through the distances of the run
     (mean over terrains, methods and point sets); the pairs at every distance ("all")
     are drawn at the right end.
     """
@@ -324,13 +383,14 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
     data = _check_df(df, {"relocation", "accuracy", "level", "max_distance"}, sweep=True)
     if data["max_distance"].nunique(dropna=True) < 1:
         raise ValueError("df holds no distance sweep (max_distance is unlimited in every row)")
-    levels = sorted(data["level"].unique())
+    step = step_column(data)
+    levels = sorted(data[step].unique())
     finite = sorted(data["max_distance"].dropna().unique())
     x_all = finite[-1] * 2.0
     unit = data["distance_unit"].iloc[0] if "distance_unit" in data.columns else "world"
     fig, axes = _panels(len(levels), 4.2, 3.8, figsize)
     for ax, level in zip(axes, levels):
-        sub = data[data["level"] == level]
+        sub = data[data[step] == level]
         for rel in [r for r in RELOCATIONS if r in set(sub["relocation"])]:
             g = sub[sub["relocation"] == rel].assign(_d=lambda t: t["max_distance"].fillna(x_all))
             mu = 100 * g.groupby("_d")["accuracy"].mean()
@@ -341,7 +401,7 @@ def accuracy_vs_distance(df: pd.DataFrame, *, figsize=None) -> Figure:
         ticks = finite + [x_all]
         ax.set_xticks(ticks, [f"{v:g}" for v in finite] + ["all"])
         ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_title(f"level {level}", fontsize=10)
+        ax.set_title(f"level {level}" if step == "level" else f"max error ≤ {level:g}", fontsize=10)
         ax.set_xlabel(f"pairs within this distance ({'cells' if unit == 'cells' else 'm'})")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")

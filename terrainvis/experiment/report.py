@@ -7,6 +7,11 @@ rate of visible and of blocked pairs that stay so, for the identity and half
 relocations at the deepest level. The cost table adds what the paper did not measure:
 the line-of-sight speedup and the memory ratio of S(T) against T.
 
+A run budgeted in maximum vertical error (``compare(..., max_errors=[E, ...])``) gets the
+same tables with the budget E in place of the level ("Max error E", Table 4 at the
+largest budget, the cost table by method and budget); the paper side by side and its
+findings are about its levels, and leave such rows out.
+
 Rows follow the paper's order (the registry's): QEC, greedy cuts, greedy insertion,
 simple, GLS, LLS, feature-aware, and the relocations identity, full, half. Accuracies
 are in percent. σ is the sample standard deviation (ddof = 1).
@@ -26,10 +31,40 @@ import pandas as pd
 
 __all__ = [
     "paper_tables", "to_markdown", "findings", "findings_markdown", "paper_reference", "paper_comparison",
-    "comparison_markdown", "oracle_gap", "localized", "viewshed_table",
+    "comparison_markdown", "oracle_gap", "localized", "viewshed_table", "budgeted_rows", "step_column",
 ]
 
 _LEVEL_FRACTION = {1: "25%", 2: "6%", 3: "1.5%"}
+
+
+def budgeted_rows(df: pd.DataFrame) -> pd.Series:
+    """Which rows of a table belong to a run budgeted in maximum vertical error (a ``max_error_budget``)."""
+    if "max_error_budget" not in df.columns:
+        return pd.Series(False, index=df.index)
+    return df["max_error_budget"].notna()
+
+
+def step_column(df: pd.DataFrame) -> str:
+    """The column a table's units are by: ``"level"``, or ``"max_error_budget"`` when its rows are of a
+    run budgeted in maximum vertical error (the tables and figures put the budget in the level's place).
+
+    Raises
+    ------
+    ValueError
+        When ``df`` holds rows of both kinds of run.
+    """
+    budget = budgeted_rows(df)
+    if not budget.any():
+        return "level"
+    if not budget.all():
+        raise ValueError(f"df holds rows of a run by levels ({int((~budget).sum())}, max_error_budget empty) and of "
+                         f"a run budgeted in maximum vertical error ({int(budget.sum())}); select one kind first")
+    return "max_error_budget"
+
+
+def _step_label(step: str, value) -> str:
+    """``"level 2"``, or ``"max error ≤ 2.5"`` for a budget."""
+    return f"level {value}" if step == "level" else f"max error ≤ {value:g}"
 
 
 def _ok(df: pd.DataFrame, predicate: str | None = None) -> pd.DataFrame:
@@ -96,7 +131,10 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
         identity and half. ``"Cost"``: index (method, level), columns ``size`` (% of
         the original samples), ``memory_ratio`` (bytes of S(T) / bytes of T),
         ``los_speedup`` (LOS time on T / on S(T)), ``simplify_s``, ``max_error``,
-        ``rms_error`` and ``volume_error`` (medians over terrains).
+        ``rms_error`` and ``volume_error`` (medians over terrains). For a run budgeted in
+        maximum vertical error, ``"Max error E"`` for each budget E (smallest first) in
+        place of the levels' tables, Table 4 at the largest budget, and the cost table by
+        (method, ``max_error_budget``).
     """
     from simplifiers import METHODS
 
@@ -108,13 +146,15 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
     if missing:
         raise ValueError(f"df must have the columns of terrainvis.compare, missing {sorted(missing)}")
     every = _ok(df, predicate)
+    step = step_column(every)
+    as_step = int if step == "level" else float
     data = every[every["relocation"].isin(RELOCATIONS)]  # the paper's tables: its relocations only
     counts = _counts(data)
     what = "accuracy (%)" if counts == "pairs" else f"{counts} whose verdict survives (%)"
     tables: dict[str, pd.DataFrame] = {}
-    levels = sorted(int(v) for v in data["level"].unique())
+    levels = sorted(as_step(v) for v in data[step].unique())
     for level in levels:
-        sub = data[data["level"] == level]
+        sub = data[data[step] == level]
         g = sub.groupby(["method", "relocation"])["accuracy"]
         t = pd.DataFrame({"mu": 100 * g.mean(), "sigma": 100 * g.std(ddof=1), "n": g.size()})
         idx = [
@@ -124,28 +164,32 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
             if (m, r) in t.index
         ]
         t = t.loc[idx]
-        # the paper's Tables 1-3 are its levels 1-3: the same numbers, whichever levels ran
-        name = f"Table {level}" if level in _LEVEL_FRACTION else f"Level {level}"
-        share = f" ({_LEVEL_FRACTION[level]})" if level in _LEVEL_FRACTION else ""
-        t.attrs["title"] = f"{name}: {what} at level {level}{share}"
+        if step == "level":
+            # the paper's Tables 1-3 are its levels 1-3: the same numbers, whichever levels ran
+            name = f"Table {level}" if level in _LEVEL_FRACTION else f"Level {level}"
+            share = f" ({_LEVEL_FRACTION[level]})" if level in _LEVEL_FRACTION else ""
+            t.attrs["title"] = f"{name}: {what} at level {level}{share}"
+        else:
+            name = f"Max error {level:g}"
+            t.attrs["title"] = f"{name}: {what}, each method at its smallest result within {level:g} (z units)"
         tables[name] = t
     if levels:
-        deepest = levels[-1]
-        sub = data[(data["level"] == deepest) & data["relocation"].isin(["identity", "half"])]
+        deepest = levels[-1]  # the deepest level, or the largest budget: the coarsest results
+        sub = data[(data[step] == deepest) & data["relocation"].isin(["identity", "half"])]
         if len(sub):
             g = sub.groupby(["method", "relocation"])[["visible_kept", "blocked_kept"]].mean() * 100
             t4 = g.unstack("relocation")
             t4 = t4.swaplevel(0, 1, axis=1)
             cols = [(r, c) for r in ("identity", "half") for c in ("visible_kept", "blocked_kept") if (r, c) in t4.columns]
             t4 = t4[cols].loc[_ordered(t4.index, METHODS)]
-            t4.attrs["title"] = f"Table 4: visible and blocked {counts} kept (%) at level {deepest}"
+            t4.attrs["title"] = f"Table 4: visible and blocked {counts} kept (%) at {_step_label(step, deepest)}"
             tables["Table 4"] = t4
-    per_unit = every.drop_duplicates(["terrain", "method", "level", "set", "relocation"])  # cost: every relocation
+    per_unit = every.drop_duplicates(["terrain", "method", step, "set", "relocation"])  # cost: every relocation
     per_unit = per_unit.assign(
         speedup=per_unit["los_seconds_original"] / per_unit["los_seconds"],
         memory_ratio=per_unit["nbytes"] / per_unit["nbytes_original"],
     )
-    g = per_unit.groupby(["method", "level"])
+    g = per_unit.groupby(["method", step])
     cost = pd.DataFrame(
         {
             "size": 100 * g["size_fraction"].median(),
@@ -157,7 +201,7 @@ def paper_tables(df: pd.DataFrame, *, predicate: str | None = None) -> dict[str,
             "volume_error": g["volume_error"].median(),
         }
     )
-    every_level = sorted(int(v) for v in every["level"].unique())
+    every_level = sorted(as_step(v) for v in every[step].unique())
     idx = [(m, lv) for m in _ordered({i[0] for i in cost.index}, METHODS) for lv in every_level if (m, lv) in cost.index]
     cost = cost.loc[idx]
     cost.attrs["title"] = "Cost: what S(T) buys (medians over terrains, point sets and relocations)"
@@ -329,9 +373,13 @@ def findings(df: pd.DataFrame) -> list[dict]:
     rows = df[df["error"].fillna("").astype(str) == ""] if "error" in df.columns else df
     if "max_distance" in rows.columns and rows["max_distance"].nunique(dropna=False) > 1:
         rows = rows[rows["max_distance"].isna()]
+    by_budget = budgeted_rows(rows)
+    rows = rows[~by_budget]  # the paper's findings are about its levels
     measured = rows[rows["accuracy"].notna()]
     rows = measured[measured["relocation"].isin(RELOCATIONS)]
-    reason = ("no row has an accuracy" if measured.empty else
+    reason = ("the paper's findings are about its levels, and these rows are budgeted in maximum vertical error"
+              if by_budget.any() and measured.empty else
+              "no row has an accuracy" if measured.empty else
               f"needs the paper's relocations ({', '.join(RELOCATIONS)}); this run has "
               f"{', '.join(sorted(set(measured['relocation'])))}")
     predicates = sorted(set(rows["predicate"])) if "predicate" in rows.columns and len(rows) else ["exact"]
@@ -401,7 +449,8 @@ def paper_comparison(df: pd.DataFrame, *, predicate: str | None = None) -> pd.Da
         accuracy cells of Tables 1-3 (63 when all are present) and over Table 4 (28),
         with the number of cells each.
     """
-    data = _paper_convention(_ok(df, predicate))
+    data = _ok(df, predicate)
+    data = _paper_convention(data[~budgeted_rows(data)])  # the paper's cells are its levels
     ref = paper_reference()
     rows = []
     for r in ref.itertuples():
@@ -437,8 +486,9 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
     Returns
     -------
     pandas.DataFrame
-        Index (method, level); columns ``oracle`` (mean accuracy, %, of the
-        ``"oracle"`` relocation: an upper bound that needs T's verdicts), ``best``
+        Index (method, level; or method, ``max_error_budget`` in a run budgeted in vertical
+        error); columns ``oracle`` (mean accuracy, %, of the ``"oracle"`` relocation: an
+        upper bound that needs T's verdicts), ``best``
         (the best practical relocation's name), ``best_accuracy`` and ``gap`` (oracle -
         best, points). Empty when the result has no oracle rows.
     """
@@ -447,7 +497,7 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
     from ..relocation.registry import ORACLE, practical_relocations
 
     data = _ok(df, predicate)
-    mu = 100 * data.groupby(["method", "level", "relocation"])["accuracy"].mean().unstack("relocation")
+    mu = 100 * data.groupby(["method", step_column(data), "relocation"])["accuracy"].mean().unstack("relocation")
     if ORACLE not in mu.columns:
         return pd.DataFrame(columns=["oracle", "best", "best_accuracy", "gap"])
     practical = mu[[r for r in practical_relocations() if r in mu.columns]]
@@ -470,8 +520,8 @@ def beyond_paper(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFr
     Returns
     -------
     pandas.DataFrame
-        Index (method, level); columns: the mean accuracy (%) of every relocation present
-        in registry order (the paper's ``identity``, ``full``, ``half``, then
+        Index (method, level; or method, ``max_error_budget`` in a run budgeted in vertical
+        error); columns: the mean accuracy (%) of every relocation present in registry order (the paper's ``identity``, ``full``, ``half``, then
         ``calibrated`` and any registered relocation, then bounds such as ``oracle``),
         ``best_paper`` (the best of the paper's three) and, with the calibrated
         relocation, ``gain`` (calibrated - best_paper, points) and, with the oracle too,
@@ -484,7 +534,7 @@ def beyond_paper(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFr
     from ..relocation.registry import CALIBRATED, ORACLE, PAPER_RELOCATIONS, RELOCATIONS
 
     data = _ok(df, predicate)
-    mu = 100 * data.groupby(["method", "level", "relocation"])["accuracy"].mean().unstack("relocation")
+    mu = 100 * data.groupby(["method", step_column(data), "relocation"])["accuracy"].mean().unstack("relocation")
     beyond = [r for r in RELOCATIONS if r not in PAPER_RELOCATIONS and not RELOCATIONS[r].bound and r in mu.columns]
     if not beyond:
         return pd.DataFrame()
@@ -521,8 +571,9 @@ def beyond_paper_findings(df: pd.DataFrame, *, predicate: str | None = None) -> 
     if t.empty or CALIBRATED not in t.columns or t["best_paper"].isna().all():
         return []
     lines = ["", "### Beyond the paper: regular against irregular, with the calibrated relocation", ""]
+    step = t.index.names[1]  # level, or max_error_budget
     for level in sorted({lv for _, lv in t.index}):
-        sub = t.xs(level, level="level")
+        sub = t.xs(level, level=step)
         regular = [m for m in sub.index if m in METHODS and METHODS[m].kind == "regular"]
         irregular = [m for m in sub.index if m in METHODS and METHODS[m].kind == "irregular"]
         if not regular or not irregular:
@@ -532,7 +583,8 @@ def beyond_paper_findings(df: pd.DataFrame, *, predicate: str | None = None) -> 
         irr_cal = sub.loc[irregular, CALIBRATED]
         r_best, i_best, i_cal = reg.idxmax(), irr_paper.idxmax(), irr_cal.idxmax()
         lines.append(
-            f"- **Level {level}:** the best regular method with the calibrated relocation, {r_best} "
+            f"- **{_step_label(step, level).capitalize()}:** the best regular method with the calibrated relocation, "
+            f"{r_best} "
             f"({reg[r_best]:.2f}), against the best irregular method with the paper's relocations "
             f"({', '.join(r for r in PAPER_RELOCATIONS if r in sub.columns)}), {i_best} ({irr_paper[i_best]:.2f}): "
             f"{reg[r_best] - irr_paper[i_best]:+.2f} points; against the best irregular method with the "
@@ -547,7 +599,7 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
     Returns
     -------
     pandas.DataFrame
-        Index (level, relocation); one column per distance (in the run's
+        Index (level, or ``max_error_budget``, and relocation); one column per distance (in the run's
         ``distance_unit``), ``all`` for every pair.
     """
     from ..relocation.registry import RELOCATIONS
@@ -558,7 +610,7 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
     elif "predicate" in data.columns and data["predicate"].nunique() > 1:
         raise ValueError(f"df holds rows of several predicates {sorted(set(data['predicate']))}; pass predicate=")
     d = data["max_distance"].fillna(np.inf)
-    mu = 100 * data.assign(_d=d).groupby(["level", "relocation", "_d"])["accuracy"].mean().unstack("_d")
+    mu = 100 * data.assign(_d=d).groupby([step_column(data), "relocation", "_d"])["accuracy"].mean().unstack("_d")
     mu.columns = ["all" if c == np.inf else _fmt(float(c)) for c in mu.columns]
     idx = [(lv, r) for lv in sorted({i[0] for i in mu.index}) for r in RELOCATIONS if (lv, r) in mu.index]
     mu = mu.loc[idx]
@@ -568,7 +620,7 @@ def localized(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame
 
 
 def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
-    """What simplification does to viewsheds: per method, level and relocation.
+    """What simplification does to viewsheds: per method, level (or budget) and relocation.
 
     Columns ``cells_kept`` (share of cells whose verdict survives), ``visible_kept``,
     ``blocked_kept`` (means over terrains and observers, %), ``area_ratio`` (visible
@@ -592,7 +644,7 @@ def viewshed_table(df: pd.DataFrame) -> pd.DataFrame:
     if "measure" not in data.columns or not (data["measure"] == "viewshed").any():
         raise ValueError("df holds no viewshed rows (run compare with measure='viewshed')")
     data = data[data["measure"] == "viewshed"]
-    g = data.groupby(["method", "level", "relocation"])
+    g = data.groupby(["method", step_column(data), "relocation"])
     t = pd.DataFrame({
         "cells_kept": 100 * g["accuracy"].mean(), "visible_kept": 100 * g["visible_kept"].mean(),
         "blocked_kept": 100 * g["blocked_kept"].mean(), "area_ratio": g["visible_area_ratio"].median(),

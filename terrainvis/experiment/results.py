@@ -42,7 +42,7 @@ def lock_path(csv_path) -> Path:
 
 
 #: Columns read as text whatever they hold (a terrain named "2024" stays a name).
-TEXT_COLUMNS = ("terrain", "method", "kind", "relocation", "predicate", "measure", "repair", "error")
+TEXT_COLUMNS = ("terrain", "method", "kind", "relocation", "predicate", "measure", "stopped_by", "repair", "error")
 
 
 def _read_csv(text: str, columns) -> pd.DataFrame:

@@ -1,6 +1,7 @@
 """What one unit of a :func:`terrainvis.compare` run computes.
 
-A *unit* is one terrain x method x level: it simplifies T once into S(T), then, for each
+A *unit* is one terrain x method x level (or x budget E, in a run budgeted in maximum
+vertical error: ``max_errors``): it simplifies T once into S(T), then, for each
 point set (or observer) and relocation, computes the verdicts on T and on S(T) and counts
 how many agree (:func:`terrainvis.agreement`, :func:`terrainvis.core.metrics.viewshed_agreement`).
 A *task* (:func:`run_unit`) is one unit, or every level of a cascade. Each task returns its
@@ -19,22 +20,24 @@ from pathlib import Path
 import numpy as np
 
 from .measures import MEASURES
-from .options import Settings, los_keywords
+from .options import Settings, budgeted, los_keywords
 from ..core.terrain import HeightGrid
 
 __all__ = [
-    "end_radius_for", "simplified_path", "run_unit", "measured_rows", "failed_rows", "call", "install", "warm_up",
-    "warm_up_part",
+    "end_radius_for", "nearest_level", "simplified_path", "run_unit", "measured_rows", "failed_rows", "stopped_by",
+    "call", "install", "warm_up", "warm_up_part",
 ]
 
 
 # ---------------------------------------------------------------------- the predicate and the files
-def end_radius_for(simplified, original: HeightGrid, level: int, predicate: str) -> float:
+def end_radius_for(simplified, original: HeightGrid, level: int | None, predicate: str) -> float:
     """The end radius of the verdicts on S(T) under ``predicate`` (0 for ``"exact"``).
 
     ``"paper"``: one cell of the surface under test. For a grid, its larger mean cell
     side; for a TIN, the larger cell side of the regular grid with the same vertex
-    budget (the regular result at the same level).
+    budget (the regular result at the same level; a TIN without a level, simplified to a
+    maximum vertical error, takes the level whose budget is nearest its vertex count:
+    :func:`nearest_level`).
     """
     if predicate == "exact":
         return 0.0
@@ -42,19 +45,34 @@ def end_radius_for(simplified, original: HeightGrid, level: int, predicate: str)
         return float(max(simplified.dx, simplified.dy))
     from simplifiers.levels import coarse_shape
 
+    if level is None or level != level:  # None, or NaN as a table holds it
+        level = nearest_level(original.shape, simplified.n_vertices)
     rows, cols = coarse_shape(original.shape, level)
     xmin, xmax, ymin, ymax = original.extent
     return float(max((xmax - xmin) / max(cols - 1, 1), (ymax - ymin) / max(rows - 1, 1)))
 
 
-def simplified_path(save_dir, name: str, method: str, level: int) -> Path:
+def nearest_level(shape, n_vertices: int) -> int:
+    """The level whose vertex budget (:func:`simplifiers.levels.vertex_budget`) is nearest ``n_vertices``
+    on a grid of ``shape`` (in ratio; the finer of two as near)."""
+    from simplifiers.levels import max_level, vertex_budget
+
+    levels = range(0, max_level(shape) + 1)
+    return min(levels, key=lambda lv: (abs(np.log(vertex_budget(shape, lv) / max(n_vertices, 1))), lv))
+
+
+def simplified_path(save_dir, name: str, method: str, level: int | None, *, max_error: float | None = None) -> Path:
     """Where :func:`~terrainvis.compare` saves the simplified terrain of terrain ``name`` when given ``save_dir``.
 
+    ``<name>__<method>__level<k>.npz``, or with ``max_error`` (a run budgeted in vertical
+    error; ``level`` is then not part of the name) ``<name>__<method>__max_error<E>.npz``,
+    E as Python writes the float (``2.5``, ``10.0``: distinct budgets, distinct names).
     Always a file directly in ``save_dir``: a name that would lead elsewhere (a path
     separator in it) is a ValueError. The registries refuse such method names already
     (:func:`terrainvis.core.validate.entry_name`); this check keeps any other caller in.
     """
-    file = f"{name}__{method}__level{level}.npz"
+    step = f"level{level}" if max_error is None else f"max_error{float(max_error)!r}"
+    file = f"{name}__{method}__{step}.npz"
     if Path(file).name != file or any(sep and sep in file for sep in (os.sep, os.altsep)):
         raise ValueError(f"the simplified terrain's file name {file!r} (terrain {name!r}, method {method!r}) is not "
                          "a plain file name: it would be written outside the output folder")
@@ -70,6 +88,8 @@ def run_unit(grid: HeightGrid, name: str, method: str, levels: tuple, settings: 
     method, finest first, each simplification starting from the previous one.
     """
     sets = MEASURES[settings.measure].sets(grid, name, settings)
+    if budgeted(settings):  # ``levels`` holds one budget E: the smallest result within E
+        return [row for budget in levels for row in _budget_rows(grid, name, method, budget, settings, save_dir, sets)]
     cascade = len(levels) > 1
     rows, previous = [], None
     for level in levels:
@@ -98,10 +118,50 @@ def _level_rows(grid, name, method, level, settings, save_dir, sets, start):
     return rows, simplified
 
 
-def _base(grid: HeightGrid, name: str, method: str, kind: str, level: int, settings: Settings) -> dict:
-    """The columns every row of a unit shares before anything is measured."""
+def _budget_rows(grid, name, method, budget, settings, save_dir, sets) -> list[dict]:
+    """The rows of one terrain x method x budget E: S(T) is ``simplify(grid, method, max_error=E)``.
+
+    The rows' ``level`` is the level the method reached (None for an irregular method,
+    which :func:`simplifiers.simplify` records so), ``max_error_budget`` is E and
+    ``stopped_by`` says whether the result is within E (:func:`stopped_by`).
+    """
+    from simplifiers import METHODS, simplify
+
+    base = _base(grid, name, method, METHODS[method].kind, None, settings)
+    base["max_error_budget"] = float(budget)
+    try:
+        simplified = simplify(grid, method, max_error=budget)
+        meta = simplified.attrs
+        base["level"] = meta.get("level")
+        base["stopped_by"] = stopped_by(meta, budget)
+        if save_dir is not None:
+            _save(simplified, simplified_path(save_dir, name, method, None, max_error=budget))
+        return measured_rows(grid, simplified, base, settings, sets)
+    except Exception as exc:  # record the failure in this unit's rows; the run goes on
+        return failed_rows(base, exc, settings, sets)
+
+
+def stopped_by(attrs: dict, budget: float) -> str:
+    """What stopped a simplification to the maximum vertical error ``budget``, as a row says it.
+
+    ``"max_error"``: the result is within ``budget`` (its measured ``attrs["max_error"]``
+    is <= it); otherwise what :func:`simplifiers.simplify` recorded (``"budget"``: the
+    method could not reach the error at any size it allows, and returned its finest
+    result), or ``"exceeded"`` when it recorded nothing else, or claimed the error met
+    while the measured error exceeds it. A row is within its budget, or says so here.
+    """
+    said = attrs.get("stopped_by")
+    if float(attrs.get("max_error", np.inf)) <= budget:
+        return "max_error"
+    return str(said) if said and said != "max_error" else "exceeded"
+
+
+def _base(grid: HeightGrid, name: str, method: str, kind: str, level: int | None, settings: Settings) -> dict:
+    """The columns every row of a unit shares before anything is measured (``max_error_budget`` and
+    ``stopped_by`` empty: a run by levels)."""
     return {
-        "terrain": name, "method": method, "kind": kind, "level": level, "measure": settings.measure,
+        "terrain": name, "method": method, "kind": kind, "level": level, "max_error_budget": None,
+        "stopped_by": None, "measure": settings.measure,
         "predicate": settings.predicate, "n_points": MEASURES[settings.measure].n_points(settings),
         "n_vertices_original": grid.size, "nbytes_original": grid.nbytes, "seed": settings.seed,
         "distance_unit": settings.distance_unit, "offset": settings.offset, "cascaded": False, "error": None,

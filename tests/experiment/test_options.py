@@ -104,6 +104,11 @@ def test_every_flag_reaches_compare_with_its_value(monkeypatch, tmp_path):
     viewshed = dict(measure="viewshed", n_observers=4, target_height=0.5, min_height=False, siting=2)
     assert {k: v for k, v in seen.items() if k in OPTIONS} == viewshed
     expected.update(viewshed)
+    seen.clear()
+    with pytest.raises(Stop):  # budgets in vertical error, in place of --levels
+        main(["compare", "--terrain", "hills", "--out", str(tmp_path), "--max-error", "2", "5.5"])
+    assert {k: v for k, v in seen.items() if k in OPTIONS} == {"max_errors": [2.0, 5.5]}
+    expected["max_errors"] = [2.0, 5.5]
     assert set(expected) == {n for n, o in OPTIONS.items() if o.cli is not None}  # the test covers every flag
     seen.clear()
     with pytest.raises(Stop):
