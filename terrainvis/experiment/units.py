@@ -145,13 +145,16 @@ def stopped_by(attrs: dict, budget: float) -> str:
     """What stopped a simplification to the maximum vertical error ``budget``, as a row says it.
 
     ``"max_error"``: the result is within ``budget`` (its measured ``attrs["max_error"]``
-    is <= it); otherwise what :func:`simplifiers.simplify` recorded (``"budget"``: the
+    is <= it, up to :data:`~terrainvis.tolerances.MAX_ERROR_TIE_REL` of it: the method's
+    own error and the measured one round apart at a tie); otherwise what :func:`simplifiers.simplify` recorded (``"budget"``: the
     method could not reach the error at any size it allows, and returned its finest
     result), or ``"exceeded"`` when it recorded nothing else, or claimed the error met
     while the measured error exceeds it. A row is within its budget, or says so here.
     """
+    from ..tolerances import MAX_ERROR_TIE_REL
+
     said = attrs.get("stopped_by")
-    if float(attrs.get("max_error", np.inf)) <= budget:
+    if float(attrs.get("max_error", np.inf)) <= budget * (1.0 + MAX_ERROR_TIE_REL):
         return "max_error"
     return str(said) if said and said != "max_error" else "exceeded"
 
