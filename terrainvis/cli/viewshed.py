@@ -71,7 +71,7 @@ def run(args) -> int:
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
     check_output_file(out, "-o", inputs=[args.dem])
     fov = field_of_view_args(args)
-    with loading_kernels(_load_kernels, "viewshed"):
+    with loading_kernels(lambda: _load_kernels(args.dem), "viewshed"):
         label, grid = read_terrain(args.dem, args)
     from ..visibility import viewshed
 
@@ -109,14 +109,18 @@ def run(args) -> int:
     return 0
 
 
-def _load_kernels() -> None:
-    """Import the viewshed and load its cached kernels: a viewshed on a 3 x 3 grid (run beside the DEM's reading)."""
+def _load_kernels(dem) -> None:
+    """Import the viewshed and load its cached kernels: a viewshed on a 3 x 3 grid (run beside the
+    DEM's reading) whose heights have the dtype the DEM's will have (a float32 GeoTIFF's grid keeps
+    float32 heights, whose kernels are others: loading the float64 ones compiled both on a first run)."""
     import numpy as np
 
     from ..core.terrain import HeightGrid
+    from ..io._names import heights_dtype
     from ..visibility import viewshed
 
-    viewshed(HeightGrid(np.zeros((3, 3))), (1.0, 1.0))
+    z = np.zeros((3, 3), dtype=heights_dtype(dem))
+    viewshed(HeightGrid._from_coords(z, [0.0, 1.0, 2.0], [0.0, 1.0, 2.0], None, owned=True), (1.0, 1.0))
 
 
 def _report_values(grid, values, out: Path, suffix: str, args, about) -> int:

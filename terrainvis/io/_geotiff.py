@@ -24,7 +24,6 @@ _RESAMPLED_TAG = "TERRAINVIS_RESAMPLED"
 
 def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
     rasterio = rasterio_module()
-    from rasterio.enums import MaskFlags
 
     try:
         with contextlib.ExitStack() as stack:
@@ -43,22 +42,17 @@ def _read_tif(p: Path, *, crs=None, band=None) -> HeightGrid:
                 raise _UserError(f"band must be in [1, {src.count}] for {p.name!r}, got {b}")
             # the band, its mask (1 byte) and the float64 heights
             _check_read_memory(p.name, (src.height, src.width), np.dtype(src.dtypes[b - 1]).itemsize, extra_per_sample=1)
-            # a mask beyond the nodata value (a mask band, alpha) needs rasterio's masked read; the
-            # nodata value alone is found in the pass that converts and flips the band
-            plain = all(f in (MaskFlags.all_valid, MaskFlags.nodata) for f in src.mask_flag_enums[b - 1])
+            plain, (scale, offset) = _plain(src, b), _scale_offset(src, b)
             t = src.transform
             if t.b != 0 or t.d != 0:
                 raise _Corrupt(f"rotated rasters are not supported (transform {tuple(t)[:6]})")
-            scale, offset = src.scales[b - 1], src.offsets[b - 1]
-            scale = 1.0 if scale is None else float(scale)
-            offset = 0.0 if offset is None else float(offset)
             n_nan = None
             if plain:
                 # each strip is read once, whole blocks at a time: GDAL's block cache (5 % of the
                 # memory by default) would keep every block read, the size of the band again
                 # (8192² float32: 871 MB at the end of the reading instead of 599 MB)
                 with rasterio.Env(GDAL_CACHEMAX=_strip_cache_bytes(src, b)):
-                    z, n_nan = _read_strips(src, b, t, (scale, offset))
+                    z, n_nan = _read_strips(src, b, t, (scale, offset), _held_dtype(src, b))
             else:
                 z = _to_heights(_masked(src.read(b, masked=True), t), (scale, offset))
             file_crs = src.crs
@@ -125,20 +119,50 @@ def _strip_cache_bytes(src, b: int) -> int:
     return max(16 << 20, 2 * step * src.width * np.dtype(src.dtypes[b - 1]).itemsize)
 
 
-def _read_strips(src, b: int, t, scale_offset) -> np.ndarray:
+def _plain(src, b: int) -> bool:
+    """Whether band ``b``'s nodata is its nodata value alone (found in the pass that converts and flips
+    the band); a mask beyond it (a mask band, alpha) needs rasterio's masked read."""
+    from rasterio.enums import MaskFlags
+
+    return all(f in (MaskFlags.all_valid, MaskFlags.nodata) for f in src.mask_flag_enums[b - 1])
+
+
+def _scale_offset(src, b: int) -> tuple[float, float]:
+    scale, offset = src.scales[b - 1], src.offsets[b - 1]
+    return (1.0 if scale is None else float(scale)), (0.0 if offset is None else float(offset))
+
+
+def _held_dtype(src, b: int) -> np.dtype:
+    """The dtype the grid read from band ``b`` holds its heights in (:attr:`~terrainvis.HeightGrid.heights`):
+    float32 for a float32 band read plainly (:func:`_plain`) without scale or offset (its samples are
+    the heights), float64 otherwise."""
+    keep32 = np.dtype(src.dtypes[b - 1]) == np.float32 and _plain(src, b) and _scale_offset(src, b) == (1.0, 0.0)
+    return np.dtype(np.float32 if keep32 else np.float64)
+
+
+def held_dtype(p: Path) -> np.dtype:
+    """:func:`_held_dtype` of the GeoTIFF ``p``'s first band, from its header (float64 when it
+    cannot be opened: the read itself reports why)."""
+    rasterio = rasterio_module()
+    with contextlib.suppress(Exception):
+        with rasterio.open(p) as src:
+            return _held_dtype(src, 1)
+    return np.dtype(np.float64)
+
+
+def _read_strips(src, b: int, t, scale_offset, dtype) -> np.ndarray:
     """Band ``b`` of an open raster as heights: rows in increasing y (and x), its nodata
     value NaN, ``(scale, offset)`` applied, read in strips of rows (:data:`_STRIP_SAMPLES`)
     into a fresh buffer the grid adopts; and the number of NaN (counted strip by strip: a
     grid's ``n_nodata`` without a pass and a mask of its own).
 
-    The buffer is float32 for a float32 band that has no scale or offset (the samples are
-    the heights: the grid keeps them, :attr:`~terrainvis.HeightGrid.heights`, half the
-    memory of a float64 copy) and float64 otherwise."""
+    The buffer's ``dtype`` is :func:`_held_dtype`'s: float32 for a float32 band that has no
+    scale or offset (the samples are the heights: the grid keeps them,
+    :attr:`~terrainvis.HeightGrid.heights`, half the memory of a float64 copy)."""
     from rasterio.windows import Window
 
     rows, cols = src.height, src.width
-    keep32 = np.dtype(src.dtypes[b - 1]) == np.float32 and tuple(scale_offset) == (1.0, 0.0)
-    z = fresh_array((rows, cols), np.float32 if keep32 else np.float64)
+    z = fresh_array((rows, cols), dtype)
     nodata = src.nodatavals[b - 1]
     stored = None
     if nodata is not None and not np.isnan(nodata):

@@ -112,3 +112,24 @@ def _jacksboro() -> HeightGrid:
     grid = sample_dem("jacksboro").crop(rows=(r0, r1), cols=(c0, c1))
     grid.attrs["name"] = "jacksboro"
     return grid
+
+
+def heights_dtype(t):
+    """The dtype of the heights the grid read for the terrain argument ``t`` will hold
+    (:attr:`terrainvis.HeightGrid.heights`), from the file's header: float32 for a GeoTIFF
+    band the reader keeps as float32 (:func:`terrainvis.io._geotiff.held_dtype`), float64
+    for any other file or name, or when it cannot tell (the read itself reports why). A
+    command that loads its kernels beside the read loads those of this dtype."""
+    import numpy as np
+
+    from ._sample import BUNDLED_DEMS, _data_dir
+
+    text = str(t)
+    path = Path(text)
+    if not path.is_file() and text in BUNDLED_DEMS:
+        path = _data_dir() / BUNDLED_DEMS[text]
+    if path.is_file() and path.suffix.lower() in (".tif", ".tiff"):
+        from ._geotiff import held_dtype
+
+        return held_dtype(path)
+    return np.dtype(np.float64)

@@ -239,3 +239,25 @@ def test_viewshed_command_never_asks_for_float64_heights(tmp_path, monkeypatch, 
     with rasterio.open(tmp_path / "out.tif") as a, rasterio.open(tmp_path / "out64.tif") as b:
         got, want = a.read(1), b.read(1)
     assert np.array_equal(got, want) and 0 < int((got == 1).sum()) < int((got == 0).sum()) and (got == 255).any()
+
+
+def test_heights_dtype_from_the_header_is_the_readers(tmp_path):
+    """What the viewshed command loads its kernels for, beside the read, is what the read gives
+    (a float32 grid's kernels are others: loading the float64 ones compiled both on a first run)."""
+    import rasterio
+
+    from terrainvis import load_dem
+    from terrainvis.io import bundled_terrain, save_terrain
+    from terrainvis.io._names import heights_dtype
+
+    z = synthetic_terrain("mesas", size=24, seed=2).z
+    files = [_tif(tmp_path / "a32.tif", z, "float32"), _tif(tmp_path / "a64.tif", z, "float64"),
+             _tif(tmp_path / "i16.tif", np.round(z), "int16"), _tif(tmp_path / "s32.tif", z, "float32")]
+    with rasterio.open(files[-1], "r+") as dst:
+        dst.offsets = (100.0,)
+    save_terrain(HeightGrid(z), tmp_path / "g.npz")
+    for p in files + [tmp_path / "g.npz"]:
+        assert heights_dtype(str(p)) == load_dem(p).heights.dtype, p
+    assert [heights_dtype(str(p)) for p in files] == [np.float32, np.float64, np.float64, np.float64]
+    assert heights_dtype("cumberland") == bundled_terrain("cumberland").heights.dtype
+    assert heights_dtype("hills") == np.float64 and heights_dtype(str(tmp_path / "absent.tif")) == np.float64
