@@ -248,7 +248,8 @@ def _boundary_valid(grid, frame, rect) -> bool:
 # ---------------------------------------------------------------------- one tile
 @dataclass(frozen=True)
 class _Lattice:
-    """A tile's lattice: its quantized columns and rows, their lon/lat, and the HeightGrid in the local frame."""
+    """A tile's lattice: its quantized columns and rows, their lon/lat, its heights, and ``grid``, the
+    HeightGrid the simplifiers get: the lattice in the local metric frame, spaced evenly at its mean step."""
 
     bounds: tuple
     us: np.ndarray
@@ -257,14 +258,19 @@ class _Lattice:
     lat: np.ndarray
     lon0: float
     lat0: float
+    z: np.ndarray
     grid: HeightGrid
 
     def to_local(self, lon, lat) -> tuple[np.ndarray, np.ndarray]:
+        """The true local frame (equirectangular about lon0, lat0), where errors are measured."""
         return _equirectangular(lon, lat, self.lon0, self.lat0)
 
-    def to_lonlat(self, x, y) -> tuple[np.ndarray, np.ndarray]:
-        k = EARTH_RADIUS * math.pi / 180.0
-        return (self.lon0 + np.asarray(x) / (k * math.cos(math.radians(self.lat0))), self.lat0 + np.asarray(y) / k)
+    def grid_to_lonlat(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """Positions of ``grid`` (evenly spaced) to lon/lat: lattice column i to ``lon[i]``, linear between."""
+        g = self.grid
+        c = (np.asarray(x, dtype=np.float64) - g.xs[0]) / (g.xs[-1] - g.xs[0]) * (g.xs.size - 1)
+        r = (np.asarray(y, dtype=np.float64) - g.ys[0]) / (g.ys[-1] - g.ys[0]) * (g.ys.size - 1)
+        return (np.interp(c, np.arange(self.lon.size), self.lon), np.interp(r, np.arange(self.lat.size), self.lat))
 
 
 def _equirectangular(lon, lat, lon0: float, lat0: float) -> tuple[np.ndarray, np.ndarray]:
@@ -319,7 +325,11 @@ def tile_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, *, lattice
                          "tileset's rectangle (a nodata hole): fill the DEM's nodata first (--fill nearest, or "
                          "HeightGrid.fill_nodata)")
     xs, ys = _equirectangular(lon, lat, lon0, lat0)
-    return _Lattice(bounds, us, vs, lon, lat, lon0, lat0, HeightGrid.from_coords(z_.reshape(LAT.shape), xs, ys))
+    z_ = z_.reshape(LAT.shape)
+    # the simplifiers get the lattice evenly spaced: its points sit on the tile's integer positions, up to half a
+    # quantization step off even spacing, and uneven steps make a near-degenerate triangle of greedy cuts stall
+    even = HeightGrid.from_coords(z_, np.linspace(xs[0], xs[-1], xs.size), np.linspace(ys[0], ys[-1], ys.size))
+    return _Lattice(bounds, us, vs, lon, lat, lon0, lat0, z_, even)
 
 
 @dataclass
@@ -334,7 +344,7 @@ class _Made:
 def _encode(lat_: _Lattice, tin: TIN) -> tuple[bytes, qm.DecodedTile] | None:
     """The tile of ``tin`` (local frame) and its decoding; None when rounding would fold a triangle."""
     v = tin.vertices
-    lon, lat = lat_.to_lonlat(v[:, 0], v[:, 1])
+    lon, lat = lat_.grid_to_lonlat(v[:, 0], v[:, 1])
     u, vv = qm.to_uv(lon, lat, lat_.bounds)
     faces = np.asarray(tin.faces, dtype=np.int64)
     if (qm._areas(u, vv, faces) <= 0).any():
@@ -347,9 +357,9 @@ def _error(lat_: _Lattice, dec: qm.DecodedTile) -> float:
     """The largest |decoded mesh - lattice height| at the lattice points (inf where the mesh misses one)."""
     x, y = lat_.to_local(dec.lon, dec.lat)
     tin = TIN(np.column_stack([x, y, dec.height]), dec.triangles)
-    g = lat_.grid
-    got = tin.height_at(g.sample_xy())
-    diff = np.abs(got - g.z.ravel())
+    X, Y = np.meshgrid(*lat_.to_local(lat_.lon, lat_.lat))
+    got = tin.height_at(np.column_stack([X.ravel(), Y.ravel()]))
+    diff = np.abs(got - lat_.z.ravel())
     return float(diff.max()) if np.isfinite(diff).all() else math.inf
 
 
@@ -424,7 +434,14 @@ def _prepare(out_dir, overwrite: bool, names: dict) -> tuple[Path, int]:
     if not entries:
         return out, 0
     if not overwrite:
-        shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+        if _ours(out / LAYER):
+            n = len(_tile_files(out))
+            shown = f"a tileset terrainvis wrote: {LAYER} and {n:,} tile{'s' if n != 1 else ''}"
+        elif _tile_files(out):
+            n = len(_tile_files(out))
+            shown = f"{n:,} tile{'s' if n != 1 else ''} without {LAYER}, an interrupted run's"
+        else:
+            shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
         raise ValueError(f"{names['out_dir']} {str(out)!r} is not empty (it holds {shown}); {names['overwrite']} "
                          "replaces the tileset in it (the files a tileset writes, nothing else), or choose another "
                          "folder")
