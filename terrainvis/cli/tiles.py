@@ -11,7 +11,7 @@ from ._common import UsageError, add_nodata, distance_arg, method_arg, on_interr
 HELP = "write a DEM as Cesium quantized-mesh terrain tiles"
 
 #: How the API's messages name the arguments on the command line.
-_NAMES = {"out_dir": "OUT_DIR", "overwrite": "--overwrite", "zooms": "--zoom", "method": "--method",
+_NAMES = {"out_dir": "OUT_DIR", "overwrite": "--overwrite", "resume": "--resume", "zooms": "--zoom", "method": "--method",
           "max_error0": "--max-error", "lattice": "--lattice", "grid": "DEM"}
 
 
@@ -62,8 +62,12 @@ def add_parser(sub) -> None:
                    help="gzip-compress the tiles, as cesium-terrain-builder does (default; --no-gzip writes them raw)")
     t.add_argument("--lattice", type=lattice_arg, default=64, metavar="N",
                    help="lattice cells per tile side (default 64: 65 x 65 points, as Cesium's heightmap tiles)")
-    t.add_argument("--overwrite", action="store_true",
-                   help="replace the tileset in a non-empty OUT_DIR (remove the files a tileset writes, only those)")
+    again = t.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="continue an interrupted run in OUT_DIR (same settings): its tiles are read and measured "
+                            "again, kept when within their budget, and the rest are made")
+    again.add_argument("--overwrite", action="store_true",
+                       help="replace the tileset in a non-empty OUT_DIR (remove the files a tileset writes, only those)")
     add_nodata(t)
 
 
@@ -79,9 +83,9 @@ def run(args) -> int:
     refuse_protected(args.out_dir, "OUT_DIR", inputs=[args.dem])
     label, grid = read_terrain(args.dem, args)
     working("tiles", f"writing zooms 0 to {hi} of {label} ({args.method} from zoom {lo})")
-    on_interrupt(f"; the finished tiles are in {args.out_dir!r}, without layer.json (rerun with --overwrite)")
+    on_interrupt(f"; the finished tiles are in {args.out_dir!r}, without layer.json (--resume continues)")
     ts = write_tileset(grid, args.out_dir, method=args.method, zooms=(lo, hi), max_error0=args.max_error,
-                       gzip=args.gzip, lattice=args.lattice, overwrite=args.overwrite, name=label,
+                       gzip=args.gzip, lattice=args.lattice, overwrite=args.overwrite, resume=args.resume, name=label,
                        names={**_NAMES, "grid": f"DEM {args.dem!r}"})
     on_interrupt()
     if ts.removed:

@@ -47,11 +47,16 @@ Files and interruptions
 -----------------------
 Tiles go to ``out_dir/{z}/{x}/{y}.terrain`` (gzip-compressed by default, as
 cesium-terrain-builder writes them; a web server must then send them with
-``Content-Encoding: gzip``), each written atomically. ``layer.json`` comes last: an
-interrupted run leaves finished tiles but no ``layer.json``, so it never claims tiles it
-lacks. A non-empty ``out_dir`` is refused unless ``overwrite=True``, which removes the
-files a tileset writes (``layer.json`` if terrainvis wrote it, the ``{z}/{x}/{y}.terrain``
-files and their leftover temporary files) and nothing else.
+``Content-Encoding: gzip``), each written atomically. The run's settings (method, zooms,
+budget, lattice, compression, the DEM's fingerprint and CRS, the rectangle) go first into
+``terrainvis-tiles.partial.json``; ``layer.json`` comes last, and the record is removed
+after it. An interrupted run thus leaves its finished tiles and the record but no
+``layer.json``, so it never claims tiles it lacks, and ``resume=True`` continues it: with
+the same settings, each tile already there is read and measured again, kept when it meets
+its budget, and the others are made. A non-empty ``out_dir`` is refused otherwise unless
+``overwrite=True``, which removes the files a tileset writes (``layer.json`` if terrainvis
+wrote it, the record, the ``{z}/{x}/{y}.terrain`` files and the leftover temporary files of
+atomic writes) and nothing else.
 """
 
 from __future__ import annotations
@@ -69,7 +74,7 @@ from ..core.terrain import TIN, HeightGrid
 from . import quantized_mesh as qm
 from .scheme import MAX_ZOOM, tile_bounds, tile_count, tile_ranges, tiles_covering
 
-__all__ = ["DEFAULT_MAX_ERROR0", "DEFAULT_LATTICE", "EARTH_RADIUS", "LAYER", "API_NAMES", "ZoomReport", "Tileset",
+__all__ = ["DEFAULT_MAX_ERROR0", "DEFAULT_LATTICE", "EARTH_RADIUS", "LAYER", "PARTIAL", "API_NAMES", "ZoomReport", "Tileset",
            "write_tileset", "lonlat_rectangle", "tile_lattice", "pyproj_module"]
 
 #: The budget of zoom 0 (m); zoom z gets ``DEFAULT_MAX_ERROR0 / 2**z``.
@@ -80,8 +85,11 @@ DEFAULT_LATTICE = 64
 EARTH_RADIUS = 6378137.0
 #: The tileset's description, written last.
 LAYER = "layer.json"
+#: The settings of a run that has not finished (written first, removed once layer.json is written): what
+#: ``resume=True`` checks before it keeps the tiles already written.
+PARTIAL = "terrainvis-tiles.partial.json"
 #: How messages name the arguments (the command line passes its flags instead).
-API_NAMES = {"out_dir": "out_dir", "overwrite": "overwrite=True", "zooms": "zooms", "method": "method",
+API_NAMES = {"out_dir": "out_dir", "overwrite": "overwrite=True", "resume": "resume=True", "zooms": "zooms", "method": "method",
              "max_error0": "max_error0", "lattice": "lattice", "grid": "grid"}
 #: Retries of a tile over its budget before it is written as its whole lattice.
 _RETRIES = 3
@@ -424,8 +432,18 @@ def _tile_files(out: Path) -> list[Path]:
     return found
 
 
-def _prepare(out_dir, overwrite: bool, names: dict) -> tuple[Path, int]:
-    """``out_dir`` checked and made; with ``overwrite`` an earlier tileset's files removed (how many)."""
+def _partial(out: Path) -> dict | None:
+    """The settings an unfinished run recorded in ``out`` (None: no record terrainvis wrote)."""
+    try:
+        rec = json.loads((out / PARTIAL).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return rec if isinstance(rec, dict) and rec.get("format") == "quantized-mesh-1.0" and "settings" in rec else None
+
+
+def _prepare(out_dir, overwrite: bool, resume: bool, settings: dict, names: dict) -> tuple[Path, int]:
+    """``out_dir`` checked and made; with ``overwrite`` an earlier tileset's files removed (how many); with
+    ``resume`` an unfinished run's settings checked against ``settings``."""
     from ..core.fileio import check_writable_dir, refuse_protected
 
     refuse_protected(out_dir, names["out_dir"])
@@ -433,26 +451,44 @@ def _prepare(out_dir, overwrite: bool, names: dict) -> tuple[Path, int]:
     entries = sorted(p.name for p in out.iterdir())
     if not entries:
         return out, 0
+    where = f"{names['out_dir']} {str(out)!r}"
+    layer = out / LAYER
+    earlier = _partial(out)
+    if resume:
+        if earlier is None:
+            done = " (a finished tileset: nothing to resume)" if _ours(layer) else ""
+            raise ValueError(f"{names['resume']}: {where} holds no unfinished run of terrainvis tiles{done}; "
+                             f"{names['overwrite']} replaces what is there")
+        differ = sorted(k for k in set(settings) | set(earlier["settings"])
+                        if settings.get(k) != earlier["settings"].get(k))
+        if differ:
+            shown = "; ".join(f"{k}: {earlier['settings'].get(k)!r} then, {settings.get(k)!r} now" for k in differ)
+            raise ValueError(f"{names['resume']}: the unfinished run in {where} had other settings ({shown}); "
+                             f"{names['overwrite']} starts again with these")
+        return out, 0
     if not overwrite:
-        if _ours(out / LAYER):
-            n = len(_tile_files(out))
-            shown = f"a tileset terrainvis wrote: {LAYER} and {n:,} tile{'s' if n != 1 else ''}"
-        elif _tile_files(out):
-            n = len(_tile_files(out))
-            shown = f"{n:,} tile{'s' if n != 1 else ''} without {LAYER}, an interrupted run's"
+        n = len(_tile_files(out))
+        tiles = f"{n:,} tile{'s' if n != 1 else ''}"
+        if _ours(layer):
+            shown = f"a tileset terrainvis wrote: {LAYER} and {tiles}"
+        elif earlier is not None:
+            raise ValueError(f"{where} holds an unfinished run's {tiles}; {names['resume']} continues it (same "
+                             f"settings), {names['overwrite']} replaces it, or choose another folder")
+        elif n:
+            shown = f"{tiles} without {LAYER}"
         else:
             shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
-        raise ValueError(f"{names['out_dir']} {str(out)!r} is not empty (it holds {shown}); {names['overwrite']} "
-                         "replaces the tileset in it (the files a tileset writes, nothing else), or choose another "
-                         "folder")
-    layer = out / LAYER
+        raise ValueError(f"{where} is not empty (it holds {shown}); {names['overwrite']} replaces the tileset in it "
+                         "(the files a tileset writes, nothing else), or choose another folder")
     if layer.exists() and not _ours(layer):
-        raise ValueError(f"{names['out_dir']} {str(out)!r} holds a {LAYER} that terrainvis did not write; terrainvis "
-                         "never replaces a file it did not write: move it away or choose another folder")
+        raise ValueError(f"{where} holds a {LAYER} that terrainvis did not write; terrainvis never replaces a file it "
+                         "did not write: move it away or choose another folder")
     files = _tile_files(out)
-    leftovers = [p for p in out.iterdir() if p.is_file() and re.fullmatch(r"\.layer\.json\.[a-z0-9_]{8}\.json", p.name)]
+    leftovers = [p for p in out.iterdir() if p.is_file() and re.fullmatch(
+        r"\.(layer\.json|terrainvis-tiles\.partial\.json)\.[a-z0-9_]{8}\.json", p.name)]
+    mine = [f for f in (layer, out / PARTIAL) if f.exists() and (f.name != PARTIAL or earlier is not None)]
     removed = 0
-    for f in ([layer] if layer.exists() else []) + files + leftovers:
+    for f in mine + files + leftovers:
         f.unlink()
         removed += 1
     for zd in out.iterdir():
@@ -463,6 +499,22 @@ def _prepare(out_dir, overwrite: bool, names: dict) -> tuple[Path, int]:
             if not any(zd.iterdir()):
                 zd.rmdir()
     return out, removed
+
+
+def _kept(path: Path, lat_: _Lattice, budget: float | None) -> _Made | None:
+    """An unfinished run's tile, read and measured again: kept when it decodes and meets its budget."""
+    try:
+        data = path.read_bytes()
+        dec = qm.decode_tile(data, lat_.bounds)
+    except (OSError, ValueError, EOFError, _gzip.BadGzipFile):
+        return None
+    err = _error(lat_, dec)
+    allowed = (0.0 if budget is None else budget) + 0.5 * qm.height_step(dec.min_height, dec.max_height)
+    if not err <= allowed * (1 + 1e-12) + 1e-9:
+        return None
+    whole = budget is not None and dec.u.size == lat_.lon.size * lat_.lat.size
+    return _Made(b"", err, dec.u.size, dec.triangles.shape[0], "the whole lattice (kept from the unfinished run)"
+                 if whole else None)
 
 
 # ---------------------------------------------------------------------- the tileset
@@ -529,8 +581,8 @@ def _check(grid, method, zooms, max_error0, gzip, lattice, names) -> tuple:
 
 
 def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: float | None = None,
-                  gzip: bool = True, lattice: int = DEFAULT_LATTICE, overwrite: bool = False, name: str | None = None,
-                  names: dict | None = None) -> Tileset:
+                  gzip: bool = True, lattice: int = DEFAULT_LATTICE, overwrite: bool = False, resume: bool = False,
+                  name: str | None = None, names: dict | None = None) -> Tileset:
     """Write ``grid`` as a Cesium quantized-mesh-1.0 tileset in ``out_dir``, each tile simplified by ``method``.
 
     The module docstring describes what the tileset covers, how each tile is made and the
@@ -556,6 +608,10 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
         Lattice cells per tile side (default 64: 65 x 65 points).
     overwrite : bool
         Replace the tileset files in a non-empty ``out_dir``.
+    resume : bool
+        Continue the unfinished run in ``out_dir`` (one with the same settings and DEM): its
+        tiles are read and measured again, kept when they meet their budget, and the rest
+        are made.
     name : str, optional
         The tileset's name in ``layer.json`` (default ``grid.attrs["name"]`` or ``"terrain"``).
     names : dict, optional
@@ -578,9 +634,15 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
     lo, hi, e0, lattice = _check(grid, method, zooms, max_error0, gzip, lattice, names)
     frame = _Frame(grid, names["grid"])
     rect = _rectangle(grid, frame, names["grid"])
-    out, removed = _prepare(out_dir, bool(overwrite), names)
-
+    if overwrite and resume:
+        raise ValueError(f"{names['overwrite']} and {names['resume']} exclude each other: replace the run, or continue it")
     from ..core.fileio import atomic_path, atomic_write_text
+    from ..core.terrain import fingerprint
+
+    settings = {"method": method, "zooms": [lo, hi], "max_error0": e0, "lattice": lattice, "gzip": bool(gzip),
+                "dem": fingerprint(grid), "crs": frame.crs_text, "bounds": [float(v) for v in rect]}
+    out, removed = _prepare(out_dir, bool(overwrite), bool(resume), settings, names)
+    atomic_write_text(out / PARTIAL, json.dumps({"format": "quantized-mesh-1.0", "settings": settings}, indent=1) + "\n")
 
     reports, available = [], []
     for z in range(hi + 1):
@@ -596,20 +658,25 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
                 if x0 <= x <= x1 and y0 <= y <= y1 else None
             if lat_ is None and z > 0:
                 continue  # a part thinner than one quantization step
+            path = out / str(z) / str(x) / f"{y}.terrain"
+            made = _kept(path, lat_, budget) if resume and lat_ is not None and path.is_file() else None
             if lat_ is None:
-                data, made = _flat_tile(tile_bounds(0, x, 0)), None
-            else:
+                data = _flat_tile(tile_bounds(0, x, 0))
+            elif made is None:
                 made = _make_tile(lat_, method if simplified else None, budget)
                 data = made.data
+            else:
+                data = None  # kept as it is
+            if made is not None:
                 errors.append(made.error)
                 n_v += made.n_vertices
                 n_t += made.n_triangles
                 if made.fallback and simplified:
                     reasons.append(f"{z}/{x}/{y}: {made.fallback}")
-            path = out / str(z) / str(x) / f"{y}.terrain"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with atomic_path(path) as tmp:
-                tmp.write_bytes(_gzip.compress(data, mtime=0) if gzip else data)
+            if data is not None:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                with atomic_path(path) as tmp:
+                    tmp.write_bytes(_gzip.compress(data, mtime=0) if gzip else data)
             written.append((x, y))
         available.append(tile_ranges(written))
         reports.append(ZoomReport(z, simplified, budget, len(written), n_v, n_t, max(errors, default=0.0),
@@ -630,4 +697,5 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
         },
     }
     atomic_write_text(out / LAYER, json.dumps(layer, indent=1) + "\n")
+    (out / PARTIAL).unlink()
     return Tileset(out, rect, method, reports, layer, removed)

@@ -246,3 +246,33 @@ def test_without_pyproj_one_line_names_the_extra(capsys, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "pyproj", None)
     err = one_line_error(capsys, 2, ["tiles", "cumberland", str(tmp_path / "o"), "--method", "simple", "--zoom", "0", "0"])
     assert 'pip install "terrainvis[tiles]"' in err
+
+
+def test_an_interrupted_run_is_continued_with_resume(capsys, tmp_path, monkeypatch):
+    from terrainvis.cli import main
+    from terrainvis.tiles import tileset as module
+
+    real, calls = module._make_tile, []
+
+    def stopping(*a, **k):
+        calls.append(1)
+        if len(calls) == 5:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    out = tmp_path / "o"
+    args = ["tiles", "cumberland", str(out), "--method", "simple", "--zoom", "2", "5"]  # 7 tiles, 6 made
+    monkeypatch.setattr(module, "_make_tile", stopping)
+    assert main(args) == 130
+    assert "--resume continues" in capsys.readouterr().err
+    monkeypatch.setattr(module, "_make_tile", real)
+    assert not (out / "layer.json").exists()
+    err = one_line_error(capsys, 2, args)
+    assert "an unfinished run's" in err and "--resume continues it" in err
+    err = one_line_error(capsys, 2, args[:-2] + ["1", "5", "--resume"])
+    assert "other settings (zooms: [2, 5] then, [1, 5] now)" in err
+    calls.clear()
+    monkeypatch.setattr(module, "_make_tile", stopping)  # counts again: only the missing tiles are made
+    assert main(args + ["--resume"]) == 0
+    assert len(calls) == 3  # the tile of zoom 4 (whose making was interrupted) and the two of zoom 5
+    assert json.loads((out / "layer.json").read_text())["maxzoom"] == 5

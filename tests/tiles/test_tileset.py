@@ -91,13 +91,54 @@ def test_an_interrupted_run_leaves_no_layer_json(tmp_path, monkeypatch):
     finished = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
     # the two root tiles (the eastern one flat, made without _make_tile) and zoom 1's tile: lon -100.5 is in
     # column floor(79.5 / 90) = 0, lat 40 in row floor(130 / 90) = 1; whole files only, no temporary left
-    assert finished == ["0/0/0.terrain", "0/1/0.terrain", "1/0/1.terrain"]
+    # and the run's settings, for resume
+    assert finished == ["0/0/0.terrain", "0/1/0.terrain", "1/0/1.terrain", "terrainvis-tiles.partial.json"]
+    assert json.loads((out / "terrainvis-tiles.partial.json").read_text())["settings"]["method"] == "simple"
     monkeypatch.setattr(module, "_make_tile", real)
-    with pytest.raises(ValueError, match="3 tiles without layer.json, an interrupted run's.*overwrite=True"):
+    with pytest.raises(ValueError, match="holds an unfinished run's 3 tiles; resume=True continues it"):
         write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 3))
-    ts = write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 3), overwrite=True)
-    assert ts.removed == 3
-    assert json.loads((out / "layer.json").read_text())["maxzoom"] == 3
+    with pytest.raises(ValueError, match=r"other settings \(method: 'simple' then, 'lls' now\)"):
+        write_tileset(_lonlat_dem(), out, method="lls", zooms=(0, 3), resume=True)
+    # resume: the finished tiles are kept as they are (not written again), the others made
+    kept = {p: p.stat().st_mtime_ns for p in out.rglob("*.terrain") if p.parent.parent.name != "0"}
+    assert kept
+    ts = write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 3), resume=True)
+    assert {p: p.stat().st_mtime_ns for p in kept} == kept
+    assert ts.removed == 0 and not (out / "terrainvis-tiles.partial.json").exists()
+    fresh = tmp_path / "fresh"
+    write_tileset(_lonlat_dem(), fresh, method="simple", zooms=(0, 3))
+    assert json.loads((out / "layer.json").read_text()) == json.loads((fresh / "layer.json").read_text())
+    assert sorted(p.relative_to(out) for p in out.rglob("*.terrain")) == \
+        sorted(p.relative_to(fresh) for p in fresh.rglob("*.terrain"))
+
+
+def test_resume_remakes_a_damaged_tile_and_overwrite_starts_again(tmp_path, monkeypatch):
+    from terrainvis.tiles import tileset as module
+
+    real, calls = module._make_tile, []
+
+    def stopping(*a, **k):
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(module, "_make_tile", stopping)
+    out = tmp_path / "t"
+    with pytest.raises(KeyboardInterrupt):
+        write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 3), gzip=False)
+    monkeypatch.setattr(module, "_make_tile", real)
+    damaged = out / "1" / "0" / "1.terrain"
+    damaged.write_bytes(damaged.read_bytes()[:50])
+    write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 3), gzip=False, resume=True)
+    fresh = tmp_path / "fresh"
+    write_tileset(_lonlat_dem(), fresh, method="simple", zooms=(0, 3), gzip=False)
+    assert damaged.read_bytes() == (fresh / "1" / "0" / "1.terrain").read_bytes()
+    with pytest.raises(ValueError, match="no unfinished run of terrainvis tiles \\(a finished tileset"):
+        write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 3), resume=True)
+    ts = write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 2), overwrite=True)
+    assert ts.removed == 5 + 1  # 5 tiles and layer.json
+    assert not (out / "3").exists()
 
 
 def test_largest_rectangle_by_hand():
