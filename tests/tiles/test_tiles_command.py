@@ -4,7 +4,6 @@ from the documented rules (pyproj, matplotlib's linear interpolation), not from 
 
 from __future__ import annotations
 
-import gzip
 import json
 import math
 from pathlib import Path
