@@ -49,13 +49,15 @@ Tiles go to ``out_dir/{z}/{x}/{y}.terrain`` (gzip-compressed by default, as
 cesium-terrain-builder writes them; a web server must then send them with
 ``Content-Encoding: gzip``), each written atomically. The run's settings (method, zooms,
 budget, lattice, compression, the DEM's fingerprint and CRS, the rectangle) go first into
-``terrainvis-tiles.partial.json``; ``layer.json`` comes last, and the record is removed
-after it. An interrupted run thus leaves its finished tiles and the record but no
+``terrainvis-tiles.partial.json``; ``terrainvis-tiles.csv`` (one row per tile: vertices, triangles, the
+zoom's budget, the method's own measure of its error, the error measured on the written
+tile, whether it fell back to the whole lattice) and ``layer.json`` come last, and the
+record is removed after them. An interrupted run thus leaves its finished tiles and the record but no
 ``layer.json``, so it never claims tiles it lacks, and ``resume=True`` continues it: with
 the same settings, each tile already there is read and measured again, kept when it meets
 its budget, and the others are made. A non-empty ``out_dir`` is refused otherwise unless
 ``overwrite=True``, which removes the files a tileset writes (``layer.json`` if terrainvis
-wrote it, the record, the ``{z}/{x}/{y}.terrain`` files and the leftover temporary files of
+wrote it, the record, the table, the ``{z}/{x}/{y}.terrain`` files and the leftover temporary files of
 atomic writes) and nothing else.
 """
 
@@ -74,7 +76,8 @@ from ..core.terrain import TIN, HeightGrid
 from . import quantized_mesh as qm
 from .scheme import MAX_ZOOM, tile_bounds, tile_count, tile_ranges, tiles_covering
 
-__all__ = ["DEFAULT_MAX_ERROR0", "DEFAULT_LATTICE", "EARTH_RADIUS", "LAYER", "PARTIAL", "API_NAMES", "ZoomReport", "Tileset",
+__all__ = ["DEFAULT_MAX_ERROR0", "DEFAULT_LATTICE", "EARTH_RADIUS", "LAYER", "PARTIAL", "TILES_CSV", "API_NAMES",
+           "ZoomReport", "Tileset",
            "write_tileset", "lonlat_rectangle", "tile_lattice", "pyproj_module"]
 
 #: The budget of zoom 0 (m); zoom z gets ``DEFAULT_MAX_ERROR0 / 2**z``.
@@ -85,6 +88,8 @@ DEFAULT_LATTICE = 64
 EARTH_RADIUS = 6378137.0
 #: The tileset's description, written last.
 LAYER = "layer.json"
+#: One row per tile: its size, budget, the method's own error measure and the error measured on the tile.
+TILES_CSV = "terrainvis-tiles.csv"
 #: The settings of a run that has not finished (written first, removed once layer.json is written): what
 #: ``resume=True`` checks before it keeps the tiles already written.
 PARTIAL = "terrainvis-tiles.partial.json"
@@ -96,6 +101,8 @@ _RETRIES = 3
 #: The lattice the footprint's rectangle is searched on (points per side).
 _SEARCH = 257
 _TILE_FILE = re.compile(r"^\d+$")
+#: The header of :data:`TILES_CSV` (``method_error`` empty for a tile not simplified here, or kept by a resume).
+_CSV_HEADER = "z,x,y,vertices,triangles,max_error,method_error,measured_error,whole_lattice_fallback"
 
 
 def pyproj_module():
@@ -347,6 +354,7 @@ class _Made:
     n_vertices: int
     n_triangles: int
     fallback: str | None = None
+    simplify_error: float | None = None  # the method's own measure (simplify's attrs["max_error"])
 
 
 def _encode(lat_: _Lattice, tin: TIN) -> tuple[bytes, qm.DecodedTile] | None:
@@ -395,7 +403,8 @@ def _make_tile(lat_: _Lattice, method: str | None, budget: float | None) -> _Mad
             err = _error(lat_, dec)
             allowed = budget + 0.5 * qm.height_step(dec.min_height, dec.max_height)
             if err <= allowed * (1 + 1e-12):
-                return _Made(data, err, dec.u.size, dec.triangles.shape[0])
+                return _Made(data, err, dec.u.size, dec.triangles.shape[0],
+                             simplify_error=float(result.attrs["max_error"]))
             fallback = f"over its budget after {_RETRIES + 1} tries (error {err:.4g})"
             target = max(0.0, target - (err - allowed) - qm.height_step(dec.min_height, dec.max_height))
     data, dec = _encode(lat_, lat_.grid.to_tin())
@@ -485,8 +494,14 @@ def _prepare(out_dir, overwrite: bool, resume: bool, settings: dict, names: dict
                          "did not write: move it away or choose another folder")
     files = _tile_files(out)
     leftovers = [p for p in out.iterdir() if p.is_file() and re.fullmatch(
-        r"\.(layer\.json|terrainvis-tiles\.partial\.json)\.[a-z0-9_]{8}\.json", p.name)]
-    mine = [f for f in (layer, out / PARTIAL) if f.exists() and (f.name != PARTIAL or earlier is not None)]
+        r"\.(layer\.json|terrainvis-tiles\.partial\.json)\.[a-z0-9_]{8}\.json|\.terrainvis-tiles\.csv\.[a-z0-9_]{8}\.csv",
+        p.name)]
+    csv = out / TILES_CSV
+    ours_csv = csv.is_file() and csv.read_text(encoding="utf-8", errors="replace").startswith(_CSV_HEADER)
+    if csv.exists() and not ours_csv:
+        raise ValueError(f"{where} holds a {TILES_CSV} that terrainvis did not write; terrainvis never replaces a "
+                         "file it did not write: move it away or choose another folder")
+    mine = [f for f in (layer, out / PARTIAL, csv) if f.exists() and (f.name != PARTIAL or earlier is not None)]
     removed = 0
     for f in mine + files + leftovers:
         f.unlink()
@@ -644,7 +659,7 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
     out, removed = _prepare(out_dir, bool(overwrite), bool(resume), settings, names)
     atomic_write_text(out / PARTIAL, json.dumps({"format": "quantized-mesh-1.0", "settings": settings}, indent=1) + "\n")
 
-    reports, available = [], []
+    reports, available, rows = [], [], []
     for z in range(hi + 1):
         simplified = z >= lo
         budget = e0 / 2 ** z if simplified else None
@@ -668,6 +683,9 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
             else:
                 data = None  # kept as it is
             if made is not None:
+                rows.append(f"{z},{x},{y},{made.n_vertices},{made.n_triangles},{'' if budget is None else repr(budget)},"
+                            f"{'' if made.simplify_error is None else repr(made.simplify_error)},{made.error!r},"
+                            f"{'yes' if made.fallback and simplified else 'no'}")
                 errors.append(made.error)
                 n_v += made.n_vertices
                 n_t += made.n_triangles
@@ -696,6 +714,7 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
             "zooms_written": [r.as_json() for r in reports],
         },
     }
+    atomic_write_text(out / TILES_CSV, _CSV_HEADER + "\n" + "".join(r + "\n" for r in rows))
     atomic_write_text(out / LAYER, json.dumps(layer, indent=1) + "\n")
     (out / PARTIAL).unlink()
     return Tileset(out, rect, method, reports, layer, removed)

@@ -72,6 +72,22 @@ def test_layer_json_describes_the_files(tileset):
         assert tv["max_error"][str(z)] == want
 
 
+def test_the_table_has_a_row_per_tile(tileset):
+    import pandas as pd
+
+    out, layer = tileset
+    table = pd.read_csv(out / "terrainvis-tiles.csv")
+    files = {(z, x, y) for z, tiles in _files(out).items() for x, y in tiles}
+    assert set(zip(table.z, table.x, table.y)) == files - {(0, 1, 0)}  # all but the flat root tile
+    simplified = table.z >= ZOOMS[0]
+    assert table.method_error[simplified].notna().all() and table.method_error[~simplified].isna().all()
+    np.testing.assert_array_equal(table.max_error[simplified], E0 / 2.0 ** table.z[simplified])
+    for r in layer["terrainvis"]["zooms_written"]:
+        rows = table[table.z == r["zoom"]]
+        assert rows.measured_error.max() == r["largest_error"]
+        assert rows.vertices.sum() == r["vertices"]
+
+
 def test_the_tiles_are_those_meeting_the_rectangle(tileset, dem):
     out, layer = tileset
     w, s, e, n = layer["bounds"]

@@ -137,7 +137,7 @@ def test_resume_remakes_a_damaged_tile_and_overwrite_starts_again(tmp_path, monk
     with pytest.raises(ValueError, match="no unfinished run of terrainvis tiles \\(a finished tileset"):
         write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 3), resume=True)
     ts = write_tileset(_lonlat_dem(), out, method="simple", zooms=(0, 2), overwrite=True)
-    assert ts.removed == 5 + 1  # 5 tiles and layer.json
+    assert ts.removed == 5 + 2  # 5 tiles, layer.json and terrainvis-tiles.csv
     assert not (out / "3").exists()
 
 
