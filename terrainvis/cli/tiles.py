@@ -97,7 +97,8 @@ def run(args) -> int:
     for r in ts.zooms:
         how = (f"max error {r.largest_error:.2f} m, budget {r.max_error:.2f} m" if r.simplified
                else f"whole lattice, max error {r.largest_error:.3f} m")
-        more = f"; {plural(r.fallbacks, 'tile')} written as the whole lattice" if r.fallbacks else ""
+        more = (f"; {plural(r.fallbacks, 'tile')} written as the whole lattice (first {r.fallback_reasons[0]})"
+                if r.fallbacks else "")
         print(f"  zoom {r.zoom:2d}: {plural(r.n_tiles, 'tile')}, {plural(r.n_vertices, 'vertex', 'vertices')}, "
               f"{how}{more}")
     print(f"  wrote {plural(sum(r.n_tiles for r in ts.zooms), 'tile')} and layer.json in {ts.out_dir}")
