@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..tolerances import HORIZON_DENOMINATOR_MIN
+
 __all__ = ["QUANTIZED_MAX", "WGS84_A", "WGS84_B", "lonlat_to_ecef", "to_uv", "horizon_occlusion_point",
            "encode_tile", "decode_tile", "DecodedTile", "height_step"]
 
@@ -119,7 +121,7 @@ def horizon_occlusion_point(ecef: np.ndarray, direction: np.ndarray) -> np.ndarr
     cos_b = 1.0 / mag
     sin_b = np.sqrt(mag2 - 1.0) * cos_b
     denom = cos_a * cos_b - sin_a * sin_b
-    if not (denom > 1e-12).all():
+    if not (denom > HORIZON_DENOMINATOR_MIN).all():
         return d * 1e6
     return d * float((1.0 / denom).max())
 

@@ -73,6 +73,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.terrain import TIN, HeightGrid
+from ..tolerances import QUANTIZED_SNAP, TILE_BUDGET_REL, TILE_RECTANGLE_SHRINK_REL
 from . import quantized_mesh as qm
 from .scheme import MAX_ZOOM, tile_bounds, tile_count, tile_ranges, tiles_covering
 
@@ -190,7 +191,7 @@ def lonlat_rectangle(grid: HeightGrid, *, name: str = "grid") -> tuple[float, fl
     The footprint (where ``grid.height_at`` is finite) is mapped to lon/lat with pyproj. The
     rectangle with the most cells of a 257 x 257 lattice over the footprint's bounding box is
     taken, then each side is pushed outwards by bisection while the rectangle's boundary (1025
-    points a side) stays on valid ground, and the result is shrunk by 1e-9 of its size
+    points a side) stays on valid ground, and the result is shrunk by ``TILE_RECTANGLE_SHRINK_REL`` of its size
     against rounding. Largest means in square degrees on that lattice.
 
     Raises
@@ -248,7 +249,7 @@ def _rectangle(grid: HeightGrid, frame: _Frame, name: str) -> tuple[float, float
                 far = mid
         rect[side] = good
     w, s, e, n = (float(v) for v in rect)
-    dw, dh = 1e-9 * (e - w), 1e-9 * (n - s)
+    dw, dh = TILE_RECTANGLE_SHRINK_REL * (e - w), TILE_RECTANGLE_SHRINK_REL * (n - s)
     return w + dw, s + dh, e - dw, n - dh
 
 
@@ -296,8 +297,8 @@ def _equirectangular(lon, lat, lon0: float, lat0: float) -> tuple[np.ndarray, np
 
 def _steps(lo: float, hi: float, n: int) -> np.ndarray | None:
     """The integer quantized positions of a lattice over [lo, hi] (in units of the tile): at most n + 1, even."""
-    a = max(0, math.ceil(lo - 1e-9))
-    b = min(qm.QUANTIZED_MAX, math.floor(hi + 1e-9))
+    a = max(0, math.ceil(lo - QUANTIZED_SNAP))
+    b = min(qm.QUANTIZED_MAX, math.floor(hi + QUANTIZED_SNAP))
     if b - a < 1:
         return None
     k = min(n, b - a)
@@ -402,7 +403,7 @@ def _make_tile(lat_: _Lattice, method: str | None, budget: float | None) -> _Mad
             data, dec = made
             err = _error(lat_, dec)
             allowed = budget + 0.5 * qm.height_step(dec.min_height, dec.max_height)
-            if err <= allowed * (1 + 1e-12):
+            if err <= allowed * (1 + TILE_BUDGET_REL):
                 return _Made(data, err, dec.u.size, dec.triangles.shape[0],
                              simplify_error=float(result.attrs["max_error"]))
             fallback = f"over its budget after {_RETRIES + 1} tries (error {err:.4g})"
@@ -525,7 +526,7 @@ def _kept(path: Path, lat_: _Lattice, budget: float | None) -> _Made | None:
         return None
     err = _error(lat_, dec)
     allowed = (0.0 if budget is None else budget) + 0.5 * qm.height_step(dec.min_height, dec.max_height)
-    if not err <= allowed * (1 + 1e-12) + 1e-9:
+    if not err <= allowed * (1 + TILE_BUDGET_REL):
         return None
     whole = budget is not None and dec.u.size == lat_.lon.size * lat_.lat.size
     return _Made(b"", err, dec.u.size, dec.triangles.shape[0], "the whole lattice (kept from the unfinished run)"
