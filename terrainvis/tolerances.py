@@ -36,6 +36,7 @@ __all__ = [
     "SLOPE_REL", "PSEUDO_ANGLE_SLACK", "EDGE_CLIP_SLACK", "DIAGONAL_SLACK", "PSEUDO_ANGLE_SPAN_MIN", "PARALLEL_SINE_MIN",
     "WEDGE_BOUNDARY_SLACK", "RING_BOUND_REL", "TRIM_MARGIN_REL", "TIN_ON_EDGE_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
     "OUTPUT_SETTLE_REL", "HOLE_REACH_SLACK", "BUCKET_SLACK_REL",
+    "HORIZON_DENOMINATOR_MIN", "TILE_RECTANGLE_SHRINK_REL", "QUANTIZED_SNAP", "TILE_BUDGET_REL",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -218,3 +219,20 @@ OUTPUT_SETTLE_REL = 1e-9
 #: a target at the hole's rounded distance is checked exactly).
 HOLE_REACH_SLACK = 1e-9
 
+
+# ----------------------------------------------------------------- terrain tiles
+#: The horizon occlusion point of a quantized-mesh tile: a vertex whose term
+#: ``cos(alpha) cos(beta) - sin(alpha) sin(beta)`` is at most this (it lies 90 degrees or more
+#: from the tile's centre, seen from the earth's centre) leaves no such point.
+HORIZON_DENOMINATOR_MIN = 1e-12
+#: The tileset's lon/lat rectangle is shrunk by this fraction of its width and height, so
+#: that the transforms' rounding never puts a lattice point on its edge outside the DEM.
+TILE_RECTANGLE_SHRINK_REL = 1e-9
+#: A tile's part of the rectangle, in quantization steps (0 to 32767): a bound within this
+#: of an integer step is taken as that step (ceil and floor would otherwise lose a step to
+#: rounding).
+QUANTIZED_SNAP = 1e-9
+#: A tile's measured error meets its budget (the zoom's max error plus half the height
+#: step) when it is at most the budget times ``1 + TILE_BUDGET_REL`` (the rounding of the
+#: measurement itself).
+TILE_BUDGET_REL = 1e-12

@@ -15,6 +15,8 @@
   see each sample (a cumulative viewshed).
 * ``terrainvis site DEM --grid STEP -k K`` chooses K observers that together see the most.
 * ``terrainvis relocate DEM --points CSV ...`` places points on a simplification.
+* ``terrainvis tiles DEM OUT_DIR --method M --zoom MIN MAX`` writes a Cesium quantized-mesh
+  tileset, each tile simplified by the method.
 * ``terrainvis info DEM`` describes a terrain.
 * ``terrainvis compile`` compiles every numba kernel ahead, into numba's cache (CI images,
   containers).
@@ -41,7 +43,7 @@ import argparse
 import contextlib
 import sys
 
-from . import compare, compile_ahead, cumulative, evaluate, info, los, relocate, simplify, site, viewshed
+from . import compare, compile_ahead, cumulative, evaluate, info, los, relocate, simplify, site, tiles, viewshed
 from . import _common
 from ._common import ParseError, Parser
 
@@ -51,7 +53,7 @@ __all__ = ["main"]
 #: The commands, in the order ``terrainvis --help`` lists them: each module declares its
 #: sub-parser (``add_parser(sub)``) and runs it (``run(args) -> exit status``).
 COMMANDS = {"compare": compare, "evaluate": evaluate, "simplify": simplify, "los": los, "viewshed": viewshed,
-            "cumulative": cumulative, "site": site, "relocate": relocate, "info": info,
+            "cumulative": cumulative, "site": site, "relocate": relocate, "tiles": tiles, "info": info,
             "compile": compile_ahead}
 
 

@@ -19,11 +19,12 @@ LAYERS = (
     ("terrainvis.visibility",),
     ("terrainvis.relocation",),
     ("simplifiers",),
+    ("terrainvis.tiles",),
     ("terrainvis.experiment",),
     ("terrainvis.cli", "terrainvis.__main__", "terrainvis.testing"),
 )
 #: The folders the parts live in (and the top-level modules beside them).
-PARTS = {"core", "io", "visibility", "relocation", "experiment", "cli", "data"}
+PARTS = {"core", "io", "visibility", "relocation", "tiles", "experiment", "cli", "data"}
 TOP_LEVEL = {"__init__.py", "__main__.py", "errors.py", "tolerances.py", "testing.py"}
 
 

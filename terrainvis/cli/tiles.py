@@ -1,0 +1,105 @@
+"""``terrainvis tiles``: a DEM as a Cesium quantized-mesh tileset, each tile simplified by a method."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ._common import UsageError, add_nodata, distance_arg, method_arg, on_interrupt, plural, read_terrain, working
+
+#: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
+HELP = "write a DEM as Cesium quantized-mesh terrain tiles"
+
+#: How the API's messages name the arguments on the command line.
+_NAMES = {"out_dir": "OUT_DIR", "overwrite": "--overwrite", "resume": "--resume", "zooms": "--zoom", "method": "--method",
+          "max_error0": "--max-error", "lattice": "--lattice", "grid": "DEM"}
+
+
+def zoom_arg(text: str) -> int:
+    from ..tiles.scheme import MAX_ZOOM
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a zoom, an integer in [0, {MAX_ZOOM}], got {text!r}") from None
+    if not 0 <= value <= MAX_ZOOM:
+        raise argparse.ArgumentTypeError(f"expected a zoom in [0, {MAX_ZOOM}], got {text!r}")
+    return value
+
+
+def lattice_arg(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 1024:
+        raise argparse.ArgumentTypeError(f"expected an integer in [1, 1024], got {text!r}")
+    return value
+
+
+def add_parser(sub) -> None:
+    from simplifiers import METHODS
+
+    t = sub.add_parser(
+        "tiles", help=HELP,
+        description=(
+            "Write a georeferenced DEM as a Cesium quantized-mesh-1.0 tileset (OUT_DIR/{z}/{x}/{y}.terrain and "
+            "OUT_DIR/layer.json, EPSG:4326, TMS): the largest lon/lat rectangle inside the DEM's footprint, every "
+            "zoom from 0 to MAX. Each tile is the DEM sampled on a 65 x 65 lattice (--lattice), simplified from "
+            "zoom MIN on with the method to a max vertical error of E0 / 2^z metres (below MIN the whole lattice). "
+            "Needs pyproj: pip install \"terrainvis[tiles]\"."
+        ),
+    )
+    t.add_argument("dem", help="DEM file or bundled name (with a CRS)")
+    t.add_argument("out_dir", metavar="OUT_DIR", help="output folder (empty, or with --overwrite)")
+    t.add_argument("-m", "--method", required=True, type=method_arg, metavar="METHOD",
+                   help=f"one of {', '.join(METHODS)}")
+    t.add_argument("--zoom", nargs=2, type=zoom_arg, required=True, metavar=("MIN", "MAX"),
+                   help="the method simplifies zooms MIN to MAX; zooms 0 to MAX are written")
+    t.add_argument("--max-error", type=distance_arg, default=None, metavar="E0",
+                   help="zoom 0's max vertical error in metres; zoom z gets E0 / 2^z (default 77067)")
+    t.add_argument("--gzip", action=argparse.BooleanOptionalAction, default=True,
+                   help="gzip-compress the tiles, as cesium-terrain-builder does (default; --no-gzip writes them raw)")
+    t.add_argument("--lattice", type=lattice_arg, default=64, metavar="N",
+                   help="lattice cells per tile side (default 64: 65 x 65 points, as Cesium's heightmap tiles)")
+    again = t.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true",
+                       help="continue an interrupted run in OUT_DIR (same settings): its tiles are read and measured "
+                            "again, kept when within their budget, and the rest are made")
+    again.add_argument("--overwrite", action="store_true",
+                       help="replace the tileset in a non-empty OUT_DIR (remove the files a tileset writes, only those)")
+    add_nodata(t)
+
+
+def run(args) -> int:
+    from ..core.fileio import refuse_protected
+    from ..tiles import write_tileset
+    from ..tiles.tileset import pyproj_module
+
+    lo, hi = args.zoom
+    if lo > hi:
+        raise UsageError(f"--zoom MIN MAX must run from the lower zoom to the higher, got {lo} {hi}")
+    pyproj_module()  # said before the DEM is read
+    refuse_protected(args.out_dir, "OUT_DIR", inputs=[args.dem])
+    label, grid = read_terrain(args.dem, args)
+    working("tiles", f"writing zooms 0 to {hi} of {label} ({args.method} from zoom {lo})")
+    on_interrupt(f"; the finished tiles are in {args.out_dir!r}, without layer.json (--resume continues)")
+    ts = write_tileset(grid, args.out_dir, method=args.method, zooms=(lo, hi), max_error0=args.max_error,
+                       gzip=args.gzip, lattice=args.lattice, overwrite=args.overwrite, resume=args.resume, name=label,
+                       names={**_NAMES, "grid": f"DEM {args.dem!r}"})
+    on_interrupt()
+    if ts.removed:
+        print(f"terrainvis tiles: --overwrite: removed the earlier tileset's {plural(ts.removed, 'file')}",
+              file=sys.stderr)
+    w, s, e, n = ts.bounds
+    print(f"{label}: {args.method} tiles, zooms 0 to {hi} (the method from zoom {lo})")
+    print(f"  covers lon {w:.5f} to {e:.5f}, lat {s:.5f} to {n:.5f} (the largest lon/lat rectangle inside the DEM)")
+    for r in ts.zooms:
+        how = (f"max error {r.largest_error:.2f} m, budget {r.max_error:.2f} m" if r.simplified
+               else f"whole lattice, max error {r.largest_error:.3f} m")
+        more = (f"; {plural(r.fallbacks, 'tile')} written as the whole lattice (first {r.fallback_reasons[0]})"
+                if r.fallbacks else "")
+        print(f"  zoom {r.zoom:2d}: {plural(r.n_tiles, 'tile')}, {plural(r.n_vertices, 'vertex', 'vertices')}, "
+              f"{how}{more}")
+    print(f"  wrote {plural(sum(r.n_tiles for r in ts.zooms), 'tile')} and layer.json in {ts.out_dir}")
+    return 0

@@ -1,0 +1,15 @@
+"""Cesium quantized-mesh terrain tilesets of a DEM, each tile simplified by a registered method.
+
+* :mod:`terrainvis.tiles.scheme`: Cesium's geographic tiling scheme (EPSG:4326, TMS rows);
+* :mod:`terrainvis.tiles.quantized_mesh`: the quantized-mesh-1.0 encoder and decoder;
+* :mod:`terrainvis.tiles.tileset`: :func:`write_tileset` (``terrainvis tiles``), which needs
+  pyproj (``pip install "terrainvis[tiles]"``).
+"""
+
+from .quantized_mesh import DecodedTile, decode_tile, encode_tile, to_uv
+from .scheme import tile_bounds, tile_count, tile_ranges, tile_size, tiles_covering
+from .tileset import DEFAULT_MAX_ERROR0, Tileset, ZoomReport, lonlat_rectangle, tile_lattice, write_tileset
+
+__all__ = ["write_tileset", "Tileset", "ZoomReport", "lonlat_rectangle", "tile_lattice", "DEFAULT_MAX_ERROR0",
+           "encode_tile", "decode_tile", "DecodedTile", "to_uv",
+           "tile_bounds", "tile_count", "tile_size", "tiles_covering", "tile_ranges"]
