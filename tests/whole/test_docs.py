@@ -217,7 +217,7 @@ def test_every_figure_in_docs_is_shown():
 def test_quick_start_is_what_ci_runs():
     readme = README.read_text(encoding="utf-8")
     ci = (REPO / ".ci" / "run").read_text(encoding="utf-8")
-    install = '.venv/bin/pip install -e ".[test,dask,geo,xarray,peers]"'
+    install = '.venv/bin/pip install -e ".[test,dask,geo,xarray,peers,tiles]"'
     assert (f"python3.11 -m venv .venv && {install} && .venv/bin/terrainvis compare --out results") in readme
     assert ".venv/bin/python -m pytest" in readme
     assert "python3.11 -m venv .venv" in ci
