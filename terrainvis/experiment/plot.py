@@ -246,13 +246,8 @@ def accuracy_vs_size(df: pd.DataFrame, *, figsize=None) -> Figure:
             sd = 100 * g["sd"].fillna(0).to_numpy()
             ax.errorbar(x, mu, yerr=sd, marker=marker, color=color, label=m, capsize=2, elinewidth=0.8,
                         markersize=5)
-        ax.set_xscale("log")
         sizes = sorted({round(100 * v, 2) for v in sub.groupby(step)["size_fraction"].median()})
-        ax.set_xticks(sizes, [f"{v:g}%" for v in sizes])
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_title(f"relocation: {rel}", fontsize=10)
-        ax.set_xlabel("size of S(T) (% of samples of T)")
-        ax.grid(True, which="both", alpha=0.3)
+        _log_panel(ax, sizes, [f"{v:g}%" for v in sizes], rel, "size of S(T) (% of samples of T)")
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")
     _legend_outside(axes[-1])
     return fig
@@ -294,15 +289,21 @@ def accuracy_vs_budget(df: pd.DataFrame, *, figsize=None) -> Figure:
             x = g.index.to_numpy(dtype=float) * 1.045 ** (k - (len(present) - 1) / 2)
             ax.errorbar(x, 100 * g["mu"].to_numpy(), yerr=100 * g["sd"].fillna(0).to_numpy(), marker=marker,
                         color=color, label=m, capsize=2, elinewidth=0.8, markersize=5)
-        ax.set_xscale("log")
-        ax.set_xticks(budgets, [f"{v:g}" for v in budgets])
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.set_title(f"relocation: {rel}", fontsize=10)
-        ax.set_xlabel("max vertical error budget (z units)")
-        ax.grid(True, which="both", alpha=0.3)
+        _log_panel(ax, budgets, [f"{v:g}" for v in budgets], rel, "max vertical error budget (z units)")
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")
     _legend_outside(axes[-1])
     return fig
+
+
+def _log_panel(ax, ticks, labels, relocation: str, xlabel: str) -> None:
+    """One relocation's panel of :func:`accuracy_vs_size` or :func:`accuracy_vs_budget`: a log x axis
+    ticked at ``ticks``, its title and labels."""
+    ax.set_xscale("log")
+    ax.set_xticks(ticks, labels)
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.set_title(f"relocation: {relocation}", fontsize=10)
+    ax.set_xlabel(xlabel)
+    ax.grid(True, which="both", alpha=0.3)
 
 
 def _legend_outside(ax) -> None:
