@@ -1,4 +1,4 @@
-"""Numba loops for line of sight (grid walk, min/max pyramid, TIN clipping).
+"""Numba loops for line of sight (grid walk, TIN clipping).
 
 Kernels loop and never validate: the public functions in ``terrainvis.visibility``
 check their input, shift coordinates to a local origin and pass plain arrays.
@@ -86,72 +86,13 @@ _INF = np.inf
 WalkStack = namedtuple("WalkStack", ["level", "row", "col", "t"])
 
 
-# --------------------------------------------------------------------------- pyramid
-@nb.njit(cache=True, nogil=True)
-def _f32_down(v):
-    f = np.float32(v)
-    if np.float64(f) > v:
-        f = np.nextafter(f, np.float32(-np.inf))
-    return f
-
-
+# --------------------------------------------------------------------------- float32 rounding
 @nb.njit(cache=True, nogil=True)
 def _f32_up(v):
     f = np.float32(v)
     if np.float64(f) < v:
         f = np.nextafter(f, np.float32(np.inf))
     return f
-
-
-@nb.njit(cache=True, nogil=True)
-def build_pyramid(z, pyr, off, nxl, nyl, ltop):
-    """Fill the min/max pyramid (levels 1..ltop) of the height samples ``z``."""
-    nr, nc = z.shape
-    if ltop < 1:
-        return
-    # level 1: blocks of 2x2 cells -> up to 3x3 samples
-    nx = nxl[1]
-    ny = nyl[1]
-    base = off[1]
-    for R in range(ny):
-        r0 = 2 * R
-        r1 = min(r0 + 2, nr - 1)
-        for C in range(nx):
-            c0 = 2 * C
-            c1 = min(c0 + 2, nc - 1)
-            lo = _INF
-            hi = -_INF
-            for r in range(r0, r1 + 1):
-                for c in range(c0, c1 + 1):
-                    v = z[r, c]
-                    if v < lo:
-                        lo = v
-                    if v > hi:
-                        hi = v
-            k = base + 2 * (R * nx + C)
-            pyr[k] = _f32_down(lo)
-            pyr[k + 1] = _f32_up(hi)
-    for L in range(2, ltop + 1):
-        nx = nxl[L]
-        ny = nyl[L]
-        cnx = nxl[L - 1]
-        cny = nyl[L - 1]
-        base = off[L]
-        cbase = off[L - 1]
-        for R in range(ny):
-            for C in range(nx):
-                lo = np.float32(np.inf)
-                hi = np.float32(-np.inf)
-                for rr in range(2 * R, min(2 * R + 2, cny)):
-                    for cc in range(2 * C, min(2 * C + 2, cnx)):
-                        k = cbase + 2 * (rr * cnx + cc)
-                        if pyr[k] < lo:
-                            lo = pyr[k]
-                        if pyr[k + 1] > hi:
-                            hi = pyr[k + 1]
-                k = base + 2 * (R * nx + C)
-                pyr[k] = lo
-                pyr[k + 1] = hi
 
 
 # --------------------------------------------------------------------------- grid walk

@@ -77,6 +77,74 @@ class GridAccel:
         )
 
 
+def _f32_bounds(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """float64 lows and highs as float32, rounded down and up (a bound stays a bound)."""
+    flo = lo.astype(np.float32)
+    np.nextafter(flo, np.float32(-np.inf), out=flo, where=np.greater(flo, lo))
+    fhi = hi.astype(np.float32)
+    np.nextafter(fhi, np.float32(np.inf), out=fhi, where=np.less(fhi, hi))
+    return flo, fhi
+
+
+def _strided3(a: np.ndarray, axis: int, n: int, reduce) -> np.ndarray:
+    """``reduce`` over the windows [2i, 2i + 2] (clamped to the last index) along ``axis``, i < n:
+    the samples of cell blocks 2 cells wide, which share their edge samples (strided views, one
+    output array)."""
+    last = a.shape[axis] - 1
+    full = min(n, last // 2)  # blocks whose three samples all exist
+
+    def part(start, stop, step=2):
+        return a[:, start:stop:step] if axis == 1 else a[start:stop:step]
+
+    shape = (a.shape[0], n) if axis == 1 else (n, a.shape[1])
+    out = np.empty(shape, dtype=a.dtype)
+    head = out[:, :full] if axis == 1 else out[:full]
+    reduce(part(0, 2 * full, 2), part(1, 2 * full, 2), out=head)
+    reduce(head, part(2, 2 * full + 1, 2), out=head)
+    if n > full:  # the last block, one or two samples wide
+        reduce.reduce(part(2 * full, None, 1), axis=axis, out=out[:, full] if axis == 1 else out[full])
+    return out
+
+
+def build_pyramid(z, pyr, off, nxl, nyl, ltop) -> None:
+    """Fill the min/max pyramid of the grid engine (levels 1..``ltop``, the layout
+    :mod:`terrainvis.visibility._kernels` reads) from the heights ``z``, with numpy.
+
+    Level 1 holds, for each block of 2 x 2 cells, the lowest and highest of its up to 3 x 3
+    samples, rounded outwards to float32; level L, of the up to 2 x 2 blocks of level L - 1
+    under it. (A numba kernel did this before, the same values; it took 0.3-0.45 s to compile
+    on a first run of every line-of-sight entry point.) NaN are ignored, as the kernel's
+    comparisons ignored them.
+    """
+    if ltop < 1:
+        return
+    nx, ny = int(nxl[1]), int(nyl[1])
+    # rows first: their reduction reads whole rows, and halves what the strided columns' reads
+    lo = _strided3(_strided3(z, 0, ny, np.fmin), 1, nx, np.fmin)
+    hi = _strided3(_strided3(z, 0, ny, np.fmax), 1, nx, np.fmax)
+    lo[np.isnan(lo)] = np.inf
+    hi[np.isnan(hi)] = -np.inf
+    flo, fhi = _f32_bounds(lo, hi)
+    for L in range(1, ltop + 1):
+        if L > 1:
+            nx, ny = int(nxl[L]), int(nyl[L])
+            flo = _pairs(_pairs(flo, 1, nx, np.minimum, np.inf), 0, ny, np.minimum, np.inf)
+            fhi = _pairs(_pairs(fhi, 1, nx, np.maximum, -np.inf), 0, ny, np.maximum, -np.inf)
+        level = pyr[off[L]: off[L] + 2 * nx * ny].reshape(ny, nx, 2)
+        level[..., 0] = flo
+        level[..., 1] = fhi
+
+
+def _pairs(a: np.ndarray, axis: int, n: int, reduce, fill: float) -> np.ndarray:
+    """``reduce`` of the pairs (2i, 2i + 1) along ``axis``, i < n, a missing second padded with ``fill``."""
+    if a.shape[axis] < 2 * n:
+        pad = [(0, 0), (0, 0)]
+        pad[axis] = (0, 2 * n - a.shape[axis])
+        a = np.pad(a, pad, constant_values=np.float32(fill))
+    even = np.take(a, np.arange(0, 2 * n, 2), axis=axis)
+    return reduce(even, np.take(a, np.arange(1, 2 * n, 2), axis=axis), out=even)
+
+
 def grid_accel(grid) -> GridAccel:
     """The cached :class:`GridAccel` of a (NaN-free) HeightGrid, built on first use."""
     acc = grid._cache.get("visibility")
@@ -96,7 +164,7 @@ def grid_accel(grid) -> GridAccel:
         off[L] = total
         total += 2 * int(nxl[L] * nyl[L])
     pyr = np.empty(max(total, 1), dtype=np.float32)
-    _kernels.build_pyramid(grid.z, pyr, off, nxl, nyl, ltop)
+    build_pyramid(grid.z, pyr, off, nxl, nyl, ltop)
     x0 = float(grid.xs[0])
     y0 = float(grid.ys[0])
     xs = grid.xs - x0

@@ -421,6 +421,38 @@ def test_pyramid_bounds_and_memory():
     assert acc.nxl[acc.ltop] == 1 and acc.nyl[acc.ltop] == 1
 
 
+def _outward(lo: float, hi: float) -> tuple:
+    """lo and hi as float32, rounded down and up, one value at a time."""
+    flo, fhi = np.float32(lo), np.float32(hi)
+    if float(flo) > lo:
+        flo = np.nextafter(flo, np.float32(-np.inf))
+    if float(fhi) < hi:
+        fhi = np.nextafter(fhi, np.float32(np.inf))
+    return flo, fhi
+
+
+@settings(max_examples=60, deadline=None)
+@given(rows=st.integers(2, 40), cols=st.integers(2, 40), seed=st.integers(0, 10_000),
+       scale=st.sampled_from([1e-3, 1.0, 1e4]), offset=st.sampled_from([0.0, -431.7, 8848.86, 5e5]))
+def test_pyramid_is_every_blocks_outward_rounded_range(rows, cols, seed, scale, offset):
+    """Every entry of every level, block by block: the lowest and highest sample under the block
+    (level L: 2^L x 2^L cells, the samples on its edges included, clamped to the grid), as
+    float32 rounded outwards. Brute force, one block at a time."""
+    z = np.random.default_rng(seed).normal(0.0, scale, (rows, cols)) + offset
+    g = HeightGrid.from_coords(z, np.arange(cols) * 1.5, np.arange(rows) * 2.0)
+    acc = grid_accel(g)
+    ncy, ncx = rows - 1, cols - 1
+    for L in range(1, acc.ltop + 1):
+        nx, ny = int(acc.nxl[L]), int(acc.nyl[L])
+        assert (nx, ny) == (-(-ncx // (1 << L)), -(-ncy // (1 << L)))
+        lev = acc.pyr[acc.off[L] : acc.off[L] + 2 * nx * ny].reshape(ny, nx, 2)
+        for R in range(ny):
+            for C in range(nx):
+                block = z[R << L : min((R + 1) << L, ncy) + 1, C << L : min((C + 1) << L, ncx) + 1]
+                want = _outward(float(block.min()), float(block.max()))
+                assert (lev[R, C, 0], lev[R, C, 1]) == want, (L, R, C)
+
+
 # ----------------------------------------------------------------- properties
 def _small_grid(seed):
     rng = np.random.default_rng(seed)
