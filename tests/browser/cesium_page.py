@@ -102,13 +102,14 @@ def serve(tileset, *, gzip_header: bool = True):
         thread.join(timeout=10)
 
 
-def page_url(base: str, *, positions=None, view: bool = False, wireframe: bool = False) -> str:
-    """The page's URL on server ``base``: the tileset at ``tileset/``; ``positions`` (n, 2) lon, lat in degrees."""
+def page_url(base: str, *, positions=None, view: str | None = None, wireframe: bool = False) -> str:
+    """The page's URL on server ``base``: the tileset at ``tileset/``; ``positions`` (n, 2) lon, lat in degrees;
+    ``view`` ``"whole"`` or ``"inside"`` (the page's Viewer, its camera on the whole rectangle or inside it)."""
     query = {"tileset": "tileset/"}
     if positions is not None:
         query["positions"] = ";".join(f"{float(lon)!r},{float(lat)!r}" for lon, lat in positions)
     if view:
-        query["view"] = "1"
+        query["view"] = view
     if wireframe:
         query["wireframe"] = "1"
     return base + PAGE + "?" + urllib.parse.urlencode(query)
@@ -135,16 +136,11 @@ def run_page(url: str, *, timeout: float = 120.0, budget_ms: int = 60000, screen
                 f"--virtual-time-budget={int(budget_ms)}"]
         argv += ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist",
                  f"--window-size={size[0]},{size[1]}", "--hide-scrollbars"]
+        argv += ["--dump-dom"]
         if screenshot is not None:
             argv += [f"--screenshot={Path(screenshot).resolve()}"]
-        else:
-            argv += ["--dump-dom"]
         proc = subprocess.run(argv + [url], capture_output=True, text=True, timeout=timeout,
                               env={**os.environ, "HOME": profile})
-    if screenshot is not None:
-        if proc.returncode != 0 or not Path(screenshot).is_file():
-            raise RuntimeError(f"chromium took no screenshot (exit {proc.returncode}): {proc.stderr[-2000:]}")
-        return {}
     start = proc.stdout.rfind('<pre id="result">')
     end = proc.stdout.find("</pre>", start)
     if proc.returncode != 0 or start < 0 or end < 0:

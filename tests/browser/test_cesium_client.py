@@ -6,9 +6,13 @@ server's headers (gzip tiles with ``Content-Encoding: gzip``); the page asks
 ``Cesium.CesiumTerrainProvider.fromUrl`` for it and ``Cesium.sampleTerrainMostDetailed`` for the
 heights at positions inside the tileset's rectangle, so Cesium's own code reads ``layer.json``,
 fetches and decodes the tiles. Each height must be our decoder's surface there (the triangle of
-the most detailed tile, linear in (u, v)) within the tile's height quantization step, and at the
-tiles' lattice points within the zoom's budget of the DEM's own surface. Two servers that must
-fail it: one tile cut short, and gzip tiles sent without ``Content-Encoding: gzip``.
+the most detailed tile, linear in (u, v)) within the tile's height quantization step, and at two
+interior lattice points of each most detailed tile within the zoom's budget of the DEM's own
+surface. Two servers must fail it: one with a tile cut short, one sending gzip tiles without
+``Content-Encoding: gzip``. Then a Viewer draws the tileset with software WebGL (SwiftShader):
+seen from inside its rectangle it renders down to the deepest zoom without an error; seen whole,
+with the globe around it, Cesium stops rendering (a known failure, marked xfail: tiles partly
+outside the rectangle hold only their part inside it).
 
 Needs Debian's ``chromium`` (``apt-get install chromium``) and the ``cesium`` npm package
 (``npm install --prefix tests/browser``); skips, naming them, where either is absent.
@@ -152,3 +156,33 @@ def test_gzip_tiles_without_content_encoding_are_not_read(tileset):
     w, s, e, n = layer["bounds"]
     got = _sample(out, [(0.5 * (w + e), 0.5 * (s + n))], gzip_header=False)
     assert got["exception"] is not None and got["heights"] is None, got
+
+
+def _view(out, frame: str) -> dict:
+    with cesium_page.serve(out) as base:
+        return cesium_page.run_page(cesium_page.page_url(base, view=frame), timeout=TIMEOUT)
+
+
+def test_a_viewer_draws_the_tileset_seen_from_inside_its_rectangle(tileset):
+    """Cesium's Viewer (software WebGL) draws the tileset down to its deepest zoom, every tile loaded, no error."""
+    out, layer = tileset
+    got = _view(out, "inside")
+    assert got["exception"] is None, got["exception"]
+    assert got["errors"] == [] and got["rendered"]["render_errors"] == [], got
+    assert got["rendered"]["settled"], got
+    # Cesium draws tiles of zoom 11 and, nearer the camera, tiles it upsamples from them (zooms 12 and more)
+    assert max(int(z) for z in got["rendered"]["tiles_drawn"]) >= ZOOMS[1], got
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "a tile partly outside the tileset's rectangle holds only its part inside it; Cesium upsamples the missing "
+    "children of such a tile from it, gets meshes without vertices there (NaN bounding volumes), and its renderer "
+    "stops: 'Invalid array length' in View.createPotentiallyVisibleSet. Remove this mark when the writer covers "
+    "whole tiles"))
+def test_a_viewer_draws_the_tileset_and_the_globe_around_it(tileset):
+    """As a user who flies to the tileset sees it: the whole rectangle and the globe beyond its edges."""
+    out, layer = tileset
+    got = _view(out, "whole")
+    assert got["exception"] is None, got["exception"]
+    assert got["errors"] == [] and got["rendered"]["render_errors"] == [], got
+    assert got["rendered"]["settled"], got
