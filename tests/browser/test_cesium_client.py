@@ -8,8 +8,8 @@ heights at positions inside the tileset's rectangle, so Cesium's own code reads 
 fetches and decodes the tiles. Each height must be our decoder's surface there (the triangle of
 the most detailed tile, linear in (u, v)) within the tile's height quantization step, and at two
 interior lattice points of each most detailed tile within the zoom's budget of the DEM's own
-surface. Two servers must fail it: one with a tile cut short, one sending gzip tiles without
-``Content-Encoding: gzip``. Then a Viewer draws the tileset with software WebGL (SwiftShader):
+surface. Three servers must fail it: one with a tile cut short, one with a tile missing, one
+sending gzip tiles without ``Content-Encoding: gzip``. Then a Viewer draws the tileset with software WebGL (SwiftShader):
 seen from inside its rectangle it renders down to the deepest zoom without an error; seen whole,
 with the globe around it, Cesium stops rendering (a known failure, marked xfail: tiles partly
 outside the rectangle hold only their part inside it).
@@ -133,7 +133,8 @@ def test_cesium_reads_the_tileset_as_our_decoder_does(tileset, dem):
             assert abs(h - truth) <= budgets[str(z)] + step + 1e-6, (i, lon, lat, h, truth, budgets[str(z)])
 
 
-def test_a_tile_cut_short_is_a_tile_error(tileset, tmp_path):
+@pytest.mark.parametrize("damage", ["cut short", "missing"])
+def test_a_damaged_tile_fails_the_sampling(tileset, tmp_path, damage):
     out, layer = tileset
     broken = tmp_path / "broken"
     shutil.copytree(out, broken)
@@ -141,12 +142,17 @@ def test_a_tile_cut_short_is_a_tile_error(tileset, tmp_path):
     lon, lat = 0.5 * (w + e), 0.5 * (s + n)
     z, x, y = _most_detailed(layer, lon, lat)
     tile = broken / str(z) / str(x) / f"{y}.terrain"
-    import gzip
+    if damage == "missing":
+        tile.unlink()
+    else:
+        import gzip
 
-    tile.write_bytes(gzip.compress(gzip.decompress(tile.read_bytes())[:100], mtime=0))
+        tile.write_bytes(gzip.compress(gzip.decompress(tile.read_bytes())[:100], mtime=0))
     got = _sample(broken, [(lon, lat)])
-    # sampleTerrainMostDetailed(..., rejectOnTileFail=true) rejects on the tile Cesium cannot decode
+    # sampleTerrainMostDetailed(..., rejectOnTileFail=true) rejects on a tile Cesium cannot fetch or decode
     assert got["exception"] is not None and got["heights"] is None, got
+    if damage == "missing":
+        assert "404" in got["exception"], got["exception"]
     good = _sample(out, [(lon, lat)])
     assert good["exception"] is None and good["heights"][0] is not None
 
