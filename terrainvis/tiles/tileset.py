@@ -6,8 +6,11 @@ The DEM's valid footprint (where its surface has a height) is mapped to lon/lat 
 EPSG:4326) with pyproj, and the tileset covers the largest lon/lat-aligned rectangle
 inside it (:func:`lonlat_rectangle`): found on a 257 x 257 lattice over the footprint's
 bounding box, then each side pushed outwards by bisection while the rectangle's boundary
-stays on valid ground. A tile partly outside the rectangle holds only its part inside;
-outside the rectangle the globe has no terrain from this tileset.
+stays on valid ground. A tile partly outside the rectangle holds its part inside as made
+below, extended to the tile's edges at the heights of the rectangle's edge (:func:`_whole_tile`:
+Cesium makes a tile the tileset lacks from its parent, and a parent with only its part of the
+rectangle left those children empty, which stopped Cesium's renderer); beyond that the globe
+has no terrain from this tileset.
 
 How a tile is made
 ------------------
@@ -359,15 +362,78 @@ class _Made:
 
 
 def _encode(lat_: _Lattice, tin: TIN) -> tuple[bytes, qm.DecodedTile] | None:
-    """The tile of ``tin`` (local frame) and its decoding; None when rounding would fold a triangle."""
+    """The tile of ``tin`` (local frame), reaching the whole tile (:func:`_whole_tile`), and its decoding;
+    None when rounding would fold a triangle."""
     v = tin.vertices
     lon, lat = lat_.grid_to_lonlat(v[:, 0], v[:, 1])
     u, vv = qm.to_uv(lon, lat, lat_.bounds)
     faces = np.asarray(tin.faces, dtype=np.int64)
     if (qm._areas(u, vv, faces) <= 0).any():
         return None
-    data = qm.encode_tile(u, vv, v[:, 2], faces, lat_.bounds)
+    u, vv, h, faces = _whole_tile(u, vv, v[:, 2], faces, (int(lat_.us[0]), int(lat_.us[-1])),
+                                  (int(lat_.vs[0]), int(lat_.vs[-1])))
+    data = qm.encode_tile(u, vv, h, faces, lat_.bounds)
     return data, qm.decode_tile(data, lat_.bounds)
+
+
+def _whole_tile(u, v, h, faces, u_span, v_span):
+    """A mesh over the part ``u_span`` x ``v_span`` of a tile (quantized positions), extended to the
+    whole tile.
+
+    Cesium makes a tile the tileset lacks from its parent: a parent that held only its part of the
+    tileset's rectangle left the others empty, and Cesium's renderer stopped on them. Each side of
+    the part inside the tile gets a strip out to the tile's edge: every vertex of the mesh on that
+    side is repeated on the edge at the same height, and each corner a quad at the part's corner
+    height. Outside the rectangle the terrain is thus the rectangle's edge, extended outwards; the
+    part inside is the mesh as it was.
+    """
+    M = qm.QUANTIZED_MAX
+    (ua, ub), (va, vb) = u_span, v_span  # the mesh's vertices on a side of the part are sorted along it
+    index = {(int(a), int(b)): i for i, (a, b) in enumerate(zip(u, v))}
+    us, vs, hs = list(map(int, u)), list(map(int, v)), list(map(float, h))
+    at = {k: hs[i] for k, i in index.items()}
+    tris = [tuple(f) for f in np.asarray(faces, dtype=np.int64)]
+
+    def vertex(a, b, height):
+        key = (a, b)
+        if key not in index:
+            index[key] = len(us)
+            us.append(a)
+            vs.append(b)
+            hs.append(height)
+        return index[key]
+
+    def quad(p, q, r, s):  # counter-clockwise corners of a quad: two triangles
+        tris.extend([(p, q, r), (p, r, s)])
+
+    # strips: west (u == ua, out to 0), east (u == ub, to M), south (v == va, to 0), north (v == vb, to M)
+    if ua > 0:
+        col = sorted(b for (a, b) in at if a == ua)
+        for b0, b1 in zip(col, col[1:]):
+            quad(vertex(0, b0, at[(ua, b0)]), index[(ua, b0)], index[(ua, b1)], vertex(0, b1, at[(ua, b1)]))
+    if ub < M:
+        col = sorted(b for (a, b) in at if a == ub)
+        for b0, b1 in zip(col, col[1:]):
+            quad(index[(ub, b0)], vertex(M, b0, at[(ub, b0)]), vertex(M, b1, at[(ub, b1)]), index[(ub, b1)])
+    if va > 0:
+        row = sorted(a for (a, b) in at if b == va)
+        for a0, a1 in zip(row, row[1:]):
+            quad(vertex(a0, 0, at[(a0, va)]), vertex(a1, 0, at[(a1, va)]), index[(a1, va)], index[(a0, va)])
+    if vb < M:
+        row = sorted(a for (a, b) in at if b == vb)
+        for a0, a1 in zip(row, row[1:]):
+            quad(index[(a0, vb)], index[(a1, vb)], vertex(a1, M, at[(a1, vb)]), vertex(a0, M, at[(a0, vb)]))
+    # corners: the part's corner height out to the tile's corner
+    for cu, eu in ((ua, 0), (ub, M)):
+        for cv, ev in ((va, 0), (vb, M)):
+            if cu == eu or cv == ev:
+                continue
+            c = at[(cu, cv)]
+            ring = [index[(cu, cv)], vertex(eu, cv, c), vertex(eu, ev, c), vertex(cu, ev, c)]
+            if (eu > cu) != (ev > cv):  # keep the quad counter-clockwise
+                ring = ring[::-1]
+            quad(*ring)
+    return np.array(us), np.array(vs), np.array(hs), np.array(tris, dtype=np.int64)
 
 
 def _error(lat_: _Lattice, dec: qm.DecodedTile) -> float:

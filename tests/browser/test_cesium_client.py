@@ -10,9 +10,9 @@ the most detailed tile, linear in (u, v)) within the tile's height quantization 
 interior lattice points of each most detailed tile within the zoom's budget of the DEM's own
 surface. Three servers must fail it: one with a tile cut short, one with a tile missing, one
 sending gzip tiles without ``Content-Encoding: gzip``. Then a Viewer draws the tileset with software WebGL (SwiftShader):
-seen from inside its rectangle it renders down to the deepest zoom without an error; seen whole,
-with the globe around it, Cesium stops rendering (a known failure, marked xfail: tiles partly
-outside the rectangle hold only their part inside it).
+seen from inside its rectangle it renders down to the deepest zoom without an error, and so it
+does seen whole, with the globe around it (which once stopped Cesium's renderer: tiles partly
+outside the rectangle held only their part inside it).
 
 Needs Debian's ``chromium`` (``apt-get install chromium``) and the ``cesium`` npm package
 (``npm install --prefix tests/browser``); skips, naming them, where either is absent.
@@ -180,13 +180,13 @@ def test_a_viewer_draws_the_tileset_seen_from_inside_its_rectangle(tileset):
     assert max(int(z) for z in got["rendered"]["tiles_drawn"]) >= ZOOMS[1], got
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "a tile partly outside the tileset's rectangle holds only its part inside it; Cesium upsamples the missing "
-    "children of such a tile from it, gets meshes without vertices there (NaN bounding volumes), and its renderer "
-    "stops: 'Invalid array length' in View.createPotentiallyVisibleSet. Remove this mark when the writer covers "
-    "whole tiles"))
 def test_a_viewer_draws_the_tileset_and_the_globe_around_it(tileset):
-    """As a user who flies to the tileset sees it: the whole rectangle and the globe beyond its edges."""
+    """As a user who flies to the tileset sees it: the whole rectangle and the globe beyond its edges.
+
+    This failed while a tile partly outside the rectangle held only its part inside it: Cesium made
+    that tile's missing children from it, meshes without vertices beyond the rectangle (NaN bounding
+    volumes), and its renderer stopped ('Invalid array length' in View.createPotentiallyVisibleSet).
+    Every tile now reaches its edges (terrainvis.tiles.tileset._whole_tile)."""
     out, layer = tileset
     got = _view(out, "whole")
     assert got["exception"] is None, got["exception"]

@@ -37,10 +37,13 @@ def test_a_lonlat_dem_is_placed_where_it_is(tmp_path):
     for f in (tmp_path / "t").glob("9/*/*.terrain"):
         x, y = int(f.parent.name), int(f.stem)
         t = decode_tile(f.read_bytes(), tile_bounds(9, x, y))
-        # every vertex is a lattice point, so its height is the DEM's surface at its lon/lat (up to the rounding)
-        want = dem.height_at(dem.from_native(np.column_stack([t.lon, t.lat])))
+        # every vertex inside the rectangle is a lattice point, so its height is the DEM's surface at its
+        # lon/lat (up to the rounding); the others extend the rectangle's edge to the tile's (test_whole_tile)
+        w, s, e, nn = ts.bounds
+        inside = (t.lon >= w - 1e-9) & (t.lon <= e + 1e-9) & (t.lat >= s - 1e-9) & (t.lat <= nn + 1e-9)
+        want = dem.height_at(dem.from_native(np.column_stack([t.lon[inside], t.lat[inside]])))
         step = (t.max_height - t.min_height) / 32767
-        assert np.abs(t.height - want).max() <= 0.5 * step + 1e-6
+        assert np.abs(t.height[inside] - want).max() <= 0.5 * step + 1e-6
         n += 1
     assert n >= 2
     assert ts.largest_error <= 77067.0 / 2 ** 8 + 1.0
@@ -149,3 +152,34 @@ def test_largest_rectangle_by_hand():
     # rows 1-2, columns 1-3 (6 cells) beats rows 0-3 column 1 (4) and rows 1-3 columns 1-2 (6, found later)
     assert _largest_true_rectangle(mask) == (1, 1, 2, 3)
     assert _largest_true_rectangle(np.zeros((3, 3), dtype=bool)) is None
+
+
+@pytest.mark.parametrize("u_span, v_span", [((0, 32767), (0, 32767)), ((1200, 32767), (0, 32767)),
+                                            ((0, 20000), (500, 32767)), ((9000, 13251), (4000, 30000))])
+def test_whole_tile_extends_the_part_to_the_tiles_edges(u_span, v_span):
+    """A mesh over part of a tile, extended to the whole tile: the part's triangles unchanged, the tile
+    covered exactly once (triangle areas summing to the tile's, all counter-clockwise), and every added
+    vertex at the height of the part's vertex it extends (the same v on the west and east sides, the
+    same u on the south and north sides, the part's corner beyond its corners)."""
+    from terrainvis.tiles.quantized_mesh import QUANTIZED_MAX as M
+    from terrainvis.tiles.quantized_mesh import _areas
+    from terrainvis.tiles.tileset import _whole_tile
+
+    rng = np.random.default_rng(sum(u_span) + sum(v_span))
+    (ua, ub), (va, vb) = u_span, v_span
+    us = np.unique(np.concatenate([[ua, ub], rng.integers(ua + 1, ub, 6)]))
+    vs = np.unique(np.concatenate([[va, vb], rng.integers(va + 1, vb, 5)]))
+    U, V = np.meshgrid(us, vs)
+    H = rng.normal(300.0, 50.0, U.shape)
+    r, c = np.mgrid[0: vs.size - 1, 0: us.size - 1]
+    k = (r * us.size + c).ravel()
+    faces = np.concatenate([np.column_stack([k, k + 1, k + us.size + 1]), np.column_stack([k, k + us.size + 1, k + us.size])])
+    u, v, h, f = _whole_tile(U.ravel(), V.ravel(), H.ravel(), faces, u_span, v_span)
+    assert np.array_equal(f[: len(faces)], faces) and np.array_equal(h[: U.size], H.ravel())
+    area = _areas(u, v, f)
+    assert (area > 0).all() and area.sum() == 2 * M * M  # twice the tile's area: covered once, no overlap
+    assert {u.min(), u.max(), v.min(), v.max()} == {0, M}
+    part = {(int(a), int(b)): float(x) for a, b, x in zip(U.ravel(), V.ravel(), H.ravel())}
+    for a, b, x in zip(u[U.size:], v[U.size:], h[U.size:]):
+        src = (min(max(int(a), ua), ub), min(max(int(b), va), vb))  # the part's point it extends
+        assert x == part[src], (a, b)
