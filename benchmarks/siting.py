@@ -116,13 +116,16 @@ def main() -> None:
           f"least {100 * result.table['covered_area'].iloc[-1] / result.bound:.1f} % of the optimum (the run's bound)")
     print(f"  lazy greedy: {result.evaluations:,} gains evaluated (the plain greedy: {plain_evals:,})")
     if args.plain:
-        from terrainvis.visibility.observers import _prepare, _run_chunks
+        from terrainvis.visibility import Sight
+        from terrainvis.visibility.observer_runs import prepare, run_chunks
         from terrainvis.visibility.siting import _siting_unit
 
-        run = _prepare(grid, cands, args.observer_height, (0.0, args.max_distance, None, "auto", args.curvature,
-                                                           6378137.0), args.workers, None, False, "candidates")
+        sight = Sight.make(observer_height=args.observer_height, max_distance=args.max_distance,
+                           curvature=args.curvature)
+        run = prepare(grid, cands, None, sight, None, workers=args.workers, client=None, progress=False,
+                      name="candidates")
         packed = np.zeros((len(cands), -(-grid.size // 8)), dtype=np.uint8)
-        _run_chunks(run, _siting_unit, lambda key, part: packed.__setitem__(slice(*key), part), desc="")
+        run_chunks(run, _siting_unit, lambda key, part: packed.__setitem__(slice(*key), part), desc="")
         t0 = time.perf_counter()
         chosen = _plain_greedy(packed, args.k)
         print(f"  plain greedy on the same packed viewsheds: {time.perf_counter() - t0:.3f} s; same sequence: "

@@ -98,14 +98,17 @@ def add_field_of_view(p) -> None:
                    help="field of view: only samples at least this horizontal distance from the observer")
 
 
-def field_of_view_args(args):
-    """The field of view of ``--azimuth``, ``--vertical``, ``--min-distance`` and ``--max-distance``,
-    checked before anything is computed (a mistake names its flag)."""
-    from ..visibility.field_of_view import CLI_NAMES, field_of_view
+def sight_args(args):
+    """The one :class:`~terrainvis.visibility.Sight` of a command's flags (``--height``, ``--target-height``,
+    ``--curvature``, ``--earth-radius`` and the field of view), checked before anything is computed (a
+    mistake in the field of view names its flag)."""
+    from ..visibility.field_of_view import CLI_NAMES
+    from ..visibility.sight import Sight
 
     try:
-        return field_of_view(azimuth=args.azimuth, vertical=args.vertical, min_distance=args.min_distance,
-                             max_distance=args.max_distance, names=CLI_NAMES)
+        return Sight.make(observer_height=args.height, target_height=args.target_height, curvature=args.curvature,
+                          earth_radius=args.earth_radius, azimuth=args.azimuth, vertical=args.vertical,
+                          min_distance=args.min_distance, max_distance=args.max_distance, names=CLI_NAMES)
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
 

@@ -17,13 +17,13 @@ from ._common import (
     check_heights,
     dask_client,
     earth_text,
-    field_of_view_args,
     height_arg,
     outside_message,
     plural,
     position_frame,
     read_columns,
     read_terrain,
+    sight_args,
 )
 
 
@@ -88,7 +88,8 @@ def run(args) -> int:
     if png is not None:
         check_output_file(png, "--png", inputs=inputs, outputs=outputs)
         outputs["--png"] = png
-    fov = field_of_view_args(args)
+    sight = sight_args(args)
+    fov = sight.fov
     extra = _check_extra_outputs(args, inputs, outputs)
     label, grid = read_terrain(args.dem, args)
     _check_grid(grid, args, out, extra)
@@ -112,10 +113,8 @@ def run(args) -> int:
     try:
         t0 = time.perf_counter()
         many = observer_sets if "sets" in extra else cumulative_viewshed
-        result = many(grid, xy, observer_height=heights, target_height=args.target_height,
-                      max_distance=args.max_distance, curvature=args.curvature,
-                      earth_radius=args.earth_radius, azimuth=fov.azimuth, vertical=fov.vertical,
-                      min_distance=fov.min_distance, workers=args.workers, client=client, progress=True)
+        result = many(grid, xy, observer_height=heights, sight=sight, workers=args.workers, client=client,
+                      progress=True)
         counts = result.count() if "sets" in extra else result
         seconds = time.perf_counter() - t0
     finally:

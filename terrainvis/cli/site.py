@@ -17,13 +17,13 @@ from ._common import (
     check_heights,
     dask_client,
     earth_text,
-    field_of_view_args,
     height_arg,
     outside_message,
     plural,
     position_frame,
     read_columns,
     read_terrain,
+    sight_args,
 )
 
 
@@ -88,7 +88,8 @@ def run(args) -> int:
     from ..visibility import site_observers
 
     outputs = _check_outputs(args)
-    fov = field_of_view_args(args)
+    sight = sight_args(args)
+    fov = sight.fov
     label, grid = read_terrain(args.dem, args)
     check_heights(grid, args)
     if outputs.get("coverage") is not None and outputs["coverage"].suffix.lower() != ".npz" and not grid.is_uniform:
@@ -104,10 +105,8 @@ def run(args) -> int:
     client = dask_client(args.scheduler) if args.scheduler else None
     try:
         t0 = time.perf_counter()
-        result = site_observers(grid, xy, args.k, observer_height=heights, target_height=args.target_height,
-                                max_distance=args.max_distance, curvature=args.curvature,
-                                earth_radius=args.earth_radius, azimuth=fov.azimuth, vertical=fov.vertical,
-                                min_distance=fov.min_distance, workers=args.workers, client=client, progress=True)
+        result = site_observers(grid, xy, args.k, observer_height=heights, sight=sight, workers=args.workers,
+                                client=client, progress=True)
         seconds = time.perf_counter() - t0
     finally:
         if client is not None:

@@ -15,7 +15,6 @@ from ._common import (
     add_target_height,
     check_heights,
     earth_text,
-    field_of_view_args,
     height_arg,
     loading_kernels,
     number_arg,
@@ -23,6 +22,7 @@ from ._common import (
     plural,
     position_frame,
     read_terrain,
+    sight_args,
 )
 
 
@@ -70,7 +70,8 @@ def run(args) -> int:
     if suffix not in (".tif", ".tiff", ".npz", ".png"):
         raise UsageError(f"-o must end in .tif, .npz or .png, got {out.name!r}")
     check_output_file(out, "-o", inputs=[args.dem])
-    fov = field_of_view_args(args)
+    sight = sight_args(args)
+    fov = sight.fov
     with loading_kernels(lambda: _load_kernels(args.dem), "viewshed"):
         label, grid = read_terrain(args.dem, args)
     from ..visibility import viewshed
@@ -85,16 +86,14 @@ def run(args) -> int:
     if np.isnan(grid.height_at([observer])[0]):
         raise UsageError(f"--observer {frame.point(args.observer)} {outside_message(frame, args.observer)}")
     t0 = time.perf_counter()
-    vis = viewshed(grid, observer, observer_height=args.height, target_height=args.target_height,
-                   max_distance=args.max_distance, curvature=args.curvature, earth_radius=args.earth_radius,
-                   azimuth=fov.azimuth, vertical=fov.vertical, min_distance=fov.min_distance, output=args.output_mode)
+    vis = viewshed(grid, observer, sight=sight, output=args.output_mode)
     seconds = time.perf_counter() - t0
     if args.output_mode != "visible":
         return _report_values(grid, vis, out, suffix, args, (label, observer, frame, fov, seconds))
     valid = np.isfinite(grid.heights) if grid.n_nodata else None  # a full-size mask only where there is nodata
     n_vis = int(np.count_nonzero(vis if valid is None else vis & valid))
     n_valid = grid.size - grid.n_nodata
-    field = _field(grid, observer, fov, args)
+    field = _field(grid, observer, sight)
     _write_viewshed(grid, vis, out, suffix, args, label, observer, field)
     print(f"{label}: observer {frame.point(args.observer)}, eye {args.height:g} above the surface")
     print(f"  {earth_text(args)}")
@@ -179,14 +178,15 @@ def _write_values(grid, values, out: Path, suffix: str, args, label: str, observ
                   tags={"TERRAINVIS_OUTPUT_MODE": args.output_mode, "TERRAINVIS_UNITS": unit})
 
 
-def _field(grid, observer, fov, args):
-    """The samples inside the field of view (None without limits)."""
+def _field(grid, observer, sight):
+    """The samples inside the sight's field of view (None without limits)."""
     from ..visibility import field_of_view_mask
 
-    if not fov.limited:
+    if not sight.fov.limited:
         return None
-    return field_of_view_mask(grid, observer, fov, observer_height=args.height, target_height=args.target_height,
-                              curvature=args.curvature, earth_radius=args.earth_radius)
+    return field_of_view_mask(grid, observer, sight.fov, observer_height=sight.observer_height,
+                              target_height=sight.target_height, curvature=sight.curvature,
+                              earth_radius=sight.earth_radius)
 
 
 def _write_viewshed(grid, vis, out: Path, suffix: str, args, label: str, observer, field) -> None:

@@ -96,6 +96,7 @@ _API = {
     "FresnelClearance": "fresnel", "fresnel_clearance": "fresnel", "fresnel_radius": "fresnel",
     "clearance_profile": "profile", "lowest_point": "profile",
     "SitingResult": "siting", "candidate_grid": "siting", "sample_areas": "siting", "site_observers": "siting",
+    "Sight": "sight",
     "viewshed": "sweep",
 }
 
@@ -134,6 +135,7 @@ __all__ = [
     "terrain_scale",
     "embree_tolerance",
     "viewshed",
+    "Sight",
     "cumulative_viewshed",
     "FieldOfView",
     "field_of_view",

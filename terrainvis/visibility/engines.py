@@ -42,7 +42,7 @@ from ..core.terrain import HeightGrid
 from ..core.validate import describe
 
 __all__ = ["Engine", "Predicate", "ENGINES", "AUTO", "register", "unregister", "available", "engine_names",
-           "choose", "verdicts_text"]
+           "check_name", "choose", "verdicts_text"]
 
 #: The engine name that picks one by terrain and curvature (see the module docstring).
 AUTO = "auto"
@@ -184,6 +184,13 @@ def engine_names() -> list[str]:
     return [AUTO, *ENGINES]
 
 
+def check_name(engine) -> str:
+    """``engine`` if it is ``"auto"`` or a registered engine's name, else a ValueError listing them."""
+    if not isinstance(engine, str) or (engine != AUTO and engine not in ENGINES):
+        raise ValueError(f"engine must be one of {engine_names()}, got {engine!r}")
+    return engine
+
+
 def choose(engine, terrain, kc: float = 0.0) -> Engine:
     """The engine that answers on ``terrain``: ``engine`` by name, or the one ``"auto"`` picks.
 
@@ -193,8 +200,7 @@ def choose(engine, terrain, kc: float = 0.0) -> Engine:
         An unknown name, an engine that does not run on this terrain, or one that cannot
         model the curvature asked for; the message says what to use instead.
     """
-    if not isinstance(engine, str) or (engine != AUTO and engine not in ENGINES):
-        raise ValueError(f"engine must be one of {engine_names()}, got {engine!r}")
+    check_name(engine)
     if engine == AUTO:
         if isinstance(terrain, HeightGrid):
             return ENGINES["grid"]

@@ -57,7 +57,7 @@ import numpy as np
 
 from ..core.terrain import HeightGrid
 from ..core.validate import as_nonnegative_finite, describe
-from .predicate import EARTH_RADIUS, curvature_coefficient
+from .predicate import EARTH_RADIUS, curvature_coefficient, target_grid
 
 __all__ = ["FieldOfView", "field_of_view", "field_of_view_mask", "azimuth_degrees", "elevation_degrees"]
 
@@ -242,11 +242,7 @@ def field_of_view_mask(
     """
     if not isinstance(fov, FieldOfView):
         raise TypeError(f"fov must be a FieldOfView (from field_of_view(...)), got {describe(fov)}")
-    if at is not None and not isinstance(at, HeightGrid):
-        raise TypeError(f"at must be a terrainvis.HeightGrid (the grid of target samples) or None, got {describe(at)}")
-    if at is None and not isinstance(terrain, HeightGrid):
-        raise ValueError("at is required for a TIN: pass the HeightGrid whose samples are the targets")
-    grid = terrain if at is None else at
+    grid = target_grid(terrain, at)
     obs = np.asarray(observer, dtype=np.float64).ravel()
     if obs.size not in (2, 3) or not np.isfinite(obs).all():
         raise ValueError(f"observer must be a finite pair (x, y) or an eye (x, y, z), got {describe(observer)}")
@@ -313,19 +309,16 @@ def _target_surface(terrain, grid: HeightGrid) -> np.ndarray:
     return terrain.height_on_grid(grid.xs, grid.ys)
 
 
-def apply_field_of_view(visible: np.ndarray, terrain, observer, fov: FieldOfView, **viewshed_options) -> np.ndarray:
+def apply_field_of_view(visible: np.ndarray, terrain, observer, fov: FieldOfView, at, heights) -> np.ndarray:
     """``visible`` with the targets outside ``fov`` set to False (``visible`` itself when no limit is set).
 
-    ``viewshed_options`` are the viewshed's ``at``, ``observer_height``, ``target_height``,
-    ``curvature`` and ``earth_radius``.
+    ``at`` is the viewshed's (None: the terrain's own samples); ``heights`` is
+    ``(observer_height, target_height, kc)``, kc the curvature coefficient (a Sight's).
     """
     if not fov.limited:
         return visible
-    grid = terrain if viewshed_options.get("at") is None else viewshed_options["at"]
+    grid = terrain if at is None else at
     obs = np.asarray(observer, dtype=np.float64).ravel()
-    heights = (float(viewshed_options.get("observer_height", 1.7)), float(viewshed_options.get("target_height", 0.0)),
-               curvature_coefficient(viewshed_options.get("curvature", 0.0),
-                                     viewshed_options.get("earth_radius", EARTH_RADIUS)))
     idx = np.flatnonzero(visible)  # only the visible targets can change: the mask is computed for them alone
     out = np.zeros_like(visible)
     out.ravel()[idx[_inside(terrain, grid, obs, fov, idx, heights)]] = True

@@ -13,7 +13,7 @@ same exact :func:`terrainvis.viewshed` per observer, the same chunks of observer
 terrain between them, with the pair engine's exact minimum clearance
 (:func:`terrainvis.min_clearance`).
 
-The chunked run (:func:`terrainvis.visibility.cumulative._run_chunks`) is the cumulative
+The chunked run (:mod:`terrainvis.visibility.observer_runs`) is the cumulative
 viewshed's, shared with :mod:`terrainvis.visibility.siting`, whose units keep each
 candidate's viewshed as packed bits instead.
 """
@@ -29,17 +29,19 @@ from ..core.memory import check_memory
 from ..core.terrain import as_terrain
 from ..core.validate import as_int
 from ..errors import OutsideFootprintError
-from .cumulative import (
-    _as_heights,
-    _as_observers,
-    _check_inside,
-    _count_dtype,
-    _keep_terrain,
-    _prepare,
-    _run_chunks,
+from .observer_runs import (
+    as_heights,
+    as_observers,
+    check_on_surface,
+    count_dtype,
+    eyes,
+    keep_terrain,
+    prepare,
+    run_chunks,
+    sight_of_many,
 )
 from .predicate import EARTH_RADIUS, clearance_tolerance, curvature_coefficient
-from .sweep import _surface_at, viewshed
+from .sweep import viewshed
 
 __all__ = ["ObserverSets", "observer_sets", "intervisibility_network"]
 
@@ -109,7 +111,7 @@ class ObserverSets:
         total = np.zeros(self.shape, dtype=np.uint32)
         for b in range(self.bits.shape[2]):  # one byte plane at a time: no (rows, cols, K / 8) temporary
             total += np.bitwise_count(self.bits[:, :, b])
-        return total.astype(_count_dtype(self.n_observers))
+        return total.astype(count_dtype(self.n_observers))
 
     def frequency(self) -> np.ndarray:
         """The normalised visibility frequency: count / K, (rows, cols) float64 in [0, 1], NaN on nodata."""
@@ -201,6 +203,7 @@ def observer_sets(
     azimuth=None,
     vertical=None,
     min_distance=None,
+    sight=None,
     workers: int | None = None,
     client=None,
     progress: bool = False,
@@ -209,7 +212,7 @@ def observer_sets(
 
     Parameters
     ----------
-    terrain, observers, observer_height, target_height, max_distance, at, engine, curvature, earth_radius, workers, client, progress
+    terrain, observers, observer_height, target_height, max_distance, at, engine, curvature, earth_radius, sight, workers, client, progress
         As in :func:`terrainvis.cumulative_viewshed`.
     azimuth, vertical, min_distance : optional
         Each observer's field of view, as in :func:`terrainvis.cumulative_viewshed`: an
@@ -251,11 +254,14 @@ def observer_sets(
     >>> sets.count()[0].tolist(), sets.nbytes
     ([1, 1, 2, 1, 1], 15)
     """
-    run = _prepare(terrain, observers, observer_height, (target_height, max_distance, at, engine, curvature,
-                                                          earth_radius), workers, client, progress, "observers",
-                   fov=(azimuth, vertical, min_distance))
+    s, each = sight_of_many(sight, observer_height, {
+        "target_height": target_height, "max_distance": max_distance, "engine": engine, "curvature": curvature,
+        "earth_radius": earth_radius, "azimuth": azimuth, "vertical": vertical, "min_distance": min_distance,
+    })
+    run = prepare(terrain, observers, each, s, at, workers=workers, client=client, progress=progress,
+                  name="observers")
     grid = terrain if at is None else at
-    k = run["obs"].shape[0]
+    k = run.obs.shape[0]
     n_bytes = -(-k // 8)
     check_memory(grid.size * n_bytes * 1.1, f"the observer sets of {k:,} observers on {grid.shape[0]}x{grid.shape[1]} "
                                             f"samples ({grid.size * n_bytes:,} bytes of bits)")
@@ -264,10 +270,11 @@ def observer_sets(
     def place(key, part):
         bits[:, :, key[0] // 8: key[0] // 8 + part.shape[2]] = part
 
-    _run_chunks(run, _sets_unit, place, align=8, desc="observer sets")
-    settings = {**run["options"], "observer_height": _heights_setting(run["heights"])}
+    run_chunks(run, _sets_unit, place, align=8, desc="observer sets")
+    settings = {name: v for name, v in s.keywords().items() if name != "observer_height"}
+    settings["observer_height"] = _heights_setting(run.heights)
     valid = np.isfinite(grid.z)
-    return ObserverSets(bits, k, grid.xs, grid.ys, valid, run["obs"], settings)
+    return ObserverSets(bits, k, grid.xs, grid.ys, valid, run.obs, settings)
 
 
 def _heights_setting(heights: np.ndarray):
@@ -275,13 +282,13 @@ def _heights_setting(heights: np.ndarray):
     return float(heights[0]) if np.all(heights == heights[0]) else heights.tolist()
 
 
-def _sets_unit(terrain, at, token: str, observers: np.ndarray, heights: np.ndarray, options: dict) -> np.ndarray:
+def _sets_unit(terrain, at, token: str, observers: np.ndarray, heights: np.ndarray, sight) -> np.ndarray:
     """The bytes of one chunk of observers (its first observer on a byte boundary): (rows, cols, ceil(n / 8))."""
-    terrain, at = _keep_terrain(token, terrain, at)
+    terrain, at = keep_terrain(token, terrain, at)
     shape = (terrain if at is None else at).shape
     out = np.zeros(shape + (-(-observers.shape[0] // 8),), dtype=np.uint8)
     for i in range(observers.shape[0]):
-        v = viewshed(terrain, observers[i], observer_height=heights[i], at=at, **options)
+        v = viewshed(terrain, observers[i], sight=sight.with_observer_height(heights[i]), at=at)
         out[:, :, i >> 3] |= v.view(np.uint8) << np.uint8(7 - (i & 7))
     return out
 
@@ -353,28 +360,21 @@ def intervisibility_network(
     from .los import min_clearance
 
     as_terrain(terrain)
-    obs = _as_observers(observers, "observers")
+    obs = as_observers(observers, "observers")
     k = obs.shape[0]
-    heights = _as_heights(observer_height, k, terrain)
+    heights = as_heights(observer_height, k, terrain)
     curvature_coefficient(curvature, earth_radius)
-    _check_inside(terrain, obs, "observers")
+    check_on_surface(terrain, obs, "observers")
     n_pairs = k * (k - 1) // 2
     check_memory(n_pairs * 8 * 16, f"the intervisibility network of {k:,} observers ({n_pairs:,} pairs)")
-    eyes = _eyes(terrain, obs, heights)
+    e = eyes(terrain, obs, heights)
     i, j = np.triu_indices(k, 1)
-    clearance = min_clearance(terrain, eyes[i], eyes[j], curvature=curvature, earth_radius=earth_radius)
-    distance = np.hypot(eyes[j, 0] - eyes[i, 0], eyes[j, 1] - eyes[i, 1])
+    clearance = min_clearance(terrain, e[i], e[j], curvature=curvature, earth_radius=earth_radius)
+    distance = np.hypot(e[j, 0] - e[i, 0], e[j, 1] - e[i, 1])
     return pd.DataFrame({
         "i": i.astype(np.int64), "j": j.astype(np.int64),
-        "x_i": eyes[i, 0], "y_i": eyes[i, 1], "z_i": eyes[i, 2],
-        "x_j": eyes[j, 0], "y_j": eyes[j, 1], "z_j": eyes[j, 2],
+        "x_i": e[i, 0], "y_i": e[i, 1], "z_i": e[i, 2],
+        "x_j": e[j, 0], "y_j": e[j, 1], "z_j": e[j, 2],
         "distance": distance, "clearance": clearance, "visible": clearance >= -clearance_tolerance(terrain),
     })
 
-
-def _eyes(terrain, obs: np.ndarray, heights: np.ndarray) -> np.ndarray:
-    """(K, 3) eyes: (x, y, surface + height) as :func:`terrainvis.viewshed` places them, or the given eyes."""
-    if obs.shape[1] == 3:
-        return obs.copy()
-    ground = np.array([_surface_at(terrain, x, y) for x, y in obs])
-    return np.column_stack([obs, ground + heights])

@@ -165,3 +165,33 @@ def _prepare_segments(terrain, a, b, operation: str):
     _check_inside(terrain, a, "a")
     _check_inside(terrain, b, "b")
     return np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)
+
+
+def target_grid(terrain, at) -> HeightGrid:
+    """The grid whose samples are a viewshed's targets: ``at``, or the terrain itself when it
+    is a HeightGrid; ``at`` must be a HeightGrid over the terrain's footprint (required for a TIN).
+
+    The one check of ``at`` behind :func:`terrainvis.viewshed`, the runs of many observers and
+    :func:`terrainvis.visibility.field_of_view_mask`.
+    """
+    if at is not None and not isinstance(at, HeightGrid):
+        raise TypeError(f"at must be a terrainvis.HeightGrid (the grid of target samples) or None, got {describe(at)}")
+    if at is None:
+        if not isinstance(terrain, HeightGrid):
+            raise ValueError(
+                "at is required for a TIN: pass the HeightGrid whose samples are the targets "
+                "(normally the original terrain the TIN simplifies)"
+            )
+        return terrain
+    _check_overlap(terrain, at)
+    return at
+
+
+def _check_overlap(terrain, at: HeightGrid) -> None:
+    xmin, xmax, ymin, ymax = terrain.extent
+    axmin, axmax, aymin, aymax = at.extent
+    if axmax < xmin or axmin > xmax or aymax < ymin or aymin > ymax:
+        raise ValueError(
+            f"at covers {at.extent}, which does not overlap the terrain's footprint {terrain.extent}; "
+            "pass a grid over the same area (same coordinate system)"
+        )

@@ -20,7 +20,7 @@ Memory: each candidate's viewshed is kept as packed bits (``numpy.packbits``), K
 cols / 8 bytes (1,000 candidates on 1024²: 125 MiB); a request that would not fit is
 refused before anything runs (:func:`terrainvis.core.memory.check_memory`). The viewsheds
 run in chunks of candidates as :func:`terrainvis.cumulative_viewshed`'s observers do
-(:func:`terrainvis.visibility.cumulative._run_chunks`), on this process, local workers or
+(:mod:`terrainvis.visibility.observer_runs`), on this process, local workers or
 dask; the greedy choice itself runs here, in numpy (an AND and a popcount per evaluation).
 
 References
@@ -54,8 +54,7 @@ import numpy as np
 from ..core.memory import check_memory
 from ..core.terrain import HeightGrid
 from ..core.validate import as_int, describe
-from .cumulative import _keep_terrain, _prepare, _run_chunks
-from .observers import _eyes
+from .observer_runs import eyes, keep_terrain, prepare, run_chunks, sight_of_many
 from .predicate import EARTH_RADIUS
 from .sweep import _on_surface, viewshed
 
@@ -120,6 +119,7 @@ def site_observers(
     azimuth=None,
     vertical=None,
     min_distance=None,
+    sight=None,
     workers: int | None = None,
     client=None,
     progress: bool = False,
@@ -143,6 +143,9 @@ def site_observers(
     azimuth, vertical, min_distance : optional
         Each candidate's field of view, as in :func:`terrainvis.viewshed`: a candidate
         covers nothing outside it (a mast's antenna sector, a camera's view).
+    sight : Sight, optional
+        The options above but ``at`` as one value, as in :func:`terrainvis.cumulative_viewshed`
+        (``observer_height`` may still be one height per candidate).
     workers, client, progress
         Where the K viewsheds run, as in :func:`terrainvis.cumulative_viewshed` (the
         progress bar counts candidates).
@@ -211,10 +214,13 @@ def site_observers(
     >>> r.chosen.tolist(), r.table["gain_cells"].tolist(), r.table["covered_share"].tolist()
     ([0, 2], [9, 6], [0.6, 1.0])
     """
-    run = _prepare(terrain, candidates, observer_height, (target_height, max_distance, at, engine, curvature,
-                                                          earth_radius), workers, client, progress, "candidates",
-                   fov=(azimuth, vertical, min_distance))
-    n = run["obs"].shape[0]
+    s, each = sight_of_many(sight, observer_height, {
+        "target_height": target_height, "max_distance": max_distance, "engine": engine, "curvature": curvature,
+        "earth_radius": earth_radius, "azimuth": azimuth, "vertical": vertical, "min_distance": min_distance,
+    })
+    run = prepare(terrain, candidates, each, s, at, workers=workers, client=client, progress=progress,
+                  name="candidates")
+    n = run.obs.shape[0]
     if isinstance(k, (bool, np.bool_)) or not isinstance(k, (int, np.integer)):
         raise TypeError(f"k must be an integer (how many observers to choose), got {describe(k)}")
     if not 1 <= int(k) <= n:
@@ -231,7 +237,7 @@ def site_observers(
     def place(key, part):
         packed[key[0]: key[1]] = part
 
-    _run_chunks(run, _siting_unit, place, desc="candidate viewsheds")
+    run_chunks(run, _siting_unit, place, desc="candidate viewsheds")
     t1 = time.perf_counter()
     weights = None if grid.is_uniform else sample_areas(grid).ravel()
     chosen, gains, bound, evaluations = _lazy_greedy(packed, k, weights, grid.size)
@@ -249,13 +255,13 @@ def site_observers(
                         seconds)
 
 
-def _siting_unit(terrain, at, token: str, observers: np.ndarray, heights: np.ndarray, options: dict) -> np.ndarray:
+def _siting_unit(terrain, at, token: str, observers: np.ndarray, heights: np.ndarray, sight) -> np.ndarray:
     """The packed viewsheds of one chunk of candidates: (n, ceil(rows * cols / 8)) uint8, row-major samples."""
-    terrain, at = _keep_terrain(token, terrain, at)
+    terrain, at = keep_terrain(token, terrain, at)
     size = (terrain if at is None else at).size
     out = np.empty((observers.shape[0], -(-size // 8)), dtype=np.uint8)
     for i in range(observers.shape[0]):
-        out[i] = np.packbits(viewshed(terrain, observers[i], observer_height=heights[i], at=at, **options))
+        out[i] = np.packbits(viewshed(terrain, observers[i], sight=sight.with_observer_height(heights[i]), at=at))
     return out
 
 
@@ -299,12 +305,12 @@ def _lazy_greedy(packed: np.ndarray, k: int, weights, size: int):
     return chosen, gains, bound, evaluations
 
 
-def _table(run: dict, chosen, packed: np.ndarray, grid: HeightGrid, weights):
-    """The table of :class:`SitingResult`: each choice, its gain and the coverage after it."""
+def _table(run, chosen, packed: np.ndarray, grid: HeightGrid, weights):
+    """The table of :class:`SitingResult` (``run``: the :class:`~terrainvis.visibility.observer_runs.Run`):
+    each choice, its gain and the coverage after it."""
     import pandas as pd
 
-    obs = run["obs"]
-    eyes = _eyes(run["terrain"], obs[chosen], run["heights"][chosen])
+    e = eyes(run.terrain, run.obs[chosen], run.heights[chosen])
     uncovered = np.full(packed.shape[1], 0xFF, dtype=np.uint8)
     cell = grid.dx * grid.dy if weights is None else None
     gain_cells, gain_area = [], []
@@ -315,7 +321,7 @@ def _table(run: dict, chosen, packed: np.ndarray, grid: HeightGrid, weights):
         np.bitwise_and(uncovered, np.bitwise_not(packed[i]), out=uncovered)
     table = pd.DataFrame({
         "order": np.arange(1, len(chosen) + 1), "candidate": np.asarray(chosen, dtype=np.int64),
-        "x": eyes[:, 0], "y": eyes[:, 1], "eye": eyes[:, 2],
+        "x": e[:, 0], "y": e[:, 1], "eye": e[:, 2],
         "gain_cells": np.asarray(gain_cells, dtype=np.int64), "gain_area": np.asarray(gain_area, dtype=np.float64),
     })
     table["covered_cells"] = table["gain_cells"].cumsum()

@@ -77,15 +77,15 @@ from ..core.interrupt import THREAD_MIN_WORK, alongside, call
 from ..core.memory import fresh_array
 from ..core.mesh import footprint_matches
 from ..core.surface import SurfaceGrid, no_pyramid, no_strips
-from ..core.validate import as_nonnegative_finite, describe
+from ..core.validate import describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import TIN, HeightGrid, as_terrain, height_range
 from . import _sweep_kernels as _vk
 from .engines import Predicate, choose
-from .field_of_view import apply_field_of_view, field_of_view, field_of_view_mask
+from .field_of_view import apply_field_of_view, field_of_view_mask
 from .output_modes import check_output, eye_thresholds, output_values, tin_of_grid_thresholds
-from .predicate import (EARTH_RADIUS, _check_heights, _height_above, clearance_tolerance, curvature_coefficient,
-                        terrain_scale, trim_length)
+from .predicate import EARTH_RADIUS, _check_heights, clearance_tolerance, target_grid, terrain_scale, trim_length
+from .sight import Sight, engine_on, sight_of
 
 __all__ = ["viewshed"]
 
@@ -119,6 +119,7 @@ def viewshed(
     azimuth=None,
     vertical=None,
     min_distance=None,
+    sight=None,
     output: str = "visible",
 ) -> np.ndarray:
     """Which samples of a grid are visible from an observer (or how far from visible they are).
@@ -171,6 +172,10 @@ def viewshed(
         ``curvature * d**2 / (2 R)``.
     min_distance : float, optional
         Field of view: samples nearer than this horizontal distance are False.
+    sight : Sight, optional
+        All of the above but ``at`` as one value (:class:`~terrainvis.visibility.Sight`,
+        checked when it was made), instead of the keywords: a keyword set to other than
+        its default beside it is a TypeError.
     output : {"visible", "min_height", "angle"}, default "visible"
         What to return for each target (:mod:`terrainvis.visibility.output_modes`):
         ``"visible"`` the bool mask below; ``"min_height"`` (float64) the least height
@@ -250,23 +255,21 @@ def viewshed(
            [1, 1, 1, 0, 0]])
     """
     check_output(output)
-    fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance, max_distance=max_distance)
+    s = sight_of(sight, {
+        "observer_height": observer_height, "target_height": target_height, "max_distance": max_distance,
+        "engine": engine, "curvature": curvature, "earth_radius": earth_radius, "azimuth": azimuth,
+        "vertical": vertical, "min_distance": min_distance,
+    })
     if output != "visible":
-        return _output_values(
-            terrain, observer, output, fov, observer_height=observer_height, target_height=target_height,
-            max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
-        )
-    out, _ = _viewshed(
-        terrain, observer, observer_height=observer_height, target_height=target_height,
-        max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius,
-    )
-    return apply_field_of_view(out, terrain, observer, fov, at=at, observer_height=observer_height,
-                               target_height=target_height, curvature=curvature, earth_radius=earth_radius)
+        return _output_values(terrain, observer, output, s, at)
+    out, _ = _viewshed(terrain, observer, s, at=at)
+    return apply_field_of_view(out, terrain, observer, s.fov, at, (s.observer_height, s.target_height, s.kc))
 
 
-def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_distance=None, at=None,
-              engine="auto", curvature=0.0, earth_radius=EARTH_RADIUS):
-    """:func:`viewshed` and a dict of counts: how the samples were decided.
+def _viewshed(terrain, observer, sight: Sight | None = None, *, at=None, **keywords):
+    """:func:`viewshed` without its field of view but ``max_distance``, and a dict of counts:
+    how the samples were decided. ``keywords`` (tests, benchmarks) are :func:`viewshed`'s,
+    made into a Sight when ``sight`` is None.
 
     Keys: ``targets`` (samples that are targets), ``lb`` / ``ub`` (decided by the sweep's
     lower bound / by its upper bound and the last ring: its exact walk, or for ``ub_bound``
@@ -274,9 +277,9 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     blocks of rings whose bound reached the target), ``exact`` (answered by the pair
     engine, or the nodata-aware walk, or Embree, or the TIN clipper).
     """
-    engine, kc, eye, zs, at, own, (h_t, dmax) = _setup(
-        terrain, observer, observer_height=observer_height, target_height=target_height,
-        max_distance=max_distance, at=at, engine=engine, curvature=curvature, earth_radius=earth_radius)
+    if sight is None:
+        sight = Sight.make(**keywords)
+    engine, kc, eye, zs, at, own, (h_t, dmax) = _setup(terrain, observer, sight, at)
     if engine.name == "grid":
         # The sweep's bounds assume the eye on or above its own cell's surface (so the
         # part of every ray inside the trim cannot block). An eye below it, e.g. an
@@ -288,27 +291,16 @@ def _viewshed(terrain, observer, *, observer_height=1.7, target_height=0.0, max_
     return out, info
 
 
-def _setup(terrain, observer, *, observer_height, target_height, max_distance, at, engine, curvature,
-           earth_radius):
+def _setup(terrain, observer, sight: Sight, at):
     """The checked arguments of a viewshed: ``(engine, kc, eye, zs, at, own, (h_t, dmax))``,
     ``zs`` the surface under the observer and ``own`` whether the targets are the grid's samples."""
     as_terrain(terrain)
-    kc = curvature_coefficient(curvature, earth_radius)
-    engine = choose(engine, terrain, kc)
+    kc = sight.kc
+    engine = engine_on(terrain, sight)
     ox, oy, oz = _as_observer(observer)
-    h_o = _height_above(observer_height, "observer_height", terrain)
-    h_t = _height_above(target_height, "target_height", terrain)
-    dmax = math.inf if max_distance is None else as_nonnegative_finite(max_distance, "max_distance", "xy units")
-    if at is not None and not isinstance(at, HeightGrid):
-        raise TypeError(f"at must be a terrainvis.HeightGrid (the grid of target samples) or None, got {describe(at)}")
-    if at is None:
-        if isinstance(terrain, TIN):
-            raise ValueError(
-                "at is required for a TIN: pass the HeightGrid whose samples are the targets "
-                "(normally the original terrain the TIN simplifies)"
-            )
-        at = terrain
-    _check_overlap(terrain, at)
+    h_o, h_t = sight.observer_height, sight.target_height
+    dmax = math.inf if sight.max_distance is None else sight.max_distance
+    at = target_grid(terrain, at)
     zs = _surface_at(terrain, ox, oy)
     if not np.isfinite(zs):
         raise OutsideFootprintError(
@@ -329,9 +321,10 @@ def _setup(terrain, observer, *, observer_height, target_height, max_distance, a
 _SETTLE_REL = OUTPUT_SETTLE_REL
 
 
-def _output_values(terrain, observer, output: str, fov, **options) -> np.ndarray:
+def _output_values(terrain, observer, output: str, sight: Sight, at) -> np.ndarray:
     """:func:`viewshed`'s ``"min_height"`` or ``"angle"``: the threshold of every target in the field."""
-    _, kc, eye, _, at, own, (h_t, _) = _setup(terrain, observer, **options)
+    _, kc, eye, _, at, own, (h_t, _) = _setup(terrain, observer, sight, at)
+    fov = sight.fov
     if own:
         zt = np.array(terrain.z, dtype=np.float64)
         if terrain.n_nodata:
@@ -340,8 +333,8 @@ def _output_values(terrain, observer, output: str, fov, **options) -> np.ndarray
         zt = terrain.height_on_grid(at.xs, at.ys)
     ok = np.isfinite(zt) & np.isfinite(at.z)
     if fov.limited:
-        ok &= field_of_view_mask(terrain, eye, fov, at=at, target_height=h_t, curvature=options["curvature"],
-                                 earth_radius=options["earth_radius"])
+        ok &= field_of_view_mask(terrain, eye, fov, at=at, target_height=h_t, curvature=sight.curvature,
+                                 earth_radius=sight.earth_radius)
     idx = np.flatnonzero(ok.ravel())
     r, c = np.divmod(idx, at.shape[1])
     ground = zt.ravel()[idx]
@@ -506,16 +499,6 @@ def _as_observer(observer) -> tuple[float, float, float | None]:
     if not np.isfinite(arr).all():
         raise ValueError(f"observer must be finite, got {arr.tolist()}")
     return float(arr[0]), float(arr[1]), (float(arr[2]) if arr.shape[0] == 3 else None)
-
-
-def _check_overlap(terrain, at: HeightGrid) -> None:
-    xmin, xmax, ymin, ymax = terrain.extent
-    axmin, axmax, aymin, aymax = at.extent
-    if axmax < xmin or axmin > xmax or aymax < ymin or aymin > ymax:
-        raise ValueError(
-            f"at covers {at.extent}, which does not overlap the terrain's footprint {terrain.extent}; "
-            "pass a grid over the same area (same coordinate system)"
-        )
 
 
 # ----------------------------------------------------------------- surface

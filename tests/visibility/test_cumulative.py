@@ -26,7 +26,7 @@ from terrainvis import HeightGrid, cumulative_viewshed, viewshed
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import line_of_sight
-from terrainvis.visibility.cumulative import _chunks, _count_dtype
+from terrainvis.visibility.observer_runs import _chunks, count_dtype
 from terrainvis.visibility.sweep import _surface_at
 
 
@@ -164,7 +164,7 @@ def test_threads_and_one_thread_give_the_same_raster(hills, monkeypatch):
     that is what it does."""
     import numba
 
-    from terrainvis.visibility import cumulative as module
+    from terrainvis.visibility import observer_runs as module
 
     obs = _observers(hills, 24, seed=5)
     if numba.get_num_threads() < 2:
@@ -211,11 +211,11 @@ def test_progress_bar_counts_observers(hills, capsys, monkeypatch):
     assert capsys.readouterr().err == ""
 
 
-def test_count_dtype():
-    assert _count_dtype(1) == np.uint16
-    assert _count_dtype(65535) == np.uint16
-    assert _count_dtype(65536) == np.uint32
-    assert np.iinfo(_count_dtype(65535)).max >= 65535
+def testcount_dtype():
+    assert count_dtype(1) == np.uint16
+    assert count_dtype(65535) == np.uint16
+    assert count_dtype(65536) == np.uint32
+    assert np.iinfo(count_dtype(65535)).max >= 65535
 
 
 @settings(max_examples=200, deadline=None)
