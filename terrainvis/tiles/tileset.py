@@ -560,6 +560,12 @@ def _prepare(out_dir, overwrite: bool, resume: bool, settings: dict, names: dict
         raise ValueError(f"{where} holds a {LAYER} that terrainvis did not write; terrainvis never replaces a file it "
                          "did not write: move it away or choose another folder")
     files = _tile_files(out)
+    if files and not (_ours(layer) or earlier is not None):
+        # every run of terrainvis tiles writes its record before its first tile: tiles without
+        # either record are another program's (a tiler's output kept without its layer.json)
+        raise ValueError(f"{where} holds {len(files):,} {{z}}/{{x}}/{{y}}.terrain file(s) without a {LAYER} or a record "
+                         f"that terrainvis wrote; terrainvis never replaces files it did not write: move them away "
+                         "or choose another folder")
     leftovers = [p for p in out.iterdir() if p.is_file() and re.fullmatch(
         r"\.(layer\.json|terrainvis-tiles\.partial\.json)\.[a-z0-9_]{8}\.json|\.terrainvis-tiles\.csv\.[a-z0-9_]{8}\.csv",
         p.name)]

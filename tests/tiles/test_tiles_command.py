@@ -255,6 +255,18 @@ def test_overwrite_never_replaces_a_layer_json_terrainvis_did_not_write(capsys, 
     assert (out / "layer.json").read_text() == '{"tilejson": "2.1.0"}'
 
 
+def test_overwrite_never_removes_tiles_terrainvis_did_not_write(capsys, tmp_path):
+    """Tiles with neither a layer.json nor a run record of terrainvis (another tiler's output kept
+    without its layer.json) are refused, not removed."""
+    out = tmp_path / "o"
+    (out / "5" / "17").mkdir(parents=True)
+    (out / "5" / "17" / "9.terrain").write_bytes(b"another tiler's tile")
+    err = one_line_error(capsys, 2, ["tiles", "cumberland", str(out), "--method", "simple", "--zoom", "0", "0",
+                                     "--overwrite"])
+    assert "1 {z}/{x}/{y}.terrain file(s)" in err and "did not write" in err
+    assert (out / "5" / "17" / "9.terrain").read_bytes() == b"another tiler's tile"
+
+
 def test_without_pyproj_one_line_names_the_extra(capsys, tmp_path, monkeypatch):
     import sys
 
