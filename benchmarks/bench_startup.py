@@ -64,7 +64,7 @@ if command == "viewshed":
     from terrainvis.visibility.sweep import _build_tables
     import rasterio
     mark("imports")
-    _command._load_kernels()  # what the command loads beside its reading
+    _command._load_kernels(dem)  # what the command loads beside its reading (the DEM's heights' dtype)
     mark("kernel loading")
     grid = load_dem(dem)
     mark("reading")
