@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from ._common import UsageError, add_nodata, distance_arg, method_arg, on_interrupt, plural, read_terrain, working
@@ -12,7 +13,8 @@ HELP = "write a DEM as Cesium quantized-mesh terrain tiles"
 
 #: How the API's messages name the arguments on the command line.
 _NAMES = {"out_dir": "OUT_DIR", "overwrite": "--overwrite", "resume": "--resume", "zooms": "--zoom", "method": "--method",
-          "max_error0": "--max-error", "lattice": "--lattice", "grid": "DEM"}
+          "max_error0": "--max-error", "lattice": "--lattice", "grid": "DEM", "keep_los": "--keep-los",
+          "los_height": "--los-height"}
 
 
 def zoom_arg(text: str) -> int:
@@ -24,6 +26,16 @@ def zoom_arg(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a zoom, an integer in [0, {MAX_ZOOM}], got {text!r}") from None
     if not 0 <= value <= MAX_ZOOM:
         raise argparse.ArgumentTypeError(f"expected a zoom in [0, {MAX_ZOOM}], got {text!r}")
+    return value
+
+
+def share_arg(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a share of the verdicts in (0, 1], such as 0.99, got {text!r}")
     return value
 
 
@@ -46,7 +58,8 @@ def add_parser(sub) -> None:
             "Write a georeferenced DEM as a Cesium quantized-mesh-1.0 tileset (OUT_DIR/{z}/{x}/{y}.terrain and "
             "OUT_DIR/layer.json, EPSG:4326, TMS): the largest lon/lat rectangle inside the DEM's footprint, every "
             "zoom from 0 to MAX. Each tile is the DEM sampled on a 65 x 65 lattice (--lattice), simplified from "
-            "zoom MIN on with the method to a max vertical error of E0 / 2^z metres (below MIN the whole lattice). "
+            "zoom MIN on with the method to a max vertical error of E0 / 2^z metres (below MIN the whole lattice), "
+            "or, with --keep-los P, to the largest error whose tiles keep a share P of their sight lines' verdicts. "
             "Needs pyproj: pip install \"terrainvis[tiles]\"."
         ),
     )
@@ -56,8 +69,15 @@ def add_parser(sub) -> None:
                    help=f"one of {', '.join(METHODS)}")
     t.add_argument("--zoom", nargs=2, type=zoom_arg, required=True, metavar=("MIN", "MAX"),
                    help="the method simplifies zooms MIN to MAX; zooms 0 to MAX are written")
-    t.add_argument("--max-error", type=distance_arg, default=None, metavar="E0",
-                   help="zoom 0's max vertical error in metres; zoom z gets E0 / 2^z (default 77067)")
+    budgets = t.add_mutually_exclusive_group()
+    budgets.add_argument("--max-error", type=distance_arg, default=None, metavar="E0",
+                         help="zoom 0's max vertical error in metres; zoom z gets E0 / 2^z (default 77067)")
+    budgets.add_argument("--keep-los", type=share_arg, default=None, metavar="P",
+                         help="instead, each zoom's max error is the largest whose tiles keep at least a share P "
+                              "(e.g. 0.99) of the line-of-sight verdicts of 780 sight lines per tile, their ends "
+                              "--los-height above the ground")
+    t.add_argument("--los-height", type=distance_arg, default=2.0, metavar="H",
+                   help="with --keep-los: the sight lines' ends above the ground in metres (default 2)")
     t.add_argument("--gzip", action=argparse.BooleanOptionalAction, default=True,
                    help="gzip-compress the tiles, as cesium-terrain-builder does (default; --no-gzip writes them raw)")
     t.add_argument("--lattice", type=lattice_arg, default=64, metavar="N",
@@ -86,7 +106,8 @@ def run(args) -> int:
     on_interrupt(f"; the finished tiles are in {args.out_dir!r}, without layer.json (--resume continues)")
     ts = write_tileset(grid, args.out_dir, method=args.method, zooms=(lo, hi), max_error0=args.max_error,
                        gzip=args.gzip, lattice=args.lattice, overwrite=args.overwrite, resume=args.resume, name=label,
-                       names={**_NAMES, "grid": f"DEM {args.dem!r}"})
+                       names={**_NAMES, "grid": f"DEM {args.dem!r}"}, keep_los=args.keep_los,
+                       los_height=args.los_height)
     on_interrupt()
     if ts.removed:
         print(f"terrainvis tiles: --overwrite: removed the earlier tileset's {plural(ts.removed, 'file')}",
@@ -99,6 +120,10 @@ def run(args) -> int:
                else f"whole lattice, max error {r.largest_error:.3f} m")
         more = (f"; {plural(r.fallbacks, 'tile')} written as the whole lattice (first {r.fallback_reasons[0]})"
                 if r.fallbacks else "")
+        if r.los is not None:
+            more += (f"; keeps {100 * r.los.share:.2f} % of {r.los.pairs:,} sight lines' verdicts"
+                     + ("" if r.los.reached else f" (whole lattices: no budget down to {r.los.tried[-1][0]:.3g} m kept "
+                                                 f"{100 * args.keep_los:g} %)" if r.los.tried else " (flat: whole lattices)"))
         print(f"  zoom {r.zoom:2d}: {plural(r.n_tiles, 'tile')}, {plural(r.n_vertices, 'vertex', 'vertices')}, "
               f"{how}{more}")
     print(f"  wrote {plural(sum(r.n_tiles for r in ts.zooms), 'tile')} and layer.json in {ts.out_dir}")

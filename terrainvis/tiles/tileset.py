@@ -78,6 +78,7 @@ import numpy as np
 from ..core.terrain import TIN, HeightGrid
 from ..tolerances import QUANTIZED_SNAP, TILE_BUDGET_REL, TILE_RECTANGLE_SHRINK_REL
 from . import quantized_mesh as qm
+from .keep_los import DEFAULT_LOS_HEIGHT, N_POINTS
 from .scheme import MAX_ZOOM, tile_bounds, tile_count, tile_ranges, tiles_covering
 
 __all__ = ["DEFAULT_MAX_ERROR0", "DEFAULT_LATTICE", "EARTH_RADIUS", "LAYER", "PARTIAL", "TILES_CSV", "API_NAMES",
@@ -99,7 +100,8 @@ TILES_CSV = "terrainvis-tiles.csv"
 PARTIAL = "terrainvis-tiles.partial.json"
 #: How messages name the arguments (the command line passes its flags instead).
 API_NAMES = {"out_dir": "out_dir", "overwrite": "overwrite=True", "resume": "resume=True", "zooms": "zooms", "method": "method",
-             "max_error0": "max_error0", "lattice": "lattice", "grid": "grid"}
+             "max_error0": "max_error0", "lattice": "lattice", "grid": "grid", "keep_los": "keep_los",
+             "los_height": "los_height"}
 #: Retries of a tile over its budget before it is written as its whole lattice.
 _RETRIES = 3
 #: The lattice the footprint's rectangle is searched on (points per side).
@@ -359,6 +361,7 @@ class _Made:
     n_triangles: int
     fallback: str | None = None
     simplify_error: float | None = None  # the method's own measure (simplify's attrs["max_error"])
+    decoded: qm.DecodedTile | None = field(default=None, repr=False)  # the tile as read back (None when kept)
 
 
 def _encode(lat_: _Lattice, tin: TIN) -> tuple[bytes, qm.DecodedTile] | None:
@@ -471,11 +474,11 @@ def _make_tile(lat_: _Lattice, method: str | None, budget: float | None) -> _Mad
             allowed = budget + 0.5 * qm.height_step(dec.min_height, dec.max_height)
             if err <= allowed * (1 + TILE_BUDGET_REL):
                 return _Made(data, err, dec.u.size, dec.triangles.shape[0],
-                             simplify_error=float(result.attrs["max_error"]))
+                             simplify_error=float(result.attrs["max_error"]), decoded=dec)
             fallback = f"over its budget after {_RETRIES + 1} tries (error {err:.4g})"
             target = max(0.0, target - (err - allowed) - qm.height_step(dec.min_height, dec.max_height))
     data, dec = _encode(lat_, lat_.grid.to_tin())
-    return _Made(data, _error(lat_, dec), dec.u.size, dec.triangles.shape[0], fallback)
+    return _Made(data, _error(lat_, dec), dec.u.size, dec.triangles.shape[0], fallback, decoded=dec)
 
 
 def _flat_tile(bounds) -> bytes:
@@ -600,7 +603,10 @@ def _kept(path: Path, lat_: _Lattice, budget: float | None) -> _Made | None:
     allowed = (0.0 if budget is None else budget) + 0.5 * qm.height_step(dec.min_height, dec.max_height)
     if not err <= allowed * (1 + TILE_BUDGET_REL):
         return None
-    whole = budget is not None and dec.u.size == lat_.lon.size * lat_.lat.size
+    # a simplified tile holding every lattice point is one written as the whole lattice (a fallback)
+    U, V = np.meshgrid(lat_.us, lat_.vs)
+    present = set(zip(dec.u.tolist(), dec.v.tolist()))
+    whole = budget is not None and all(p in present for p in zip(U.ravel().tolist(), V.ravel().tolist()))
     return _Made(b"", err, dec.u.size, dec.triangles.shape[0], "the whole lattice (kept from the unfinished run)"
                  if whole else None)
 
@@ -619,11 +625,20 @@ class ZoomReport:
     largest_error: float
     fallbacks: int
     fallback_reasons: tuple = ()
+    los: object = None  # with keep_los: the zoom's terrainvis.tiles.keep_los.ZoomChoice
+
+    @property
+    def los_kept(self) -> float | None:
+        """With ``keep_los``: the share of the zoom's sight lines whose verdict its tiles keep."""
+        return None if self.los is None else self.los.share
 
     def as_json(self) -> dict:
-        return {"zoom": self.zoom, "simplified": self.simplified, "max_error": self.max_error, "tiles": self.n_tiles,
-                "vertices": self.n_vertices, "triangles": self.n_triangles, "largest_error": self.largest_error,
-                "fallbacks": self.fallbacks}
+        out = {"zoom": self.zoom, "simplified": self.simplified, "max_error": self.max_error, "tiles": self.n_tiles,
+               "vertices": self.n_vertices, "triangles": self.n_triangles, "largest_error": self.largest_error,
+               "fallbacks": self.fallbacks}
+        if self.los is not None:
+            out.update(los_kept=self.los.share, los_pairs=self.los.pairs)
+        return out
 
 
 @dataclass(frozen=True)
@@ -670,7 +685,8 @@ def _check(grid, method, zooms, max_error0, gzip, lattice, names) -> tuple:
 
 def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: float | None = None,
                   gzip: bool = True, lattice: int = DEFAULT_LATTICE, overwrite: bool = False, resume: bool = False,
-                  name: str | None = None, names: dict | None = None) -> Tileset:
+                  name: str | None = None, names: dict | None = None, keep_los: float | None = None,
+                  los_height: float = DEFAULT_LOS_HEIGHT) -> Tileset:
     """Write ``grid`` as a Cesium quantized-mesh-1.0 tileset in ``out_dir``, each tile simplified by ``method``.
 
     The module docstring describes what the tileset covers, how each tile is made and the
@@ -690,6 +706,7 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
         below ``min`` as whole lattices.
     max_error0 : float, optional
         The budget at zoom 0 in metres (default 77067); zoom z gets ``max_error0 / 2**z``.
+        Not with ``keep_los``.
     gzip : bool
         Compress the tiles with gzip (default), as cesium-terrain-builder does.
     lattice : int
@@ -704,6 +721,13 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
         The tileset's name in ``layer.json`` (default ``grid.attrs["name"]`` or ``"terrain"``).
     names : dict, optional
         How messages name the arguments (:data:`API_NAMES`; the command line passes its flags).
+    keep_los : float, optional
+        Instead of halving budgets, each zoom's budget is the largest vertical error at which
+        its tiles keep at least this share (in (0, 1]) of the line-of-sight verdicts of
+        their sight lines: :mod:`terrainvis.tiles.keep_los`. Each zoom's share is in the
+        report (:attr:`ZoomReport.los_kept`) and in ``layer.json``.
+    los_height : float
+        With ``keep_los``: the sight lines' ends above the ground (m, default 2).
 
     Returns
     -------
@@ -718,76 +742,153 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
     >>> ts.zooms[-1].largest_error <= 77067.0 / 2**9 + 1.0  # doctest: +SKIP
     True
     """
+    from .keep_los import check_keep_los
+
     names = {**API_NAMES, **(names or {})}
     lo, hi, e0, lattice = _check(grid, method, zooms, max_error0, gzip, lattice, names)
+    keep, los_height = check_keep_los(keep_los, los_height, names)
+    if keep is not None and max_error0 is not None:
+        raise ValueError(f"{names['max_error0']} and {names['keep_los']} exclude each other: the budgets halve from "
+                         "zoom 0's, or line of sight chooses them")
     frame = _Frame(grid, names["grid"])
     rect = _rectangle(grid, frame, names["grid"])
     if overwrite and resume:
         raise ValueError(f"{names['overwrite']} and {names['resume']} exclude each other: replace the run, or continue it")
-    from ..core.fileio import atomic_path, atomic_write_text
+    from ..core.fileio import atomic_write_text
     from ..core.terrain import fingerprint
 
-    settings = {"method": method, "zooms": [lo, hi], "max_error0": e0, "lattice": lattice, "gzip": bool(gzip),
-                "dem": fingerprint(grid), "crs": frame.crs_text, "bounds": [float(v) for v in rect]}
+    settings = {"method": method, "zooms": [lo, hi], "max_error0": None if keep is not None else e0,
+                "lattice": lattice, "gzip": bool(gzip), "dem": fingerprint(grid), "crs": frame.crs_text,
+                "bounds": [float(v) for v in rect]}
+    if keep is not None:
+        settings.update(keep_los=keep, los_height=los_height)
     out, removed = _prepare(out_dir, bool(overwrite), bool(resume), settings, names)
-    atomic_write_text(out / PARTIAL, json.dumps({"format": "quantized-mesh-1.0", "settings": settings}, indent=1) + "\n")
-
+    # the budgets line of sight chose for each zoom, kept in the record so that a resume does not search again
+    chosen = dict(((_partial(out) or {}).get("chosen") or {}) if resume else {})
+    record = {"format": "quantized-mesh-1.0", "settings": settings, "chosen": chosen}
+    atomic_write_text(out / PARTIAL, json.dumps(record, indent=1) + "\n")
+    run = _Run(grid, frame, rect, out, method, lattice, bool(gzip), bool(resume), keep, los_height, names["grid"],
+               record)
     reports, available, rows = [], [], []
     for z in range(hi + 1):
-        simplified = z >= lo
-        budget = e0 / 2 ** z if simplified else None
-        written, errors, n_v, n_t, reasons = [], [], 0, 0, []
-        x0, y0, x1, y1 = tiles_covering(z, rect)
-        todo = [(x, y) for y in range(y0, y1 + 1) for x in range(x0, x1 + 1)]
-        if z == 0:
-            todo += [(x, 0) for x in range(tile_count(0)[0]) if (x, 0) not in todo]
-        for x, y in todo:
-            lat_ = tile_lattice(grid, z, x, y, rect, lattice=lattice, frame=frame, name=names["grid"]) \
-                if x0 <= x <= x1 and y0 <= y <= y1 else None
-            if lat_ is None and z > 0:
-                continue  # a part thinner than one quantization step
-            path = out / str(z) / str(x) / f"{y}.terrain"
-            made = _kept(path, lat_, budget) if resume and lat_ is not None and path.is_file() else None
-            if lat_ is None:
-                data = _flat_tile(tile_bounds(0, x, 0))
-            elif made is None:
-                made = _make_tile(lat_, method if simplified else None, budget)
-                data = made.data
-            else:
-                data = None  # kept as it is
-            if made is not None:
-                rows.append(f"{z},{x},{y},{made.n_vertices},{made.n_triangles},{'' if budget is None else repr(budget)},"
-                            f"{'' if made.simplify_error is None else repr(made.simplify_error)},{made.error!r},"
-                            f"{'yes' if made.fallback and simplified else 'no'}")
-                errors.append(made.error)
-                n_v += made.n_vertices
-                n_t += made.n_triangles
-                if made.fallback and simplified:
-                    reasons.append(f"{z}/{x}/{y}: {made.fallback}")
-            if data is not None:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                with atomic_path(path) as tmp:
-                    tmp.write_bytes(_gzip.compress(data, mtime=0) if gzip else data)
-            written.append((x, y))
+        report, written = _write_zoom(run, z, z >= lo, e0 / 2 ** z if z >= lo and keep is None else None, rows)
+        reports.append(report)
         available.append(tile_ranges(written))
-        reports.append(ZoomReport(z, simplified, budget, len(written), n_v, n_t, max(errors, default=0.0),
-                                  len(reasons), tuple(reasons)))
-    label = name or grid.attrs.get("name") or "terrain"
+    layer = _layer(run, name or grid.attrs.get("name") or "terrain", (lo, hi), settings, reports, available)
+    atomic_write_text(out / TILES_CSV, _CSV_HEADER + "\n" + "".join(r + "\n" for r in rows))
+    atomic_write_text(out / LAYER, json.dumps(layer, indent=1) + "\n")
+    (out / PARTIAL).unlink()
+    return Tileset(out, rect, method, reports, layer, removed)
+
+
+@dataclass(frozen=True)
+class _Run:
+    """What every zoom of one :func:`write_tileset` run shares."""
+
+    grid: HeightGrid
+    frame: _Frame
+    rect: tuple
+    out: Path
+    method: str
+    lattice: int
+    gzip: bool
+    resume: bool
+    keep: float | None
+    los_height: float
+    name: str
+    record: dict  # the partial record; its "chosen" holds the budgets line of sight chose
+
+
+def _zoom_budget(run: _Run, z: int, lattices: dict) -> tuple:
+    """With ``keep_los``: zoom z's budget (recorded by an earlier run, or searched now and recorded), the
+    method its tiles take (None: whole lattices), the tiles the search made, and its choice."""
+    from ..core.fileio import atomic_write_text
+    from .keep_los import ZoomChoice, choose_budget
+
+    chosen = run.record["chosen"]
+    made_at = {}
+    if str(z) in chosen:
+        choice = ZoomChoice.from_json(chosen[str(z)])
+    else:
+        choice, made_at = choose_budget(
+            {k: v for k, v in lattices.items() if v is not None}, z, run.keep, run.los_height,
+            lambda lat_, b: _make_tile(lat_, run.method if b is not None else None, b))
+        chosen[str(z)] = choice.as_json()
+        atomic_write_text(run.out / PARTIAL, json.dumps(run.record, indent=1) + "\n")
+    whole = not choice.tried or choice.budget == 0.0  # no rung kept the share: whole lattices
+    return choice.budget, None if whole else run.method, made_at, choice
+
+
+def _write_zoom(run: _Run, z: int, simplified: bool, budget: float | None, rows: list) -> tuple:
+    """Zoom z's tiles made (or kept by a resume) and written; its report and the tiles written. Each
+    tile's row of the table is appended to ``rows``."""
+    from ..core.fileio import atomic_path
+
+    tile_method = run.method if simplified else None
+    x0, y0, x1, y1 = tiles_covering(z, run.rect)
+    todo = [(x, y) for y in range(y0, y1 + 1) for x in range(x0, x1 + 1)]
+    if z == 0:
+        todo += [(x, 0) for x in range(tile_count(0)[0]) if (x, 0) not in todo]
+    lattices = {(x, y): tile_lattice(run.grid, z, x, y, run.rect, lattice=run.lattice, frame=run.frame,
+                                     name=run.name) if x0 <= x <= x1 and y0 <= y <= y1 else None for x, y in todo}
+    choice, made_at = None, {}
+    if simplified and run.keep is not None:
+        budget, tile_method, made_at, choice = _zoom_budget(run, z, lattices)
+    written, errors, n_v, n_t, reasons = [], [], 0, 0, []
+    for x, y in todo:
+        lat_ = lattices[(x, y)]
+        if lat_ is None and z > 0:
+            continue  # a part thinner than one quantization step
+        path = run.out / str(z) / str(x) / f"{y}.terrain"
+        made = made_at.get((x, y))
+        if made is None and run.resume and lat_ is not None and path.is_file():
+            made = _kept(path, lat_, budget)
+            data = None  # kept as it is
+        if lat_ is None:
+            data = _flat_tile(tile_bounds(0, x, 0))
+        elif made is None or made.decoded is not None:
+            made = made or _make_tile(lat_, tile_method, budget if tile_method else None)
+            data = made.data
+        if made is not None:
+            fell_back = bool(made.fallback) and tile_method is not None
+            rows.append(f"{z},{x},{y},{made.n_vertices},{made.n_triangles},{'' if budget is None else repr(budget)},"
+                        f"{'' if made.simplify_error is None else repr(made.simplify_error)},{made.error!r},"
+                        f"{'yes' if fell_back else 'no'}")
+            errors.append(made.error)
+            n_v += made.n_vertices
+            n_t += made.n_triangles
+            if fell_back:
+                reasons.append(f"{z}/{x}/{y}: {made.fallback}")
+        if data is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(_gzip.compress(data, mtime=0) if run.gzip else data)
+        written.append((x, y))
+    return ZoomReport(z, simplified, budget, len(written), n_v, n_t, max(errors, default=0.0), len(reasons),
+                      tuple(reasons), choice), written
+
+
+def _layer(run: _Run, label, zooms, settings: dict, reports: list, available: list) -> dict:
+    """``layer.json``'s content."""
+    lo, hi = zooms
     layer = {
         "tilejson": "2.1.0", "name": str(label),
-        "description": f"{label} simplified with {method} from zoom {lo} (terrainvis)",
+        "description": f"{label} simplified with {run.method} from zoom {lo}" + (
+            f", each zoom to the largest vertical error keeping {run.keep:.4g} of its tiles' line-of-sight verdicts"
+            if run.keep is not None else "") + " (terrainvis)",
         "version": "1.0.0", "format": "quantized-mesh-1.0", "attribution": "", "scheme": "tms",
-        "tiles": ["{z}/{x}/{y}.terrain"], "projection": "EPSG:4326", "bounds": list(rect),
+        "tiles": ["{z}/{x}/{y}.terrain"], "projection": "EPSG:4326", "bounds": list(run.rect),
         "minzoom": 0, "maxzoom": hi, "available": available,
         "terrainvis": {
-            "method": method, "zooms": [lo, hi], "max_error0": e0, "lattice": lattice, "gzip": bool(gzip),
-            "source_crs": frame.crs_text,
+            "method": run.method, "zooms": [lo, hi], "max_error0": settings["max_error0"], "lattice": run.lattice,
+            "gzip": run.gzip,
+            "source_crs": run.frame.crs_text,
             "max_error": {str(r.zoom): r.max_error for r in reports},
             "largest_error": max((r.largest_error for r in reports if r.simplified), default=0.0),
             "zooms_written": [r.as_json() for r in reports],
         },
     }
-    atomic_write_text(out / TILES_CSV, _CSV_HEADER + "\n" + "".join(r + "\n" for r in rows))
-    atomic_write_text(out / LAYER, json.dumps(layer, indent=1) + "\n")
-    (out / PARTIAL).unlink()
-    return Tileset(out, rect, method, reports, layer, removed)
+    if run.keep is not None:
+        layer["terrainvis"]["keep_los"] = {"share": run.keep, "height": run.los_height, "points_per_tile": N_POINTS,
+                                           "zooms": {str(r.zoom): r.los.as_json() for r in reports if r.los}}
+    return layer
