@@ -9,12 +9,12 @@ import sys
 from ._common import UsageError, add_nodata, distance_arg, method_arg, on_interrupt, plural, read_terrain, working
 
 #: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
-HELP = "write a DEM as Cesium quantized-mesh terrain tiles"
+HELP = "write a DEM as terrain tiles: Cesium quantized-mesh or terrain-RGB"
 
 #: How the API's messages name the arguments on the command line.
 _NAMES = {"out_dir": "OUT_DIR", "overwrite": "--overwrite", "resume": "--resume", "zooms": "--zoom", "method": "--method",
           "max_error0": "--max-error", "lattice": "--lattice", "grid": "DEM", "keep_los": "--keep-los",
-          "los_height": "--los-height"}
+          "los_height": "--los-height", "format": "--format", "gzip": "--gzip"}
 
 
 def zoom_arg(text: str) -> int:
@@ -52,6 +52,8 @@ def lattice_arg(text: str) -> int:
 def add_parser(sub) -> None:
     from simplifiers import METHODS
 
+    from ..tiles.scheme import FORMATS
+
     t = sub.add_parser(
         "tiles", help=HELP,
         description=(
@@ -78,10 +80,15 @@ def add_parser(sub) -> None:
                               "--los-height above the ground")
     t.add_argument("--los-height", type=distance_arg, default=2.0, metavar="H",
                    help="with --keep-los: the sight lines' ends above the ground in metres (default 2)")
-    t.add_argument("--gzip", action=argparse.BooleanOptionalAction, default=True,
-                   help="gzip-compress the tiles, as cesium-terrain-builder does (default; --no-gzip writes them raw)")
-    t.add_argument("--lattice", type=lattice_arg, default=64, metavar="N",
-                   help="lattice cells per tile side (default 64: 65 x 65 points, as Cesium's heightmap tiles)")
+    t.add_argument("--format", choices=FORMATS, default="quantized-mesh",
+                   help="quantized-mesh (Cesium, EPSG:4326, TMS; the default) or terrain-rgb (Mapbox's PNG tiles, "
+                        "Web Mercator, XYZ)")
+    t.add_argument("--gzip", action=argparse.BooleanOptionalAction, default=None,
+                   help="gzip-compress quantized-mesh tiles, as cesium-terrain-builder does (default; --no-gzip writes "
+                        "them raw)")
+    t.add_argument("--lattice", type=lattice_arg, default=None, metavar="N",
+                   help="lattice cells per tile side (default 64: 65 x 65 points, as Cesium's heightmap tiles); "
+                        "terrain-rgb: pixels per tile side (default 256)")
     again = t.add_mutually_exclusive_group()
     again.add_argument("--resume", action="store_true",
                        help="continue an interrupted run in OUT_DIR (same settings): its tiles are read and measured "
@@ -107,7 +114,7 @@ def run(args) -> int:
     ts = write_tileset(grid, args.out_dir, method=args.method, zooms=(lo, hi), max_error0=args.max_error,
                        gzip=args.gzip, lattice=args.lattice, overwrite=args.overwrite, resume=args.resume, name=label,
                        names={**_NAMES, "grid": f"DEM {args.dem!r}"}, keep_los=args.keep_los,
-                       los_height=args.los_height)
+                       los_height=args.los_height, format=args.format)
     on_interrupt()
     if ts.removed:
         print(f"terrainvis tiles: --overwrite: removed the earlier tileset's {plural(ts.removed, 'file')}",

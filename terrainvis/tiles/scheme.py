@@ -13,8 +13,11 @@ import math
 
 from ..core.validate import as_int
 
-__all__ = ["MAX_ZOOM", "tile_count", "tile_size", "tile_bounds", "tiles_covering", "tile_ranges"]
+__all__ = ["FORMATS", "MAX_ZOOM", "tile_count", "tile_size", "tile_bounds", "tiles_covering", "tile_ranges"]
 
+#: The formats ``terrainvis tiles`` writes: Cesium's quantized-mesh-1.0 (this scheme) and Mapbox's
+#: terrain-RGB PNG tiles (Web Mercator, XYZ rows: :mod:`terrainvis.tiles.terrain_rgb`).
+FORMATS = ("quantized-mesh", "terrain-rgb")
 #: The deepest zoom accepted: tiles of 180 / 2**24 degrees (about 1.2 m at the equator).
 MAX_ZOOM = 24
 

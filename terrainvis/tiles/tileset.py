@@ -79,12 +79,16 @@ from ..core.terrain import TIN, HeightGrid
 from ..tolerances import QUANTIZED_SNAP, TILE_BUDGET_REL, TILE_RECTANGLE_SHRINK_REL
 from . import quantized_mesh as qm
 from .keep_los import DEFAULT_LOS_HEIGHT, N_POINTS
-from .scheme import MAX_ZOOM, tile_bounds, tile_count, tile_ranges, tiles_covering
+from .terrain_rgb import DEFAULT_PIXELS as RGB_PIXELS
+from .terrain_rgb import kept_rgb_tile, make_rgb_tile, mercator_tiles_covering, pixel_lattice
+from .scheme import FORMATS, MAX_ZOOM, tile_bounds, tile_count, tile_ranges, tiles_covering
 
 __all__ = ["DEFAULT_MAX_ERROR0", "DEFAULT_LATTICE", "EARTH_RADIUS", "LAYER", "PARTIAL", "TILES_CSV", "API_NAMES",
            "ZoomReport", "Tileset",
            "write_tileset", "lonlat_rectangle", "tile_lattice", "pyproj_module"]
 
+#: What ``layer.json``'s ``format`` says of each.
+_LAYER_FORMAT = {"quantized-mesh": "quantized-mesh-1.0", "terrain-rgb": "terrain-rgb"}
 #: The budget of zoom 0 (m); zoom z gets ``DEFAULT_MAX_ERROR0 / 2**z``.
 DEFAULT_MAX_ERROR0 = 77067.0
 #: Lattice cells per tile side (65 x 65 points, as Cesium's heightmap tiles).
@@ -101,7 +105,7 @@ PARTIAL = "terrainvis-tiles.partial.json"
 #: How messages name the arguments (the command line passes its flags instead).
 API_NAMES = {"out_dir": "out_dir", "overwrite": "overwrite=True", "resume": "resume=True", "zooms": "zooms", "method": "method",
              "max_error0": "max_error0", "lattice": "lattice", "grid": "grid", "keep_los": "keep_los",
-             "los_height": "los_height"}
+             "los_height": "los_height", "format": "format", "gzip": "gzip=True"}
 #: Retries of a tile over its budget before it is written as its whole lattice.
 _RETRIES = 3
 #: The lattice the footprint's rectangle is searched on (points per side).
@@ -493,11 +497,11 @@ def _ours(layer: Path) -> bool:
         meta = json.loads(layer.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
-    return isinstance(meta, dict) and "terrainvis" in meta and meta.get("format") == "quantized-mesh-1.0"
+    return isinstance(meta, dict) and "terrainvis" in meta and meta.get("format") in _LAYER_FORMAT.values()
 
 
 def _tile_files(out: Path) -> list[Path]:
-    """The ``{z}/{x}/{y}.terrain`` files under ``out`` and the leftovers of their atomic writes."""
+    """The ``{z}/{x}/{y}.terrain`` and ``.png`` files under ``out`` and the leftovers of their atomic writes."""
     found = []
     for zd in out.iterdir():
         if not (zd.is_dir() and _TILE_FILE.match(zd.name)):
@@ -506,7 +510,8 @@ def _tile_files(out: Path) -> list[Path]:
             if not (xd.is_dir() and _TILE_FILE.match(xd.name)):
                 continue
             for f in xd.iterdir():
-                if f.is_file() and re.fullmatch(r"\d+\.terrain|\.\d+\.terrain\.[a-z0-9_]{8}\.terrain", f.name):
+                if f.is_file() and re.fullmatch(r"\d+\.(terrain|png)|\.\d+\.(terrain\.[a-z0-9_]{8}\.terrain|png\.[a-z0-9_]{8}\.png)",
+                                                f.name):
                     found.append(f)
     return found
 
@@ -517,7 +522,7 @@ def _partial(out: Path) -> dict | None:
         rec = json.loads((out / PARTIAL).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    return rec if isinstance(rec, dict) and rec.get("format") == "quantized-mesh-1.0" and "settings" in rec else None
+    return rec if isinstance(rec, dict) and rec.get("format") in _LAYER_FORMAT.values() and "settings" in rec else None
 
 
 def _prepare(out_dir, overwrite: bool, resume: bool, settings: dict, names: dict) -> tuple[Path, int]:
@@ -566,7 +571,7 @@ def _prepare(out_dir, overwrite: bool, resume: bool, settings: dict, names: dict
     if files and not (_ours(layer) or earlier is not None):
         # every run of terrainvis tiles writes its record before its first tile: tiles without
         # either record are another program's (a tiler's output kept without its layer.json)
-        raise ValueError(f"{where} holds {len(files):,} {{z}}/{{x}}/{{y}}.terrain file(s) without a {LAYER} or a record "
+        raise ValueError(f"{where} holds {len(files):,} {{z}}/{{x}}/{{y}} tile file(s) without a {LAYER} or a record "
                          f"that terrainvis wrote; terrainvis never replaces files it did not write: move them away "
                          "or choose another folder")
     leftovers = [p for p in out.iterdir() if p.is_file() and re.fullmatch(
@@ -683,14 +688,31 @@ def _check(grid, method, zooms, max_error0, gzip, lattice, names) -> tuple:
     return int(lo), int(hi), float(e0), int(lattice)
 
 
+def _check_format(format, gzip, keep_los, names) -> bool:
+    """``format`` one of :data:`FORMATS` and the options it allows; True for terrain-RGB."""
+    if format not in FORMATS:
+        raise ValueError(f"{names['format']} must be one of {', '.join(FORMATS)}, got {format!r}")
+    if format == "terrain-rgb":
+        if gzip:
+            raise ValueError(f"{names['gzip']} is for quantized-mesh tiles: terrain-RGB tiles are PNGs, compressed "
+                             "already")
+        if keep_los is not None:
+            raise ValueError(f"{names['keep_los']} chooses the budgets of quantized-mesh tiles only: a client meshes "
+                             "terrain-RGB pixels at a max error of its own")
+    return format == "terrain-rgb"
+
+
 def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: float | None = None,
-                  gzip: bool = True, lattice: int = DEFAULT_LATTICE, overwrite: bool = False, resume: bool = False,
+                  gzip: bool | None = None, lattice: int | None = None, overwrite: bool = False, resume: bool = False,
                   name: str | None = None, names: dict | None = None, keep_los: float | None = None,
-                  los_height: float = DEFAULT_LOS_HEIGHT) -> Tileset:
-    """Write ``grid`` as a Cesium quantized-mesh-1.0 tileset in ``out_dir``, each tile simplified by ``method``.
+                  los_height: float = DEFAULT_LOS_HEIGHT, format: str = "quantized-mesh") -> Tileset:
+    """Write ``grid`` as a Cesium quantized-mesh-1.0 tileset (or terrain-RGB tiles) in ``out_dir``, each tile
+    simplified by ``method``.
 
     The module docstring describes what the tileset covers, how each tile is made and the
-    files; :func:`terrainvis.tiles.decode_tile` reads a tile back.
+    files; :func:`terrainvis.tiles.decode_tile` reads a tile back. With
+    ``format="terrain-rgb"`` the tiles are Mapbox's terrain-RGB PNGs in Web Mercator
+    (:mod:`terrainvis.tiles.terrain_rgb`).
 
     Parameters
     ----------
@@ -707,10 +729,12 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
     max_error0 : float, optional
         The budget at zoom 0 in metres (default 77067); zoom z gets ``max_error0 / 2**z``.
         Not with ``keep_los``.
-    gzip : bool
-        Compress the tiles with gzip (default), as cesium-terrain-builder does.
-    lattice : int
-        Lattice cells per tile side (default 64: 65 x 65 points).
+    gzip : bool, optional
+        Compress quantized-mesh tiles with gzip (the default), as cesium-terrain-builder does.
+        Terrain-RGB tiles are PNGs, never gzipped (True is refused).
+    lattice : int, optional
+        Lattice cells per tile side (default 64: 65 x 65 points); for terrain-RGB the
+        pixels per tile side (default 256).
     overwrite : bool
         Replace the tileset files in a non-empty ``out_dir``.
     resume : bool
@@ -728,6 +752,9 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
         report (:attr:`ZoomReport.los_kept`) and in ``layer.json``.
     los_height : float
         With ``keep_los``: the sight lines' ends above the ground (m, default 2).
+    format : {"quantized-mesh", "terrain-rgb"}
+        The tiles' format. ``keep_los`` is for quantized-mesh tiles (a client meshes
+        terrain-RGB pixels with a max error of its own).
 
     Returns
     -------
@@ -745,6 +772,9 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
     from .keep_los import check_keep_los
 
     names = {**API_NAMES, **(names or {})}
+    rgb = _check_format(format, gzip, keep_los, names)
+    gzip = not rgb if gzip is None else gzip
+    lattice = (RGB_PIXELS if rgb else DEFAULT_LATTICE) if lattice is None else lattice
     lo, hi, e0, lattice = _check(grid, method, zooms, max_error0, gzip, lattice, names)
     keep, los_height = check_keep_los(keep_los, los_height, names)
     if keep is not None and max_error0 is not None:
@@ -757,7 +787,7 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
     from ..core.fileio import atomic_write_text
     from ..core.terrain import fingerprint
 
-    settings = {"method": method, "zooms": [lo, hi], "max_error0": None if keep is not None else e0,
+    settings = {"format": format, "method": method, "zooms": [lo, hi], "max_error0": None if keep is not None else e0,
                 "lattice": lattice, "gzip": bool(gzip), "dem": fingerprint(grid), "crs": frame.crs_text,
                 "bounds": [float(v) for v in rect]}
     if keep is not None:
@@ -765,10 +795,10 @@ def write_tileset(grid: HeightGrid, out_dir, *, method: str, zooms, max_error0: 
     out, removed = _prepare(out_dir, bool(overwrite), bool(resume), settings, names)
     # the budgets line of sight chose for each zoom, kept in the record so that a resume does not search again
     chosen = dict(((_partial(out) or {}).get("chosen") or {}) if resume else {})
-    record = {"format": "quantized-mesh-1.0", "settings": settings, "chosen": chosen}
+    record = {"format": _LAYER_FORMAT[format], "settings": settings, "chosen": chosen}
     atomic_write_text(out / PARTIAL, json.dumps(record, indent=1) + "\n")
     run = _Run(grid, frame, rect, out, method, lattice, bool(gzip), bool(resume), keep, los_height, names["grid"],
-               record)
+               record, rgb)
     reports, available, rows = [], [], []
     for z in range(hi + 1):
         report, written = _write_zoom(run, z, z >= lo, e0 / 2 ** z if z >= lo and keep is None else None, rows)
@@ -797,6 +827,35 @@ class _Run:
     los_height: float
     name: str
     record: dict  # the partial record; its "chosen" holds the budgets line of sight chose
+    rgb: bool = False  # terrain-RGB tiles (Web Mercator, XYZ rows, PNG)
+
+    def covering(self, z: int) -> tuple[list, tuple]:
+        """The tiles of zoom z to write, and the range of those meeting the rectangle."""
+        if self.rgb:
+            x0, y0, x1, y1 = mercator_tiles_covering(z, self.rect)
+        else:
+            x0, y0, x1, y1 = tiles_covering(z, self.rect)
+        todo = [(x, y) for y in range(y0, y1 + 1) for x in range(x0, x1 + 1)]
+        if z == 0 and not self.rgb:  # Cesium asks for both root tiles
+            todo += [(x, 0) for x in range(tile_count(0)[0]) if (x, 0) not in todo]
+        return todo, (x0, y0, x1, y1)
+
+    def lattice_of(self, z: int, x: int, y: int):
+        if self.rgb:
+            return pixel_lattice(self.grid, z, x, y, self.rect, self.frame, self.lattice, self.name)
+        return tile_lattice(self.grid, z, x, y, self.rect, lattice=self.lattice, frame=self.frame, name=self.name)
+
+    def make(self, lat_, method, budget):
+        return (make_rgb_tile if self.rgb else _make_tile)(lat_, method, budget)
+
+    def kept(self, path: Path, lat_, budget):
+        if self.rgb:
+            try:
+                data = path.read_bytes()
+            except OSError:
+                return None
+            return kept_rgb_tile(data, lat_, budget)
+        return _kept(path, lat_, budget)
 
 
 def _zoom_budget(run: _Run, z: int, lattices: dict) -> tuple:
@@ -825,12 +884,8 @@ def _write_zoom(run: _Run, z: int, simplified: bool, budget: float | None, rows:
     from ..core.fileio import atomic_path
 
     tile_method = run.method if simplified else None
-    x0, y0, x1, y1 = tiles_covering(z, run.rect)
-    todo = [(x, y) for y in range(y0, y1 + 1) for x in range(x0, x1 + 1)]
-    if z == 0:
-        todo += [(x, 0) for x in range(tile_count(0)[0]) if (x, 0) not in todo]
-    lattices = {(x, y): tile_lattice(run.grid, z, x, y, run.rect, lattice=run.lattice, frame=run.frame,
-                                     name=run.name) if x0 <= x <= x1 and y0 <= y <= y1 else None for x, y in todo}
+    todo, (x0, y0, x1, y1) = run.covering(z)
+    lattices = {(x, y): run.lattice_of(z, x, y) if x0 <= x <= x1 and y0 <= y <= y1 else None for x, y in todo}
     choice, made_at = None, {}
     if simplified and run.keep is not None:
         budget, tile_method, made_at, choice = _zoom_budget(run, z, lattices)
@@ -839,15 +894,15 @@ def _write_zoom(run: _Run, z: int, simplified: bool, budget: float | None, rows:
         lat_ = lattices[(x, y)]
         if lat_ is None and z > 0:
             continue  # a part thinner than one quantization step
-        path = run.out / str(z) / str(x) / f"{y}.terrain"
+        path = run.out / str(z) / str(x) / f"{y}.{'png' if run.rgb else 'terrain'}"
         made = made_at.get((x, y))
         if made is None and run.resume and lat_ is not None and path.is_file():
-            made = _kept(path, lat_, budget)
+            made = run.kept(path, lat_, budget)
             data = None  # kept as it is
         if lat_ is None:
             data = _flat_tile(tile_bounds(0, x, 0))
-        elif made is None or made.decoded is not None:
-            made = made or _make_tile(lat_, tile_method, budget if tile_method else None)
+        elif made is None or made.data:  # made now (or by the search), not kept by a resume
+            made = made or run.make(lat_, tile_method, budget if tile_method else None)
             data = made.data
         if made is not None:
             fell_back = bool(made.fallback) and tile_method is not None
@@ -862,7 +917,7 @@ def _write_zoom(run: _Run, z: int, simplified: bool, budget: float | None, rows:
         if data is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(path) as tmp:
-                tmp.write_bytes(_gzip.compress(data, mtime=0) if run.gzip else data)
+                tmp.write_bytes(_gzip.compress(data, mtime=0) if run.gzip and not run.rgb else data)
         written.append((x, y))
     return ZoomReport(z, simplified, budget, len(written), n_v, n_t, max(errors, default=0.0), len(reasons),
                       tuple(reasons), choice), written
@@ -876,8 +931,9 @@ def _layer(run: _Run, label, zooms, settings: dict, reports: list, available: li
         "description": f"{label} simplified with {run.method} from zoom {lo}" + (
             f", each zoom to the largest vertical error keeping {run.keep:.4g} of its tiles' line-of-sight verdicts"
             if run.keep is not None else "") + " (terrainvis)",
-        "version": "1.0.0", "format": "quantized-mesh-1.0", "attribution": "", "scheme": "tms",
-        "tiles": ["{z}/{x}/{y}.terrain"], "projection": "EPSG:4326", "bounds": list(run.rect),
+        "version": "1.0.0", "format": "terrain-rgb" if run.rgb else "quantized-mesh-1.0", "attribution": "",
+        "scheme": "xyz" if run.rgb else "tms", "tiles": ["{z}/{x}/{y}.png" if run.rgb else "{z}/{x}/{y}.terrain"],
+        "projection": "EPSG:3857" if run.rgb else "EPSG:4326", "bounds": list(run.rect),
         "minzoom": 0, "maxzoom": hi, "available": available,
         "terrainvis": {
             "method": run.method, "zooms": [lo, hi], "max_error0": settings["max_error0"], "lattice": run.lattice,
@@ -888,6 +944,8 @@ def _layer(run: _Run, label, zooms, settings: dict, reports: list, available: li
             "zooms_written": [r.as_json() for r in reports],
         },
     }
+    if run.rgb:  # TileJSON's raster-dem fields, as Mapbox's terrain-RGB sources carry them
+        layer.update(encoding="mapbox", tileSize=run.lattice)
     if run.keep is not None:
         layer["terrainvis"]["keep_los"] = {"share": run.keep, "height": run.los_height, "points_per_tile": N_POINTS,
                                            "zooms": {str(r.zoom): r.los.as_json() for r in reports if r.los}}

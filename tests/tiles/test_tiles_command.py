@@ -263,7 +263,7 @@ def test_overwrite_never_removes_tiles_terrainvis_did_not_write(capsys, tmp_path
     (out / "5" / "17" / "9.terrain").write_bytes(b"another tiler's tile")
     err = one_line_error(capsys, 2, ["tiles", "cumberland", str(out), "--method", "simple", "--zoom", "0", "0",
                                      "--overwrite"])
-    assert "1 {z}/{x}/{y}.terrain file(s)" in err and "did not write" in err
+    assert "1 {z}/{x}/{y} tile file(s)" in err and "did not write" in err
     assert (out / "5" / "17" / "9.terrain").read_bytes() == b"another tiler's tile"
 
 

@@ -1,0 +1,252 @@
+"""Terrain-RGB tiles of a DEM, each simplified by a method: ``write_tileset(..., format="terrain-rgb")``.
+
+Mapbox's terrain-RGB is a raster format: PNG tiles ``{z}/{x}/{y}.png`` in Web Mercator
+(EPSG:3857) with XYZ rows (counted from the north), each pixel a height of
+-10000 + (R * 65536 + G * 256 + B) * 0.1 m. Clients mesh the pixels themselves (deck.gl's
+TerrainLayer with Martini or Delatin at a max error of its own).
+
+The pixels of a tile
+--------------------
+Pixel (row r, column c) of a tile of W x W pixels (``lattice`` W, default
+:data:`DEFAULT_PIXELS`) is the height at the fraction (c / W, r / W) of the tile from its
+north-west corner, linear in Web Mercator, as deck.gl places it (and as
+:func:`terrainvis.tiles.read.stitch_zoom` reads it). The tile's lattice holds those W x W
+points and one more row and column (the southern and eastern neighbours' first ones, which
+a client takes from them), each the DEM's exact surface at the point; a point outside the
+tileset's lon/lat rectangle (the same rectangle as the quantized-mesh tilesets',
+:func:`terrainvis.tiles.lonlat_rectangle`) takes the height at the nearest point of the
+rectangle, so a tile partly outside it continues the rectangle's edge outwards.
+
+From zoom ``zooms[0]`` on, the lattice (evenly spaced in local metres, as for
+quantized-mesh tiles) is simplified by the method to the zoom's budget, and the tile's
+pixels are the simplified surface at the lattice's points, rounded to the encoding's 0.1 m
+step. Its error is measured on the pixels written: the largest difference between a
+decoded pixel and the lattice's height there. A tile over its budget plus half the step
+(0.05 m) is simplified again with the budget lowered by the excess, up to three times, and
+is otherwise written as its whole lattice (a fallback, counted as for quantized-mesh
+tiles). Below ``zooms[0]`` the pixels are the lattice's heights. The ``vertices`` of a
+tile's row in ``terrainvis-tiles.csv`` are those of the simplified surface the pixels
+were taken from (a client meshes the pixels again).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.terrain import TIN, HeightGrid
+from ..tolerances import TILE_BUDGET_REL
+from . import quantized_mesh as qm
+
+__all__ = ["DEFAULT_PIXELS", "RGB_STEP", "mercator_tile_bounds", "mercator_tiles_covering", "pixel_lattice",
+           "encode_png", "decode_png"]
+
+#: Pixels per tile side (Mapbox's terrain-RGB tiles are 256 x 256; 512 x 512 for "@2x").
+DEFAULT_PIXELS = 256
+#: The encoding's height step (m).
+RGB_STEP = 0.1
+#: Half the circumference of Web Mercator's sphere (m): x and y run over [-H, H].
+_HALF = math.pi * qm.WGS84_A
+#: Web Mercator's latitude limit (the square's edge).
+MAX_LAT = 85.0511287798066
+_RETRIES = 3
+#: The PNG text chunk holding the vertices and triangles of the surface a tile's pixels were taken from.
+_MESH_KEY = "terrainvis-mesh"
+
+
+def _x_of_lon(lon) -> np.ndarray:
+    return np.radians(np.asarray(lon, dtype=np.float64)) * qm.WGS84_A
+
+
+def _y_of_lat(lat) -> np.ndarray:
+    lat = np.clip(np.asarray(lat, dtype=np.float64), -MAX_LAT, MAX_LAT)
+    return qm.WGS84_A * np.log(np.tan(np.pi / 4 + np.radians(lat) / 2))
+
+
+def _lon_of_x(x) -> np.ndarray:
+    return np.degrees(np.asarray(x, dtype=np.float64) / qm.WGS84_A)
+
+
+def _lat_of_y(y) -> np.ndarray:
+    return np.degrees(np.arctan(np.sinh(np.asarray(y, dtype=np.float64) / qm.WGS84_A)))
+
+
+def mercator_tile_bounds(z: int, x: int, y: int) -> tuple[float, float, float, float]:
+    """(west, south, east, north) in degrees of the Web Mercator tile (z, x, y), rows from the north."""
+    size = 2 * _HALF / 2 ** z
+    west, east = -_HALF + x * size, -_HALF + (x + 1) * size
+    north, south = _HALF - y * size, _HALF - (y + 1) * size
+    return (float(_lon_of_x(west)), float(_lat_of_y(south)), float(_lon_of_x(east)), float(_lat_of_y(north)))
+
+
+def mercator_tiles_covering(z: int, bounds) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)``, inclusive: the Web Mercator tiles of zoom z (rows from the north) that meet the
+    lon/lat rectangle ``bounds`` = (west, south, east, north) in a part of positive area."""
+    west, south, east, north = bounds
+    n = 2 ** z
+    size = 2 * _HALF / n
+    fx0, fx1 = (_x_of_lon(west) + _HALF) / size, (_x_of_lon(east) + _HALF) / size
+    fy0, fy1 = (_HALF - _y_of_lat(north)) / size, (_HALF - _y_of_lat(south)) / size
+
+    def first(f):
+        return min(n - 1, max(0, int(math.floor(f))))
+
+    def last(f):  # a rectangle ending on a tile's edge does not meet the next tile
+        return min(n - 1, max(0, int(math.ceil(f)) - 1))
+
+    return first(fx0), first(fy0), last(fx1), last(fy1)
+
+
+@dataclass(frozen=True)
+class PixelLattice:
+    """A terrain-RGB tile's lattice: (W + 1) x (W + 1) points, ``lon`` west to east, ``lat`` south to north,
+    ``z`` their heights (rows south to north), ``grid`` the same heights evenly spaced in local metres (the
+    simplifiers'), ``pixels`` W."""
+
+    bounds: tuple
+    lon: np.ndarray
+    lat: np.ndarray
+    lon0: float
+    lat0: float
+    z: np.ndarray
+    grid: HeightGrid
+    pixels: int
+
+    def to_local(self, lon, lat) -> tuple[np.ndarray, np.ndarray]:
+        from .tileset import _equirectangular
+
+        return _equirectangular(lon, lat, self.lon0, self.lat0)
+
+    def tile_heights(self, heights: np.ndarray) -> np.ndarray:
+        """The W x W pixels (rows from the north) of lattice heights (rows from the south)."""
+        w = self.pixels
+        return heights[::-1][:w, :w]
+
+
+def pixel_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, frame, pixels: int = DEFAULT_PIXELS,
+                  name: str = "grid") -> PixelLattice:
+    """The lattice of terrain-RGB tile ``(z, x, y)`` (the module docstring)."""
+    from .tileset import _equirectangular
+
+    size = 2 * _HALF / 2 ** z
+    steps = np.arange(pixels + 1) / pixels
+    lon = _lon_of_x(-_HALF + (x + steps) * size)
+    lat = _lat_of_y(_HALF - (y + steps) * size)[::-1]  # south to north
+    rw, rs, re_, rn = rectangle
+    LON, LAT = np.meshgrid(np.clip(lon, rw, re_), np.clip(lat, rs, rn))
+    xy = frame.to_grid(LON.ravel(), LAT.ravel())
+    heights = np.full(xy.shape[0], np.nan)
+    ok = np.isfinite(xy).all(axis=1)
+    heights[ok] = grid.height_at(xy[ok])
+    if not np.isfinite(heights).all():
+        bad = int(np.flatnonzero(~np.isfinite(heights))[0])
+        raise ValueError(f"{name} has no height at lon {LON.ravel()[bad]:.6f}, lat {LAT.ravel()[bad]:.6f}, inside the "
+                         "tileset's rectangle (a nodata hole): fill the DEM's nodata first (--fill nearest, or "
+                         "HeightGrid.fill_nodata)")
+    heights = heights.reshape(LAT.shape)
+    lon0, lat0 = 0.5 * (lon[0] + lon[-1]), 0.5 * (lat[0] + lat[-1])
+    xs, ys = _equirectangular(lon, lat, lon0, lat0)
+    even = HeightGrid.from_coords(heights, np.linspace(xs[0], xs[-1], xs.size), np.linspace(ys[0], ys[-1], ys.size))
+    return PixelLattice(mercator_tile_bounds(z, x, y), lon, lat, lon0, lat0, heights, even, int(pixels))
+
+
+def encode_png(heights: np.ndarray, mesh: tuple[int, int] | None = None) -> bytes:
+    """A terrain-RGB PNG of (rows from the north) heights in metres, rounded to 0.1 m. ``mesh``: the vertices
+    and triangles of the surface they were taken from, kept in a text chunk (``terrainvis-mesh``) that a
+    resumed run reads back; no other metadata, so the same heights give the same bytes."""
+    from PIL import Image, PngImagePlugin
+
+    from .read import rgb_encode
+
+    info = None
+    if mesh is not None:
+        info = PngImagePlugin.PngInfo()
+        info.add_text(_MESH_KEY, f"{int(mesh[0])} {int(mesh[1])}")
+    buf = io.BytesIO()
+    Image.fromarray(rgb_encode(heights), mode="RGB").save(buf, format="PNG", compress_level=6, pnginfo=info)
+    return buf.getvalue()
+
+
+def decode_png(data: bytes) -> np.ndarray:
+    """The heights (m, rows from the north) of a terrain-RGB PNG's bytes."""
+    return _decoded(data)[0]
+
+
+def _decoded(data: bytes) -> tuple[np.ndarray, tuple[int, int] | None]:
+    from PIL import Image
+
+    from .read import rgb_heights
+
+    with Image.open(io.BytesIO(data)) as im:
+        im.load()
+        text = getattr(im, "text", {}).get(_MESH_KEY)
+        heights = rgb_heights(np.asarray(im.convert("RGB")))
+    try:
+        mesh = tuple(int(v) for v in text.split()) if text else None
+    except ValueError:
+        mesh = None
+    return heights, mesh if mesh is not None and len(mesh) == 2 else None
+
+
+def _surface(lat_: PixelLattice, tin: TIN) -> np.ndarray:
+    """A simplified surface (the even grid's frame) at the lattice's points, rows from the south."""
+    g = lat_.grid
+    X, Y = np.meshgrid(g.xs, g.ys)
+    return tin.height_at(np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
+
+
+def make_rgb_tile(lat_: PixelLattice, method: str | None, budget: float | None):
+    """Simplify (or not), rasterize, encode, measure; retries and the whole lattice as the fallback."""
+    from simplifiers import simplify
+
+    from ..errors import SimplificationError
+    from .tileset import _Made
+
+    want = lat_.tile_heights(lat_.z)
+    fallback = None
+    if method is not None:
+        target = budget
+        for _ in range(_RETRIES + 1):
+            try:
+                result = simplify(lat_.grid, method, max_error=target)
+            except (SimplificationError, ValueError) as exc:
+                fallback = f"{method} could not simplify the lattice: {exc}"
+                break
+            tin = result if isinstance(result, TIN) else result.to_tin()
+            surface = _surface(lat_, tin)
+            if not np.isfinite(surface).all():
+                fallback = f"{method}'s mesh does not cover the lattice"
+                break
+            data = encode_png(lat_.tile_heights(surface), (tin.n_vertices, tin.n_faces))
+            err = float(np.abs(decode_png(data) - want).max())
+            allowed = budget + 0.5 * RGB_STEP
+            if err <= allowed * (1 + TILE_BUDGET_REL):
+                return _Made(data, err, tin.n_vertices, tin.n_faces, simplify_error=float(result.attrs["max_error"]))
+            fallback = f"over its budget after {_RETRIES + 1} tries (error {err:.4g})"
+            target = max(0.0, target - (err - allowed) - RGB_STEP)
+    n = lat_.pixels + 1
+    mesh = (n * n, 2 * (n - 1) * (n - 1))
+    data = encode_png(want, mesh)
+    return _Made(data, float(np.abs(decode_png(data) - want).max()), *mesh, fallback)
+
+
+def kept_rgb_tile(data: bytes, lat_: PixelLattice, budget: float | None):
+    """An unfinished run's tile, read and measured again: kept when it decodes and meets its budget."""
+    from .tileset import _Made
+
+    try:
+        got, mesh = _decoded(data)
+    except (OSError, ValueError, SyntaxError):
+        return None
+    want = lat_.tile_heights(lat_.z)
+    if got.shape != want.shape or mesh is None:
+        return None
+    err = float(np.abs(got - want).max())
+    if not err <= ((0.0 if budget is None else budget) + 0.5 * RGB_STEP) * (1 + TILE_BUDGET_REL):
+        return None
+    n = lat_.pixels + 1
+    whole = budget is not None and mesh[0] == n * n
+    return _Made(b"", err, *mesh, "the whole lattice (kept from the unfinished run)" if whole else None)
