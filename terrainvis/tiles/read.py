@@ -17,7 +17,9 @@ Formats
   height = -10000 + (R * 65536 + G * 256 + B) * 0.1 m (Mapbox's encoding). A tile of
   W x W pixels is meshed as deck.gl's TerrainLayer meshes it: pixel (row r, column c) is
   the point at the fraction (c / W, r / W) of the tile from its north-west corner, the
-  (W + 1)-th row and column repeat the last ones (deck.gl's backfill), and the mesh is
+  (W + 1)-th row and column are the southern and eastern neighbours' first ones (deck.gl
+  repeats the tile's last ones instead, which we do only where the neighbour is absent:
+  its step along every seam is one a single surface cannot hold), and the mesh is
   Martini's (``pymartini``, W a power of two) or Delatin's (``pydelatin``) at the zoom's
   ``max_error``, or the whole grid of pixels (each cell split along the diagonal from
   (r, c) to (r + 1, c + 1)).
@@ -359,7 +361,8 @@ def rgb_encode(heights) -> np.ndarray:
     return np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=-1).astype(np.uint8)
 
 
-def _read_rgb(path: Path, col: int, row: int, mesher: str, max_error: float | None, width: list) -> _Piece:
+def _rgb_pixels(path: Path, width: list) -> np.ndarray:
+    """A terrain-RGB tile's heights (w x w, rows from the north); ``width`` holds the zoom's tile width."""
     try:
         from PIL import Image
     except ImportError as exc:
@@ -377,13 +380,30 @@ def _read_rgb(path: Path, col: int, row: int, mesher: str, max_error: float | No
         width[0] = w
     elif w != width[0]:
         raise ValueError(f"tile {str(path)!r} is {w} x {w} pixels, and the zoom's other tiles {width[0]} x {width[0]}")
-    z = np.empty((w + 1, w + 1))
-    z[:w, :w] = rgb_heights(rgb)
-    z[w, :w] = z[w - 1, :w]  # deck.gl's backfill: the extra row and column repeat the last ones
-    z[:, w] = z[:, w - 1]
-    rows, cols, tri = _mesh_rgb(z, mesher, max_error, path)
-    # pixel row r is the fraction r / w of the tile from its north edge: v = w - r from the south
-    return _Piece(col * w + cols, row * w + (w - rows), z[rows, cols], tri)
+    return rgb_heights(rgb)
+
+
+def _rgb_pieces(pixels: dict, mesher: str, max_error: float | None, paths: dict) -> list:
+    """Each terrain-RGB tile ((col, TMS row) -> heights) meshed over its (w + 1) x (w + 1) points.
+
+    The extra column and row are the eastern and southern neighbours' first column and row
+    (and the south-eastern neighbour's first pixel) when those tiles are there; otherwise the
+    tile's own last ones are repeated, as deck.gl does for every tile (which leaves a step
+    along every seam, one a single surface cannot hold).
+    """
+    out = []
+    for (col, row), own in pixels.items():
+        w = own.shape[0]
+        z = np.empty((w + 1, w + 1))
+        z[:w, :w] = own
+        east, south, corner = pixels.get((col + 1, row)), pixels.get((col, row - 1)), pixels.get((col + 1, row - 1))
+        z[:w, w] = east[:, 0] if east is not None else own[:, -1]
+        z[w, :w] = south[0, :] if south is not None else z[w - 1, :w]
+        z[w, w] = corner[0, 0] if corner is not None else (south[0, -1] if south is not None else z[w - 1, w])
+        rows, cols, tri = _mesh_rgb(z, mesher, max_error, paths[(col, row)])
+        # pixel row r is the fraction r / w of the tile from its north edge: v = w - r from the south
+        out.append(_Piece(col * w + cols, row * w + (w - rows), z[rows, cols], tri))
+    return out
 
 
 def _mesh_rgb(z: np.ndarray, mesher: str, max_error: float | None, path: Path):
@@ -438,11 +458,11 @@ def _merge(pieces: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     tri = np.concatenate([p.tri + s for p, s in zip(pieces, starts)])
     keys, inverse = np.unique(np.column_stack([U, V]), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
-    sums = np.bincount(inverse, weights=h, minlength=keys.shape[0])
-    counts = np.bincount(inverse, minlength=keys.shape[0])
+    k = keys.shape[0]
+    height = np.bincount(inverse, weights=h, minlength=k) / np.bincount(inverse, minlength=k)
     tri = inverse[tri]
     keep = (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
-    return keys[:, 0].copy(), keys[:, 1].copy(), sums / counts, tri[keep]
+    return keys[:, 0].copy(), keys[:, 1].copy(), height, tri[keep]
 
 
 def _close_seams(U: np.ndarray, V: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -676,8 +696,10 @@ def stitch_zoom(grid: HeightGrid, tiles, zoom, *, mesh: str = "grid", max_error:
         raise ValueError(f"offset must be a finite height (m), got {offset!r}")
     frame = _Frame(grid, "original") if frame is None else frame
     needed, (c0, r0, c1, r1) = _needed_tiles(tiles, zoom, grid, frame)
-    ny = tiles.count(zoom)[1]
-    pieces, missing, width = [], [], [None]
+    nx, ny = tiles.count(zoom)
+    if tiles.format == "terrain-rgb":  # the neighbours around, when there: their pixels correct the backfilled edges
+        c0, r0, c1, r1 = max(c0 - 1, 0), max(r0 - 1, 0), min(c1 + 1, nx - 1), min(r1 + 1, ny - 1)
+    pieces, missing, width, pixels, paths = [], [], [None], {}, {}
     for row in range(r0, r1 + 1):
         for col in range(c0, c1 + 1):
             file_row = row if tiles.scheme == "tms" else ny - 1 - row
@@ -689,11 +711,14 @@ def stitch_zoom(grid: HeightGrid, tiles, zoom, *, mesh: str = "grid", max_error:
             if tiles.format == "quantized-mesh-1.0":
                 pieces.append(_read_qm(path, col, row))
             else:
-                pieces.append(_read_rgb(path, col, row, mesh, max_error, width))
+                pixels[(col, row)] = _rgb_pixels(path, width)
+                paths[(col, row)] = path
     if missing:
         shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
         raise ValueError(f"{name} {str(tiles.path)!r} does not cover the DEM at zoom {zoom}: {len(missing)} tile(s) "
                          f"over its footprint are missing ({shown})")
+    if pixels:
+        pieces = _rgb_pieces(pixels, mesh, max_error, paths)
     steps = qm.QUANTIZED_MAX if tiles.format == "quantized-mesh-1.0" else width[0]
     U, V, h, tri = _lattice_mesh(pieces)
     lon, lat = _to_lonlat(tiles, zoom, U.astype(np.float64), V.astype(np.float64), steps)
