@@ -53,8 +53,8 @@ Heights are taken as in the DEM's vertical datum. Tiles in another datum (quanti
 tiles from cesium-terrain-builder hold the source DEM's heights, usually orthometric;
 Cesium World Terrain holds ellipsoidal heights) are brought to the DEM's with
 ``offset``, the height added to every tile's heights: for a DEM of orthometric heights
-and tiles of ellipsoidal ones, ``offset`` is minus the geoid undulation of the area (about
--30 m around Cumberland, Tennessee). A constant is exact over an area where the
+and tiles of ellipsoidal ones, ``offset`` is minus the geoid undulation N of the area (N is
+about -30 m around Cumberland, Tennessee: ``offset`` +30 m). A constant is exact over an area where the
 undulation varies by less than the error that matters.
 """
 
