@@ -9,13 +9,13 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
-from test_read_tileset import CUMBERLAND, _qm_encoder_tileset, _rgb_tileset  # noqa: F401 (fixtures below)
-from test_read_tileset import dem, ours  # noqa: F401
+from test_read_tileset import CUMBERLAND, _qm_encoder_tileset, _rgb_tileset
 
 import terrainvis
 from terrainvis.cli import main
 from terrainvis.core.terrain import HeightGrid
 from terrainvis.experiment.collect import TIMING_COLUMNS
+from terrainvis.tiles import write_tileset
 from terrainvis.tiles.read import stitch_zoom
 
 pytest.importorskip("pyproj")
@@ -23,7 +23,20 @@ pytest.importorskip("pyproj")
 QUICK = dict(relocations=["identity", "full"], n_points=30, n_sets=2)
 
 
-def test_a_tileset_is_measured_as_its_stitched_tin_to_the_last_pair(dem, ours):  # noqa: F811
+@pytest.fixture(scope="module")
+def dem():
+    return terrainvis.load_dem(CUMBERLAND)
+
+
+@pytest.fixture(scope="module")
+def ours(dem, tmp_path_factory):
+    """A tileset terrainvis tiles wrote over Cumberland: zoom 9 as whole lattices, 10 simplified (greedy insertion)."""
+    out = tmp_path_factory.mktemp("ours")
+    write_tileset(dem, out, method="greedy-insertion", zooms=(10, 10), lattice=16)
+    return out
+
+
+def test_a_tileset_is_measured_as_its_stitched_tin_to_the_last_pair(dem, ours):
     got = terrainvis.evaluate({"cumberland": dem}, {"ts": ours}, zoom=[9, 10], **QUICK)
     assert got["error"].isna().all()
     assert sorted(set(zip(got["method"], got["zoom"]))) == [("ts-z10", 10), ("ts-z9", 9)]
@@ -36,7 +49,7 @@ def test_a_tileset_is_measured_as_its_stitched_tin_to_the_last_pair(dem, ours): 
             == got["n_pairs"]).all()
 
 
-def test_a_tileset_of_another_encoder_is_read_and_measured(dem, tmp_path):  # noqa: F811
+def test_a_tileset_of_another_encoder_is_read_and_measured(dem, tmp_path):
     ts = _qm_encoder_tileset(tmp_path / "qme", dem, 10, max_error=5.0)
     df = terrainvis.evaluate({"cumberland": dem}, ts, zoom=10, **QUICK)
     assert df["error"].isna().all() and (df["zoom"] == 10).all()
@@ -49,7 +62,7 @@ def test_a_tileset_of_another_encoder_is_read_and_measured(dem, tmp_path):  # no
 
 
 @pytest.mark.parametrize("mesh,err", [("grid", None), ("delatin", [10.0]), ("martini", 10.0)])
-def test_a_terrain_rgb_tileset_is_read_and_measured(dem, tmp_path, mesh, err):  # noqa: F811
+def test_a_terrain_rgb_tileset_is_read_and_measured(dem, tmp_path, mesh, err):
     if mesh == "martini":
         pytest.importorskip("pymartini")
     ts = _rgb_tileset(tmp_path / "rgb", dem, 11, width=128)  # pixels of ~123 m at 36.6 degrees north
@@ -66,21 +79,21 @@ def test_a_terrain_rgb_tileset_is_read_and_measured(dem, tmp_path, mesh, err):  
     assert df["accuracy"].mean() > 0.9
 
 
-def test_the_offset_moves_the_tiles(dem, ours):  # noqa: F811
+def test_the_offset_moves_the_tiles(dem, ours):
     a = terrainvis.evaluate({"cumberland": dem}, ours, zoom=10, **QUICK)
     b = terrainvis.evaluate({"cumberland": dem}, ours, zoom=10, tile_offset=-50.0, **QUICK)
     assert b["rms_error"].iloc[0] > a["rms_error"].iloc[0] + 20
 
 
 # ---------------------------------------------------------------------- refusals, from Python
-def test_zoom_is_required_with_a_tileset_and_lists_the_present_ones(dem, ours):  # noqa: F811
+def test_zoom_is_required_with_a_tileset_and_lists_the_present_ones(dem, ours):
     with pytest.raises(ValueError, match=r"^zoom must name the zooms of tileset '.*' to measure; it holds zooms 0-10$"):
         terrainvis.evaluate({"cumberland": dem}, ours, **QUICK)
     with pytest.raises(ValueError, match=r"^zoom 12, 13 not in tileset '.*', which holds zooms 0-10$"):
         terrainvis.evaluate({"cumberland": dem}, ours, zoom=[10, 12, 13], **QUICK)
 
 
-def test_zoom_without_a_tileset_and_bad_tile_options(dem, tmp_path):  # noqa: F811
+def test_zoom_without_a_tileset_and_bad_tile_options(dem, tmp_path):
     with pytest.raises(ValueError, match="zoom chooses the zooms of a tileset, and no simplified terrain is a tileset"):
         terrainvis.evaluate({"cumberland": dem}, dem.to_tin(), zoom=3, **QUICK)
     with pytest.raises(ValueError, match=r"tile_mesh 'martini' meshes at a maximum error per zoom; give "
@@ -101,7 +114,7 @@ def _one_line(capsys, argv) -> str:
     return lines[0]
 
 
-def test_cli_refusals_are_one_line(dem, ours, tmp_path, capsys):  # noqa: F811
+def test_cli_refusals_are_one_line(dem, ours, tmp_path, capsys):
     base = ["evaluate", str(CUMBERLAND)]
     line = _one_line(capsys, base + [str(ours)])
     assert "--zoom must name the zooms of tileset" in line and "holds zooms 0-10" in line
@@ -136,7 +149,7 @@ def test_cli_refusals_are_one_line(dem, ours, tmp_path, capsys):  # noqa: F811
     assert "original has no CRS (attrs['crs'])" in line
 
 
-def test_cli_measures_a_tileset_and_draws_the_zoom_figure(ours, tmp_path, capsys):  # noqa: F811
+def test_cli_measures_a_tileset_and_draws_the_zoom_figure(ours, tmp_path, capsys):
     out = tmp_path / "out"
     code = main(["evaluate", str(CUMBERLAND), str(ours), "--zoom", "9", "10", "--relocations", "identity",
                  "--points", "20", "--sets", "1", "--out", str(out)])

@@ -372,3 +372,34 @@ def test_not_a_tileset(tmp_path):
     (tmp_path / "3" / "1" / "2.terrain").write_bytes(b"")
     with pytest.raises(ValueError, match="holds .terrain tiles but no layer.json"):
         open_tileset(tmp_path)
+
+
+def test_two_by_two_tiles_through_the_whole_reader(tmp_path):
+    """Four hand-made quantized-mesh tiles (corners and centre each) over a geographic DEM that is exactly
+    their union: nothing is clipped, and the stitched TIN has the hand count, 9 corners + 4 centres."""
+    from terrainvis.tiles import encode_tile
+    from terrainvis.tiles.scheme import tile_bounds
+
+    z, q = 3, 32767
+    for x in (2, 3):
+        for y in (5, 6):
+            h = [100.0 * x + y] * 4 + [500.0]
+            data = encode_tile([0, q, q, 0, q // 2], [0, 0, q, q, q // 2], h,
+                               [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]], tile_bounds(z, x, y))
+            path = tmp_path / str(z) / str(x) / f"{y}.terrain"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(gzip.compress(data) if x == 2 else data)
+    (tmp_path / "layer.json").write_text(json.dumps({"format": "quantized-mesh-1.0", "tiles": ["{z}/{x}/{y}.terrain"],
+                                                     "available": [[]] * 3 + [[{"startX": 2, "startY": 5, "endX": 3,
+                                                                                "endY": 6}]]}))
+    w, s, _, _ = tile_bounds(z, 2, 5)
+    _, _, e, n = tile_bounds(z, 3, 6)
+    lon, lat = np.linspace(w, e, 9), np.linspace(s, n, 9)
+    grid = HeightGrid.from_coords(np.zeros((9, 9)), lon, lat, attrs={"crs": "EPSG:4326"})
+    tin = stitch_zoom(grid, tmp_path, z)
+    assert tin.n_vertices == 13 and tin.faces.shape[0] == 16
+    assert height_field_problems(tin, grid) == []
+    # the shared corner of the four tiles: the mean of their corner heights
+    k = int(np.flatnonzero((tin.vertices[:, 0] == lon[4]) & (tin.vertices[:, 1] == lat[4]))[0])
+    assert tin.vertices[k, 2] == pytest.approx(np.mean([205.0, 305.0, 206.0, 306.0]), abs=0.01)
+    assert tin.attrs["n_tiles"] == 4
