@@ -286,9 +286,9 @@ def _needed_tiles(tiles: Tiles, z: int, grid: HeightGrid, frame) -> tuple[set, t
     idx = np.repeat(np.arange(ring.shape[0]), k)
     frac = (np.arange(idx.size) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k, k)
     pts = ring[idx] + (nxt[idx] - ring[idx]) * frac[:, None]
-    centre = ring.mean(axis=0)
-    span = max(float(np.ptp(ring[:, 0])), float(np.ptp(ring[:, 1])), 1e-300)
-    pts = pts + (centre - pts) * (1e-9 * max(1.0, 1.0 / span))
+    from ..tolerances import TILE_RING_INSET_REL
+
+    pts = pts + (ring.mean(axis=0) - pts) * TILE_RING_INSET_REL
     nx, ny = tiles.count(z)
     cols = np.clip(np.floor(pts[:, 0]).astype(np.int64), 0, nx - 1)
     rows = np.clip(np.floor(pts[:, 1]).astype(np.int64), 0, ny - 1)
