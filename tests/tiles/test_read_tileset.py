@@ -225,8 +225,9 @@ def _alone(dem, tiles, z, xy):
     """Heights at ``xy`` (the DEM's frame) from each tile decoded alone, its vertices projected with pyproj
     (straight edges in the DEM's frame, as the stitched TIN has them), and each point's tile's height step."""
     from terrainvis.core.terrain import TIN
+    from terrainvis.tiles.tileset import _Frame
 
-    t = pyproj.Transformer.from_crs("EPSG:4326", dem.attrs["crs"], always_xy=True)
+    frame = _Frame(dem, "dem")  # lon/lat to the DEM's frame: its CRS, then its xy_to_native
     out = np.full(xy.shape[0], np.nan)
     steps = np.zeros(xy.shape[0])
     for path in sorted((tiles.path / str(z)).glob("*/*.terrain")):
@@ -234,8 +235,7 @@ def _alone(dem, tiles, z, xy):
         from terrainvis.tiles.scheme import tile_bounds
 
         d = decode_tile(path.read_bytes(), tile_bounds(z, c, r))
-        x, y = t.transform(d.lon, d.lat)
-        tin = TIN(np.column_stack([x, y, d.height]), d.triangles)
+        tin = TIN(np.column_stack([frame.to_grid(d.lon, d.lat), d.height]), d.triangles)
         got = tin.height_at(xy)
         m = np.isfinite(got) & np.isnan(out)
         out[m] = got[m]
@@ -403,3 +403,20 @@ def test_two_by_two_tiles_through_the_whole_reader(tmp_path):
     k = int(np.flatnonzero((tin.vertices[:, 0] == lon[4]) & (tin.vertices[:, 1] == lat[4]))[0])
     assert tin.vertices[k, 2] == pytest.approx(np.mean([205.0, 305.0, 206.0, 306.0]), abs=0.01)
     assert tin.attrs["n_tiles"] == 4
+
+
+def test_a_geographic_dem_reads_its_tileset(tmp_path):
+    """Jacksboro (3 arc-second lon/lat, its frame local metres): a tileset of it read back is a height field over
+    it, equal to each tile decoded alone up to the tiles' height quantization."""
+    from conftest import shared_dem_path
+
+    dem = terrainvis.load_dem(shared_dem_path("jacksboro_fault_tn"))
+    write_tileset(dem, tmp_path, method="greedy-insertion", zooms=(11, 11), lattice=16)
+    tiles = open_tileset(tmp_path)
+    tin = stitch_zoom(dem, tiles, 11)
+    assert height_field_problems(tin, dem) == []
+    X, Y = np.meshgrid(dem.xs[::3], dem.ys[::3])
+    xy = np.column_stack([X.ravel(), Y.ravel()])
+    want, steps = _alone(dem, tiles, 11, xy)
+    assert np.isfinite(want).all()
+    assert np.abs(tin.height_at(xy) - want).max() <= steps.max() + 1e-6
