@@ -134,8 +134,10 @@ def open_tileset(path, *, name: str = "tileset") -> Tiles:
     """What the tileset folder ``path`` holds: its format, projection, row scheme, tile paths and zooms.
 
     A folder with a ``layer.json`` is what that file declares (``format``, ``projection``,
-    ``scheme``, ``tiles``); one without it that holds ``{z}/{x}/{y}.png`` (or ``.webp``)
-    tiles is terrain-RGB in Web Mercator XYZ rows.
+    ``scheme``, ``tiles``; without a ``format``, ``.png`` or ``.webp`` tiles are terrain-RGB,
+    in Web Mercator XYZ rows unless it says otherwise, and others quantized-mesh-1.0, in
+    Cesium's geographic TMS tiling unless it says otherwise); one without it that holds
+    ``{z}/{x}/{y}.png`` (or ``.webp``) tiles is terrain-RGB in Web Mercator XYZ rows.
 
     Raises
     ------
@@ -161,14 +163,16 @@ def open_tileset(path, *, name: str = "tileset") -> Tiles:
         if not all(k in template for k in ("{z}", "{x}", "{y}")) or re.search(r"\{(?!z\}|x\}|y\})", template):
             raise ValueError(f"{name}: {str(layer)!r}'s tiles template must name {{z}}, {{x}} and {{y}} only, got "
                              f"{templates[0]!r}")
-        fmt = str(meta.get("format", "quantized-mesh-1.0"))
-        if fmt == "quantized-mesh-1.0":
-            default_projection, default_scheme = "EPSG:4326", "tms"
-        elif fmt.lower() in ("terrain-rgb", "png", "webp") or template.lower().endswith(_RGB_SUFFIXES):
-            fmt, default_projection, default_scheme = "terrain-rgb", "EPSG:3857", "xyz"
+        image = template.lower().endswith(_RGB_SUFFIXES)
+        fmt = str(meta.get("format", "terrain-rgb" if image else "quantized-mesh-1.0"))
+        if fmt == "quantized-mesh-1.0" and not image:
+            default_projection, default_scheme = "EPSG:4326", "tms"  # Cesium's defaults
+        elif fmt.lower() in ("terrain-rgb", "png", "pngraw", "webp") and image:
+            fmt, default_projection, default_scheme = "terrain-rgb", "EPSG:3857", "xyz"  # TileJSON's defaults
         else:
-            raise ValueError(f"{name}: {str(layer)!r} declares format {fmt!r}; expected one of "
-                             f"{', '.join(FORMATS)}")
+            raise ValueError(f"{name}: {str(layer)!r} declares format {fmt!r} with tiles {template!r}; expected "
+                             "quantized-mesh-1.0 with .terrain tiles, or terrain-rgb (png, pngraw, webp) with .png or "
+                             ".webp tiles")
         projection = str(meta.get("projection", default_projection)).upper()
         if projection not in PROJECTIONS:
             raise ValueError(f"{name}: {str(layer)!r} declares projection {meta.get('projection')!r}; expected "

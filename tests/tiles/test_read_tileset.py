@@ -298,6 +298,21 @@ def test_terrain_rgb_tiles_reproduce_a_plane(dem, tmp_path):
             assert tin.n_vertices < n_grid / 4  # a plane needs few vertices
 
 
+def test_a_terrain_rgb_tilejson_is_read_as_its_folder(dem, tmp_path):
+    """A layer.json (TileJSON) beside terrain-RGB tiles, without a format: its .png template says terrain-RGB, in
+    TileJSON's default XYZ rows; with "scheme": "tms" the rows count from the south."""
+    plane = _plane_dem(dem)
+    ts = _rgb_tileset(tmp_path / "rgb", plane, 11, plane=True, width=32)
+    bare = stitch_zoom(plane, ts, 11)
+    (ts / "layer.json").write_text(json.dumps({"tilejson": "2.2.0", "tiles": ["{z}/{x}/{y}.png"]}))
+    tiles = open_tileset(ts)
+    assert (tiles.format, tiles.projection, tiles.scheme) == ("terrain-rgb", "EPSG:3857", "xyz")
+    np.testing.assert_array_equal(stitch_zoom(plane, tiles, 11).vertices, bare.vertices)
+    (ts / "layer.json").write_text(json.dumps({"tilejson": "2.2.0", "tiles": ["{z}/{x}/{y}.png"], "scheme": "tms"}))
+    with pytest.raises(ValueError, match="does not cover the DEM at zoom 11"):  # the rows then name other tiles
+        stitch_zoom(plane, ts, 11)
+
+
 def test_rgb_encoding_round_trips():
     h = np.array([[-10000.0, 0.0, 1234.5, 8848.8]])
     np.testing.assert_allclose(rgb_heights(rgb_encode(h)), h, atol=1e-6)
@@ -348,7 +363,8 @@ def test_an_absent_zoom_lists_the_present_ones(dem, ours):
 @pytest.mark.parametrize("field,value,expected", [
     ("scheme", "quadkey", "declares scheme 'quadkey'; expected tms, xyz or slippyMap"),
     ("projection", "EPSG:3395", "declares projection 'EPSG:3395'; expected EPSG:4326 or EPSG:3857"),
-    ("format", "heightmap-1.0", "declares format 'heightmap-1.0'; expected one of quantized-mesh-1.0, terrain-rgb"),
+    ("format", "heightmap-1.0", "declares format 'heightmap-1.0' with tiles '{z}/{x}/{y}.terrain'; expected "
+                                "quantized-mesh-1.0 with .terrain tiles"),
 ])
 def test_unknown_scheme_projection_or_format(ours, tmp_path, field, value, expected):
     ts = _copy(ours, tmp_path / "ts")
