@@ -436,3 +436,29 @@ def test_a_geographic_dem_reads_its_tileset(tmp_path):
     want, steps = _alone(dem, tiles, 11, xy)
     assert np.isfinite(want).all()
     assert np.abs(tin.height_at(xy) - want).max() <= steps.max() + 1e-6
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_clipping_keeps_the_surface_inside_and_covers_the_rectangle(seed):
+    """A random grid's TIN (a few vertices moved off the lattice) clipped to an inner rectangle: one cover of the
+    rectangle, and the same heights inside as the TIN it was cut from."""
+    from terrainvis.core.terrain import TIN
+    from terrainvis.tiles.read import _clip
+
+    rng = np.random.default_rng(seed)
+    g = HeightGrid.from_coords(rng.normal(0, 10, (8, 8)), np.arange(8.0), np.arange(8.0))
+    tin = g.to_tin()
+    v = tin.vertices.copy()
+    inner = (np.abs(v[:, 0] - 3.5) < 3) & (np.abs(v[:, 1] - 3.5) < 3)
+    v[inner, :2] += rng.uniform(-0.15, 0.15, (int(inner.sum()), 2))
+    v[9, 0] = 1.0  # a vertex exactly on the clip line x = 1
+    tin = TIN(v, tin.faces)
+    a, b, c = tin.faces.T
+    assert (((v[b, 0] - v[a, 0]) * (v[c, 1] - v[a, 1]) - (v[c, 0] - v[a, 0]) * (v[b, 1] - v[a, 1])) > 0).all()
+    extent = (1.0, 5.7, 0.4, 6.3)
+    xy, h, tri = _clip(v[:, :2], v[:, 2], tin.faces, extent)
+    cut = TIN(np.column_stack([xy, h]), tri)
+    box = HeightGrid.from_coords(np.zeros((2, 2)), np.array(extent[:2]), np.array(extent[2:]))
+    assert height_field_problems(cut, box) == []
+    pts = np.column_stack([rng.uniform(extent[0], extent[1], 500), rng.uniform(extent[2], extent[3], 500)])
+    np.testing.assert_allclose(cut.height_at(pts), tin.height_at(pts), atol=1e-9)
