@@ -357,7 +357,7 @@ def rgb_encode(heights) -> np.ndarray:
     """(h, w, 3) uint8 terrain-RGB pixels of heights (m), each rounded to the encoding's 0.1 m step.
 
     >>> rgb_encode([[0.0, 1234.56]]).tolist()
-    [[[1, 134, 160], [1, 182, 201]]]
+    [[[1, 134, 160], [1, 182, 218]]]
     """
     v = np.rint((np.asarray(heights, dtype=np.float64) + 10000.0) * 10.0).astype(np.int64)
     if v.size and (v.min() < 0 or v.max() >= 1 << 24):
