@@ -37,6 +37,7 @@ __all__ = [
     "WEDGE_BOUNDARY_SLACK", "RING_BOUND_REL", "TRIM_MARGIN_REL", "TIN_ON_EDGE_REL", "TRACK_FACE_SLACK", "TRACK_EDGE_SLACK", "TRACK_STEP_MIN", "TRACK_PROBE_REL", "MOVED_ABS",
     "OUTPUT_SETTLE_REL", "HOLE_REACH_SLACK", "BUCKET_SLACK_REL",
     "HORIZON_DENOMINATOR_MIN", "TILE_RECTANGLE_SHRINK_REL", "QUANTIZED_SNAP", "TILE_BUDGET_REL",
+    "TILE_RING_INSET_REL",
 ]
 
 # ------------------------------------------------------------------ line of sight
@@ -236,3 +237,8 @@ QUANTIZED_SNAP = 1e-9
 #: step) when it is at most the budget times ``1 + TILE_BUDGET_REL`` (the rounding of the
 #: measurement itself).
 TILE_BUDGET_REL = 1e-12
+#: Reading a tileset: the DEM footprint's boundary, in tile units, is pulled this fraction of
+#: each point's distance to its centre inwards before the tiles it crosses are listed, so a
+#: footprint whose edge runs along a tile edge (a DEM cut at the tiles) does not claim the
+#: neighbouring tile, which it only touches.
+TILE_RING_INSET_REL = 1e-9

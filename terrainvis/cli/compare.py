@@ -259,6 +259,8 @@ def _write_plots(df, grids, out: Path) -> None:
         save(plot.tradeoff(ok, relocation=rel), f"tradeoff_{rel}.png", 110)
     if ok["max_distance"].nunique(dropna=True) >= 1:
         save(plot.accuracy_vs_distance(ok), "accuracy_vs_distance.png", 110)
+    if "zoom" in ok and ok["zoom"].notna().any():  # tilesets measured by evaluate
+        save(plot.accuracy_vs_zoom(ok), "accuracy_vs_zoom.png", 110)
     # the finest results: the shallowest level, or the smallest budget
     level = float(ok["max_error_budget"].min()) if budgets else int(ok["level"].min())
     for name, grid in grids.items():

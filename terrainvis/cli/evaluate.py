@@ -1,4 +1,4 @@
-"""``terrainvis evaluate``: simplifications made elsewhere (meshes, rasters) measured as ``compare`` measures a method's."""
+"""``terrainvis evaluate``: simplifications made elsewhere (meshes, rasters, tilesets) measured as ``compare`` measures a method's."""
 
 from __future__ import annotations
 
@@ -14,7 +14,11 @@ _NOT_HERE = ("methods", "levels", "max_errors", "cascade")
 
 
 #: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
-HELP = "measure simplifications made elsewhere (meshes, rasters) as compare measures a method's"
+HELP = "measure simplifications made elsewhere (meshes, rasters, tilesets) as compare measures a method's"
+
+#: How messages name the tileset options.
+_TILE_FLAGS = {"zoom": "--zoom", "tile_mesh": "--tile-mesh", "tile_max_error": "--tile-max-error",
+               "tile_offset": "--tile-offset"}
 
 
 def add_parser(sub) -> None:
@@ -28,13 +32,16 @@ def add_parser(sub) -> None:
         description=(
             "Measure each SIMPLIFIED terrain of DEM on the comparison's measure: the same point sets (by the DEM's "
             "name and --seed), relocations, predicate and columns as terrainvis compare, optionally beside "
-            "built-in methods at the same vertex count (--against). Exits 1 when --min-accuracy is not met."
+            "built-in methods at the same vertex count (--against). A SIMPLIFIED folder is a tileset (Cesium "
+            "quantized-mesh with its layer.json, or terrain-RGB PNG tiles): each --zoom's tiles over the DEM are "
+            "stitched into one TIN, clipped to the DEM, and measured, with a zoom column. Exits 1 when "
+            "--min-accuracy is not met."
         ),
     )
     e.add_argument("dem", help="the original DEM (file or bundled name)")
     e.add_argument("simplified", nargs="+", metavar="SIMPLIFIED",
-                   help=f"simplified terrains: meshes ({' '.join(MESH_SUFFIXES)}) or rasters "
-                        f"({' '.join(RASTER_SUFFIXES)})")
+                   help=f"simplified terrains: meshes ({' '.join(MESH_SUFFIXES)}), rasters "
+                        f"({' '.join(RASTER_SUFFIXES)}) or tileset folders")
     e.add_argument("--against", nargs="+", default=[], metavar="M", type=method_arg,
                    help=f"methods measured beside them at the same size: {', '.join(METHODS)}")
     e.add_argument("--frame", choices=["native", "local"], default=None,
@@ -43,6 +50,18 @@ def add_parser(sub) -> None:
     e.add_argument("--repair", action="store_true",
                    help="repair a mesh that is not a height field over the DEM (folds, corners, a border off the "
                         "rectangle) instead of refusing it")
+    tiles = e.add_argument_group("tilesets (a SIMPLIFIED folder)")
+    tiles.add_argument("--zoom", nargs="+", type=int, default=None, metavar="Z",
+                       help="the zooms of each tileset to measure, each stitched into one TIN (required with a "
+                            "tileset; an absent zoom is refused with the zooms it holds)")
+    tiles.add_argument("--tile-mesh", choices=["grid", "martini", "delatin"], default="grid",
+                       help="how terrain-RGB tiles are meshed: every pixel a vertex (grid, the default), or as deck.gl "
+                            "meshes them, Martini or Delatin at --tile-max-error")
+    tiles.add_argument("--tile-max-error", nargs="+", type=float, default=None, metavar="E",
+                       help="Martini's or Delatin's maximum error (m): one for every zoom, or one per --zoom")
+    tiles.add_argument("--tile-offset", type=float, default=0.0, metavar="M",
+                       help="height (m) added to the tiles' heights, when they are not in the DEM's vertical datum "
+                            "(minus the geoid undulation for ellipsoidal tiles over an orthometric DEM); default 0")
     e.add_argument("--min-accuracy", type=float, default=None, metavar="A",
                    help="exit 1 unless every simplified terrain keeps at least this share of verdicts (0.95 for 95 "
                         "%%) under every relocation of the run")
@@ -101,7 +120,7 @@ def _evaluate(args, label: str, grid, out: Path | None, earlier: list) -> int:
     options = {k: v for k, v in given(args).items() if k not in _NOT_HERE}
     t0 = time.perf_counter()
     run = prepared({label: grid}, list(args.simplified), against=args.against, frame=args.frame, repair=args.repair,
-                   **options)
+                   **_tile_options(args), names=_TILE_FLAGS, **options)
     rows = None
     if out is not None:
         rows = out / PARTIAL
@@ -121,6 +140,11 @@ def _evaluate(args, label: str, grid, out: Path | None, earlier: list) -> int:
             print(f"terrainvis evaluate: --overwrite: removed the earlier run's {describe(stale)} that this run did "
                   "not write again", file=sys.stderr)
     return _verdict(df, args)
+
+
+def _tile_options(args) -> dict:
+    return {"zoom": args.zoom, "tile_mesh": args.tile_mesh, "tile_max_error": args.tile_max_error,
+            "tile_offset": args.tile_offset}
 
 
 def _measured_line():
@@ -153,10 +177,13 @@ def _check_out(args, label: str, out: Path) -> list[Path]:
     run replaces. Nothing is removed here; with ``--resume`` nothing is (the run goes on).
     """
     from ..experiment._outdir import _candidates, describe, earlier_run, foreign_files
-    from ..experiment.evaluate import _named
+    from ..experiment.evaluate import _named, is_tileset
     from .compare import _foreign_message
 
-    names = [m for m, _ in _named(list(args.simplified), None, taken=args.against)] + list(args.against)
+    names = []
+    for m, s in _named(list(args.simplified), None, taken=args.against):
+        names += [f"{m}-z{z}" for z in (args.zoom or [])] if is_tileset(s) else [m]
+    names += list(args.against)
     foreign = foreign_files(out, [label], names, [])
     if foreign:
         raise UsageError(_foreign_message(out, foreign))
@@ -185,7 +212,8 @@ def _print(df, label: str, seconds: float) -> None:
     ok = df[df["error"].isna()]
     if len(ok):
         g = ok.groupby(["method", "relocation"], sort=False)
-        t = pd.DataFrame({"vertices": g["n_vertices"].first(), "level": g["level"].first(),
+        t = pd.DataFrame({**({"zoom": g["zoom"].first().astype("Int64")} if ok["zoom"].notna().any() else {}),
+                          "vertices": g["n_vertices"].first(), "level": g["level"].first(),
                           "accuracy": 100 * g["accuracy"].mean(), "visible_kept": 100 * g["visible_kept"].mean(),
                           "blocked_kept": 100 * g["blocked_kept"].mean(), "max_error": g["max_error"].first()})
         print(f"{label}: accuracy (%) of each simplified terrain, mean over {ok['set'].nunique()} point set(s)")

@@ -36,7 +36,7 @@ TABLES = "tables.md"
 SIMPLIFIED = "simplified"
 LOCK = "results.lock"
 #: Figures every run may write, whatever its terrains and relocations.
-FIXED_FIGURES = ("accuracy_vs_size.png", "accuracy_vs_budget.png", "accuracy_vs_distance.png")
+FIXED_FIGURES = ("accuracy_vs_size.png", "accuracy_vs_budget.png", "accuracy_vs_distance.png", "accuracy_vs_zoom.png")
 #: The first line of every ``tables.md`` a run writes.
 TABLES_TITLE = "# terrainvis compare"
 #: Settings every stored settings file of ``compare`` holds, whatever its version.

@@ -25,16 +25,17 @@ COLUMNS = (
     "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
     "max_error", "stopped_by", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
     "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
-    "seed", "max_distance", "distance_unit", "offset", "repair", "repair_max_snap", "error",
+    "seed", "max_distance", "distance_unit", "offset", "repair", "repair_max_snap", "zoom", "error",
 )
 #: Columns that only one measure fills (NaN in the other measures' rows), by that measure;
 #: they came after the first results files, so an older file lacks them (:func:`optional_columns`).
 MEASURE_COLUMNS = {"viewshed": ("min_height_rms", "min_height_p95", "siting_share", "siting_share_original",
                                 "siting_ratio")}
 #: Columns only :func:`terrainvis.evaluate` fills: what it changed in a mesh to measure it (faces
-#: reversed, a ``repair=True`` repair: :func:`terrainvis.core.repair.repair_summary`) and the
-#: farthest a vertex was snapped; empty in a comparison's rows, and absent from older files.
-EVALUATE_COLUMNS = ("repair", "repair_max_snap")
+#: reversed, a ``repair=True`` repair: :func:`terrainvis.core.repair.repair_summary`), the
+#: farthest a vertex was snapped, and the zoom of a tileset's rows; empty in a comparison's rows,
+#: and absent from older files.
+EVALUATE_COLUMNS = ("repair", "repair_max_snap", "zoom")
 #: Columns only a run budgeted in vertical error fills (``max_errors``): the budget E of the
 #: row's unit and ``stopped_by``, ``"max_error"`` when the result is within E, else what stopped
 #: the method first (:func:`terrainvis.experiment.units.stopped_by`); empty in a run by levels, and
@@ -81,7 +82,7 @@ def table(rows: list[dict]) -> pd.DataFrame:
 
 def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
     """The table sorted: terrains as given, then set, methods in the registry's (the paper's) order,
-    budget (in a run budgeted in vertical error), level, relocation (identity, full, half, then
+    budget (in a run budgeted in vertical error), zoom (of a tileset's rows), level, relocation (identity, full, half, then
     the others), distance (unlimited last)."""
     from simplifiers import METHODS
 
@@ -94,5 +95,5 @@ def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
     df = df.assign(
         _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r),
         _d=df["max_distance"].fillna(np.inf),
-    ).sort_values(["_t", "set", "_m", "max_error_budget", "level", "_r", "_d"], kind="stable")
+    ).sort_values(["_t", "set", "_m", "max_error_budget", "zoom", "level", "_r", "_d"], kind="stable")
     return df.drop(columns=["_t", "_m", "_r", "_d"]).reset_index(drop=True)

@@ -20,6 +20,13 @@ checked:
   defect is reported with where it is; with ``repair=True`` the mesh is repaired as QEC's
   output is (:func:`terrainvis.core.repair.repair_tin`) and ``attrs["repair"]`` says what
   changed.
+* **Tilesets.** A folder of terrain tiles (Cesium quantized-mesh-1.0 with its
+  ``layer.json``, or terrain-RGB PNG tiles) is measured once per zoom of ``zoom``: that
+  zoom's tiles over the DEM are stitched into one TIN in the DEM's frame and clipped to its
+  footprint (:func:`terrainvis.tiles.read.stitch_zoom`), named ``{folder}-z{zoom}``, and
+  its rows carry the ``zoom``. Heights are taken as in the DEM's vertical datum;
+  ``tile_offset`` is added to them when they are not (the module
+  :mod:`terrainvis.tiles.read` says when).
 * **Coverage of a raster.** A coarser raster resampled from the DEM (``gdalwarp -tr``)
   has its sample centres half a coarse cell inside the DEM's: its edge samples are
   extended to the DEM's footprint (recorded in ``attrs["padded"]``); a raster that covers
@@ -38,7 +45,7 @@ import pandas as pd
 from ..core.terrain import TIN, HeightGrid
 from ..core.validate import choice, describe, file_label
 
-__all__ = ["evaluate", "as_simplified", "MESH_SUFFIXES", "RASTER_SUFFIXES"]
+__all__ = ["evaluate", "as_simplified", "is_tileset", "MESH_SUFFIXES", "RASTER_SUFFIXES", "TILE_NAMES"]
 
 #: Mesh files :func:`evaluate` reads (through trimesh).
 MESH_SUFFIXES = (".ply", ".obj", ".off", ".stl", ".glb")
@@ -49,7 +56,8 @@ FRAMES = ("native", "local")
 
 
 def evaluate(original, simplified, *, name: str | None = None, against=(), frame: str | None = None,
-             repair: bool = False, out_csv=None, resume: bool = False, on_unit=None, **options) -> pd.DataFrame:
+             repair: bool = False, zoom=None, tile_mesh: str = "grid", tile_max_error=None, tile_offset: float = 0.0,
+             out_csv=None, resume: bool = False, on_unit=None, **options) -> pd.DataFrame:
     """Measure simplifications made elsewhere as :func:`terrainvis.compare` measures a method's.
 
     Parameters
@@ -60,10 +68,11 @@ def evaluate(original, simplified, *, name: str | None = None, against=(), frame
         evaluating a method's output under the terrain's name and the run's seed gives
         that comparison's rows.
     simplified : terrain or path, or a list or dict of them
-        S(T): a TIN, a HeightGrid, a ``trimesh.Trimesh``, or a file (a mesh of
+        S(T): a TIN, a HeightGrid, a ``trimesh.Trimesh``, a file (a mesh of
         :data:`MESH_SUFFIXES`, a raster of :data:`RASTER_SUFFIXES`, or a terrainvis
-        ``.npz`` of either kind). Several are measured one after the other; a dict gives
-        their names, else a file's stem, ``attrs["method"]`` or ``"simplified"``.
+        ``.npz`` of either kind), or a tileset folder (measured at each of ``zoom``, see the
+        module docstring). Several are measured one after the other; a dict gives their
+        names, else a file's stem, ``attrs["method"]`` or ``"simplified"``.
     name : str, optional
         The method column of a single simplified terrain.
     against : sequence of str
@@ -77,6 +86,18 @@ def evaluate(original, simplified, *, name: str | None = None, against=(), frame
         other files.
     repair : bool
         Repair a mesh that is not a valid height field instead of refusing it.
+    zoom : int or sequence of int
+        The zooms of the tilesets to measure, each one TIN; required with a tileset (a
+        missing one is refused with the zooms the tileset holds), refused without.
+    tile_mesh : {"grid", "martini", "delatin"}
+        How terrain-RGB tiles are meshed: every pixel a vertex, or deck.gl's Martini or
+        Delatin at ``tile_max_error``.
+    tile_max_error : float, sequence or dict, optional
+        Martini's and Delatin's maximum error (m): one for every zoom, one per zoom of
+        ``zoom``, or ``{zoom: error}``.
+    tile_offset : float
+        Height (m) added to the tiles' heights: the DEM's vertical datum minus the tiles'
+        (``-N``, N the geoid undulation, for ellipsoidal tiles over an orthometric DEM).
     out_csv : str or Path, optional
         Write each measured terrain's rows (and each ``against`` method's) to this CSV as
         soon as they are measured, atomically, with the run's settings beside it, as
@@ -125,7 +146,8 @@ def evaluate(original, simplified, *, name: str | None = None, against=(), frame
         raise ValueError("resume=True continues the run stored in out_csv; give out_csv (the results file to resume)")
     if on_unit is not None and not callable(on_unit):
         raise TypeError(f"on_unit must be a function of (key, rows) or None, got {describe(on_unit)}")
-    run = prepared(original, simplified, name=name, against=against, frame=frame, repair=repair, **options)
+    run = prepared(original, simplified, name=name, against=against, frame=frame, repair=repair, zoom=zoom,
+                   tile_mesh=tile_mesh, tile_max_error=tile_max_error, tile_offset=tile_offset, **options)
     from .comparison import _lock
 
     with _lock(out_csv):
@@ -160,8 +182,10 @@ class Prepared:
         return _rows(self.grid, self.name, units, store, done, on_unit, self.settings)
 
 
-def prepared(original, simplified, *, name=None, against=(), frame=None, repair=False, **options) -> Prepared:
-    """Read and check everything :func:`evaluate` measures (its arguments, less the output's)."""
+def prepared(original, simplified, *, name=None, against=(), frame=None, repair=False, zoom=None, tile_mesh="grid",
+             tile_max_error=None, tile_offset=0.0, names=None, **options) -> Prepared:
+    """Read and check everything :func:`evaluate` measures (its arguments, less the output's); ``names``
+    says how messages name the tileset arguments (:data:`TILE_NAMES`; the command line passes its flags)."""
     from .plan import resolve_terrains, settings_for
 
     grids = resolve_terrains(original if isinstance(original, dict) else [original])
@@ -173,9 +197,134 @@ def prepared(original, simplified, *, name=None, against=(), frame=None, repair=
     settings = settings_for(grids, {**options, "methods": against or ["simple"]})
     if frame is not None:
         frame = choice(frame, "frame", FRAMES)
-    terrains = {label: as_simplified(s, grid, frame=frame, repair=repair, label=label) for label, s in items}
+    reading = _TileReading.checked(zoom, tile_mesh, tile_max_error, tile_offset, {**TILE_NAMES, **(names or {})})
+    terrains = {}
+    for label, s in _tilesets_expanded(items, grid, reading, taken=against):
+        terrains[label] = as_simplified(s, grid, frame="local" if _from_tileset(s) else frame, repair=repair,
+                                        label=label)
     _check_engine(settings, terrains)
     return Prepared(grid, tname, terrains, against, settings)
+
+
+# ---------------------------------------------------------------------- tilesets
+#: How messages name the tileset arguments of :func:`evaluate` (the command line passes its flags).
+TILE_NAMES = {"zoom": "zoom", "tile_mesh": "tile_mesh", "tile_max_error": "tile_max_error",
+              "tile_offset": "tile_offset"}
+
+
+def is_tileset(s) -> bool:
+    """A simplified terrain given as a folder: a tileset."""
+    return isinstance(s, (str, Path)) and Path(s).is_dir()
+
+
+def _from_tileset(s) -> bool:
+    return isinstance(s, TIN) and "tileset" in s.attrs and "zoom" in s.attrs
+
+
+@dataclass(frozen=True)
+class _TileReading:
+    """How tilesets are read: the zooms, the mesher and its errors per zoom, the height offset; checked once."""
+
+    zooms: tuple
+    mesh: str
+    max_error: dict
+    offset: float
+    names: dict
+
+    @classmethod
+    def checked(cls, zoom, mesh, max_error, offset, names) -> _TileReading:
+        from ..tiles.read import MESHERS
+        from ..tiles.scheme import MAX_ZOOM
+
+        if zoom is None:
+            zooms = ()
+        else:
+            given = [zoom] if isinstance(zoom, (int, np.integer)) and not isinstance(zoom, bool) else zoom
+            try:
+                zooms = tuple(given)
+            except TypeError:
+                raise ValueError(f"{names['zoom']} must be a zoom or a list of zooms, got {describe(zoom)}") from None
+            if not zooms or any(isinstance(z, bool) or not isinstance(z, (int, np.integer)) or not 0 <= z <= MAX_ZOOM
+                                for z in zooms):
+                raise ValueError(f"{names['zoom']} must be one or more integers in [0, {MAX_ZOOM}], got {zoom!r}")
+            if len(set(zooms)) != len(zooms):
+                raise ValueError(f"{names['zoom']} must not repeat a zoom, got {list(zooms)}")
+            zooms = tuple(int(z) for z in zooms)
+        mesh = choice(mesh, names["tile_mesh"], MESHERS)
+        errors = {}
+        if max_error is not None:
+            if isinstance(max_error, dict):
+                errors = dict(max_error)
+            elif isinstance(max_error, (int, float, np.integer, np.floating)) and not isinstance(max_error, bool):
+                errors = {z: max_error for z in zooms}
+            else:
+                values = list(max_error)
+                if len(values) == 1:
+                    values = values * len(zooms)
+                if len(values) != len(zooms):
+                    raise ValueError(f"{names['tile_max_error']} must be one error or one per zoom of "
+                                     f"{names['zoom']} ({len(zooms)}), got {len(values)}")
+                errors = dict(zip(zooms, values))
+            for z, e in errors.items():
+                if isinstance(e, bool) or not isinstance(e, (int, float, np.integer, np.floating)) \
+                        or not np.isfinite(e) or e < 0:
+                    raise ValueError(f"{names['tile_max_error']} must be finite errors >= 0 (m), got {e!r} for zoom "
+                                     f"{z}")
+            errors = {int(z): float(e) for z, e in errors.items()}
+        if mesh != "grid":
+            lacking = [z for z in zooms if z not in errors]
+            if lacking:
+                raise ValueError(f"{names['tile_mesh']} {mesh!r} meshes at a maximum error per zoom; give "
+                                 f"{names['tile_max_error']} (none for zoom {', '.join(map(str, lacking))})")
+        if isinstance(offset, bool) or not isinstance(offset, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(offset):
+            raise ValueError(f"{names['tile_offset']} must be a finite height (m), got {offset!r}")
+        return cls(zooms, mesh, errors, float(offset), names)
+
+
+def _tilesets_expanded(items: list, grid: HeightGrid, reading: _TileReading, taken=()) -> list:
+    """``items`` with each tileset folder replaced by one stitched TIN per zoom, labelled ``{label}-z{zoom}``."""
+    out, tilesets = [], 0
+    for label, s in items:
+        if not is_tileset(s):
+            out.append((label, s))
+            continue
+        tilesets += 1
+        from ..tiles.read import open_tileset, stitch_zoom
+        from ..tiles.tileset import _Frame
+
+        tiles = open_tileset(s, name=f"simplified terrain {label!r}")
+        if not reading.zooms:
+            raise ValueError(f"{reading.names['zoom']} must name the zooms of tileset {str(s)!r} to measure; it "
+                             f"holds zooms {_zoom_list(tiles.zooms)}")
+        absent = [z for z in reading.zooms if z not in tiles.zooms]
+        if absent:
+            raise ValueError(f"{reading.names['zoom']} {', '.join(map(str, absent))} not in tileset {str(s)!r}, "
+                             f"which holds zooms {_zoom_list(tiles.zooms)}")
+        frame = _Frame(grid, "original")
+        for z in reading.zooms:
+            tin = stitch_zoom(grid, tiles, z, mesh=reading.mesh, max_error=reading.max_error.get(z),
+                              offset=reading.offset, name=f"simplified terrain {label!r}", frame=frame)
+            out.append((f"{label}-z{z}", tin))
+    if reading.zooms and not tilesets:
+        raise ValueError(f"{reading.names['zoom']} chooses the zooms of a tileset, and no simplified terrain is a "
+                         "tileset folder")
+    labels = [lab for lab, _ in out]
+    if len(set(labels)) != len(labels) or set(labels) & set(taken):
+        raise ValueError(f"simplified terrains must have distinct names, got {labels}")
+    return out
+
+
+def _zoom_list(zooms) -> str:
+    """``0-5, 7``: zooms as runs."""
+    if not zooms:
+        return "none"
+    runs, start = [], zooms[0]
+    for a, b in zip(zooms, list(zooms[1:]) + [None]):
+        if b != a + 1:
+            runs.append(f"{start}" if start == a else f"{start}-{a}")
+            start = b
+    return ", ".join(runs)
 
 
 def _content(terrain) -> str:
@@ -511,6 +660,7 @@ def _units(grid: HeightGrid, tname: str, terrains: dict, against: list, settings
         record = s.attrs.get(EVALUATE_REPAIR) or {}
         base["repair"] = repair_summary(record) or None
         base["repair_max_snap"] = float(record.get("max_snap", 0.0)) if record else np.nan
+        base["zoom"] = int(s.attrs["zoom"]) if _from_tileset(s) else None
         units.append(_Unit((tname, label, base["level"]), base, s))
     sizes = sorted({(s.size if isinstance(s, HeightGrid) else s.n_vertices) for s in terrains.values()})
     for method in against:

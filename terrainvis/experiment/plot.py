@@ -23,7 +23,7 @@ from ..core.terrain import TIN, HeightGrid, as_terrain
 from .report import step_column
 
 __all__ = [
-    "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "accuracy_vs_budget", "tradeoff",
+    "hillshade", "terrain_views", "los_pairs", "accuracy_vs_size", "accuracy_vs_budget", "accuracy_vs_zoom", "tradeoff",
     "accuracy_vs_distance", "viewshed",
     "viewshed_values", "cumulative_viewshed", "siting", "observer_network",
 ]
@@ -292,6 +292,70 @@ def accuracy_vs_budget(df: pd.DataFrame, *, figsize=None) -> Figure:
         _log_panel(ax, budgets, [f"{v:g}" for v in budgets], rel, "max vertical error budget (z units)")
     axes[0].set_ylabel("accuracy (% of pairs agreeing)")
     _legend_outside(axes[-1])
+    return fig
+
+
+def accuracy_vs_zoom(df: pd.DataFrame, *, figsize=None) -> Figure:
+    """The verdicts a tileset keeps, against its zoom and against its measured vertical error.
+
+    For the rows of tilesets measured by :func:`terrainvis.evaluate` (those with a ``zoom``):
+    two panels, accuracy against zoom (left) and against the stitched TIN's maximum
+    vertical error (right, log scale); a line per tileset and relocation (colour by
+    relocation, marker by tileset), each point the mean over point sets with the standard
+    deviation as an error bar.
+
+    Raises
+    ------
+    ValueError
+        When ``df`` holds no row with a zoom.
+    """
+    from ..relocation.registry import practical_relocations
+
+    data = _check_df(df, {"method", "relocation", "accuracy", "zoom", "max_error"})
+    data = data[data["zoom"].notna()]
+    if data.empty:
+        raise ValueError("df holds no tileset's rows (zoom is empty in every row); measure a tileset with "
+                         "terrainvis.evaluate(DEM, TILESET_DIR, zoom=[...])")
+    data = data.assign(tileset=[m[: -len(f"-z{int(z)}")] if str(m).endswith(f"-z{int(z)}") else str(m)
+                                for m, z in zip(data["method"], data["zoom"])])
+    rels = [r for r in practical_relocations() if r in set(data["relocation"])]
+    rels += sorted(set(data["relocation"]) - set(rels))
+    fig, axes = _panels(2, 4.2, 3.8, figsize, sharey=True, legend=2.2)
+    from matplotlib import rcParams
+
+    colors = rcParams["axes.prop_cycle"].by_key()["color"]
+    markers = "osD^vP*X"
+    for t, tileset in enumerate(dict.fromkeys(data["tileset"])):
+        for r, rel in enumerate(rels):
+            sub = data[(data["tileset"] == tileset) & (data["relocation"] == rel)]
+            if sub.empty:
+                continue
+            g = sub.groupby("zoom").agg(mu=("accuracy", "mean"), sd=("accuracy", "std"),
+                                        err=("max_error", "first")).sort_index()
+            style = dict(marker=markers[t % len(markers)], color=colors[r % len(colors)], capsize=2,
+                         elinewidth=0.8, markersize=5)
+            mu, sd = 100 * g["mu"].to_numpy(), 100 * g["sd"].fillna(0).to_numpy()
+            axes[0].errorbar(g.index.to_numpy(dtype=float), mu, yerr=sd, label=f"{tileset}, {rel}", **style)
+            by_err = np.argsort(g["err"].to_numpy(dtype=float), kind="stable")
+            axes[1].errorbar(g["err"].to_numpy(dtype=float)[by_err], mu[by_err], yerr=sd[by_err], **style)
+    zooms = sorted(int(z) for z in data["zoom"].unique())
+    axes[0].set_xticks(zooms, [str(z) for z in zooms])
+    axes[0].set_xlabel("zoom")
+    axes[0].set_ylabel("accuracy (% of pairs agreeing)")
+    from matplotlib.ticker import FuncFormatter, LogLocator
+
+    axes[1].set_xscale("log")
+    axes[1].xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    axes[1].xaxis.set_minor_formatter(NullFormatter())
+    axes[1].xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axes[1].set_xlabel("max vertical error of the stitched TIN (z units)")
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_title("against zoom", fontsize=10)
+    axes[1].set_title("against vertical error", fontsize=10)
+    handles, labels = axes[0].get_legend_handles_labels()
+    axes[1].legend(handles, labels, fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                   frameon=False)
     return fig
 
 
