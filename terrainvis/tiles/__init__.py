@@ -1,9 +1,13 @@
-"""Cesium quantized-mesh terrain tilesets of a DEM, each tile simplified by a registered method.
+"""Terrain tilesets of a DEM (Cesium quantized-mesh, terrain-RGB), each tile simplified by a registered method.
 
 * :mod:`terrainvis.tiles.scheme`: Cesium's geographic tiling scheme (EPSG:4326, TMS rows);
 * :mod:`terrainvis.tiles.quantized_mesh`: the quantized-mesh-1.0 encoder and decoder;
 * :mod:`terrainvis.tiles.tileset`: :func:`write_tileset` (``terrainvis tiles``), which needs
   pyproj (``pip install "terrainvis[tiles]"``);
+* :mod:`terrainvis.tiles.keep_los`: each zoom's budget chosen by the line-of-sight verdicts
+  its tiles keep (``--keep-los P``);
+* :mod:`terrainvis.tiles.terrain_rgb`: Mapbox's terrain-RGB PNG tiles in Web Mercator
+  (``--format terrain-rgb``, Pillow);
 * :mod:`terrainvis.tiles.read`: :func:`open_tileset` and :func:`stitch_zoom`, a tileset
   (quantized-mesh-1.0 or terrain-RGB) read back as one TIN per zoom over a DEM
   (``terrainvis evaluate DEM TILESET_DIR --zoom Z``).

@@ -73,6 +73,7 @@ import numpy as np
 
 from ..core.terrain import TIN, HeightGrid
 from . import quantized_mesh as qm
+from .terrain_rgb import rgb_encode, rgb_heights
 
 __all__ = ["Tiles", "open_tileset", "stitch_zoom", "MESHERS", "FORMATS", "PROJECTIONS", "SCHEMES",
            "rgb_heights", "rgb_encode"]
@@ -341,28 +342,6 @@ def _read_qm(path: Path, col: int, row: int) -> _Piece:
                          f"[{dec.min_height}, {dec.max_height}] is not finite")
     Q = qm.QUANTIZED_MAX
     return _Piece(col * Q + dec.u, row * Q + dec.v, dec.height.astype(np.float64), dec.triangles)
-
-
-def rgb_heights(rgb: np.ndarray) -> np.ndarray:
-    """Heights (float64, m) of terrain-RGB pixels: -10000 + (R * 65536 + G * 256 + B) * 0.1.
-
-    >>> rgb_heights(np.array([[[1, 134, 160]]], dtype=np.uint8)).round(6).tolist()
-    [[0.0]]
-    """
-    a = np.asarray(rgb).astype(np.int64)
-    return -10000.0 + (a[..., 0] * 65536 + a[..., 1] * 256 + a[..., 2]) * 0.1
-
-
-def rgb_encode(heights) -> np.ndarray:
-    """(h, w, 3) uint8 terrain-RGB pixels of heights (m), each rounded to the encoding's 0.1 m step.
-
-    >>> rgb_encode([[0.0, 1234.56]]).tolist()
-    [[[1, 134, 160], [1, 182, 218]]]
-    """
-    v = np.rint((np.asarray(heights, dtype=np.float64) + 10000.0) * 10.0).astype(np.int64)
-    if v.size and (v.min() < 0 or v.max() >= 1 << 24):
-        raise ValueError("heights must lie in [-10000, 1667721.5] m for terrain-RGB")
-    return np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=-1).astype(np.uint8)
 
 
 def _rgb_pixels(path: Path, width: list) -> np.ndarray:
@@ -645,6 +624,12 @@ def _merge_positions(xy: np.ndarray, h: np.ndarray, tri: np.ndarray):
     return keys, h, tri[keep]
 
 
+def _with_path(name: str, tiles) -> str:
+    """``name`` and the tileset's path, unless the name already quotes it (evaluate names a folder by itself)."""
+    path = str(tiles.path)
+    return name if repr(path) in name else f"{name} {path!r}"
+
+
 def stitch_zoom(grid: HeightGrid, tiles, zoom, *, mesh: str = "grid", max_error: float | None = None,
                 offset: float = 0.0, name: str = "tileset", frame=None) -> TIN:
     """One zoom of a tileset over ``grid``: its tiles stitched into one TIN in the grid's frame, clipped to its footprint.
@@ -691,7 +676,7 @@ def stitch_zoom(grid: HeightGrid, tiles, zoom, *, mesh: str = "grid", max_error:
         raise ValueError(f"zoom must be an integer, got {zoom!r}")
     zoom = int(zoom)
     if zoom not in tiles.zooms:
-        raise ValueError(f"zoom {zoom} is not in {name} {str(tiles.path)!r}: its zooms are {_zooms_text(tiles.zooms)}")
+        raise ValueError(f"zoom {zoom} is not in {_with_path(name, tiles)}: its zooms are {_zooms_text(tiles.zooms)}")
     if mesh not in MESHERS:
         raise ValueError(f"mesh must be one of {', '.join(MESHERS)}, got {mesh!r}")
     if tiles.format == "terrain-rgb" and mesh != "grid" and max_error is None:
@@ -719,7 +704,7 @@ def stitch_zoom(grid: HeightGrid, tiles, zoom, *, mesh: str = "grid", max_error:
                 paths[(col, row)] = path
     if missing:
         shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
-        raise ValueError(f"{name} {str(tiles.path)!r} does not cover the DEM at zoom {zoom}: {len(missing)} tile(s) "
+        raise ValueError(f"{_with_path(name, tiles)} does not cover the DEM at zoom {zoom}: {len(missing)} tile(s) "
                          f"over its footprint are missing ({shown})")
     if pixels:
         pieces = _rgb_pieces(pixels, mesh, max_error, paths)
@@ -739,7 +724,7 @@ def stitch_zoom(grid: HeightGrid, tiles, zoom, *, mesh: str = "grid", max_error:
     xy, h, tri = _clip(xy, h + float(offset), tri, grid.extent)
     xy, h, tri = _merge_positions(xy, h, tri)
     if not tri.shape[0]:
-        raise ValueError(f"{name} {str(tiles.path)!r} has no triangle over the DEM at zoom {zoom}")
+        raise ValueError(f"{_with_path(name, tiles)} has no triangle over the DEM at zoom {zoom}")
     attrs = {"tileset": str(tiles.path), "zoom": zoom, "n_tiles": len(pieces), "format": tiles.format,
              "method": f"{tiles.path.name}-z{zoom}", "kind": "irregular"}
     return TIN(np.column_stack([xy, h]), tri, attrs=attrs)

@@ -40,8 +40,9 @@ import numpy as np
 from ..core.terrain import TIN, HeightGrid
 from ..tolerances import TILE_BUDGET_REL
 from . import quantized_mesh as qm
+from ._common import Made, equirectangular
 
-__all__ = ["DEFAULT_PIXELS", "RGB_STEP", "mercator_tile_bounds", "mercator_tiles_covering", "pixel_lattice",
+__all__ = ["DEFAULT_PIXELS", "RGB_STEP", "rgb_heights", "rgb_encode", "mercator_tile_bounds", "mercator_tiles_covering", "pixel_lattice",
            "encode_png", "decode_png"]
 
 #: Pixels per tile side (Mapbox's terrain-RGB tiles are 256 x 256; 512 x 512 for "@2x").
@@ -55,6 +56,28 @@ MAX_LAT = 85.0511287798066
 _RETRIES = 3
 #: The PNG text chunk holding the vertices and triangles of the surface a tile's pixels were taken from.
 _MESH_KEY = "terrainvis-mesh"
+
+
+def rgb_heights(rgb: np.ndarray) -> np.ndarray:
+    """Heights (float64, m) of terrain-RGB pixels: -10000 + (R * 65536 + G * 256 + B) * 0.1.
+
+    >>> rgb_heights(np.array([[[1, 134, 160]]], dtype=np.uint8)).round(6).tolist()
+    [[0.0]]
+    """
+    a = np.asarray(rgb).astype(np.int64)
+    return -10000.0 + (a[..., 0] * 65536 + a[..., 1] * 256 + a[..., 2]) * 0.1
+
+
+def rgb_encode(heights) -> np.ndarray:
+    """(h, w, 3) uint8 terrain-RGB pixels of heights (m), each rounded to the encoding's 0.1 m step.
+
+    >>> rgb_encode([[0.0, 1234.56]]).tolist()
+    [[[1, 134, 160], [1, 182, 218]]]
+    """
+    v = np.rint((np.asarray(heights, dtype=np.float64) + 10000.0) * 10.0).astype(np.int64)
+    if v.size and (v.min() < 0 or v.max() >= 1 << 24):
+        raise ValueError("heights must lie in [-10000, 1667721.5] m for terrain-RGB")
+    return np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=-1).astype(np.uint8)
 
 
 def _x_of_lon(lon) -> np.ndarray:
@@ -116,9 +139,7 @@ class PixelLattice:
     pixels: int
 
     def to_local(self, lon, lat) -> tuple[np.ndarray, np.ndarray]:
-        from .tileset import _equirectangular
-
-        return _equirectangular(lon, lat, self.lon0, self.lat0)
+        return equirectangular(lon, lat, self.lon0, self.lat0)
 
     def tile_heights(self, heights: np.ndarray) -> np.ndarray:
         """The W x W pixels (rows from the north) of lattice heights (rows from the south)."""
@@ -129,8 +150,6 @@ class PixelLattice:
 def pixel_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, frame, pixels: int = DEFAULT_PIXELS,
                   name: str = "grid") -> PixelLattice:
     """The lattice of terrain-RGB tile ``(z, x, y)`` (the module docstring)."""
-    from .tileset import _equirectangular
-
     size = 2 * _HALF / 2 ** z
     steps = np.arange(pixels + 1) / pixels
     lon = _lon_of_x(-_HALF + (x + steps) * size)
@@ -148,7 +167,7 @@ def pixel_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, frame, pi
                          "HeightGrid.fill_nodata)")
     heights = heights.reshape(LAT.shape)
     lon0, lat0 = 0.5 * (lon[0] + lon[-1]), 0.5 * (lat[0] + lat[-1])
-    xs, ys = _equirectangular(lon, lat, lon0, lat0)
+    xs, ys = equirectangular(lon, lat, lon0, lat0)
     even = HeightGrid.from_coords(heights, np.linspace(xs[0], xs[-1], xs.size), np.linspace(ys[0], ys[-1], ys.size))
     return PixelLattice(mercator_tile_bounds(z, x, y), lon, lat, lon0, lat0, heights, even, int(pixels))
 
@@ -158,8 +177,6 @@ def encode_png(heights: np.ndarray, mesh: tuple[int, int] | None = None) -> byte
     and triangles of the surface they were taken from, kept in a text chunk (``terrainvis-mesh``) that a
     resumed run reads back; no other metadata, so the same heights give the same bytes."""
     from PIL import Image, PngImagePlugin
-
-    from .read import rgb_encode
 
     info = None
     if mesh is not None:
@@ -177,8 +194,6 @@ def decode_png(data: bytes) -> np.ndarray:
 
 def _decoded(data: bytes) -> tuple[np.ndarray, tuple[int, int] | None]:
     from PIL import Image
-
-    from .read import rgb_heights
 
     with Image.open(io.BytesIO(data)) as im:
         im.load()
@@ -203,8 +218,6 @@ def make_rgb_tile(lat_: PixelLattice, method: str | None, budget: float | None):
     from simplifiers import simplify
 
     from ..errors import SimplificationError
-    from .tileset import _Made
-
     want = lat_.tile_heights(lat_.z)
     fallback = None
     if method is not None:
@@ -224,19 +237,17 @@ def make_rgb_tile(lat_: PixelLattice, method: str | None, budget: float | None):
             err = float(np.abs(decode_png(data) - want).max())
             allowed = budget + 0.5 * RGB_STEP
             if err <= allowed * (1 + TILE_BUDGET_REL):
-                return _Made(data, err, tin.n_vertices, tin.n_faces, simplify_error=float(result.attrs["max_error"]))
+                return Made(data, err, tin.n_vertices, tin.n_faces, simplify_error=float(result.attrs["max_error"]))
             fallback = f"over its budget after {_RETRIES + 1} tries (error {err:.4g})"
             target = max(0.0, target - (err - allowed) - RGB_STEP)
     n = lat_.pixels + 1
     mesh = (n * n, 2 * (n - 1) * (n - 1))
     data = encode_png(want, mesh)
-    return _Made(data, float(np.abs(decode_png(data) - want).max()), *mesh, fallback)
+    return Made(data, float(np.abs(decode_png(data) - want).max()), *mesh, fallback)
 
 
 def kept_rgb_tile(data: bytes, lat_: PixelLattice, budget: float | None):
     """An unfinished run's tile, read and measured again: kept when it decodes and meets its budget."""
-    from .tileset import _Made
-
     try:
         got, mesh = _decoded(data)
     except (OSError, ValueError, SyntaxError):
@@ -249,4 +260,4 @@ def kept_rgb_tile(data: bytes, lat_: PixelLattice, budget: float | None):
         return None
     n = lat_.pixels + 1
     whole = budget is not None and mesh[0] == n * n
-    return _Made(b"", err, *mesh, "the whole lattice (kept from the unfinished run)" if whole else None)
+    return Made(b"", err, *mesh, "the whole lattice (kept from the unfinished run)" if whole else None)

@@ -78,6 +78,9 @@ import numpy as np
 from ..core.terrain import TIN, HeightGrid
 from ..tolerances import QUANTIZED_SNAP, TILE_BUDGET_REL, TILE_RECTANGLE_SHRINK_REL
 from . import quantized_mesh as qm
+from ._common import EARTH_RADIUS
+from ._common import Made as _Made
+from ._common import equirectangular as _equirectangular
 from .keep_los import DEFAULT_LOS_HEIGHT, N_POINTS
 from .terrain_rgb import DEFAULT_PIXELS as RGB_PIXELS
 from .terrain_rgb import kept_rgb_tile, make_rgb_tile, mercator_tiles_covering, pixel_lattice
@@ -93,8 +96,6 @@ _LAYER_FORMAT = {"quantized-mesh": "quantized-mesh-1.0", "terrain-rgb": "terrain
 DEFAULT_MAX_ERROR0 = 77067.0
 #: Lattice cells per tile side (65 x 65 points, as Cesium's heightmap tiles).
 DEFAULT_LATTICE = 64
-#: The radius of the local equirectangular frame (WGS84's semi-major axis, m).
-EARTH_RADIUS = 6378137.0
 #: The tileset's description, written last.
 LAYER = "layer.json"
 #: One row per tile: its size, budget, the method's own error measure and the error measured on the tile.
@@ -298,12 +299,6 @@ class _Lattice:
         return (np.interp(c, np.arange(self.lon.size), self.lon), np.interp(r, np.arange(self.lat.size), self.lat))
 
 
-def _equirectangular(lon, lat, lon0: float, lat0: float) -> tuple[np.ndarray, np.ndarray]:
-    """Local metres about (lon0, lat0): ``x = R cos(lat0) (lon - lon0) pi / 180``, ``y = R (lat - lat0) pi / 180``."""
-    k = EARTH_RADIUS * math.pi / 180.0
-    return k * math.cos(math.radians(lat0)) * (np.asarray(lon) - lon0), k * (np.asarray(lat) - lat0)
-
-
 def _steps(lo: float, hi: float, n: int) -> np.ndarray | None:
     """The integer quantized positions of a lattice over [lo, hi] (in units of the tile): at most n + 1, even."""
     a = max(0, math.ceil(lo - QUANTIZED_SNAP))
@@ -355,17 +350,6 @@ def tile_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, *, lattice
     # quantization step off even spacing, and uneven steps make a near-degenerate triangle of greedy cuts stall
     even = HeightGrid.from_coords(z_, np.linspace(xs[0], xs[-1], xs.size), np.linspace(ys[0], ys[-1], ys.size))
     return _Lattice(bounds, us, vs, lon, lat, lon0, lat0, z_, even)
-
-
-@dataclass
-class _Made:
-    data: bytes
-    error: float
-    n_vertices: int
-    n_triangles: int
-    fallback: str | None = None
-    simplify_error: float | None = None  # the method's own measure (simplify's attrs["max_error"])
-    decoded: qm.DecodedTile | None = field(default=None, repr=False)  # the tile as read back (None when kept)
 
 
 def _encode(lat_: _Lattice, tin: TIN) -> tuple[bytes, qm.DecodedTile] | None:
