@@ -122,8 +122,6 @@ KERNELS_ALLOWED_WIDE: dict[str, str] = {
     "simplifiers/_gc_kernels.py:_blocker_apex": "issue 41 item 4: records not made yet",
     "simplifiers/_gc_kernels.py:_ear": "issue 41 item 4: records not made yet",
     "simplifiers/_gc_kernels.py:_evaluate": "issue 41 item 4: records not made yet",
-    "terrainvis/core/_volume_kernels.py:_volume_chunk": "issue 41 item 4: records not made yet",
-    "terrainvis/core/_volume_kernels.py:volume_between": "issue 41 item 4: records not made yet",
 }
 _JIT = {"njit", "jit", "nb.njit", "nb.jit", "numba.njit", "numba.jit"}
 
