@@ -64,6 +64,8 @@ import numpy as np
 from terrainvis.core.stopflag import stopped
 from terrainvis.tolerances import ROW_SPAN_SNAP  # frozen into the kernels when they compile
 
+from ._shared_kernels import orient
+
 FREE = 0
 COVERED = 1
 VERTEX = 2
@@ -107,11 +109,6 @@ Front = namedtuple("Front", ["nodes", "pool", "bhead", "nbx", "scr"])
 
 #: 0 as an int64 (not a literal): numba compiles a callee again for every literal argument.
 _ZERO = np.int64(0)
-
-
-@nb.njit(**_HOT)
-def _orient(ax, ay, bx, by, cx, cy):
-    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -323,7 +320,7 @@ def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
     za = zf[ia]
     zb = zf[ib]
     zc = zf[ic]
-    area2 = _orient(xa, ya, xb, yb, xc, yc)
+    area2 = orient(xa, ya, xb, yb, xc, yc)
     cmin = min(ca, cb, cc)
     cmax = max(ca, cb, cc)
     newly = 0
@@ -340,13 +337,13 @@ def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
             c1 = min(cmax, _first_at_least(gx, hi, cmin, cmax))
         for c in range(c0, c1 + 1):
             x = gx[c]
-            o1 = _orient(xa, ya, xb, yb, x, y)  # edge ab
+            o1 = orient(xa, ya, xb, yb, x, y)  # edge ab
             if o1 < 0.0:
                 continue
-            o2 = _orient(xb, yb, xc, yc, x, y)  # edge bc
+            o2 = orient(xb, yb, xc, yc, x, y)  # edge bc
             if o2 < 0.0:
                 continue
-            o3 = _orient(xc, yc, xa, ya, x, y)  # edge ca
+            o3 = orient(xc, yc, xa, ya, x, y)  # edge ca
             if o3 < 0.0:
                 continue
             s = r * cols + c
@@ -503,23 +500,23 @@ def _geom(ia, ib, ic, nodes, pool, bhead, nbx, scr, gx, gy, cols):
                 # the start vertex inside the closed triangle (other than a corner)
                 if iu != ia and iu != ib and iu != ic:
                     if (
-                        _orient(xa, ya, xb, yb, ux, uy) >= 0.0
-                        and _orient(xb, yb, xc, yc, ux, uy) >= 0.0
-                        and _orient(xc, yc, xa, ya, ux, uy) >= 0.0
+                        orient(xa, ya, xb, yb, ux, uy) >= 0.0
+                        and orient(xb, yb, xc, yc, ux, uy) >= 0.0
+                        and orient(xc, yc, xa, ya, ux, uy) >= 0.0
                     ):
                         blocked = True
                 if not blocked:
                     sep = False
-                    if _orient(xa, ya, xb, yb, ux, uy) <= 0.0 and _orient(xa, ya, xb, yb, wx, wy) <= 0.0:
+                    if orient(xa, ya, xb, yb, ux, uy) <= 0.0 and orient(xa, ya, xb, yb, wx, wy) <= 0.0:
                         sep = True
-                    elif _orient(xb, yb, xc, yc, ux, uy) <= 0.0 and _orient(xb, yb, xc, yc, wx, wy) <= 0.0:
+                    elif orient(xb, yb, xc, yc, ux, uy) <= 0.0 and orient(xb, yb, xc, yc, wx, wy) <= 0.0:
                         sep = True
-                    elif _orient(xc, yc, xa, ya, ux, uy) <= 0.0 and _orient(xc, yc, xa, ya, wx, wy) <= 0.0:
+                    elif orient(xc, yc, xa, ya, ux, uy) <= 0.0 and orient(xc, yc, xa, ya, wx, wy) <= 0.0:
                         sep = True
                     else:
-                        o1 = _orient(ux, uy, wx, wy, xa, ya)
-                        o2 = _orient(ux, uy, wx, wy, xb, yb)
-                        o3 = _orient(ux, uy, wx, wy, xc, yc)
+                        o1 = orient(ux, uy, wx, wy, xa, ya)
+                        o2 = orient(ux, uy, wx, wy, xb, yb)
+                        o3 = orient(ux, uy, wx, wy, xc, yc)
                         if (o1 >= 0.0 and o2 >= 0.0 and o3 >= 0.0) or (o1 <= 0.0 and o2 <= 0.0 and o3 <= 0.0):
                             sep = True
                     blocked = not sep
@@ -567,7 +564,7 @@ def _evaluate(ia, ib, P, sm, fr):
     scr[S_APEX_NODE] = -1
     if P == ia or P == ib:
         return BAD
-    if _orient(gx[ia % cols], gy[ia // cols], gx[ib % cols], gy[ib // cols], gx[P % cols], gy[P // cols]) <= 0.0:
+    if orient(gx[ia % cols], gy[ia // cols], gx[ib % cols], gy[ib // cols], gx[P % cols], gy[P // cols]) <= 0.0:
         return BAD
     state = occ[P // cols, P % cols]
     if _scan(ia, ib, P, gx, gy, index_space, zf, cols, eps, occ, False) < 0:
