@@ -29,9 +29,8 @@ Data structures
 * A FIFO queue of ``(node, version)``: every edge made or changed is pushed once; an entry
   whose version no longer matches is skipped.
 * ``scr`` (``N_SCR``,) int64: the pool's used rows and free list (``S_USED``,
-  ``S_FREE``), the query counter for the stamps (``S_QID``), two outputs of an
-  evaluation (``S_BLOCKER``, ``S_APEX_NODE``) and the size of the fallback's candidate
-  heap (``S_HEAP``).
+  ``S_FREE``), the query counter for the stamps (``S_QID``) and two outputs of an
+  evaluation (``S_BLOCKER``, ``S_APEX_NODE``).
 
 Counters
 --------
@@ -65,7 +64,7 @@ import numpy as np
 from terrainvis.core.stopflag import stopped
 from terrainvis.tolerances import ROW_SPAN_SNAP  # frozen into the kernels when they compile
 
-from ._shared_kernels import Heap, heap_build, heap_pop, orient
+from ._shared_kernels import orient
 
 FREE = 0
 COVERED = 1
@@ -84,8 +83,8 @@ VERT, NXT, PRV, ALIVE, VER, STAMP = range(6)
 # columns of ``pool``
 P_NODE, P_NEXT, P_VER = range(3)
 # scalar state (indices into ``scr``)
-S_USED, S_FREE, S_QID, S_BLOCKER, S_APEX_NODE, S_HEAP = range(6)
-N_SCR = 6
+S_USED, S_FREE, S_QID, S_BLOCKER, S_APEX_NODE = range(5)
+N_SCR = 5
 
 # counters (indices into ``counts``)
 (N_EARS, N_BITES, N_SPLITS, STATUS, N_EVAL_EAR, N_EVAL_BITE, N_EVAL_SPLIT, N_CANDIDATES, N_VERTICES,
@@ -701,22 +700,42 @@ def _blocker_apex(ia, ib, sm, fr):
 
 
 @nb.njit(**_HOT)
+def _heap_less(key, ids, i, j):
+    return key[i] < key[j] or (key[i] == key[j] and ids[i] < ids[j])
+
+
+@nb.njit(**_HOT)
+def _sift_down(key, ids, i, m):
+    """Restore the min-heap order (by key, then sample) below position i of the first m."""
+    while True:
+        c = 2 * i + 1
+        if c >= m:
+            return
+        if c + 1 < m and _heap_less(key, ids, c + 1, c):
+            c += 1
+        if not _heap_less(key, ids, c, i):
+            return
+        key[i], key[c] = key[c], key[i]
+        ids[i], ids[c] = ids[c], ids[i]
+        i = c
+
+
+@nb.njit(**_HOT)
 def _split(na, window, sm, fr, counts, cand):
     """Step 3, edge splitting (fallback) on the edge of node ``na``, in the window
     ``(r0, r1, c0, c1)`` (rows r0..r1, cols c0..c1), on the :data:`Samples` ``sm`` and the
-    :data:`Front` ``fr``, with the candidate buffers ``cand = (cand_key, cand_id, no_pos)``.
+    :data:`Front` ``fr``, with the candidate buffers ``cand = (cand_key, cand_id)``.
 
     Candidates are the free samples and front vertices left of the edge in the window,
     tried in order of the circumcircle through the edge's ends
-    (smallest first, ties by sample index: the constrained-Delaunay choice) through the
-    heap of :mod:`simplifiers._shared_kernels`, its items the samples, built and popped
-    only (not indexed: ``no_pos`` is never used). Returns the apex (its node in
-    ``scr[S_APEX_NODE]``) or -1. The candidate buffers must hold the window's samples.
+    (smallest first, ties by sample index: the constrained-Delaunay choice) through a
+    binary min-heap. Returns the apex (its node in ``scr[S_APEX_NODE]``) or -1. The
+    candidate buffers must hold the window's samples.
     """
     r0, r1, c0, c1 = window
     occ, zf, eps, gx, gy, index_space, cols = sm
     nodes, pool, bhead, nbx, scr = fr
-    cand_key, cand_id, no_pos = cand
+    cand_key, cand_id = cand
     ia = nodes[na, VERT]
     ib = nodes[nodes[na, NXT], VERT]
     xa = gx[ia % cols]
@@ -742,14 +761,17 @@ def _split(na, window, sm, fr, counts, cand):
             cand_id[m] = r * cols + c
             m += 1
     counts[N_CANDIDATES] += m
-    h = Heap(cand_id, cand_key, no_pos, scr, S_HEAP, True, False)
-    heap_build(h, m)
-    while scr[S_HEAP] > 0:
+    for i in range(m // 2 - 1, -1, -1):
+        _sift_down(cand_key, cand_id, i, m)
+    while m > 0:
         P = cand_id[0]
         counts[N_EVAL_SPLIT] += 1
         if _evaluate(ia, ib, P, sm, fr) == OK:
             return P
-        heap_pop(h)
+        m -= 1
+        cand_key[0] = cand_key[m]
+        cand_id[0] = cand_id[m]
+        _sift_down(cand_key, cand_id, 0, m)
     return -1
 
 
@@ -842,7 +864,6 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
     changed = np.empty(3, dtype=np.int64)
     cand_key = np.empty(64, dtype=np.float64)
     cand_id = np.empty(64, dtype=np.int64)
-    no_pos = np.empty(0, dtype=np.int64)
     sm = Samples(occ, zf, eps, gx, gy, index_space, cols)
     # the initial front: one loop, every edge registered and queued
     for i in range(nb0):
@@ -896,7 +917,7 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
                 if span > cand_key.shape[0]:
                     cand_key = _grow(cand_key, span)
                     cand_id = _grow(cand_id, span)
-                apex = _split(na, (r0, r1, c0, c1), sm, fr, counts, (cand_key, cand_id, no_pos))
+                apex = _split(na, (r0, r1, c0, c1), sm, fr, counts, (cand_key, cand_id))
                 if apex >= 0 or w >= max_window or (c0 == 0 and r0 == 0 and c1 == cols - 1 and r1 == rows - 1):
                     break
                 w *= 2

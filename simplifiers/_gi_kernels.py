@@ -18,9 +18,8 @@ neighbouring triangle or -1 on the grid boundary.
 Each triangle keeps one candidate: the non-vertex grid sample in its closure with the
 largest vertical error (``cand[t]``, the flat index ``row * W + col``, or -1 when the
 triangle holds no sample besides its corners) and that error ``terr[t]``. Triangles with a
-candidate sit in an indexed binary heap (``heap``, ``hkey``, ``pos[t]`` = heap slot or -1:
-the min-heap of :mod:`simplifiers._shared_kernels` over minus the errors, so slot 0 holds
-the worst), so a triangle's entry can be updated or removed when it changes.
+candidate sit in an indexed binary max-heap (``heap``, ``hval``, ``pos[t]`` = heap slot
+or -1), so a triangle's entry can be updated or removed when it changes.
 
 Limits: the in-circle determinants are exact in int64 for grids up to about 30,000
 samples per side; triangle and half-edge indices are int32 (grids below about 350 million
@@ -42,7 +41,7 @@ import numpy as np
 
 from terrainvis.core.stopflag import stopped
 
-from ._shared_kernels import Heap, heap_pop, heap_remove, heap_set, orient
+from ._shared_kernels import orient
 
 NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
 
@@ -55,10 +54,10 @@ _I0, _I1, _I2, _I3, _NONE = np.int64(0), np.int64(1), np.int64(2), np.int64(3), 
 #: The state of a greedy-insertion run (see the module docstring for each array):
 #: vertices ``vx``, ``vy`` (int64 column, row); half-edge triangulation ``tri``, ``half``
 #: (int32); per triangle its candidate ``cand`` (int64 flat index) and error ``terr``;
-#: the indexed heap ``heap``, ``hkey`` (minus the errors), ``pos``; the triangles to rescan ``pend``,
+#: the indexed max-heap ``heap``, ``hval``, ``pos``; the triangles to rescan ``pend``,
 #: ``pmark``; the flip ``stack``; and ``counts``.
 State = namedtuple(
-    "State", ["vx", "vy", "tri", "half", "cand", "terr", "heap", "hkey", "pos", "pend", "pmark", "stack", "counts"]
+    "State", ["vx", "vy", "tri", "half", "cand", "terr", "heap", "hval", "pos", "pend", "pmark", "stack", "counts"]
 )
 
 
@@ -156,12 +155,79 @@ def scan_triangle(z, W, ax, ay, bx, by, cx, cy):
     return best, best_idx
 
 
-# ---------------------------------------------------------------- the heap
+# ---------------------------------------------------------------- the max-heap
 @nb.njit(cache=True, nogil=True)
-def _heap(st):
-    """The triangles' heap in ``st`` as a :data:`simplifiers._shared_kernels.Heap`: a
-    min-heap over minus the errors (so slot 0 holds the worst), its size in ``counts[NH]``."""
-    return Heap(st.heap, st.hkey, st.pos, st.counts, NH, False, True)
+def _heap_up(heap, hval, pos, i):
+    t = heap[i]
+    v = hval[i]
+    while i > 0:
+        p = (i - 1) >> 1
+        if hval[p] >= v:
+            break
+        heap[i] = heap[p]
+        hval[i] = hval[p]
+        pos[heap[i]] = i
+        i = p
+    heap[i] = t
+    hval[i] = v
+    pos[t] = i
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_down(heap, hval, pos, i, n):
+    t = heap[i]
+    v = hval[i]
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and hval[c + 1] > hval[c]:
+            c += 1
+        if hval[c] <= v:
+            break
+        heap[i] = heap[c]
+        hval[i] = hval[c]
+        pos[heap[i]] = i
+        i = c
+    heap[i] = t
+    hval[i] = v
+    pos[t] = i
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_remove(heap, hval, pos, counts, t):
+    i = np.int64(pos[t])
+    pos[t] = -1
+    n = counts[NH] - 1
+    counts[NH] = n
+    if i == n:
+        return
+    heap[i] = heap[n]
+    hval[i] = hval[n]
+    pos[heap[i]] = i
+    if i > 0 and hval[i] > hval[(i - 1) >> 1]:
+        _heap_up(heap, hval, pos, i)
+    else:
+        _heap_down(heap, hval, pos, i, n)
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_set(heap, hval, pos, counts, t, v):
+    i = np.int64(pos[t])
+    if i < 0:
+        i = counts[NH]
+        counts[NH] = i + 1
+        heap[i] = t
+        hval[i] = v
+        pos[t] = i
+        _heap_up(heap, hval, pos, i)
+        return
+    old = hval[i]
+    hval[i] = v
+    if v > old:
+        _heap_up(heap, hval, pos, i)
+    elif v < old:
+        _heap_down(heap, hval, pos, i, counts[NH])
 
 
 # ------------------------------------------------------------ triangulation
@@ -240,11 +306,10 @@ def _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, a_start, rat
 
 
 @nb.njit(cache=True, nogil=True)
-def _rescan(z, W, st, h, npend):
-    """Rescan the ``npend`` triangles marked in ``st.pend``: their candidates and heap
-    entries (``h``, the heap of ``st``)."""
+def _rescan(z, W, st, npend):
+    """Rescan the ``npend`` triangles marked in ``st.pend``: their candidates and heap entries."""
     vx, vy, tri, cand, terr = st.vx, st.vy, st.tri, st.cand, st.terr
-    pos, pend, pmark = st.pos, st.pend, st.pmark
+    heap, hval, pos, pend, pmark, counts = st.heap, st.hval, st.pos, st.pend, st.pmark, st.counts
     for k in range(npend):
         t = np.int64(pend[k])
         pmark[t] = False
@@ -257,9 +322,9 @@ def _rescan(z, W, st, h, npend):
         terr[t] = err
         if idx < 0:
             if pos[t] >= 0:
-                heap_remove(h, t)
+                _heap_remove(heap, hval, pos, counts, t)
         else:
-            heap_set(h, t, -err)
+            _heap_set(heap, hval, pos, counts, t, err)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -282,7 +347,7 @@ def init_state(z, W, H, st):
     half[:6] = -1
     npend = _set_tri(tri, half, pend, pmark, _I0, _I0, _I0, _I1, _I2, _NONE, _NONE, _NONE)
     npend = _set_tri(tri, half, pend, pmark, npend, _I1, _I0, _I2, _I3, _I2, _NONE, _NONE)
-    _rescan(z, W, st, _heap(st), npend)
+    _rescan(z, W, st, npend)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -295,15 +360,15 @@ def run(z, W, ratio, st, n_target, max_error, stop):
     aspect ``(dy / dx) ** 2``. Returns the largest vertical error of the current TIN over
     all grid samples.
     """
-    vx, vy, tri, half, cand, hkey, pos = st.vx, st.vy, st.tri, st.half, st.cand, st.hkey, st.pos
+    vx, vy, tri, half, cand, heap, hval, pos = st.vx, st.vy, st.tri, st.half, st.cand, st.heap, st.hval, st.pos
     pend, pmark, stack, counts = st.pend, st.pmark, st.stack, st.counts
-    h = _heap(st)
     while counts[NV] < n_target and counts[NH] > 0:
-        if max_error >= 0.0 and -hkey[0] <= max_error:
+        if max_error >= 0.0 and hval[0] <= max_error:
             break
         if stopped(stop):
             break
-        t = np.int64(heap_pop(h))
+        t = np.int64(heap[0])
+        _heap_remove(heap, hval, pos, counts, t)
         idx = cand[t]
         px = idx % W
         py = idx // W
@@ -370,7 +435,7 @@ def run(z, W, ratio, st, n_target, max_error, stop):
                 h_db = np.int64(half[bp])
                 tb = b0 // 3
                 if pos[tb] >= 0:
-                    heap_remove(h, tb)
+                    _heap_remove(heap, hval, pos, counts, tb)
                 t0 = t
                 t1 = nt
                 t2 = tb
@@ -384,7 +449,7 @@ def run(z, W, ratio, st, n_target, max_error, stop):
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t1 + 1, ratio)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t2 + 1, ratio)
                 npend = _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, 3 * t3 + 1, ratio)
-        _rescan(z, W, st, h, npend)
+        _rescan(z, W, st, npend)
     if counts[NH] > 0:
-        return max(-hkey[0], 0.0)
+        return max(hval[0], 0.0)
     return 0.0

@@ -98,7 +98,7 @@ class GreedyInserter:
         self._vcap = 0
         self._alloc(min(grid.size, 64))
         K.init_state(self._z, cols, rows, self._state())
-        self._max_error = float(-self._hkey[0]) if self._counts[K.NH] > 0 else 0.0
+        self._max_error = float(self._hval[0]) if self._counts[K.NH] > 0 else 0.0
 
     # ---------------------------------------------------------------- storage
     def _alloc(self, vcap: int) -> None:
@@ -122,7 +122,7 @@ class GreedyInserter:
         grow("_cand", tcap, np.int64, -1)
         grow("_terr", tcap, np.float64, -1.0)
         grow("_heap", tcap, np.int32, -1)
-        grow("_hkey", tcap, np.float64, 0.0)
+        grow("_hval", tcap, np.float64, 0.0)
         grow("_pos", tcap, np.int32, -1)
         grow("_pend", tcap, np.int32, -1)
         grow("_pmark", tcap, np.bool_, False)
@@ -132,7 +132,7 @@ class GreedyInserter:
     def _state(self) -> K.State:
         """The kernel's named record over the current arrays (they are replaced when they grow)."""
         return K.State(
-            self._vx, self._vy, self._tri, self._half, self._cand, self._terr, self._heap, self._hkey, self._pos,
+            self._vx, self._vy, self._tri, self._half, self._cand, self._terr, self._heap, self._hval, self._pos,
             self._pend, self._pmark, self._stack, self._counts,
         )
 
