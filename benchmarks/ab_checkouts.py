@@ -16,7 +16,13 @@ Workloads (each warmed once in its process, then timed ``--repeats`` times):
 * ``viewshed-nodata``: the same on a 1024² mountains grid with 0.2 % of its samples NaN;
 * ``calibrated``: 300 points relocated onto LLS level 2 of a 257² mountains grid (the
   threshold engine);
-* ``visopt``: ``simplify(hills 65², "visopt", 2, n_train=300)``.
+* ``visopt``: ``simplify(hills 65², "visopt", 2, n_train=300)``;
+* ``greedy-cuts``: one advancing front, ``greedy_cuts(mountains 513², 1.0)`` (its three
+  steps, the fallback's candidate heap included);
+* ``greedy-insertion``: ``GreedyInserter(mountains 513²).run(131,072)`` (scan conversion,
+  flips, the indexed heap);
+* ``feature``: feature-aware reverse Faber along both axes of a 2049² mountains grid;
+* ``volume``: ``volume_error`` of a 1025² mountains grid and its greedy-insertion level 1.
 """
 
 from __future__ import annotations
@@ -29,7 +35,8 @@ import subprocess
 import sys
 import time
 
-WORKLOADS = ("los", "viewshed", "viewshed-nodata", "calibrated", "visopt")
+WORKLOADS = ("los", "viewshed", "viewshed-nodata", "calibrated", "visopt", "greedy-cuts", "greedy-insertion",
+             "feature", "volume")
 
 
 def _work(name: str):
@@ -56,27 +63,47 @@ def _work(name: str):
         s = simplifiers.simplify(t, "lls", 2)
         pts = tv.sample_points(t, 300, seed=1)
         return lambda: tv.relocate(pts, s, "calibrated", original=t)
+    if name == "greedy-cuts":
+        from simplifiers.greedy_cuts import greedy_cuts
+
+        g = tv.synthetic_terrain("mountains", size=513)
+        return lambda: greedy_cuts(g, 1.0)
+    if name == "greedy-insertion":
+        from simplifiers.greedy_insertion import GreedyInserter
+
+        g = tv.synthetic_terrain("mountains", size=513)
+        return lambda: GreedyInserter(g).run(131072)
+    if name == "feature":
+        from simplifiers import reverse_faber
+
+        z = tv.synthetic_terrain("mountains", size=2049).z
+        return lambda: (reverse_faber.feature(z, axis=0), reverse_faber.feature(z, axis=1))
+    if name == "volume":
+        g = tv.synthetic_terrain("mountains", size=1025)
+        coarse = simplifiers.simplify(g, "greedy-insertion", 1)
+        return lambda: tv.volume_error(g, coarse)
     t = tv.synthetic_terrain("hills", size=65)
     return lambda: simplifiers.simplify(t, "visopt", 2, n_train=300)
 
 
-def _child(name: str, repeats: int) -> None:
+def _child(name: str, repeats: int, clock: str) -> None:
     import terrainvis
 
+    now = time.perf_counter if clock == "wall" else time.process_time
     f = _work(name)
     f()  # compile or load the kernels, fill the per-grid caches
     times = []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = now()
         f()
-        times.append(time.perf_counter() - t0)
+        times.append(now() - t0)
     print(json.dumps({"file": terrainvis.__file__, "median": statistics.median(times)}))
 
 
-def _run(checkout: str, name: str, repeats: int) -> float:
+def _run(checkout: str, name: str, repeats: int, clock: str) -> float:
     env = dict(os.environ, PYTHONPATH=os.path.abspath(checkout))
-    out = subprocess.run([sys.executable, __file__, "--child", name, "--repeats", str(repeats)], env=env,
-                         capture_output=True, text=True, check=True).stdout
+    cmd = [sys.executable, __file__, "--child", name, "--repeats", str(repeats), "--clock", clock]
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
     got = json.loads(out.strip().splitlines()[-1])
     expected = os.path.join(os.path.abspath(checkout), "terrainvis")
     if not got["file"].startswith(expected):
@@ -91,19 +118,22 @@ def main() -> None:
     ap.add_argument("--workloads", nargs="+", choices=WORKLOADS, default=list(WORKLOADS))
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                    help="wall seconds, or the process's CPU seconds (all threads: steadier on a shared machine)")
     ap.add_argument("--child", choices=WORKLOADS, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        _child(args.child, args.repeats)
+        _child(args.child, args.repeats, args.clock)
         return
     if not (args.before and args.after):
         ap.error("give the two checkouts: BEFORE AFTER")
-    print(f"load average {os.getloadavg()[0]:.2f}; {args.rounds} rounds, medians of {args.repeats} per run")
+    print(f"load average {os.getloadavg()[0]:.2f}; {args.rounds} rounds, medians of {args.repeats} per run, "
+          f"{args.clock} seconds")
     for name in args.workloads:
         runs = {"before": [], "after": []}
         for _ in range(args.rounds):
             for side in ("before", "after"):
-                runs[side].append(_run(getattr(args, side), name, args.repeats))
+                runs[side].append(_run(getattr(args, side), name, args.repeats, args.clock))
         b, a = statistics.median(runs["before"]), statistics.median(runs["after"])
         print(f"{name:16s} before {b:8.4f} s  after {a:8.4f} s  after / before {a / b:5.3f}   "
               f"(runs: {' '.join(f'{x:.4f}' for x in runs['before'])} | {' '.join(f'{x:.4f}' for x in runs['after'])})")

@@ -359,8 +359,12 @@ def critical_points(g, crit):
 
 
 @nb.njit(cache=True, nogil=True)
-def _feature_one(g, colptr, rows, vals, tdiag, toff, w2, crit, rhs, diag, off, lc, st, ptr, lv, x):
+def _feature_one(g, op, w2, work, x):
     """Feature-aware least squares for one curve ``g`` (m,), result in ``x`` (n,).
+
+    ``op = (colptr, rows, vals, tdiag, toff)`` is the Faber operator as
+    :func:`feature_apply` takes it; ``work = (crit, rhs, diag, off, lc, st, ptr, lv)`` the
+    scratch arrays (m, n, n, n, n, n, n and 3n + 1 long) of the calling task.
 
     Normal equations ``(S^T S + w2 sum e e^T) c = S^T g + w2 sum e (g_j - g_k)`` with
     ``e = e_p - e_q`` per constraint, solved by an envelope (skyline) Cholesky: row q of
@@ -368,6 +372,8 @@ def _feature_one(g, colptr, rows, vals, tdiag, toff, w2, crit, rhs, diag, off, l
     p = lc[q] < q - 1, else q-1..q. Constraints chain through increasing coarse indices, so
     each row has at most one such coupling and the factorisation costs O(n).
     """
+    colptr, rows, vals, tdiag, toff = op
+    crit, rhs, diag, off, lc, st, ptr, lv = work
     n = x.shape[0]
     for j in range(n):
         acc = 0.0
@@ -475,13 +481,14 @@ def feature_apply(f, colptr, rows, vals, tdiag, toff, w2, out, t0, t1, stop):
         st = np.empty(n, dtype=np.int64)
         ptr = np.empty(n, dtype=np.int64)
         lv = np.empty(3 * n + 1)
+        work = (crit, rhs, diag, off, lc, st, ptr, lv)
         fa = f[a]
         for i in range(m):
             r = fa[i]
             for bb in range(w):
                 gbuf[bb, i] = r[b0 + bb]
         for bb in range(w):
-            _feature_one(gbuf[bb], colptr, rows, vals, tdiag, toff, w2, crit, rhs, diag, off, lc, st, ptr, lv, xbuf[bb])
+            _feature_one(gbuf[bb], (colptr, rows, vals, tdiag, toff), w2, work, xbuf[bb])
         oa = out[a]
         flag = 0
         for j in range(n):

@@ -64,6 +64,8 @@ import numpy as np
 from terrainvis.core.stopflag import stopped
 from terrainvis.tolerances import ROW_SPAN_SNAP  # frozen into the kernels when they compile
 
+from ._shared_kernels import orient
+
 FREE = 0
 COVERED = 1
 VERTEX = 2
@@ -98,20 +100,15 @@ INTERRUPTED = 4
 
 _HOT = {"cache": True, "nogil": True, "_nrt": False}  # helpers that allocate nothing
 
-#: The samples as the fallback reads them: ``occ``, the flat heights ``zf``, ``eps``, the
+#: The samples as the three steps read them: ``occ``, the flat heights ``zf``, ``eps``, the
 #: plane-space coordinates ``gx``, ``gy``, ``index_space`` and ``cols`` (see "Data structures").
 Samples = namedtuple("Samples", ["occ", "zf", "eps", "gx", "gy", "index_space", "cols"])
-#: The front as the fallback reads it: ``nodes``, the bucket lists ``pool``, ``bhead``
+#: The front as the three steps read it: ``nodes``, the bucket lists ``pool``, ``bhead``
 #: (``nbx`` buckets a row) and ``scr`` (see "Data structures").
 Front = namedtuple("Front", ["nodes", "pool", "bhead", "nbx", "scr"])
 
 #: 0 as an int64 (not a literal): numba compiles a callee again for every literal argument.
 _ZERO = np.int64(0)
-
-
-@nb.njit(**_HOT)
-def _orient(ax, ay, bx, by, cx, cy):
-    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -323,7 +320,7 @@ def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
     za = zf[ia]
     zb = zf[ib]
     zc = zf[ic]
-    area2 = _orient(xa, ya, xb, yb, xc, yc)
+    area2 = orient(xa, ya, xb, yb, xc, yc)
     cmin = min(ca, cb, cc)
     cmax = max(ca, cb, cc)
     newly = 0
@@ -340,13 +337,13 @@ def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
             c1 = min(cmax, _first_at_least(gx, hi, cmin, cmax))
         for c in range(c0, c1 + 1):
             x = gx[c]
-            o1 = _orient(xa, ya, xb, yb, x, y)  # edge ab
+            o1 = orient(xa, ya, xb, yb, x, y)  # edge ab
             if o1 < 0.0:
                 continue
-            o2 = _orient(xb, yb, xc, yc, x, y)  # edge bc
+            o2 = orient(xb, yb, xc, yc, x, y)  # edge bc
             if o2 < 0.0:
                 continue
-            o3 = _orient(xc, yc, xa, ya, x, y)  # edge ca
+            o3 = orient(xc, yc, xa, ya, x, y)  # edge ca
             if o3 < 0.0:
                 continue
             s = r * cols + c
@@ -503,23 +500,23 @@ def _geom(ia, ib, ic, nodes, pool, bhead, nbx, scr, gx, gy, cols):
                 # the start vertex inside the closed triangle (other than a corner)
                 if iu != ia and iu != ib and iu != ic:
                     if (
-                        _orient(xa, ya, xb, yb, ux, uy) >= 0.0
-                        and _orient(xb, yb, xc, yc, ux, uy) >= 0.0
-                        and _orient(xc, yc, xa, ya, ux, uy) >= 0.0
+                        orient(xa, ya, xb, yb, ux, uy) >= 0.0
+                        and orient(xb, yb, xc, yc, ux, uy) >= 0.0
+                        and orient(xc, yc, xa, ya, ux, uy) >= 0.0
                     ):
                         blocked = True
                 if not blocked:
                     sep = False
-                    if _orient(xa, ya, xb, yb, ux, uy) <= 0.0 and _orient(xa, ya, xb, yb, wx, wy) <= 0.0:
+                    if orient(xa, ya, xb, yb, ux, uy) <= 0.0 and orient(xa, ya, xb, yb, wx, wy) <= 0.0:
                         sep = True
-                    elif _orient(xb, yb, xc, yc, ux, uy) <= 0.0 and _orient(xb, yb, xc, yc, wx, wy) <= 0.0:
+                    elif orient(xb, yb, xc, yc, ux, uy) <= 0.0 and orient(xb, yb, xc, yc, wx, wy) <= 0.0:
                         sep = True
-                    elif _orient(xc, yc, xa, ya, ux, uy) <= 0.0 and _orient(xc, yc, xa, ya, wx, wy) <= 0.0:
+                    elif orient(xc, yc, xa, ya, ux, uy) <= 0.0 and orient(xc, yc, xa, ya, wx, wy) <= 0.0:
                         sep = True
                     else:
-                        o1 = _orient(ux, uy, wx, wy, xa, ya)
-                        o2 = _orient(ux, uy, wx, wy, xb, yb)
-                        o3 = _orient(ux, uy, wx, wy, xc, yc)
+                        o1 = orient(ux, uy, wx, wy, xa, ya)
+                        o2 = orient(ux, uy, wx, wy, xb, yb)
+                        o3 = orient(ux, uy, wx, wy, xc, yc)
                         if (o1 >= 0.0 and o2 >= 0.0 and o3 >= 0.0) or (o1 <= 0.0 and o2 <= 0.0 and o3 <= 0.0):
                             sep = True
                     blocked = not sep
@@ -553,19 +550,21 @@ def _geom(ia, ib, ic, nodes, pool, bhead, nbx, scr, gx, gy, cols):
 
 
 @nb.njit(**_HOT)
-def _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr):
+def _evaluate(ia, ib, P, sm, fr):
     """Status of triangle (ia, ib, P) on front edge ia -> ib.
 
     Returns OK, ERR (a sample is farther than eps), GEO (it leaves the free region or
     touches the front; ``scr[S_BLOCKER]`` holds a node to connect to or -1) or BAD (not
     counter-clockwise). On OK, ``scr[S_APEX_NODE]`` holds the apex node, or -1 for a
-    free sample.
+    free sample. ``sm`` is the :data:`Samples`, ``fr`` the :data:`Front`.
     """
+    occ, zf, eps, gx, gy, index_space, cols = sm
+    nodes, pool, bhead, nbx, scr = fr
     scr[S_BLOCKER] = -1
     scr[S_APEX_NODE] = -1
     if P == ia or P == ib:
         return BAD
-    if _orient(gx[ia % cols], gy[ia // cols], gx[ib % cols], gy[ib // cols], gx[P % cols], gy[P // cols]) <= 0.0:
+    if orient(gx[ia % cols], gy[ia // cols], gx[ib % cols], gy[ib // cols], gx[P % cols], gy[P // cols]) <= 0.0:
         return BAD
     state = occ[P // cols, P % cols]
     if _scan(ia, ib, P, gx, gy, index_space, zf, cols, eps, occ, False) < 0:
@@ -582,11 +581,12 @@ def _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, b
 
 # ----------------------------------------------------------------- the three steps
 @nb.njit(**_HOT)
-def _ear(na, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr, counts):
+def _ear(na, sm, fr, counts):
     """Step 1, ear cutting on the edge of node ``na``: the apex sample or -1.
 
     The apex's node is left in ``scr[S_APEX_NODE]``.
     """
+    nodes = fr.nodes
     nb_ = nodes[na, NXT]
     ia = nodes[na, VERT]
     ib = nodes[nb_, VERT]
@@ -594,7 +594,7 @@ def _ear(na, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, s
         nk = nodes[na, PRV] if side == 0 else nodes[nb_, NXT]
         counts[N_EVAL_EAR] += 1
         P = nodes[nk, VERT]
-        if _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr) == OK:
+        if _evaluate(ia, ib, P, sm, fr) == OK:
             return P
     return -1
 
@@ -609,7 +609,7 @@ def _apex_at(mc, mr, nc, nr, t, rows, cols):
 
 
 @nb.njit(**_HOT)
-def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead, nbx, scr, counts):
+def _bite(na, sm, fr, rows, counts):
     """Step 2, greedy biting on the edge of node ``na``: the apex sample or -1.
 
     The apex walks the inward normal through the edge's midpoint, galloping (t = 1, 2, 4,
@@ -619,6 +619,9 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
     when valid, since connecting to the front adds no vertex. The apex's node is left in
     ``scr[S_APEX_NODE]``.
     """
+    cols = sm.cols
+    nodes = fr.nodes
+    scr = fr.scr
     ia = nodes[na, VERT]
     ib = nodes[nodes[na, NXT], VERT]
     ca = ia % cols
@@ -646,7 +649,7 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
             break
         if P != prev_p:
             counts[N_EVAL_BITE] += 1
-            st = _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+            st = _evaluate(ia, ib, P, sm, fr)
             if st == OK:
                 best = P
                 best_node = scr[S_APEX_NODE]
@@ -658,7 +661,7 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
             else:
                 hi = t
                 if st == GEO and scr[S_BLOCKER] >= 0 and alt < 0:
-                    alt = _blocker_apex(ia, ib, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+                    alt = _blocker_apex(ia, ib, sm, fr)
                     alt_node = scr[S_APEX_NODE]
                 break
         prev_p = P
@@ -669,7 +672,7 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
             P = _apex_at(mc, mr, nc, nr, tm, rows, cols)
             if P < 0 or P == best or P == _apex_at(mc, mr, nc, nr, hi, rows, cols):
                 break
-            st = _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+            st = _evaluate(ia, ib, P, sm, fr)
             if st == OK:
                 best = P
                 best_node = scr[S_APEX_NODE]
@@ -677,7 +680,7 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
             else:
                 hi = tm
                 if st == GEO and scr[S_BLOCKER] >= 0 and alt < 0:
-                    alt = _blocker_apex(ia, ib, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr)
+                    alt = _blocker_apex(ia, ib, sm, fr)
                     alt_node = scr[S_APEX_NODE]
     if alt >= 0:
         scr[S_APEX_NODE] = alt_node
@@ -687,11 +690,11 @@ def _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead,
 
 
 @nb.njit(**_HOT)
-def _blocker_apex(ia, ib, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr):
+def _blocker_apex(ia, ib, sm, fr):
     """The vertex that blocked the last evaluation (``scr[S_BLOCKER]``) as the apex, when
     that evaluates OK (``scr[S_APEX_NODE]`` is then its node); -1 otherwise."""
-    ob = nodes[scr[S_BLOCKER], VERT]
-    if _evaluate(ia, ib, ob, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr) == OK:
+    ob = fr.nodes[fr.scr[S_BLOCKER], VERT]
+    if _evaluate(ia, ib, ob, sm, fr) == OK:
         return ob
     return -1
 
@@ -763,7 +766,7 @@ def _split(na, window, sm, fr, counts, cand):
     while m > 0:
         P = cand_id[0]
         counts[N_EVAL_SPLIT] += 1
-        if _evaluate(ia, ib, P, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr) == OK:
+        if _evaluate(ia, ib, P, sm, fr) == OK:
             return P
         m -= 1
         cand_key[0] = cand_key[m]
@@ -861,6 +864,7 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
     changed = np.empty(3, dtype=np.int64)
     cand_key = np.empty(64, dtype=np.float64)
     cand_id = np.empty(64, dtype=np.int64)
+    sm = Samples(occ, zf, eps, gx, gy, index_space, cols)
     # the initial front: one loop, every edge registered and queued
     for i in range(nb0):
         nodes[i, VERT] = boundary[i]
@@ -898,9 +902,10 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
         nb_ = nodes[na, NXT]
         ia = nodes[na, VERT]
         ib = nodes[nb_, VERT]
-        apex = _ear(na, occ, zf, eps, gx, gy, index_space, cols, nodes, pool, bhead, nbx, scr, counts)
+        fr = Front(nodes, pool, bhead, nbx, scr)  # nodes and pool are replaced when they grow
+        apex = _ear(na, sm, fr, counts)
         if apex < 0:
-            apex = _bite(na, occ, zf, eps, gx, gy, index_space, rows, cols, nodes, pool, bhead, nbx, scr, counts)
+            apex = _bite(na, sm, fr, rows, counts)
         if apex < 0:
             w = 2
             while True:  # windows of half-width 2, 4, 8, ... around the edge
@@ -912,8 +917,7 @@ def greedy_cuts_front(gx, gy, index_space, z, eps, boundary, max_window, max_ver
                 if span > cand_key.shape[0]:
                     cand_key = _grow(cand_key, span)
                     cand_id = _grow(cand_id, span)
-                apex = _split(na, (r0, r1, c0, c1), Samples(occ, zf, eps, gx, gy, index_space, cols),
-                              Front(nodes, pool, bhead, nbx, scr), counts, (cand_key, cand_id))
+                apex = _split(na, (r0, r1, c0, c1), sm, fr, counts, (cand_key, cand_id))
                 if apex >= 0 or w >= max_window or (c0 == 0 and r0 == 0 and c1 == cols - 1 and r1 == rows - 1):
                     break
                 w *= 2

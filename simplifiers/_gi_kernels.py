@@ -41,6 +41,8 @@ import numpy as np
 
 from terrainvis.core.stopflag import stopped
 
+from ._shared_kernels import orient
+
 NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
 
 #: Indices as int64, not literals: numba compiles a callee once per argument type, and a
@@ -60,12 +62,6 @@ State = namedtuple(
 
 
 # ----------------------------------------------------------------- predicates
-@nb.njit(cache=True, nogil=True, inline="always")
-def _orient(ax, ay, bx, by, cx, cy):
-    """Twice the signed area of (a, b, c): > 0 counter-clockwise, 0 collinear (exact int64)."""
-    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-
-
 @nb.njit(cache=True, nogil=True)
 def _in_circle(ax, ay, bx, by, cx, cy, px, py, ratio):
     """True when p lies strictly inside the circumcircle of the counter-clockwise (a, b, c).
@@ -129,7 +125,7 @@ def scan_triangle(z, W, ax, ay, bx, by, cx, cy):
         (the first in row-major order on ties), or (-1.0, -1) when the triangle holds no
         other sample.
     """
-    area = float(_orient(ax, ay, bx, by, cx, cy))
+    area = float(orient(ax, ay, bx, by, cx, cy))
     za = z[ay * W + ax]
     zb = z[by * W + bx]
     zc = z[cy * W + cx]
@@ -386,11 +382,11 @@ def run(z, W, ratio, st, n_target, max_error, stop):
         p1 = np.int64(tri[e0 + 1])
         p2 = np.int64(tri[e0 + 2])
         on = -1
-        if _orient(vx[p0], vy[p0], vx[p1], vy[p1], px, py) == 0:
+        if orient(vx[p0], vy[p0], vx[p1], vy[p1], px, py) == 0:
             on = e0
-        elif _orient(vx[p1], vy[p1], vx[p2], vy[p2], px, py) == 0:
+        elif orient(vx[p1], vy[p1], vx[p2], vy[p2], px, py) == 0:
             on = e0 + 1
-        elif _orient(vx[p2], vy[p2], vx[p0], vy[p0], px, py) == 0:
+        elif orient(vx[p2], vy[p2], vx[p0], vy[p0], px, py) == 0:
             on = e0 + 2
         npend = _I0
         nt = counts[NT]

@@ -90,8 +90,11 @@ def _corners(tri, a, b, ncx, vv, ww):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _put(xs, ys, ncx, r, c, x, y, u, n, record, bu, btri, ba, bb):
+def _put(xs, ys, ncx, r, c, x, y, u, n, record, out):
+    """Breakpoint ``n`` at (x, y), parameter u, in cell (r, c), written into ``out = (bu,
+    btri, ba, bb)`` when ``record``: its parameter, triangle and local coordinates."""
     if record:
+        bu, btri, ba, bb = out
         a, b = _local(xs, ys, r, c, x, y)
         bu[n] = u
         btri[n] = 2 * (r * ncx + c) + (0 if a >= b else 1)
@@ -106,22 +109,21 @@ def _track(axes, ax, ay, bx, by, u0, u1, start, record, out):
     takes), written from ``start`` into ``out = (bu, btri, ba, bb)`` when ``record``;
     returns their count."""
     xs, ys, ixw, iyw = axes
-    bu, btri, ba, bb = out
     dx = bx - ax
     dy = by - ay
     track = (ax, ay, dx, dy)
     ncx = xs.shape[0] - 1
     cur = cells_start(xs, ys, ixw, iyw, False, track, u0, u1)
     n = start
-    _put(xs, ys, ncx, cur.r, cur.c, ax + u0 * dx, ay + u0 * dy, u0, n, record, bu, btri, ba, bb)
+    _put(xs, ys, ncx, cur.r, cur.c, ax + u0 * dx, ay + u0 * dy, u0, n, record, out)
     n += 1
     while True:
         r, c, u, ue = cur.r, cur.c, cur.t, cur.tn
         td = cell_diagonal(xs, ys, ixw, iyw, r, c, track)
         if td > u and td < ue:
-            _put(xs, ys, ncx, r, c, ax + td * dx, ay + td * dy, td, n, record, bu, btri, ba, bb)
+            _put(xs, ys, ncx, r, c, ax + td * dx, ay + td * dy, td, n, record, out)
             n += 1
-        _put(xs, ys, ncx, r, c, ax + ue * dx, ay + ue * dy, ue, n, record, bu, btri, ba, bb)
+        _put(xs, ys, ncx, r, c, ax + ue * dx, ay + ue * dy, ue, n, record, out)
         n += 1
         if ue >= u1:
             break

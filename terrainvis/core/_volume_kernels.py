@@ -452,9 +452,12 @@ def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop):
 
 
 @nb.njit(cache=True, nogil=True)
-def _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, stop):
+def _volume_chunk(grid, mesh, nchunks, ch, buf, out, stop):
     """Row ``ch`` of ``out``: the compensated sums of chunk ``ch`` of ``nchunks`` equal runs
-    of ``order`` (``buf`` the clipping scratch of the calling thread)."""
+    of ``order`` (``buf`` the clipping scratch of the calling thread; ``grid`` and ``mesh``
+    as :func:`volume_between` takes them)."""
+    xs, ys, z = grid
+    vx, vy, vz, faces, order = mesh
     nf = faces.shape[0]
     f0 = ch * nf // nchunks
     f1 = (ch + 1) * nf // nchunks
@@ -466,17 +469,19 @@ def _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, st
 
 
 @nb.njit(cache=True, nogil=True)
-def volume_between(xs, ys, z, vx, vy, vz, faces, order, nchunks, out, c0, c1, stop):
+def volume_between(grid, mesh, nchunks, out, c0, c1, stop):
     """:func:`volume_faces` over chunks ``c0 .. c1 - 1`` of ``nchunks`` equal runs of ``order``
     (:func:`terrainvis.core.interrupt.call` spreads the chunks over threads).
 
-    ``out`` is (nchunks, N_OUT): row ch receives the compensated sums of chunk ch. The
-    chunks depend only on ``nchunks``, so the result does not depend on the thread count.
-    Every chunk reads the stop flag ``stop`` before each face (:mod:`terrainvis.core.interrupt`).
+    ``grid`` is the fine surface ``(xs, ys, z)`` and ``mesh`` the coarse one ``(vx, vy, vz,
+    faces, order)``, as :func:`volume_faces` takes them. ``out`` is (nchunks, N_OUT): row
+    ch receives the compensated sums of chunk ch. The chunks depend only on ``nchunks``,
+    so the result does not depend on the thread count. Every chunk reads the stop flag
+    ``stop`` before each face (:mod:`terrainvis.core.interrupt`).
     """
     buf = np.empty((2, MAX_POLY, N_PCOL))
     for ch in range(c0, c1):
-        _volume_chunk(xs, ys, z, vx, vy, vz, faces, order, nchunks, ch, buf, out, stop)
+        _volume_chunk(grid, mesh, nchunks, ch, buf, out, stop)
 
 
 @nb.njit(cache=True, nogil=True)

@@ -258,8 +258,8 @@ def _volume_exact(fine: HeightGrid, coarse: TIN) -> tuple[float, float]:
     nchunks = int(min(faces.shape[0], _VOLUME_CHUNKS))
     out = np.zeros((nchunks, vk.N_OUT))
     # work: the fine cells and the coarse faces visited
-    call(vk.volume_between, xs, ys, fine.z, vx, vy, vz, faces, order, nchunks, out, work=fine.size + faces.shape[0],
-         items=nchunks)
+    call(vk.volume_between, (xs, ys, fine.z), (vx, vy, vz, faces, order), nchunks, out,
+         work=fine.size + faces.shape[0], items=nchunks)
     volume = math.fsum(np.concatenate([out[:, vk.VOL], out[:, vk.VOL_C]]))
     covered = math.fsum(np.concatenate([out[:, vk.AREA], out[:, vk.AREA_C]]))
     return volume, covered

@@ -1,4 +1,5 @@
-"""The floor plan: the parts are folders, the imports run one way, and nothing cycles.
+"""The floor plan: the parts are folders, the imports run one way, nothing cycles, and no
+numba kernel takes more than :data:`MAX_KERNEL_PARAMETERS` parameters.
 
 Read from the source (``ast``), every import counted, those inside functions too: a lazy
 import that ran back up a layer would still tie a lower part to a higher one.
@@ -110,3 +111,69 @@ def test_no_import_cycle():
 
     for m in sorted(graph):
         visit(m, [])
+
+
+#: The most parameters a numba kernel may take (issue 41): arrays that travel together go as
+#: one record (a named tuple or a tuple, grouped by meaning: the mesh, the front, the heap).
+MAX_KERNEL_PARAMETERS = 12
+#: Kernels allowed over it, as "path:name" -> why; it can only shrink. Empty: at this commit
+#: no kernel of terrainvis/ or simplifiers/ is over it.
+KERNELS_ALLOWED_WIDE: dict[str, str] = {}
+_JIT = {"njit", "jit", "nb.njit", "nb.jit", "numba.njit", "numba.jit"}
+
+
+def _is_jit(node: ast.expr) -> bool:
+    """True for ``njit``, ``nb.njit(...)``, ``numba.jit`` and the like."""
+    target = node.func if isinstance(node, ast.Call) else node
+    return ast.unparse(target) in _JIT
+
+
+def _kernel_parameters(source: str) -> dict[str, int]:
+    """Name -> parameters of every function compiled by numba in ``source``: decorated
+    (``@nb.njit(...)``) or wrapped (``nb.njit(**options)(fn)``)."""
+    tree = ast.parse(source)
+    defs = {n.name: n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))}
+    kernels = {name for name, fn in defs.items() if any(_is_jit(d) for d in fn.decorator_list)}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Call) and _is_jit(node.func):
+            kernels |= {a.id for a in node.args if isinstance(a, ast.Name) and a.id in defs}
+    out = {}
+    for name in kernels:
+        a = defs[name].args
+        out[name] = (len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + (a.vararg is not None)
+                     + (a.kwarg is not None))
+    return out
+
+
+def test_kernel_parameter_count_on_a_hand_made_module():
+    many = ", ".join(f"a{i}" for i in range(MAX_KERNEL_PARAMETERS + 1))
+    source = (
+        f"@nb.njit(cache=True, nogil=True)\ndef k1({many}):\n    pass\n\n"
+        f"@numba.jit\ndef k2(a, *, b):\n    pass\n\n"
+        f"def _k3({many}, *rest):\n    pass\n\n"
+        f"k3 = nb.njit(**_OPTIONS)(_k3)\n\n"
+        f"def plain({many}):\n    pass\n"
+    )
+    assert _kernel_parameters(source) == {
+        "k1": MAX_KERNEL_PARAMETERS + 1, "k2": 2, "_k3": MAX_KERNEL_PARAMETERS + 2,
+    }
+
+
+def _wide_kernels() -> dict[str, int]:
+    wide = {}
+    for path in MODULES.values():
+        for name, n in _kernel_parameters(path.read_text(encoding="utf-8")).items():
+            if n > MAX_KERNEL_PARAMETERS:
+                wide[f"{path.relative_to(REPO).as_posix()}:{name}"] = n
+    return wide
+
+
+def test_no_kernel_takes_more_than_twelve_parameters():
+    wide = [f"{k} takes {n}" for k, n in _wide_kernels().items() if k not in KERNELS_ALLOWED_WIDE]
+    assert not wide, (f"numba kernels over {MAX_KERNEL_PARAMETERS} parameters (pass the arrays that travel "
+                      "together as one record):\n" + "\n".join(sorted(wide)))
+
+
+def test_wide_kernel_allow_list_only_shrinks():
+    stale = sorted(set(KERNELS_ALLOWED_WIDE) - set(_wide_kernels()))
+    assert not stale, f"allow-list entries no longer needed (remove them): {stale}"
