@@ -182,6 +182,17 @@ class Prepared:
         return _rows(self.grid, self.name, units, store, done, on_unit, self.settings)
 
 
+#: compare's options that choose what is simplified, which evaluate refuses (it would ignore them), and
+#: what to use instead.
+_COMPARE_ONLY = {
+    "methods": "against= measures built-in methods beside them, at their size",
+    "levels": "against= measures built-in methods at the level whose grid is closest to each",
+    "max_errors": "against= measures built-in methods at their size; terrainvis.compare(max_errors=...) budgets "
+                  "them in vertical error",
+    "cascade": "it simplifies nothing",
+}
+
+
 def prepared(original, simplified, *, name=None, against=(), frame=None, repair=False, zoom=None, tile_mesh="grid",
              tile_max_error=None, tile_offset=0.0, names=None, **options) -> Prepared:
     """Read and check everything :func:`evaluate` measures (its arguments, less the output's); ``names``
@@ -193,6 +204,10 @@ def prepared(original, simplified, *, name=None, against=(), frame=None, repair=
         raise ValueError(f"original must be one terrain, got {len(grids)}")
     (tname, grid), = grids.items()
     against = [against] if isinstance(against, str) else list(against)
+    chosen = [k for k in _COMPARE_ONLY if k in options]
+    if chosen:
+        raise TypeError(f"evaluate() takes no {chosen[0]}=: it measures the simplified terrains it is given; "
+                        f"{_COMPARE_ONLY[chosen[0]]}")
     items = _named(simplified, name, taken=against)
     settings = settings_for(grids, {**options, "methods": against or ["simple"]})
     if frame is not None:

@@ -292,3 +292,17 @@ def test_the_terrains_own_tin_keeps_every_verdict_with_the_exact_engine(tmp_path
     assert main([*base, "--out", str(tmp_path / "exact"), "--engine", "exact"]) == 0
     assert "predicate exact, verdicts exact," in capsys.readouterr().out
     assert "verdicts exact" in (tmp_path / "exact" / "tables.md").read_text()
+
+
+@pytest.mark.parametrize("option, value, instead", [
+    ("max_errors", [5.0], "terrainvis.compare(max_errors=...) budgets them"),
+    ("levels", [1, 2], "at the level whose grid is closest"),
+    ("methods", ["lls"], "against= measures built-in methods beside them"),
+    ("cascade", True, "it simplifies nothing"),
+])
+def test_the_options_that_choose_what_compare_simplifies_are_refused(option, value, instead):
+    # evaluate measures the terrains it is given: these options would be ignored silently
+    T = bundled_terrain("hills")
+    with pytest.raises(TypeError, match=rf"evaluate\(\) takes no {option}=: it measures the simplified terrains "
+                                        rf"it is given; .*{re.escape(instead)}"):
+        evaluate(T, T.to_tin(), **{option: value})
