@@ -80,7 +80,7 @@ def run(args) -> int:
     png = _check_png(args)
     with loading_kernels(_load_kernels, "los"):
         label, grid = read_surface(args.dem, args, command="los")
-    from ..visibility import line_of_sight, min_clearance
+    from ..visibility import Sight, line_of_sight, min_clearance
     from ..visibility.profile import lowest_point
 
     check_heights(grid, args)
@@ -107,13 +107,14 @@ def run(args) -> int:
         )
     a = np.column_stack([xy1, z1])
     b = np.column_stack([xy2, z2])
-    earth = {"curvature": args.curvature, "earth_radius": args.earth_radius}
-    visible = line_of_sight(grid, a, b, end_radius=args.end_radius, **earth)
-    clear = min_clearance(grid, a, b, end_radius=args.end_radius, **earth)
+    # the predicate as one value (the ends' heights are in a and b already)
+    sight = Sight.make(end_radius=args.end_radius, curvature=args.curvature, earth_radius=args.earth_radius)
+    visible = line_of_sight(grid, a, b, sight=sight)
+    clear = min_clearance(grid, a, b, sight=sight)
     print(f"{label}: observer {args.height:g} above the surface, target {args.target_height:g} above it; "
           f"{earth_text(args)}")
     for k in range(a.shape[0]):
-        low = lowest_point(grid, a[k], b[k], end_radius=args.end_radius, **earth)
+        low = lowest_point(grid, a[k], b[k], sight=sight)
         verdict = "visible" if visible[k] else "blocked"
         where = ("" if not np.isfinite(clear[k]) else
                  f" at {frame.point(frame.from_grid([low['x'], low['y']]))}, {low['distance']:.6g} from the observer")

@@ -15,14 +15,13 @@ from .engines import Predicate, choose
 from .grid import grid_clearance
 from .predicate import (
     EARTH_RADIUS,
-    _check_end_radius,
     _check_inside,
     _prepare_segments,
     _prepare_terrain,
     clearance_tolerance,
-    curvature_coefficient,
     trim_length,
 )
+from .sight import Sight, pair_sight
 from .tin import tin_clearance
 
 __all__ = ["min_clearance", "line_of_sight", "visibility_matrix", "embree_tolerance"]
@@ -36,7 +35,8 @@ def embree_tolerance(terrain) -> float:
 
 # ----------------------------------------------------------------- public API
 def min_clearance(
-    terrain, a, b, *, end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS
+    terrain, a, b, *, end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
+    sight: Sight | None = None,
 ) -> np.ndarray:
     """Exact minimum clearance of each segment a[i] -> b[i] over its tested interval.
 
@@ -61,6 +61,10 @@ def min_clearance(
     earth_radius : float, default 6378137.0
         Radius of the earth in the terrain's x/y units (WGS84's semi-major axis in
         metres, as GDAL takes it).
+    sight : Sight, optional
+        The predicate as one value (:class:`~terrainvis.visibility.Sight`: its end radius,
+        curvature and earth radius; the clearance is exact whatever its engine), instead of
+        the keywords above.
 
     Returns
     -------
@@ -102,9 +106,10 @@ def min_clearance(
     >>> round(float(min_clearance(g, [[0.0, 0.0, 10.0]], [[20_000.0, 0.0, 10.0]], curvature=0.85714)[0]), 2)
     3.28
     """
+    s = pair_sight(sight, {"end_radius": end_radius, "curvature": curvature, "earth_radius": earth_radius},
+                   "min_clearance")
     a, b = _prepare_segments(terrain, a, b, "min_clearance")
-    end_radius = _check_end_radius(end_radius)
-    return segment_clearances(terrain, a, b, end_radius=end_radius, kc=curvature_coefficient(curvature, earth_radius))
+    return segment_clearances(terrain, a, b, end_radius=s.end_radius, kc=s.kc)
 
 
 def segment_clearances(terrain, a: np.ndarray, b: np.ndarray, *, end_radius: float, kc: float) -> np.ndarray:
@@ -122,7 +127,7 @@ def segment_clearances(terrain, a: np.ndarray, b: np.ndarray, *, end_radius: flo
 
 def line_of_sight(
     terrain, a, b, *, engine: str = "auto", end_radius: float = 0.0, curvature: float = 0.0,
-    earth_radius: float = EARTH_RADIUS,
+    earth_radius: float = EARTH_RADIUS, sight: Sight | None = None,
 ) -> np.ndarray:
     """Whether each pair of points a[i], b[i] sees each other.
 
@@ -149,6 +154,11 @@ def line_of_sight(
     earth_radius : float, default 6378137.0
         Radius of the earth in the terrain's x/y units (WGS84's semi-major axis in
         metres, as GDAL takes it).
+    sight : Sight, optional
+        The predicate as one value (:class:`~terrainvis.visibility.Sight`: engine, end
+        radius, curvature, earth radius), instead of the keywords above; the points carry
+        their own heights (the Sight's are not used) and a Sight with a field of view is
+        refused (a viewshed's).
 
     Returns
     -------
@@ -161,16 +171,16 @@ def line_of_sight(
     >>> line_of_sight(g, [[0.0, 1.0, 1.0], [0.0, 0.0, 0.0]], [[2.0, 1.0, 1.0], [2.0, 0.0, 0.0]]).tolist()
     [False, True]
     """
+    s = pair_sight(sight, {"engine": engine, "end_radius": end_radius, "curvature": curvature,
+                           "earth_radius": earth_radius}, "line_of_sight")
     a, b = _prepare_segments(terrain, a, b, "line_of_sight")
-    kc = curvature_coefficient(curvature, earth_radius)
-    chosen = choose(engine, terrain, kc)
-    predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), _check_end_radius(end_radius), kc)
-    return np.asarray(chosen.pairs(terrain, a, b, predicate), dtype=bool)
+    chosen = choose(s.engine, terrain, s.kc)
+    return np.asarray(chosen.pairs(terrain, a, b, _predicate(terrain, s)), dtype=bool)
 
 
 def visibility_matrix(
     terrain, points, *, engine: str = "auto", end_radius: float = 0.0, curvature: float = 0.0,
-    earth_radius: float = EARTH_RADIUS,
+    earth_radius: float = EARTH_RADIUS, sight: Sight | None = None,
 ) -> np.ndarray:
     """Mutual visibility of every pair of points.
 
@@ -197,6 +207,8 @@ def visibility_matrix(
     earth_radius : float, default 6378137.0
         Radius of the earth in the terrain's x/y units (WGS84's semi-major axis in
         metres, as GDAL takes it).
+    sight : Sight, optional
+        As in :func:`line_of_sight`.
 
     Returns
     -------
@@ -212,12 +224,17 @@ def visibility_matrix(
            [0, 1, 0],
            [1, 0, 1]])
     """
+    s = pair_sight(sight, {"engine": engine, "end_radius": end_radius, "curvature": curvature,
+                           "earth_radius": earth_radius}, "visibility_matrix")
     _prepare_terrain(terrain, "visibility_matrix")
     pts = np.ascontiguousarray(as_points(points, "points", 3), dtype=np.float64)
     n = pts.shape[0]
     check_memory(n * n, f"visibility_matrix of {n:,} points (a {n:,} x {n:,} boolean matrix)")
     _check_inside(terrain, pts, "points")
-    kc = curvature_coefficient(curvature, earth_radius)
-    chosen = choose(engine, terrain, kc)
-    predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), _check_end_radius(end_radius), kc)
-    return np.asarray(chosen.matrix(terrain, pts, predicate), dtype=bool)
+    chosen = choose(s.engine, terrain, s.kc)
+    return np.asarray(chosen.matrix(terrain, pts, _predicate(terrain, s)), dtype=bool)
+
+
+def _predicate(terrain, s: Sight) -> Predicate:
+    """The engines' predicate of a Sight on ``terrain`` (its trim length and clearance tolerance)."""
+    return Predicate(trim_length(terrain), clearance_tolerance(terrain), s.end_radius, s.kc)

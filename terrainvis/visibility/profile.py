@@ -140,11 +140,13 @@ def clearance_profile(
 
 
 def lowest_point(
-    terrain, a, b, *, end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS
+    terrain, a, b, *, end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
+    sight=None,
 ) -> dict:
     """Where the segment a -> b comes closest to (or goes deepest below) the surface.
 
-    ``end_radius``, ``curvature`` and ``earth_radius`` as in :func:`clearance_profile`.
+    ``end_radius``, ``curvature`` and ``earth_radius`` as in :func:`clearance_profile`, or
+    ``sight``, a :class:`~terrainvis.visibility.Sight` holding them.
 
     Returns
     -------
@@ -162,6 +164,11 @@ def lowest_point(
     >>> low["clearance"], low["x"], low["y"]
     (-9.0, 1.0, 1.0)
     """
+    from .sight import pair_sight
+
+    sight = pair_sight(sight, {"end_radius": end_radius, "curvature": curvature, "earth_radius": earth_radius},
+                       "lowest_point")
+    end_radius, curvature, earth_radius = sight.end_radius, sight.curvature, sight.earth_radius
     t, c = clearance_profile(terrain, a, b, end_radius=end_radius, curvature=curvature, earth_radius=earth_radius)
     a = np.asarray(a, float).ravel()
     b = np.asarray(b, float).ravel()

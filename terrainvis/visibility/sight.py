@@ -2,14 +2,20 @@
 
 A :class:`Sight` holds everything about the sight lines of a viewshed that does not depend
 on the terrain: the eye's height above the surface, the targets' height, the engine, the
-earth model (curvature coefficient and radius) and the field of view
-(:class:`~terrainvis.visibility.FieldOfView`: azimuth, vertical angles, the least and the
-largest distance). It is checked once, when it is made, with the messages the functions
+earth model (curvature coefficient and radius), the end radius of the predicate and the
+field of view (:class:`~terrainvis.visibility.FieldOfView`: azimuth, vertical angles, the
+least and the largest distance). It is checked once, when it is made, with the messages the functions
 give for their keywords; it is frozen and pickles, so it crosses to worker processes
 whole. :func:`terrainvis.viewshed`, :func:`terrainvis.cumulative_viewshed`,
 :func:`terrainvis.observer_sets` and :func:`terrainvis.site_observers` take one as
 ``sight=`` instead of their keywords (which stay as a front: each call makes one Sight
-from them).
+from them). A viewshed tests its sight lines whole: its Sight's ``end_radius`` must be 0.
+
+The functions of point pairs, :func:`terrainvis.line_of_sight`,
+:func:`terrainvis.visibility_matrix` and :func:`terrainvis.min_clearance`, read the
+predicate from a Sight (:func:`pair_sight`): engine, end radius, curvature and earth
+radius. Their points carry their own heights (a Sight's eye and target heights are not
+used), and a field of view is a viewshed's: they refuse a Sight that has one.
 
 The checks that need the terrain (a height within what float64 resolves on it, an engine
 that runs on it) are :func:`engine_on`'s, made where the terrain is known.
@@ -43,15 +49,17 @@ import numpy as np
 from ..core.validate import as_nonnegative_finite, describe
 from .engines import AUTO, Engine, check_name, choose
 from .field_of_view import FieldOfView, field_of_view
-from .predicate import EARTH_RADIUS, _height_above, curvature_coefficient
+from .predicate import EARTH_RADIUS, _check_end_radius, _height_above, curvature_coefficient
 
-__all__ = ["Sight", "KEYWORDS", "sight_of", "engine_on"]
+__all__ = ["Sight", "KEYWORDS", "PAIR_KEYWORDS", "sight_of", "pair_sight", "engine_on"]
 
-#: The keywords a Sight gathers, with the defaults of the functions that take them.
+#: The keywords of the viewshed family that a Sight gathers, with the defaults of the functions that take them.
 KEYWORDS = {
     "observer_height": 1.7, "target_height": 0.0, "max_distance": None, "engine": AUTO, "curvature": 0.0,
     "earth_radius": EARTH_RADIUS, "azimuth": None, "vertical": None, "min_distance": None,
 }
+#: The keywords of the functions of point pairs that a Sight gathers (the predicate), with their defaults.
+PAIR_KEYWORDS = {"engine": AUTO, "end_radius": 0.0, "curvature": 0.0, "earth_radius": EARTH_RADIUS}
 
 
 @dataclass(frozen=True)
@@ -76,6 +84,10 @@ class Sight:
         The earth's radius in the terrain's x/y units.
     fov : FieldOfView
         The field of view (``max_distance`` among its limits); no limits by default.
+    end_radius : float
+        Horizontal distance (>= 0, x/y units) around each end of a sight line inside which
+        the surface is not tested (:mod:`terrainvis.visibility`); 0, the exact predicate,
+        is the only value a viewshed takes.
     """
 
     observer_height: float = 1.7
@@ -84,6 +96,7 @@ class Sight:
     curvature: float = 0.0
     earth_radius: float = EARTH_RADIUS
     fov: FieldOfView = FieldOfView()
+    end_radius: float = 0.0
 
     def __post_init__(self):
         if not isinstance(self.fov, FieldOfView):
@@ -95,11 +108,12 @@ class Sight:
         curvature_coefficient(self.curvature, self.earth_radius)  # both checked, in its words
         put(self, "curvature", float(self.curvature))
         put(self, "earth_radius", float(self.earth_radius))
+        put(self, "end_radius", _check_end_radius(self.end_radius))
 
     @classmethod
     def make(cls, *, observer_height=1.7, target_height=0.0, max_distance=None, engine: str = AUTO,
              curvature=0.0, earth_radius=EARTH_RADIUS, azimuth=None, vertical=None, min_distance=None,
-             names=None) -> "Sight":
+             end_radius=0.0, names=None) -> "Sight":
         """A Sight from the keywords of :func:`terrainvis.viewshed` (and the same messages).
 
         ``names`` is passed to :func:`~terrainvis.visibility.field_of_view` (the command line
@@ -107,7 +121,7 @@ class Sight:
         """
         fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance,
                             max_distance=max_distance, names=names)
-        return cls(observer_height, target_height, engine, curvature, earth_radius, fov)
+        return cls(observer_height, target_height, engine, curvature, earth_radius, fov, end_radius)
 
     @property
     def kc(self) -> float:
@@ -120,7 +134,8 @@ class Sight:
         return self.fov.max_distance
 
     def keywords(self) -> dict:
-        """The Sight as the functions' keywords: ``viewshed(t, obs, **s.keywords())`` is ``viewshed(t, obs, sight=s)``."""
+        """The Sight as the viewshed's keywords: ``viewshed(t, obs, **s.keywords())`` is ``viewshed(t, obs, sight=s)``
+        (a viewshed has no ``end_radius``: it is 0 there)."""
         return {"observer_height": self.observer_height, "target_height": self.target_height,
                 "max_distance": self.fov.max_distance, "engine": self.engine, "curvature": self.curvature,
                 "earth_radius": self.earth_radius, "azimuth": self.fov.azimuth, "vertical": self.fov.vertical,
@@ -152,6 +167,22 @@ def sight_of(sight, keywords: dict) -> Sight:
     return sight
 
 
+def pair_sight(sight, keywords: dict, name: str) -> Sight:
+    """The Sight of a call of a function of point pairs (``name``): ``sight``, or one made from its
+    :data:`PAIR_KEYWORDS` (``keywords``); a Sight given with a keyword set beside it, or with a field of
+    view, is refused."""
+    s = sight_of(sight, {}) if sight is not None else Sight.make(**keywords)
+    if sight is not None:
+        for key, value in keywords.items():
+            if _differs(value, PAIR_KEYWORDS[key]):
+                raise TypeError(f"pass either sight= or the keyword {key}=, not both (the Sight holds {key}; "
+                                f"got {key}={describe(value)} beside it)")
+        if s.fov.limited:
+            raise ValueError(f"{name} takes the predicate of a Sight (engine, end_radius, curvature, earth_radius); its "
+                             f"field of view ({s.fov.describe()}) is a viewshed's: pass a Sight without one")
+    return s
+
+
 def _differs(value, default) -> bool:
     """Whether a keyword was given a value other than its default."""
     if default is None:
@@ -168,6 +199,9 @@ def engine_on(terrain, sight: Sight) -> Engine:
     (:func:`~terrainvis.visibility.engines.choose`), and each height must lie within what
     float64 resolves against the terrain.
     """
+    if sight.end_radius != 0.0:
+        raise ValueError(f"a viewshed tests its sight lines whole (the exact predicate): the Sight's end_radius must "
+                         f"be 0, got {sight.end_radius!r}")
     engine = choose(sight.engine, terrain, sight.kc)
     _height_above(sight.observer_height, "observer_height", terrain)
     _height_above(sight.target_height, "target_height", terrain)

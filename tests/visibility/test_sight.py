@@ -26,6 +26,7 @@ from terrainvis.visibility import (
     site_observers,
     viewshed,
 )
+from terrainvis.visibility.predicate import EARTH_RADIUS
 from terrainvis.visibility.sight import KEYWORDS
 
 
@@ -201,3 +202,70 @@ def test_sight_must_be_a_sight(hills):
         viewshed(hills, (100.0, 100.0), sight={"observer_height": 2.0})
     with pytest.raises(TypeError, match="sight must be a terrainvis.visibility.Sight"):
         cumulative_viewshed(hills, [[100.0, 100.0]], sight=FieldOfView(), workers=1)
+
+
+# ----------------------------------------------------------------- the functions of point pairs
+def _pairs(grid, m: int, seed: int = 3):
+    from terrainvis.core.sampling import sample_points
+
+    p = sample_points(grid, 2 * m, seed=seed, offset=2.0)
+    return p[:m], p[m:]
+
+
+@pytest.mark.parametrize("keywords", [
+    {},
+    {"engine": "grid", "end_radius": 40.0},
+    {"curvature": 0.85714, "earth_radius": 2e4},
+    {"engine": "tin", "end_radius": 15.0, "curvature": 1.0, "earth_radius": 5e4},
+])
+def test_pair_functions_take_the_predicate_as_a_sight(hills, keywords):
+    from terrainvis.visibility import line_of_sight, min_clearance, visibility_matrix
+    from terrainvis.visibility.profile import lowest_point
+
+    terrain = hills.to_tin() if keywords.get("engine") == "tin" else hills
+    a, b = _pairs(hills, 60)
+    s = Sight.make(**keywords)
+    assert (s.end_radius, s.kc) == (keywords.get("end_radius", 0.0),
+                                    keywords.get("curvature", 0.0) / (2 * keywords.get("earth_radius", EARTH_RADIUS)))
+    np.testing.assert_array_equal(line_of_sight(terrain, a, b, sight=s), line_of_sight(terrain, a, b, **keywords))
+    np.testing.assert_array_equal(visibility_matrix(terrain, a, sight=s), visibility_matrix(terrain, a, **keywords))
+    earth = {k: v for k, v in keywords.items() if k != "engine"}
+    np.testing.assert_array_equal(min_clearance(terrain, a, b, sight=s), min_clearance(terrain, a, b, **earth))
+    assert lowest_point(terrain, a[0], b[0], sight=s) == lowest_point(terrain, a[0], b[0], **earth)
+    # the Sight's heights are not the points': a and b carry theirs
+    s2 = dataclasses.replace(s, observer_height=50.0, target_height=9.0)
+    np.testing.assert_array_equal(line_of_sight(terrain, a, b, sight=s2), line_of_sight(terrain, a, b, **keywords))
+
+
+@pytest.mark.parametrize("name, value", [("engine", "grid"), ("end_radius", 3.0), ("curvature", 1.0),
+                                         ("earth_radius", 1e6)])
+def test_pair_functions_refuse_a_sight_beside_a_keyword(hills, name, value):
+    from terrainvis.visibility import line_of_sight, min_clearance, visibility_matrix
+
+    a, b = _pairs(hills, 4)
+    match = f"pass either sight= or the keyword {name}=, not both"
+    with pytest.raises(TypeError, match=match):
+        line_of_sight(hills, a, b, sight=Sight(), **{name: value})
+    with pytest.raises(TypeError, match=match):
+        visibility_matrix(hills, a, sight=Sight(), **{name: value})
+    if name != "engine":  # min_clearance has no engine keyword
+        with pytest.raises(TypeError, match=match):
+            min_clearance(hills, a, b, sight=Sight(), **{name: value})
+
+
+def test_pair_functions_refuse_a_sight_with_a_field_of_view(hills):
+    from terrainvis.visibility import line_of_sight
+
+    a, b = _pairs(hills, 4)
+    with pytest.raises(ValueError, match=r"line_of_sight takes the predicate of a Sight .*its field of view "
+                                         r"\(azimuth 0 to 90 degrees"):
+        line_of_sight(hills, a, b, sight=Sight.make(azimuth=(0, 90)))
+
+
+def test_a_viewshed_refuses_an_end_radius_and_a_sight_checks_it(hills):
+    obs = _observers(hills, 1)[0]
+    with pytest.raises(ValueError, match=r"a viewshed tests its sight lines whole .*end_radius must be 0, got 5.0"):
+        viewshed(hills, obs, sight=Sight.make(end_radius=5.0))
+    with pytest.raises(ValueError, match="end_radius"):
+        Sight(end_radius=-1.0)
+    assert pickle.loads(pickle.dumps(Sight.make(end_radius=2.5))).end_radius == 2.5
