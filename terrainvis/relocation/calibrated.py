@@ -81,6 +81,7 @@ the point's thresholds are walked whole (:mod:`terrainvis.visibility._threshold_
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -91,7 +92,7 @@ from ..core.validate import as_int, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import HeightGrid, fingerprint
 from ..tolerances import THRESHOLD_MARGIN_REL
-from ..visibility import EARTH_RADIUS, curvature_coefficient
+from ..visibility import EARTH_RADIUS, Sight, curvature_coefficient
 from ..visibility.thresholds import ThresholdSurface, best_height, best_heights, gauss_seidel, threshold_row
 
 __all__ = ["calibrated_heights", "best_responses", "neighbour_weight", "Partners", "partners", "N_PARTNERS",
@@ -206,19 +207,30 @@ def _cached(key, compute):
     return out
 
 
-def _key(original, curve, *arrays):
+def _sight(end_radius: float, curvature: float, earth_radius: float) -> Sight:
+    """The relocation's predicate as one value: the verdicts on S(T) take its end radius, those on T
+    (:func:`_on_original`) the exact predicate; both the grid engine (on a grid) and its curvature."""
+    return Sight.make(engine="grid", end_radius=end_radius, curvature=curvature, earth_radius=earth_radius)
+
+
+def _on_original(sight: Sight) -> Sight:
+    """The predicate of the verdicts on T: exact (no end radius), the grid engine, the Sight's curvature."""
+    return dataclasses.replace(sight, end_radius=0.0) if sight.end_radius else sight
+
+
+def _key(original, sight: Sight, *arrays):
     h = hashlib.sha256()
     for a in arrays:
         h.update(np.ascontiguousarray(a).tobytes())
-    return (fingerprint(original), curvature_coefficient(**curve), h.hexdigest())
+    return (fingerprint(original), sight.kc, h.hexdigest())
 
 
-def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+def _verdicts_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, sight: Sight) -> np.ndarray:
     """(n, K) verdicts on T between the points ``a`` (n, 3) and the partners ``b`` (K, 3), in chunks (cached)."""
-    return _cached(("pairs",) + _key(original, curve, a, b), lambda: _line_of_sight_rows(original, a, b, curve))
+    return _cached(("pairs",) + _key(original, sight, a, b), lambda: _line_of_sight_rows(original, a, b, sight))
 
 
-def _line_of_sight_rows(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+def _line_of_sight_rows(original: HeightGrid, a: np.ndarray, b: np.ndarray, sight: Sight) -> np.ndarray:
     from ..visibility import line_of_sight
 
     n, k = a.shape[0], b.shape[0]
@@ -228,7 +240,7 @@ def _line_of_sight_rows(original: HeightGrid, a: np.ndarray, b: np.ndarray, curv
         j = min(n, i + step)
         aa = np.repeat(a[i:j], k, axis=0)
         bb = np.tile(b, (j - i, 1))
-        out[i:j] = line_of_sight(original, aa, bb, engine="grid", **curve).reshape(j - i, k)
+        out[i:j] = line_of_sight(original, aa, bb, sight=_on_original(sight)).reshape(j - i, k)
     return out
 
 
@@ -245,19 +257,18 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
     module docstring. Inputs are validated by :func:`calibrated_heights`; ``curvature``
     and ``earth_radius`` as in :func:`terrainvis.line_of_sight`, on both surfaces.
     """
-    kc = curvature_coefficient(curvature, earth_radius)
+    sight = _sight(end_radius, curvature, earth_radius)
     core = CORE_PARTNERS if core is None else core
     key = ("calibration", fingerprint(original), float(height), bool(move), int(n_partners), int(sweeps),
-           int(seed), float(end_radius), kc, int(min_gain), bool(neighbours), int(core))
+           int(seed), sight.end_radius, sight.kc, int(min_gain), bool(neighbours), int(core))
     cached = simplified._cache.get(key)
     if cached is not None:
         return cached
-    curve = {"curvature": curvature, "earth_radius": earth_radius}
     n_core = min(int(n_partners), int(core))
     core_key = key[:4] + key[5:10] + ("core", n_core)  # the core does not depend on the neighbours
     inner = simplified._cache.get(core_key)
     if inner is None:
-        inner = _core(original, simplified, height, move, n_core, sweeps, seed, end_radius, curve, min_gain)
+        inner = _core(original, simplified, height, move, n_core, sweeps, seed, sight, min_gain)
         simplified._cache[core_key] = inner
     out = inner
     if n_partners > n_core:
@@ -266,8 +277,8 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
         ground = simplified.height_at(xy)
         z_s = ground + height
         if move and xy.shape[0] and inner.xy.shape[0]:
-            z_s = _place(np.column_stack([xy, z_t]), simplified, original, inner, height, neighbours, end_radius,
-                         curve, min_gain)
+            z_s = _place(np.column_stack([xy, z_t]), simplified, original, inner, height, neighbours, sight,
+                         min_gain)
         out = Partners(np.concatenate([inner.xy, xy]), np.concatenate([inner.z_original, z_t]),
                        np.concatenate([inner.z_simplified, z_s]), np.concatenate([inner.ground_simplified, ground]),
                        inner.visible)
@@ -276,9 +287,8 @@ def partners(original: HeightGrid, simplified, *, height: float, move: bool, n_p
 
 
 def _core(original: HeightGrid, simplified, height: float, move: bool, k: int, sweeps: int, seed: int,
-          end_radius: float, curve: dict, min_gain: int) -> Partners:
+          sight: Sight, min_gain: int) -> Partners:
     """The core partners: ``k`` stratified positions, calibrated jointly by Gauss-Seidel sweeps (``move``)."""
-    kc = curvature_coefficient(**curve)
     xy = _positions(original, simplified, k, seed)
     z_t = original.height_at(xy) + height
     ground = simplified.height_at(xy)
@@ -288,15 +298,15 @@ def _core(original: HeightGrid, simplified, height: float, move: bool, k: int, s
         from ..visibility import visibility_matrix
 
         at = np.column_stack([xy, z_t])
-        visible = _cached(("matrix",) + _key(original, curve, at),
-                          lambda: visibility_matrix(original, at, engine="grid", **curve))
+        visible = _cached(("matrix",) + _key(original, sight, at),
+                          lambda: visibility_matrix(original, at, sight=_on_original(sight)))
         surf = ThresholdSurface(simplified)
         q = surf.local(np.column_stack([xy, z_s]))
         order_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5EED]))
         n = xy.shape[0]
         for _ in range(sweeps):
             order = order_rng.permutation(n).astype(np.int64)
-            gauss_seidel(surf, q, order, visible, end_radius=end_radius, kc=kc, min_gain=min_gain,
+            gauss_seidel(surf, q, order, visible, end_radius=sight.end_radius, kc=sight.kc, min_gain=min_gain,
                          window=_window(surf, z_t, z_s))
         z_s = q[:, 2].copy()
     return Partners(xy, z_t, z_s, ground, visible)
@@ -346,36 +356,36 @@ def calibrated_heights(points, simplified, original, *, offset: float = 0.0, tar
     pts = np.asarray(points, dtype=np.float64)
     move = target_height is None
     height = float(offset if move else target_height)
-    curve = {"curvature": curvature, "earth_radius": earth_radius}
     part = partners(original, simplified, height=height, move=move, n_partners=n_partners, sweeps=sweeps,
-                    seed=seed, end_radius=end_radius, min_gain=min_gain, neighbours=neighbours, **curve)
+                    seed=seed, end_radius=end_radius, min_gain=min_gain, neighbours=neighbours, curvature=curvature,
+                    earth_radius=earth_radius)
     if pts.shape[0] == 0 or part.xy.shape[0] == 0:
         return simplified.height_at(pts[:, :2]) + offset
-    return _place(pts, simplified, original, part, offset, neighbours, end_radius, curve, min_gain, height=height)
+    return _place(pts, simplified, original, part, offset, neighbours, _sight(end_radius, curvature, earth_radius),
+                  min_gain, height=height)
 
 
 def _place(pts: np.ndarray, simplified, original: HeightGrid, part: Partners, offset: float, neighbours: bool,
-           end_radius: float, curve: dict, min_gain: int, height: float | None = None) -> np.ndarray:
+           sight: Sight, min_gain: int, height: float | None = None) -> np.ndarray:
     """The best height on S(T) of each point ``pts`` (n, 3; ``offset`` above T) against the
     partners ``part``, counting its neighbours (standing ``height`` above the surfaces,
     ``offset`` by default) when ``neighbours``."""
     height = float(offset if height is None else height)
-    kc = curvature_coefficient(**curve)
     n = pts.shape[0]
-    vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]), curve)
+    vis = _verdicts_on_original(original, pts, np.column_stack([part.xy, part.z_original]), sight)
     surf = ThresholdSurface(simplified)
     ground = simplified.height_at(pts[:, :2])
     p = surf.local(np.column_stack([pts[:, :2], ground + offset]))
     q = surf.local(np.column_stack([part.xy, part.z_simplified]))
     if neighbours:
-        near, near_vis = _neighbours(original, simplified, pts, height, curve)
+        near, near_vis = _neighbours(original, simplified, pts, height, sight)
         lthr = _neighbour_thresholds(simplified, np.column_stack([pts[:, :2], ground + offset]), near, near_vis,
-                                     surf.tol, end_radius, curve)
+                                     surf.tol, sight)
     else:
         lthr, near_vis = np.zeros((n, 0)), np.zeros((n, 0), dtype=np.int8)
     weight = float(neighbour_weight(q.shape[0]))
     out, _ = best_heights(surf, p, q, vis, neighbour_thresholds=lthr, neighbour_verdicts=near_vis, weight=weight,
-                          end_radius=end_radius, kc=kc, min_gain=min_gain,
+                          end_radius=sight.end_radius, kc=sight.kc, min_gain=min_gain,
                           window=_window(surf, part.z_original, part.ground_simplified + height))
     return out
 
@@ -418,7 +428,7 @@ def best_responses(points: np.ndarray, simplified, verdicts: np.ndarray, counted
     return q[:, 2].copy(), moved
 
 
-def _neighbour_thresholds(simplified, ref, near, near_vis, tol, end_radius, curve) -> np.ndarray:
+def _neighbour_thresholds(simplified, ref, near, near_vis, tol, sight: Sight) -> np.ndarray:
     """(n, L) thresholds of the points at ``ref`` (n, 3: their reference heights on S(T)) for
     neighbours that move with them: a neighbour stands at ``near`` (its reference height)
     raised by the same amount as the point, so the segment rises as a whole and its least
@@ -430,7 +440,7 @@ def _neighbour_thresholds(simplified, ref, near, near_vis, tol, end_radius, curv
     ok = near_vis >= 0
     if ok.any():
         rows = np.nonzero(ok)[0]
-        mc = _min_clearance(simplified, ref[rows], near[ok], end_radius, curve)
+        mc = _min_clearance(simplified, ref[rows], near[ok], sight)
         tested = np.isfinite(mc)
         vals = np.full(rows.size, -np.inf)
         vals[tested] = ref[rows[tested], 2] - tol - mc[tested]
@@ -438,17 +448,16 @@ def _neighbour_thresholds(simplified, ref, near, near_vis, tol, end_radius, curv
     return lthr
 
 
-def _min_clearance(simplified, a: np.ndarray, b: np.ndarray, end_radius: float, curve: dict) -> np.ndarray:
+def _min_clearance(simplified, a: np.ndarray, b: np.ndarray, sight: Sight) -> np.ndarray:
     """:func:`terrainvis.min_clearance` of the points and their neighbours, known to lie
     inside S(T)'s footprint (both surfaces have a height at each), without its checks."""
     from ..visibility.los import segment_clearances
 
     return segment_clearances(simplified, np.ascontiguousarray(a, dtype=np.float64),
-                              np.ascontiguousarray(b, dtype=np.float64), end_radius=float(end_radius),
-                              kc=curvature_coefficient(**curve))
+                              np.ascontiguousarray(b, dtype=np.float64), end_radius=sight.end_radius, kc=sight.kc)
 
 
-def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float, curve: dict):
+def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float, sight: Sight):
     """Each point's neighbours: positions on :data:`NEIGHBOUR_RINGS` around it, standing
     ``height`` above S(T), (n, L, 3), and the point's verdicts to them on T (standing
     ``height`` above T), (n, L) int8: 1 seen, 0 not, -1 no neighbour (off either surface).
@@ -473,8 +482,8 @@ def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float
     if ok.any():
         src = np.repeat(pts, offsets.shape[0], axis=0)[ok]
         dst = np.column_stack([flat[ok], z_t[ok] + height])
-        key = ("neighbours",) + _key(original, curve, src, dst)
-        seen = _cached(key, lambda: _pairs_on_original(original, src, dst, curve))
+        key = ("neighbours",) + _key(original, sight, src, dst)
+        seen = _cached(key, lambda: _pairs_on_original(original, src, dst, sight))
         vis[ok] = seen
     # a missing neighbour stands on the point itself: its threshold is never tested
     near = np.column_stack([np.where(ok[:, None], flat, np.repeat(pts[:, :2], offsets.shape[0], axis=0)),
@@ -482,13 +491,13 @@ def _neighbours(original: HeightGrid, simplified, pts: np.ndarray, height: float
     return near.reshape(n, offsets.shape[0], 3), vis.reshape(n, offsets.shape[0])
 
 
-def _pairs_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, curve: dict) -> np.ndarray:
+def _pairs_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, sight: Sight) -> np.ndarray:
     from ..visibility import line_of_sight
 
     out = np.empty(a.shape[0], dtype=bool)
     for i in range(0, a.shape[0], _CHUNK_PAIRS):
         out[i:i + _CHUNK_PAIRS] = line_of_sight(original, a[i:i + _CHUNK_PAIRS], b[i:i + _CHUNK_PAIRS],
-                                                engine="grid", **curve)
+                                                sight=_on_original(sight))
     return out
 
 

@@ -20,6 +20,9 @@ from terrainvis.relocation import calibrated as cal
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.terrain import TIN, HeightGrid
 
+#: The calibrated relocation's predicate on a flat earth without an end radius (its internal functions take one).
+FLAT = cal._sight(0.0, 0.0, cal.EARTH_RADIUS)
+
 
 def _random_grid(seed, rows=9, cols=11, rectilinear=False):
     rng = np.random.default_rng(seed)
@@ -247,8 +250,8 @@ def test_the_height_with_neighbours_is_the_best_by_the_exact_engine(method):
     z = cal.calibrated_heights(P, S, T, n_partners=64)
     part = cal.partners(T, S, height=0.0, move=True, n_partners=64)
     q = np.column_stack([part.xy, part.z_simplified])
-    vis = cal._verdicts_on_original(T, P, np.column_stack([part.xy, part.z_original]), {})
-    near, near_vis = cal._neighbours(T, S, P, 0.0, {})
+    vis = cal._verdicts_on_original(T, P, np.column_stack([part.xy, part.z_original]), FLAT)
+    near, near_vis = cal._neighbours(T, S, P, 0.0, FLAT)
     tol = tv.visibility.clearance_tolerance(S)
     ground = S.height_at(P[:, :2])
     rng = np.random.default_rng(5)
@@ -276,7 +279,7 @@ def test_neighbours_on_t_are_the_exact_engines():
     T = tv.experiment.resolve_terrains(["hills"])["hills"]
     P = tv.sample_points(T, 7, seed=4)
     S = simplifiers.simplify(T, "gls", 2)
-    near, near_vis = cal._neighbours(T, S, P, 1.5, {})
+    near, near_vis = cal._neighbours(T, S, P, 1.5, FLAT)
     for i in range(P.shape[0]):
         ok = near_vis[i] >= 0
         q = np.column_stack([near[i][ok, :2], T.height_at(near[i][ok, :2]) + 1.5])
@@ -300,7 +303,7 @@ def test_the_agreement_it_counts_is_the_exact_engines(hills, method):
     S = simplifiers.simplify(T, method, 3)
     part = cal.partners(T, S, height=0.0, move=True, n_partners=144, sweeps=2)
     z = cal.calibrated_heights(P, S, T, n_partners=144, sweeps=2, neighbours=False)  # the partners alone
-    vis = cal._verdicts_on_original(T, P, np.column_stack([part.xy, part.z_original]), {})
+    vis = cal._verdicts_on_original(T, P, np.column_stack([part.xy, part.z_original]), FLAT)
     q = np.column_stack([part.xy, part.z_simplified])
     surf = thresholds.ThresholdSurface(S)
     thr = _thresholds(S, np.column_stack([P[:, :2], S.height_at(P[:, :2])]), q)
@@ -343,12 +346,12 @@ def test_the_partners_beyond_the_core_stand_where_points_would(hills, method):
     assert part.visible.shape == (k, k)
     outer = np.column_stack([part.xy[k:], T.height_at(part.xy[k:])])
     assert np.array_equal(part.z_original[k:], outer[:, 2])
-    placed = cal._place(outer, S, T, core, 0.0, True, 0.0, {}, cal.MIN_GAIN)
+    placed = cal._place(outer, S, T, core, 0.0, True, FLAT, cal.MIN_GAIN)
     assert np.array_equal(part.z_simplified[k:], placed)
     assert np.any(placed != S.height_at(outer[:, :2]))  # some moved off the full projection
     # without neighbours, they are placed without them, as the points would be
     bare = cal.partners(T, S, height=0.0, move=True, n_partners=150, core=64, neighbours=False)
-    assert np.array_equal(bare.z_simplified[k:], cal._place(outer, S, T, core, 0.0, False, 0.0, {}, cal.MIN_GAIN))
+    assert np.array_equal(bare.z_simplified[k:], cal._place(outer, S, T, core, 0.0, False, FLAT, cal.MIN_GAIN))
     # the targets setting: every partner, core or not, stays on the surface
     fixed = cal.partners(T, S, height=2.0, move=False, n_partners=150, core=64)
     assert np.array_equal(fixed.z_simplified, S.height_at(fixed.xy) + 2.0)
