@@ -61,7 +61,7 @@ __all__ = ["EyeSurface", "eye_surface", "relocate_eye", "shipped_bytes", "MU", "
 
 #: The mu-law constant of the stored offsets: code k in [-127, 127] stands for
 #: ``sign(k) * expm1(|k| / 127 * log1p(MU)) * scale / MU``, so the smallest step is about
-#: ``scale / 13,600`` (0.7 mm for offsets up to 9 m) and the largest 8 % of the value.
+#: ``scale / 133,000`` (0.07 mm for offsets up to 9 m) and each step above it 7.5 % of the value.
 MU = 1.0e4
 #: The largest code (int8).
 LEVELS = 127
