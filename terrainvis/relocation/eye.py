@@ -20,6 +20,15 @@ Between the nodes ``e`` is bilinear. Where full projection already keeps every v
 of a node (against its partners and neighbours), the calibrated relocation does not move
 it, and its offset is exactly 0.
 
+Between nodes the calibrated offsets are not always what a fresh point needs: where
+S(T) is close to T (level 1) they vary within a cell of T, and interpolated offsets can
+keep fewer verdicts than full projection. So the fit checks itself (``validate=True``)
+on :data:`VALIDATION_SETS` sets of :data:`VALIDATION_POINTS` points of its own (from its
+own seed stream, never the points it will serve): their pairs' verdicts on T against
+those on S(T) with the offsets scaled by each factor of :data:`SHRINKS`, and keeps the
+first factor that keeps the most (0: the surface is full projection, never worse than
+it on those points).
+
 The representation
 ------------------
 The lattice is as fine as the byte budget allows (by default the bytes of S(T) itself:
@@ -52,12 +61,13 @@ from pathlib import Path
 import numpy as np
 
 from ..core.terrain import TIN, HeightGrid, fingerprint
-from ..core.validate import as_finite_scalar, as_int, as_points, describe
+from ..core.validate import as_bool, as_finite_scalar, as_int, as_points, describe
+from ..tolerances import EXTENT_INSIDE_REL
 from ..visibility import EARTH_RADIUS
 from .calibrated import MIN_GAIN, N_PARTNERS, SWEEPS
 
 __all__ = ["EyeSurface", "eye_surface", "relocate_eye", "shipped_bytes", "MU", "MAX_NODES", "FORMAT",
-           "FORMAT_VERSION", "HEADER_BYTES"]
+           "FORMAT_VERSION", "HEADER_BYTES", "SHRINKS", "VALIDATION_SETS", "VALIDATION_POINTS"]
 
 #: The mu-law constant of the stored offsets: code k in [-127, 127] stands for
 #: ``sign(k) * expm1(|k| / 127 * log1p(MU)) * scale / MU``, so the smallest step is about
@@ -74,8 +84,12 @@ FORMAT_VERSION = 1
 #: Bytes an eye surface ships besides its codes: eight float64 (extent, scale, mu, offset,
 #: target height).
 HEADER_BYTES = 64
-#: Points this far outside the lattice's extent (a fraction of its size) still count as inside.
-_EDGE_REL = 1e-9
+#: The shrink factors a fit tries on its validation points (the first that keeps the most
+#: verdicts is kept; 0 is full projection).
+SHRINKS = (1.0, 0.5, 0.0)
+#: Validation point sets of a fit, and points per set.
+VALIDATION_SETS = 4
+VALIDATION_POINTS = 50
 
 _KEYS = ("eye_format", "eye_format_version", "eye_codes", "eye_extent", "eye_scale", "eye_mu", "eye_offset",
          "eye_target_height")
@@ -207,7 +221,7 @@ class EyeSurface:
         q = as_points(xy, "xy", 2)
         x0, x1, y0, y1 = self.extent
         ny, nx = self.codes.shape
-        tx, ty = _EDGE_REL * (x1 - x0), _EDGE_REL * (y1 - y0)
+        tx, ty = EXTENT_INSIDE_REL * (x1 - x0), EXTENT_INSIDE_REL * (y1 - y0)
         outside = (q[:, 0] < x0 - tx) | (q[:, 0] > x1 + tx) | (q[:, 1] < y0 - ty) | (q[:, 1] > y1 + ty)
         if outside.any():
             first = int(np.flatnonzero(outside)[0])
@@ -371,7 +385,7 @@ def lattice_shape(original: HeightGrid, nodes: int) -> tuple[int, int]:
 def eye_surface(original, simplified, *, offset: float = 0.0, target_height=None, budget=None, shape=None,
                 max_nodes: int = MAX_NODES, n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
                 end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
-                min_gain: int = MIN_GAIN, neighbours: bool = True) -> EyeSurface:
+                min_gain: int = MIN_GAIN, neighbours: bool = True, validate: bool = True) -> EyeSurface:
     """Fit the eye surface of a simplification: the calibrated relocation, shipped without T.
 
     Parameters
@@ -396,6 +410,9 @@ def eye_surface(original, simplified, *, offset: float = 0.0, target_height=None
     n_partners, sweeps, seed, end_radius, curvature, earth_radius, min_gain, neighbours
         The calibrated relocation's (:func:`terrainvis.relocation.calibrated.relocate_calibrated`);
         the lattice's nodes are the points it relocates.
+    validate : bool
+        Scale the offsets by the factor of :data:`SHRINKS` that keeps the most verdicts of
+        the fit's own validation points (see the module docstring); False: keep them whole.
 
     Returns
     -------
@@ -441,7 +458,35 @@ def eye_surface(original, simplified, *, offset: float = 0.0, target_height=None
     offsets = moved[:, 2] - (simplified.height_at(xy) + off)
     scale = float(np.max(np.abs(offsets))) if offsets.size else 0.0
     codes = encode(offsets, scale).reshape(ny, nx)
-    return EyeSurface(codes, extent, scale, off, target_height)
+    out = EyeSurface(codes, extent, scale, off, target_height)
+    if as_bool(validate, "validate") and scale > 0:
+        shrink = _validated_shrink(out, original, simplified, seed, curvature, earth_radius, end_radius)
+        if shrink != 1.0:
+            out = EyeSurface(codes, extent, scale * shrink, off, target_height)
+    return out
+
+
+def _validated_shrink(eye: EyeSurface, original, simplified, seed: int, curvature: float, earth_radius: float,
+                      end_radius: float) -> float:
+    """The first factor of :data:`SHRINKS` whose scaled offsets keep the most verdicts of the
+    fit's own validation pairs (points ``eye.offset`` above T; their own seed stream)."""
+    from ..core.sampling import sample_points
+    from ..visibility import visibility_matrix
+
+    curve = {"curvature": curvature, "earth_radius": earth_radius}
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xE7E5]))
+    kept = np.zeros(len(SHRINKS))
+    for _ in range(VALIDATION_SETS):
+        pts = sample_points(original, VALIDATION_POINTS, seed=rng, offset=eye.offset)
+        truth = visibility_matrix(original, pts, engine="grid", **curve)
+        ground = simplified.height_at(pts[:, :2]) + eye.offset
+        e = eye.offset_at(pts[:, :2])
+        upper = np.triu(np.ones(truth.shape, dtype=bool), 1)
+        for k, f in enumerate(SHRINKS):
+            placed = np.column_stack([pts[:, :2], ground + f * e])
+            seen = visibility_matrix(simplified, placed, end_radius=end_radius, **curve)
+            kept[k] += np.count_nonzero((seen == truth) & upper)
+    return float(SHRINKS[int(np.argmax(kept))])
 
 
 # ---------------------------------------------------------------------- the relocation

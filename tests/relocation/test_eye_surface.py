@@ -115,7 +115,7 @@ def test_offsets_are_zero_where_full_projection_keeps_every_verdict():
     offset is exactly 0; elsewhere some nodes move."""
     T = tv.synthetic_terrain("hills", size=21, seed=5)
     S = simplifiers.simplify(T, "lls", 1)
-    opts = dict(n_partners=64, neighbours=False)
+    opts = dict(n_partners=64, neighbours=False, validate=False)
     e = tv.eye_surface(T, S, shape=T.shape, **opts)
     part = cal.partners(T, S, height=0.0, move=True, n_partners=64, neighbours=False)
     nodes = e.node_xy()
@@ -127,15 +127,16 @@ def test_offsets_are_zero_where_full_projection_keeps_every_verdict():
     b_s = np.tile(np.column_stack([part.xy, part.z_simplified]), (nodes.shape[0], 1))
     same = (tv.line_of_sight(T, a_t, b_t, engine="grid") == tv.line_of_sight(S, a_s, b_s, engine="grid"))
     kept_all = same.reshape(nodes.shape[0], k).all(axis=1)
-    codes = e.codes.ravel()
+    offsets = e.node_offsets.ravel()
     assert kept_all.sum() > 20 and (~kept_all).sum() > 20  # both kinds of node occur: the test can fail
-    assert not codes[kept_all].any()
-    assert codes[~kept_all].any()
+    assert not offsets[kept_all].any()
+    assert offsets[~kept_all].any()
 
 
 def test_the_nodes_hold_the_calibrated_offsets(hills):
     """At its nodes the surface gives the calibrated height, to the code's step."""
-    T, S, e = hills
+    T, S, _ = hills
+    e = tv.eye_surface(T, S, validate=False, **FIT)
     xy = e.node_xy()
     exact = tv.relocate(np.column_stack([xy, T.height_at(xy)]), S, "calibrated", original=T, **FIT)[:, 2]
     exact = exact - S.height_at(xy)
@@ -143,6 +144,20 @@ def test_the_nodes_hold_the_calibrated_offsets(hills):
     got = e.offset_at(xy)
     assert np.all(np.abs(got - exact) <= half * (np.abs(exact) + e.scale / eyemod.MU) + 1e-9)
     assert np.abs(exact).max() > 0.1  # S(T) is not T: there is something to fit
+
+
+def test_the_validation_scales_the_offsets_by_one_factor(hills, monkeypatch):
+    T, S, e = hills
+    whole = tv.eye_surface(T, S, validate=False, **FIT)
+    np.testing.assert_array_equal(e.codes, whole.codes)
+    assert e.scale in [f * whole.scale for f in eyemod.SHRINKS]
+    monkeypatch.setattr(eyemod, "SHRINKS", (0.0,))  # only full projection to choose from
+    P = tv.sample_points(T, 20, seed=3)
+    S2 = simplifiers.simplify(T, "lls", 2)  # a fresh S(T): nothing cached
+    np.testing.assert_array_equal(tv.relocate(P, S2, "eye", eye=tv.eye_surface(T, S2, **FIT)),
+                                  tv.relocate(P, S2, "full"))
+    monkeypatch.setattr(eyemod, "SHRINKS", (1.0,))
+    assert tv.eye_surface(T, S2, **FIT).scale == whole.scale
 
 
 def test_by_default_it_is_no_larger_than_S(hills):
