@@ -22,6 +22,10 @@ Two workloads:
     python benchmarks/bench_eye_surface.py --quick            # hills and mountains; lls, gls, qec, greedy-insertion
     python benchmarks/bench_eye_surface.py                    # the bundled terrains, every method, levels 1-3
     python benchmarks/bench_eye_surface.py --workloads curve --terrains hills --methods lls qec --levels 1 3
+    python benchmarks/bench_eye_surface.py --terrains green_mountains_vt jacksboro_fault_tn --methods lls qec
+
+``--terrains`` takes the bundled terrains and the shared real DEMs (120 x 120 crops of
+their middle, read from ``$TERRAINVIS_SHARED_DEMS``, default ``/work/shared/data/dem``).
 """
 
 from __future__ import annotations
@@ -29,7 +33,9 @@ from __future__ import annotations
 import argparse
 import copy
 import heapq
+import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -38,7 +44,23 @@ import terrainvis as tv
 from terrainvis.relocation.eye import HEADER_BYTES, MU, shipped_bytes
 
 BUNDLED = ("hills", "mountains", "mesas", "ridges", "rough")
+#: The shared real DEMs (read where they are, never copied): a 120 x 120 window from the
+#: middle of each one's valid part, as ``studies/relocation_dems.py`` crops them.
+DEMS = ("green_mountains_vt", "jacksboro_fault_tn", "mount_st_helens_wa", "west_bijou_escarpment_co")
+SHARED = Path(os.environ.get("TERRAINVIS_SHARED_DEMS", "/work/shared/data/dem"))
 QUICK = dict(terrains=["hills", "mountains"], methods=["lls", "gls", "qec", "greedy-insertion"])
+
+
+def _terrain(name: str) -> tv.HeightGrid:
+    if name in DEMS:
+        grid = tv.load_dem(SHARED / f"{name}.npz")
+        rs, cs = grid.valid_window()
+        grid = grid.crop(rs, cs)
+        rows, cols = grid.shape
+        n_r, n_c = min(120, rows), min(120, cols)
+        r0, c0 = (rows - n_r) // 2, (cols - n_c) // 2
+        return grid.crop(rows=(r0, r0 + n_r), cols=(c0, c0 + n_c))
+    return tv.bundled_terrain(name)
 
 
 def _fresh_sets(T, name: str, n: int, sets: int, seed: int):
@@ -62,7 +84,7 @@ def table(args) -> None:
     tot = {"cal": 0.0, "eye": 0.0}
     by_level: dict = {}
     for name in args.terrains:
-        T = tv.bundled_terrain(name)
+        T = _terrain(name)
         sets = _fresh_sets(T, name, args.points, args.sets, args.fresh_seed)
         truths = [tv.visibility_matrix(T, P) for P in sets]
         for method in args.methods:
@@ -192,7 +214,7 @@ class _Quadtree:
 def curve(args) -> None:
     rows: dict = {}
     for name in args.terrains:
-        T = tv.bundled_terrain(name)
+        T = _terrain(name)
         sets = _fresh_sets(T, name, args.points, args.sets, args.fresh_seed)
         truths = [tv.visibility_matrix(T, P) for P in sets]
         X, Y = np.meshgrid(T.xs, T.ys)
