@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.memory import check_memory
-from ..core.validate import as_points
+from ..core.validate import as_points, describe
 from ..core.terrain import HeightGrid, as_terrain
 from . import embree as _embree
 from .engines import Predicate, choose
@@ -122,7 +122,7 @@ def segment_clearances(terrain, a: np.ndarray, b: np.ndarray, *, end_radius: flo
 
 def line_of_sight(
     terrain, a, b, *, engine: str = "auto", end_radius: float = 0.0, curvature: float = 0.0,
-    earth_radius: float = EARTH_RADIUS,
+    earth_radius: float = EARTH_RADIUS, eye=None,
 ) -> np.ndarray:
     """Whether each pair of points a[i], b[i] sees each other.
 
@@ -149,6 +149,11 @@ def line_of_sight(
     earth_radius : float, default 6378137.0
         Radius of the earth in the terrain's x/y units (WGS84's semi-major axis in
         metres, as GDAL takes it).
+    eye : EyeSurface, optional
+        The eye surface shipped with ``terrain`` as S(T) (:func:`terrainvis.eye_surface`):
+        each point then stands where it places it, ``terrain(x, y)`` plus its eye height
+        plus its offset there, as ``relocate(points, terrain, "eye", eye=eye)`` places
+        them (the given heights are not read).
 
     Returns
     -------
@@ -162,6 +167,8 @@ def line_of_sight(
     [False, True]
     """
     a, b = _prepare_segments(terrain, a, b, "line_of_sight")
+    if eye is not None:
+        a, b = _eye_heights(eye, terrain, a), _eye_heights(eye, terrain, b)
     kc = curvature_coefficient(curvature, earth_radius)
     chosen = choose(engine, terrain, kc)
     predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), _check_end_radius(end_radius), kc)
@@ -170,7 +177,7 @@ def line_of_sight(
 
 def visibility_matrix(
     terrain, points, *, engine: str = "auto", end_radius: float = 0.0, curvature: float = 0.0,
-    earth_radius: float = EARTH_RADIUS,
+    earth_radius: float = EARTH_RADIUS, eye=None,
 ) -> np.ndarray:
     """Mutual visibility of every pair of points.
 
@@ -197,6 +204,11 @@ def visibility_matrix(
     earth_radius : float, default 6378137.0
         Radius of the earth in the terrain's x/y units (WGS84's semi-major axis in
         metres, as GDAL takes it).
+    eye : EyeSurface, optional
+        The eye surface shipped with ``terrain`` as S(T) (:func:`terrainvis.eye_surface`):
+        each point then stands where it places it, ``terrain(x, y)`` plus its eye height
+        plus its offset there, as ``relocate(points, terrain, "eye", eye=eye)`` places
+        them (the given heights are not read).
 
     Returns
     -------
@@ -217,7 +229,22 @@ def visibility_matrix(
     n = pts.shape[0]
     check_memory(n * n, f"visibility_matrix of {n:,} points (a {n:,} x {n:,} boolean matrix)")
     _check_inside(terrain, pts, "points")
+    if eye is not None:
+        pts = _eye_heights(eye, terrain, pts)
     kc = curvature_coefficient(curvature, earth_radius)
     chosen = choose(engine, terrain, kc)
     predicate = Predicate(trim_length(terrain), clearance_tolerance(terrain), _check_end_radius(end_radius), kc)
     return np.asarray(chosen.matrix(terrain, pts, predicate), dtype=bool)
+
+
+def _eye_heights(eye, terrain, points: np.ndarray) -> np.ndarray:
+    """``points`` (checked, inside the footprint) at the heights ``eye`` gives them on ``terrain``
+    (a new array). ``eye`` is anything with ``heights(points, terrain)``: an EyeSurface of
+    :mod:`terrainvis.relocation.eye`, which this layer does not import."""
+    heights = getattr(eye, "heights", None)
+    if not callable(heights):
+        raise TypeError(f"eye must be an EyeSurface (terrainvis.eye_surface), got {describe(eye)}")
+    out = np.array(points, dtype=np.float64, copy=True)
+    if out.shape[0]:
+        out[:, 2] = heights(out, terrain)
+    return np.ascontiguousarray(out)

@@ -277,3 +277,18 @@ def test_compare_fits_it_once_per_unit_and_reports_it():
     assert set(df["relocation"]) == {"full", "calibrated", "eye"}
     eye = df[df["relocation"] == "eye"]
     assert len(eye) == 2 and eye["accuracy"].between(0, 1).all()
+
+
+def test_line_of_sight_and_the_matrix_take_the_eye_surface(hills):
+    """eye= on S(T) places the ends as relocate(..., "eye") does, the given heights unread."""
+    T, S, e = hills
+    P = tv.sample_points(T, 25, seed=21)
+    moved = tv.relocate(P, S, "eye", eye=e)
+    junk = P.copy()
+    junk[:, 2] = -1e3  # under the ground: would see nothing if read
+    np.testing.assert_array_equal(tv.visibility_matrix(S, junk, eye=e), tv.visibility_matrix(S, moved))
+    a, b = junk[:12], junk[12:24]
+    np.testing.assert_array_equal(tv.line_of_sight(S, a, b, eye=e), tv.line_of_sight(S, moved[:12], moved[12:24]))
+    assert tv.visibility_matrix(S, moved).sum() > 25  # some pairs are seen: the comparison can fail
+    with pytest.raises(TypeError, match="eye must be an EyeSurface"):
+        tv.visibility_matrix(S, P, eye=object())
