@@ -40,6 +40,8 @@ _API = {
     "site_observers": "terrainvis.visibility",
     "candidate_grid": "terrainvis.visibility",
     "relocate": "terrainvis.relocation",
+    "eye_surface": "terrainvis.relocation",
+    "EyeSurface": "terrainvis.relocation",
     "agreement": "terrainvis.core.metrics",
     "vertical_errors": "terrainvis.core.deviation",
     "volume_error": "terrainvis.core.deviation",

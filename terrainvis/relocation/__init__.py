@@ -3,11 +3,13 @@
 :func:`relocate` dispatches by name on the registry :data:`RELOCATIONS`
 (:mod:`~terrainvis.relocation.registry`); :func:`register` adds a relocation of your own.
 The relocations themselves: :mod:`~terrainvis.relocation.paper` (identity, full, half),
-:mod:`~terrainvis.relocation.calibrated` and :mod:`~terrainvis.relocation.oracle`.
+:mod:`~terrainvis.relocation.calibrated`, :mod:`~terrainvis.relocation.eye` (the calibrated
+relocation shipped with S(T), without T) and :mod:`~terrainvis.relocation.oracle`.
 """
 
 from .registry import (
     CALIBRATED,
+    EYE,
     ORACLE,
     PAPER_RELOCATIONS,
     RELOCATIONS,
@@ -22,5 +24,19 @@ from .registry import (
 
 __all__ = [
     "relocate", "Relocation", "RELOCATIONS", "register", "unregister", "available", "default_relocations",
-    "practical_relocations", "PAPER_RELOCATIONS", "CALIBRATED", "ORACLE",
+    "practical_relocations", "PAPER_RELOCATIONS", "CALIBRATED", "EYE", "ORACLE",
+    "EyeSurface", "eye_surface",
 ]
+
+
+def __getattr__(name):
+    # the eye surface's module imports the calibrated relocation's walks: only when asked for
+    if name in ("EyeSurface", "eye_surface"):
+        from . import eye
+
+        return getattr(eye, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -18,6 +18,11 @@ The built-in ones:
     against partners spread over the terrain that stand for the points it will be tested
     with (never the other points themselves): :mod:`terrainvis.relocation.calibrated`.
     It needs T (``original=``).
+``"eye"``
+    The calibrated relocation without T: each point at S(T) plus the offset an *eye
+    surface* (fitted once from T and S(T), shipped with S(T)) gives there
+    (:mod:`terrainvis.relocation.eye`). It needs ``eye=`` (or ``original=``, T, to fit one
+    once per S(T), as :func:`terrainvis.compare` does). Not in the default set.
 ``"oracle"`` (a bound, not a practical relocation)
     Coordinate descent of the points' heights on the agreement of their own pairs with
     T's verdicts (:mod:`terrainvis.relocation.oracle`): it needs those verdicts
@@ -39,13 +44,15 @@ from ..core.validate import as_finite_scalar, as_points, describe
 
 __all__ = [
     "Relocation", "RELOCATIONS", "register", "unregister", "available", "default_relocations",
-    "practical_relocations", "relocate", "PAPER_RELOCATIONS", "CALIBRATED", "ORACLE",
+    "practical_relocations", "relocate", "PAPER_RELOCATIONS", "CALIBRATED", "EYE", "ORACLE",
 ]
 
 #: The paper's relocations, in the paper's order.
 PAPER_RELOCATIONS = ("identity", "full", "half")
 #: The calibrated relocation's name.
 CALIBRATED = "calibrated"
+#: The eye surface's relocation's name (not a default: the golden tables stay the paper's and the calibrated).
+EYE = "eye"
 #: The oracle bound's name.
 ORACLE = "oracle"
 
@@ -141,6 +148,20 @@ def _calibrated_memory(settings) -> tuple[int, str]:
             f"n_partners={settings.n_partners:,} (the calibrated relocation's partners)")
 
 
+def _eye(points, simplified, **options):
+    from .eye import relocate_eye
+
+    return relocate_eye(points, simplified, **options)
+
+
+def _eye_memory(settings) -> tuple[int, str]:
+    from .calibrated import memory_need
+    from .eye import MAX_NODES
+
+    return (memory_need(settings.n_partners, MAX_NODES),
+            f"n_partners={settings.n_partners:,} (the eye surface's fit, a calibrated relocation of its lattice)")
+
+
 def _oracle(points, simplified, **options):
     from .oracle import oracle
 
@@ -149,6 +170,7 @@ def _oracle(points, simplified, **options):
 
 _CALIBRATED_OPTIONS = ("original", "target_height", "end_radius", "curvature", "earth_radius", "n_partners", "sweeps",
                        "seed", "min_gain", "neighbours")
+_EYE_OPTIONS = ("eye",) + _CALIBRATED_OPTIONS
 _ORACLE_OPTIONS = ("reference", "mask", "original", "end_radius", "engine", "n_candidates", "start", "curvature",
                    "earth_radius")
 
@@ -165,6 +187,8 @@ RELOCATIONS: Registry = Registry("relocation", {
                    "spread over T", options=_CALIBRATED_OPTIONS, default=True, predicate=True,
                    memory=_calibrated_memory, color="tab:purple",
                    marker="D"),
+        Relocation(EYE, _eye, "the calibrated height from an eye surface shipped with S(T), without T",
+                   options=_EYE_OPTIONS, predicate=True, memory=_eye_memory, color="tab:orange", marker="v"),
         Relocation(ORACLE, _oracle, "an upper bound fitted to T's verdicts of the evaluated pairs",
                    options=_ORACLE_OPTIONS, bound=True, measures=("pairs",), starts_from=(CALIBRATED,),
                    predicate=True, color="black", marker="*", linestyle="--"),
@@ -279,7 +303,9 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, **options) ->
         The relocation's own options (its :attr:`Relocation.options`), e.g. for
         ``"calibrated"``: ``original`` (T, required), ``target_height``, ``end_radius``,
         ``curvature``, ``earth_radius``, ``n_partners``, ``sweeps``, ``seed``,
-        ``min_gain``, ``neighbours``; for ``"oracle"``: ``reference`` (required),
+        ``min_gain``, ``neighbours``; for ``"eye"``: ``eye`` (an
+        :class:`~terrainvis.relocation.eye.EyeSurface`), or ``original`` and the
+        calibrated relocation's options to fit one; for ``"oracle"``: ``reference`` (required),
         ``mask``, ``original``, ``end_radius``, ``engine``, ``n_candidates``, ``start``.
         An option that another relocation takes but this one does not is ignored, so one
         set of options can serve a loop over relocations; a name no relocation takes is

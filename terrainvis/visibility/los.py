@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.memory import check_memory
-from ..core.validate import as_points
+from ..core.validate import as_points, describe
 from ..core.terrain import HeightGrid, as_terrain
 from . import embree as _embree
 from .engines import Predicate, choose
@@ -127,7 +127,7 @@ def segment_clearances(terrain, a: np.ndarray, b: np.ndarray, *, end_radius: flo
 
 def line_of_sight(
     terrain, a, b, *, engine: str = "auto", end_radius: float = 0.0, curvature: float = 0.0,
-    earth_radius: float = EARTH_RADIUS, sight: Sight | None = None,
+    earth_radius: float = EARTH_RADIUS, sight: Sight | None = None, eye=None,
 ) -> np.ndarray:
     """Whether each pair of points a[i], b[i] sees each other.
 
@@ -159,6 +159,11 @@ def line_of_sight(
         radius, curvature, earth radius), instead of the keywords above; the points carry
         their own heights (the Sight's are not used) and a Sight with a field of view is
         refused (a viewshed's).
+    eye : EyeSurface, optional
+        The eye surface shipped with ``terrain`` as S(T) (:func:`terrainvis.eye_surface`):
+        each point then stands where it places it, ``terrain(x, y)`` plus its eye height
+        plus its offset there, as ``relocate(points, terrain, "eye", eye=eye)`` places
+        them (the given heights are not read).
 
     Returns
     -------
@@ -174,13 +179,15 @@ def line_of_sight(
     s = pair_sight(sight, {"engine": engine, "end_radius": end_radius, "curvature": curvature,
                            "earth_radius": earth_radius}, "line_of_sight")
     a, b = _prepare_segments(terrain, a, b, "line_of_sight")
+    if eye is not None:
+        a, b = _eye_heights(eye, terrain, a), _eye_heights(eye, terrain, b)
     chosen = choose(s.engine, terrain, s.kc)
     return np.asarray(chosen.pairs(terrain, a, b, _predicate(terrain, s)), dtype=bool)
 
 
 def visibility_matrix(
     terrain, points, *, engine: str = "auto", end_radius: float = 0.0, curvature: float = 0.0,
-    earth_radius: float = EARTH_RADIUS, sight: Sight | None = None,
+    earth_radius: float = EARTH_RADIUS, sight: Sight | None = None, eye=None,
 ) -> np.ndarray:
     """Mutual visibility of every pair of points.
 
@@ -209,6 +216,11 @@ def visibility_matrix(
         metres, as GDAL takes it).
     sight : Sight, optional
         As in :func:`line_of_sight`.
+    eye : EyeSurface, optional
+        The eye surface shipped with ``terrain`` as S(T) (:func:`terrainvis.eye_surface`):
+        each point then stands where it places it, ``terrain(x, y)`` plus its eye height
+        plus its offset there, as ``relocate(points, terrain, "eye", eye=eye)`` places
+        them (the given heights are not read).
 
     Returns
     -------
@@ -231,6 +243,8 @@ def visibility_matrix(
     n = pts.shape[0]
     check_memory(n * n, f"visibility_matrix of {n:,} points (a {n:,} x {n:,} boolean matrix)")
     _check_inside(terrain, pts, "points")
+    if eye is not None:
+        pts = _eye_heights(eye, terrain, pts)
     chosen = choose(s.engine, terrain, s.kc)
     return np.asarray(chosen.matrix(terrain, pts, _predicate(terrain, s)), dtype=bool)
 
@@ -238,3 +252,16 @@ def visibility_matrix(
 def _predicate(terrain, s: Sight) -> Predicate:
     """The engines' predicate of a Sight on ``terrain`` (its trim length and clearance tolerance)."""
     return Predicate(trim_length(terrain), clearance_tolerance(terrain), s.end_radius, s.kc)
+
+
+def _eye_heights(eye, terrain, points: np.ndarray) -> np.ndarray:
+    """``points`` (checked, inside the footprint) at the heights ``eye`` gives them on ``terrain``
+    (a new array). ``eye`` is anything with ``heights(points, terrain)``: an EyeSurface of
+    :mod:`terrainvis.relocation.eye`, which this layer does not import."""
+    heights = getattr(eye, "heights", None)
+    if not callable(heights):
+        raise TypeError(f"eye must be an EyeSurface (terrainvis.eye_surface), got {describe(eye)}")
+    out = np.array(points, dtype=np.float64, copy=True)
+    if out.shape[0]:
+        out[:, 2] = heights(out, terrain)
+    return np.ascontiguousarray(out)

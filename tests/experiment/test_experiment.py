@@ -16,7 +16,7 @@ from terrainvis import HeightGrid, compare, synthetic_terrain
 from terrainvis.experiment import COLUMNS, DEFAULT_TERRAINS, JACKSBORO_WINDOW, resolve_terrains
 from terrainvis.experiment.collect import TIMING_COLUMNS
 from terrainvis.experiment.results import settings_path
-from terrainvis.relocation.registry import PAPER_RELOCATIONS
+from terrainvis.relocation.registry import PAPER_RELOCATIONS, available
 
 MEASURED = ["accuracy", "visible_kept", "blocked_kept", "agree_visible", "agree_blocked", "false_visible",
             "false_blocked", "n_vertices", "nbytes", "max_error", "rms_error", "volume_error"]
@@ -130,7 +130,7 @@ def test_everything_is_validated_before_any_unit_runs(small):
         (dict(methods=["lls", "lls"]), ValueError, "methods must not repeat a name, got 'lls' twice"),
         (dict(methods=["decimate"]), ValueError, r"methods must be drawn from \['qec', 'greedy-cuts'"),
         (dict(relocations=["full", "full"]), ValueError, "relocations must not repeat a name"),
-        (dict(relocations=["lift"]), ValueError, r"relocations must be drawn from \['identity', 'full', 'half', 'calibrated', 'oracle'\], got 'lift'"),
+        (dict(relocations=["lift"]), ValueError, re.escape(f"relocations must be drawn from {available()}, got 'lift'")),
         (dict(engine="gird"), ValueError, re.escape(f"engine must be one of {engine_names()}, got 'gird'")),
         (dict(engine="grid", methods=["lls", "qec"]), ValueError, r"engine 'grid' works on grids only.*\['qec'\]"),
         (dict(predicate="loose"), ValueError, r"predicate must be one of \['exact', 'paper'\]"),
