@@ -25,7 +25,7 @@ Two workloads:
     python benchmarks/bench_eye_surface.py --terrains green_mountains_vt jacksboro_fault_tn --methods lls qec
 
 ``--terrains`` takes the bundled terrains and the shared real DEMs (120 x 120 crops of
-their middle, read from ``$TERRAINVIS_SHARED_DEMS``, default ``/work/shared/data/dem``).
+their middle, read from ``$TERRAINVIS_SHARED_DEMS``, default ``../shared/data/dem`` beside the repository).
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ BUNDLED = ("hills", "mountains", "mesas", "ridges", "rough")
 #: The shared real DEMs (read where they are, never copied): a 120 x 120 window from the
 #: middle of each one's valid part, as ``studies/relocation_dems.py`` crops them.
 DEMS = ("green_mountains_vt", "jacksboro_fault_tn", "mount_st_helens_wa", "west_bijou_escarpment_co")
-SHARED = Path(os.environ.get("TERRAINVIS_SHARED_DEMS", "/work/shared/data/dem"))
+SHARED = Path(os.environ.get("TERRAINVIS_SHARED_DEMS", Path(__file__).resolve().parents[2] / "shared" / "data" / "dem"))
 QUICK = dict(terrains=["hills", "mountains"], methods=["lls", "gls", "qec", "greedy-insertion"])
 
 

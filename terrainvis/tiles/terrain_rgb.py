@@ -40,7 +40,7 @@ import numpy as np
 from ..core.terrain import TIN, HeightGrid
 from ..tolerances import TILE_BUDGET_REL
 from . import quantized_mesh as qm
-from ._common import Made, equirectangular
+from ._common import Made, equirectangular, within_budget
 
 __all__ = ["DEFAULT_PIXELS", "RGB_STEP", "rgb_heights", "rgb_encode", "mercator_tile_bounds", "mercator_tiles_covering", "pixel_lattice",
            "encode_png", "decode_png"]
@@ -53,7 +53,6 @@ RGB_STEP = 0.1
 _HALF = math.pi * qm.WGS84_A
 #: Web Mercator's latitude limit (the square's edge).
 MAX_LAT = 85.0511287798066
-_RETRIES = 3
 #: The PNG text chunk holding the vertices and triangles of the surface a tile's pixels were taken from.
 _MESH_KEY = "terrainvis-mesh"
 
@@ -215,31 +214,20 @@ def _surface(lat_: PixelLattice, tin: TIN) -> np.ndarray:
 
 def make_rgb_tile(lat_: PixelLattice, method: str | None, budget: float | None):
     """Simplify (or not), rasterize, encode, measure; retries and the whole lattice as the fallback."""
-    from simplifiers import simplify
-
-    from ..errors import SimplificationError
     want = lat_.tile_heights(lat_.z)
+
+    def encode(tin):
+        surface = _surface(lat_, tin)
+        if not np.isfinite(surface).all():
+            return f"{method}'s mesh does not cover the lattice"
+        data = encode_png(lat_.tile_heights(surface), (tin.n_vertices, tin.n_faces))
+        return Made(data, float(np.abs(decode_png(data) - want).max()), tin.n_vertices, tin.n_faces), RGB_STEP
+
     fallback = None
     if method is not None:
-        target = budget
-        for _ in range(_RETRIES + 1):
-            try:
-                result = simplify(lat_.grid, method, max_error=target)
-            except (SimplificationError, ValueError) as exc:
-                fallback = f"{method} could not simplify the lattice: {exc}"
-                break
-            tin = result if isinstance(result, TIN) else result.to_tin()
-            surface = _surface(lat_, tin)
-            if not np.isfinite(surface).all():
-                fallback = f"{method}'s mesh does not cover the lattice"
-                break
-            data = encode_png(lat_.tile_heights(surface), (tin.n_vertices, tin.n_faces))
-            err = float(np.abs(decode_png(data) - want).max())
-            allowed = budget + 0.5 * RGB_STEP
-            if err <= allowed * (1 + TILE_BUDGET_REL):
-                return Made(data, err, tin.n_vertices, tin.n_faces, simplify_error=float(result.attrs["max_error"]))
-            fallback = f"over its budget after {_RETRIES + 1} tries (error {err:.4g})"
-            target = max(0.0, target - (err - allowed) - RGB_STEP)
+        made, fallback = within_budget(lat_.grid, method, budget, encode)
+        if made is not None:
+            return made
     n = lat_.pixels + 1
     mesh = (n * n, 2 * (n - 1) * (n - 1))
     data = encode_png(want, mesh)

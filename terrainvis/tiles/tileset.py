@@ -81,6 +81,7 @@ from . import quantized_mesh as qm
 from ._common import EARTH_RADIUS
 from ._common import Made as _Made
 from ._common import equirectangular as _equirectangular
+from ._common import within_budget
 from .keep_los import DEFAULT_LOS_HEIGHT, N_POINTS
 from .terrain_rgb import DEFAULT_PIXELS as RGB_PIXELS
 from .terrain_rgb import kept_rgb_tile, make_rgb_tile, mercator_tiles_covering, pixel_lattice
@@ -107,8 +108,6 @@ PARTIAL = "terrainvis-tiles.partial.json"
 API_NAMES = {"out_dir": "out_dir", "overwrite": "overwrite=True", "resume": "resume=True", "zooms": "zooms", "method": "method",
              "max_error0": "max_error0", "lattice": "lattice", "grid": "grid", "keep_los": "keep_los",
              "los_height": "los_height", "format": "format", "gzip": "gzip=True"}
-#: Retries of a tile over its budget before it is written as its whole lattice.
-_RETRIES = 3
 #: The lattice the footprint's rectangle is searched on (points per side).
 _SEARCH = 257
 _TILE_FILE = re.compile(r"^\d+$")
@@ -439,32 +438,20 @@ def _error(lat_: _Lattice, dec: qm.DecodedTile) -> float:
 
 def _make_tile(lat_: _Lattice, method: str | None, budget: float | None) -> _Made:
     """Simplify (or not), encode, measure; retries and the whole lattice as the fallback (module docstring)."""
-    from simplifiers import simplify
 
-    from ..errors import SimplificationError
+    def encode(tin):
+        made = _encode(lat_, tin)
+        if made is None:
+            return "the rounding of the vertices to the tile's positions would fold a triangle"
+        data, dec = made
+        return (_Made(data, _error(lat_, dec), dec.u.size, dec.triangles.shape[0], decoded=dec),
+                qm.height_step(dec.min_height, dec.max_height))
 
     fallback = None
     if method is not None:
-        target = budget
-        for _ in range(_RETRIES + 1):
-            try:
-                result = simplify(lat_.grid, method, max_error=target)
-            except (SimplificationError, ValueError) as exc:
-                fallback = f"{method} could not simplify the lattice: {exc}"
-                break
-            tin = result if isinstance(result, TIN) else result.to_tin()
-            made = _encode(lat_, tin)
-            if made is None:
-                fallback = "the rounding of the vertices to the tile's positions would fold a triangle"
-                break
-            data, dec = made
-            err = _error(lat_, dec)
-            allowed = budget + 0.5 * qm.height_step(dec.min_height, dec.max_height)
-            if err <= allowed * (1 + TILE_BUDGET_REL):
-                return _Made(data, err, dec.u.size, dec.triangles.shape[0],
-                             simplify_error=float(result.attrs["max_error"]), decoded=dec)
-            fallback = f"over its budget after {_RETRIES + 1} tries (error {err:.4g})"
-            target = max(0.0, target - (err - allowed) - qm.height_step(dec.min_height, dec.max_height))
+        made, fallback = within_budget(lat_.grid, method, budget, encode)
+        if made is not None:
+            return made
     data, dec = _encode(lat_, lat_.grid.to_tin())
     return _Made(data, _error(lat_, dec), dec.u.size, dec.triangles.shape[0], fallback, decoded=dec)
 
