@@ -121,6 +121,7 @@ def viewshed(
     min_distance=None,
     sight=None,
     output: str = "visible",
+    eye=None,
 ) -> np.ndarray:
     """Which samples of a grid are visible from an observer (or how far from visible they are).
 
@@ -194,6 +195,12 @@ def viewshed(
         observer, as below). On a grid with nodata the sample nearest the observer gets
         its exact value (the mask marks it True).
 
+    eye : EyeSurface, optional
+        An eye surface shipped with ``terrain`` as S(T) (:func:`terrainvis.eye_surface`):
+        the observer, given as (x, y), stands where it places it, ``terrain(x, y)`` plus the
+        surface's observer height plus its offset there, as ``relocate(..., "eye", eye=eye)``
+        places a point (then ``observer_height`` is not given, and a Sight's is not used).
+
     Returns
     -------
     (rows, cols) bool, or (rows, cols) float64 for ``output="min_height"`` or ``"angle"``
@@ -255,6 +262,8 @@ def viewshed(
            [1, 1, 1, 0, 0]])
     """
     check_output(output)
+    if eye is not None:
+        observer = _eye_observer(eye, terrain, observer, observer_height)
     s = sight_of(sight, {
         "observer_height": observer_height, "target_height": target_height, "max_distance": max_distance,
         "engine": engine, "curvature": curvature, "earth_radius": earth_radius, "azimuth": azimuth,
@@ -264,6 +273,22 @@ def viewshed(
         return _output_values(terrain, observer, output, s, at)
     out, _ = _viewshed(terrain, observer, s, at=at)
     return apply_field_of_view(out, terrain, observer, s.fov, at, (s.observer_height, s.target_height, s.kc))
+
+
+def _eye_observer(eye, terrain, observer, observer_height) -> tuple[float, float, float]:
+    """The eye (x, y, z) an eye surface gives the observer at (x, y) on ``terrain`` (S(T))."""
+    from .los import _eye_heights
+
+    xy = np.asarray(observer, dtype=np.float64)
+    if xy.shape != (2,):
+        raise ValueError(f"with eye=, observer must be its position (x, y): the eye surface gives its height; got "
+                         f"{describe(observer)}")
+    z = _eye_heights(eye, terrain, np.array([[xy[0], xy[1], 0.0]]))[0, 2]  # checks eye and the position
+    if not (np.ndim(observer_height) == 0 and observer_height == 1.7):
+        raise TypeError(f"pass either eye= or observer_height=, not both (the eye surface stands the observer "
+                        f"{eye.offset:g} above S(T) plus its offset there; got observer_height="
+                        f"{describe(observer_height)})")
+    return float(xy[0]), float(xy[1]), float(z)
 
 
 def _viewshed(terrain, observer, sight: Sight | None = None, *, at=None, **keywords):

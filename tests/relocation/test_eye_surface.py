@@ -292,3 +292,31 @@ def test_line_of_sight_and_the_matrix_take_the_eye_surface(hills):
     assert tv.visibility_matrix(S, moved).sum() > 25  # some pairs are seen: the comparison can fail
     with pytest.raises(TypeError, match="eye must be an EyeSurface"):
         tv.visibility_matrix(S, P, eye=object())
+
+
+def test_a_viewshed_takes_the_eye_surface_for_its_observer():
+    from terrainvis import line_of_sight, viewshed
+    from terrainvis.relocation.eye import EyeSurface
+
+    S = tv.synthetic_terrain("hills", size=33, seed=5)
+    x0, x1, y0, y1 = S.extent
+    codes = np.array([[0, 90, -60], [127, 0, 40], [-127, 30, 0]], dtype=np.int8)
+    e = EyeSurface(codes, (x0, x1, y0, y1), scale=6.0, offset=2.0)
+    obs = (float(S.xs[10]) + 3.0, float(S.ys[20]) - 2.0)
+    got = viewshed(S, obs, eye=e)
+    z = float(S.height_at([obs])[0] + 2.0 + e.offset_at([obs])[0])
+    assert z != float(S.height_at([obs])[0] + 2.0)  # the offset there is not 0: the test tells them apart
+    # each sample checked pair by pair, the eye where the surface puts it, the targets on the ground
+    X, Y = np.meshgrid(S.xs, S.ys)
+    t = np.column_stack([X.ravel(), Y.ravel(), S.z.ravel()])
+    want = line_of_sight(S, np.tile([obs[0], obs[1], z], (t.shape[0], 1)), t).reshape(S.shape)
+    mismatch = got != want
+    mismatch[np.hypot(X - obs[0], Y - obs[1]) < 1e-9] = False
+    assert not mismatch.any()
+    np.testing.assert_array_equal(got, viewshed(S, (obs[0], obs[1], z)))
+    with pytest.raises(TypeError, match="pass either eye= or observer_height=, not both"):
+        viewshed(S, obs, eye=e, observer_height=3.0)
+    with pytest.raises(ValueError, match=r"with eye=, observer must be its position \(x, y\)"):
+        viewshed(S, (obs[0], obs[1], z), eye=e)
+    with pytest.raises(TypeError, match="eye must be an EyeSurface"):
+        viewshed(S, obs, eye="surface.npz")
