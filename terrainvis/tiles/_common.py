@@ -20,6 +20,38 @@ def equirectangular(lon, lat, lon0: float, lat0: float) -> tuple[np.ndarray, np.
     return k * math.cos(math.radians(lat0)) * (np.asarray(lon) - lon0), k * (np.asarray(lat) - lat0)
 
 
+def sample_lattice(grid, frame, lon: np.ndarray, lat: np.ndarray, name: str, lon_at=None, lat_at=None):
+    """A tile's lattice sampled on ``grid``: the heights at the lon/lat points of the axes ``lon``
+    (west to east) and ``lat`` (south to north), or of ``lon_at`` / ``lat_at`` where given (the points
+    whose heights stand there), through ``frame`` (lon/lat to the grid's frame), rows from the south;
+    the lattice's centre (lon0, lat0); and the lattice as a HeightGrid evenly spaced in the local
+    metres about that centre, the simplifiers' (the points sit up to half a quantization step off
+    even spacing, and uneven steps make a near-degenerate triangle of greedy cuts stall).
+
+    Raises
+    ------
+    ValueError
+        When a point has no height (a nodata hole inside the tileset's rectangle).
+    """
+    from ..core.terrain import HeightGrid
+
+    LON, LAT = np.meshgrid(lon if lon_at is None else lon_at, lat if lat_at is None else lat_at)
+    xy = frame.to_grid(LON.ravel(), LAT.ravel())
+    z = np.full(xy.shape[0], np.nan)
+    ok = np.isfinite(xy).all(axis=1)
+    z[ok] = grid.height_at(xy[ok])
+    if not np.isfinite(z).all():
+        bad = int(np.flatnonzero(~np.isfinite(z))[0])
+        raise ValueError(f"{name} has no height at lon {LON.ravel()[bad]:.6f}, lat {LAT.ravel()[bad]:.6f}, inside the "
+                         "tileset's rectangle (a nodata hole): fill the DEM's nodata first (--fill nearest, or "
+                         "HeightGrid.fill_nodata)")
+    z = z.reshape(LAT.shape)
+    lon0, lat0 = 0.5 * (lon[0] + lon[-1]), 0.5 * (lat[0] + lat[-1])
+    xs, ys = equirectangular(lon, lat, lon0, lat0)
+    even = HeightGrid.from_coords(z, np.linspace(xs[0], xs[-1], xs.size), np.linspace(ys[0], ys[-1], ys.size))
+    return z, float(lon0), float(lat0), even
+
+
 @dataclass
 class Made:
     """A tile made (or kept by a resume): its bytes (empty when kept), its measured error, the size of its

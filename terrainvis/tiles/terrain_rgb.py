@@ -40,7 +40,7 @@ import numpy as np
 from ..core.terrain import TIN, HeightGrid
 from ..tolerances import TILE_BUDGET_REL
 from . import quantized_mesh as qm
-from ._common import Made, equirectangular, within_budget
+from ._common import Made, equirectangular, sample_lattice, within_budget
 
 __all__ = ["DEFAULT_PIXELS", "RGB_STEP", "rgb_heights", "rgb_encode", "mercator_tile_bounds", "mercator_tiles_covering", "pixel_lattice",
            "encode_png", "decode_png"]
@@ -154,20 +154,8 @@ def pixel_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, frame, pi
     lon = _lon_of_x(-_HALF + (x + steps) * size)
     lat = _lat_of_y(_HALF - (y + steps) * size)[::-1]  # south to north
     rw, rs, re_, rn = rectangle
-    LON, LAT = np.meshgrid(np.clip(lon, rw, re_), np.clip(lat, rs, rn))
-    xy = frame.to_grid(LON.ravel(), LAT.ravel())
-    heights = np.full(xy.shape[0], np.nan)
-    ok = np.isfinite(xy).all(axis=1)
-    heights[ok] = grid.height_at(xy[ok])
-    if not np.isfinite(heights).all():
-        bad = int(np.flatnonzero(~np.isfinite(heights))[0])
-        raise ValueError(f"{name} has no height at lon {LON.ravel()[bad]:.6f}, lat {LAT.ravel()[bad]:.6f}, inside the "
-                         "tileset's rectangle (a nodata hole): fill the DEM's nodata first (--fill nearest, or "
-                         "HeightGrid.fill_nodata)")
-    heights = heights.reshape(LAT.shape)
-    lon0, lat0 = 0.5 * (lon[0] + lon[-1]), 0.5 * (lat[0] + lat[-1])
-    xs, ys = equirectangular(lon, lat, lon0, lat0)
-    even = HeightGrid.from_coords(heights, np.linspace(xs[0], xs[-1], xs.size), np.linspace(ys[0], ys[-1], ys.size))
+    heights, lon0, lat0, even = sample_lattice(grid, frame, lon, lat, name, np.clip(lon, rw, re_),
+                                               np.clip(lat, rs, rn))
     return PixelLattice(mercator_tile_bounds(z, x, y), lon, lat, lon0, lat0, heights, even, int(pixels))
 
 

@@ -81,7 +81,7 @@ from . import quantized_mesh as qm
 from ._common import EARTH_RADIUS
 from ._common import Made as _Made
 from ._common import equirectangular as _equirectangular
-from ._common import within_budget
+from ._common import sample_lattice, within_budget
 from .keep_los import DEFAULT_LOS_HEIGHT, N_POINTS
 from .terrain_rgb import DEFAULT_PIXELS as RGB_PIXELS
 from .terrain_rgb import kept_rgb_tile, make_rgb_tile, mercator_tiles_covering, pixel_lattice
@@ -332,22 +332,7 @@ def tile_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, *, lattice
         return None
     lon = west + us / qm.QUANTIZED_MAX * (east - west)
     lat = south + vs / qm.QUANTIZED_MAX * (north - south)
-    lon0, lat0 = 0.5 * (lon[0] + lon[-1]), 0.5 * (lat[0] + lat[-1])
-    LON, LAT = np.meshgrid(lon, lat)
-    xy = frame.to_grid(LON.ravel(), LAT.ravel())
-    z_ = np.full(xy.shape[0], np.nan)
-    ok = np.isfinite(xy).all(axis=1)
-    z_[ok] = grid.height_at(xy[ok])
-    if not np.isfinite(z_).all():
-        bad = int(np.flatnonzero(~np.isfinite(z_))[0])
-        raise ValueError(f"{name} has no height at lon {LON.ravel()[bad]:.6f}, lat {LAT.ravel()[bad]:.6f}, inside the "
-                         "tileset's rectangle (a nodata hole): fill the DEM's nodata first (--fill nearest, or "
-                         "HeightGrid.fill_nodata)")
-    xs, ys = _equirectangular(lon, lat, lon0, lat0)
-    z_ = z_.reshape(LAT.shape)
-    # the simplifiers get the lattice evenly spaced: its points sit on the tile's integer positions, up to half a
-    # quantization step off even spacing, and uneven steps make a near-degenerate triangle of greedy cuts stall
-    even = HeightGrid.from_coords(z_, np.linspace(xs[0], xs[-1], xs.size), np.linspace(ys[0], ys[-1], ys.size))
+    z_, lon0, lat0, even = sample_lattice(grid, frame, lon, lat, name)
     return _Lattice(bounds, us, vs, lon, lat, lon0, lat0, z_, even)
 
 
