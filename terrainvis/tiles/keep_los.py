@@ -66,10 +66,9 @@ def check_keep_los(keep_los, los_height, names: dict) -> tuple[float | None, flo
                 or not math.isfinite(keep_los) or not 0.0 < keep_los <= 1.0:
             raise ValueError(f"{names['keep_los']} must be a share of the verdicts in (0, 1], got {keep_los!r}")
         keep_los = float(keep_los)
-    if isinstance(los_height, (bool, np.bool_)) or not isinstance(los_height, (int, float, np.integer, np.floating)) \
-            or not math.isfinite(los_height) or los_height < 0:
-        raise ValueError(f"{names['los_height']} must be a finite height >= 0 (m), got {los_height!r}")
-    return keep_los, float(los_height)
+    from ..core.validate import as_nonnegative_finite
+
+    return keep_los, as_nonnegative_finite(los_height, names["los_height"], "m")
 
 
 @dataclass(frozen=True)

@@ -216,7 +216,7 @@ def test_an_interrupted_keep_los_run_resumes_without_searching_again(kept_run, t
     ({"keep_los": 1.5}, r"keep_los must be a share"),
     ({"keep_los": True}, r"keep_los must be a share"),
     ({"keep_los": float("nan")}, r"keep_los must be a share"),
-    ({"keep_los": 0.9, "los_height": -1.0}, r"los_height must be a finite height >= 0 \(m\), got -1.0"),
+    ({"keep_los": 0.9, "los_height": -1.0}, r"los_height must be finite and >= 0 \(m\), got -1.0"),
     ({"keep_los": 0.9, "max_error0": 1000.0}, "max_error0 and keep_los exclude each other"),
 ])
 def test_refusals_name_the_argument(tmp_path, kwargs, match):
