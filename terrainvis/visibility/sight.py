@@ -146,14 +146,15 @@ class Sight:
         return dataclasses.replace(self, observer_height=height)
 
 
-def sight_of(sight, keywords: dict) -> Sight:
+def sight_of(sight, keywords: dict, defaults: dict = KEYWORDS) -> Sight:
     """The one Sight of a public function's call: ``sight`` itself, or one made from its ``keywords``.
 
     Raises
     ------
     TypeError
-        When ``sight`` is not a Sight, or comes with a keyword of :data:`KEYWORDS` set to
-        other than its default (the message names the keyword).
+        When ``sight`` is not a Sight, or comes with a keyword set to other than its default
+        in ``defaults`` (:data:`KEYWORDS`, the viewshed's; :data:`PAIR_KEYWORDS`, the pair
+        functions'; the message names the keyword).
     """
     if sight is None:
         return Sight.make(**keywords)
@@ -161,7 +162,7 @@ def sight_of(sight, keywords: dict) -> Sight:
         raise TypeError(f"sight must be a terrainvis.visibility.Sight (from Sight.make(...)) or None, "
                         f"got {describe(sight)}")
     for name, value in keywords.items():
-        if _differs(value, KEYWORDS[name]):
+        if _differs(value, defaults[name]):
             raise TypeError(f"pass either sight= or the keyword {name}=, not both (the Sight holds {name}; "
                             f"got {name}={describe(value)} beside it)")
     return sight
@@ -171,15 +172,10 @@ def pair_sight(sight, keywords: dict, name: str) -> Sight:
     """The Sight of a call of a function of point pairs (``name``): ``sight``, or one made from its
     :data:`PAIR_KEYWORDS` (``keywords``); a Sight given with a keyword set beside it, or with a field of
     view, is refused."""
-    s = sight_of(sight, {}) if sight is not None else Sight.make(**keywords)
-    if sight is not None:
-        for key, value in keywords.items():
-            if _differs(value, PAIR_KEYWORDS[key]):
-                raise TypeError(f"pass either sight= or the keyword {key}=, not both (the Sight holds {key}; "
-                                f"got {key}={describe(value)} beside it)")
-        if s.fov.limited:
-            raise ValueError(f"{name} takes the predicate of a Sight (engine, end_radius, curvature, earth_radius); its "
-                             f"field of view ({s.fov.describe()}) is a viewshed's: pass a Sight without one")
+    s = sight_of(sight, keywords, PAIR_KEYWORDS)
+    if sight is not None and s.fov.limited:
+        raise ValueError(f"{name} takes the predicate of a Sight (engine, end_radius, curvature, earth_radius); its "
+                         f"field of view ({s.fov.describe()}) is a viewshed's: pass a Sight without one")
     return s
 
 
