@@ -73,7 +73,7 @@ import numpy as np
 
 from ..core.terrain import TIN, HeightGrid
 from . import quantized_mesh as qm
-from .terrain_rgb import rgb_encode, rgb_heights
+from .terrain_rgb import MERCATOR_HALF, lat_of_y, lon_of_x, rgb_encode, rgb_heights, x_of_lon, y_of_lat
 
 __all__ = ["Tiles", "open_tileset", "stitch_zoom", "MESHERS", "FORMATS", "PROJECTIONS", "SCHEMES",
            "rgb_heights", "rgb_encode"]
@@ -87,7 +87,6 @@ SCHEMES = {"tms": "tms", "xyz": "xyz", "slippymap": "xyz"}
 #: How a terrain-RGB tile is meshed (deck.gl's TerrainLayer's tesselators, and the whole grid).
 MESHERS = ("martini", "delatin", "grid")
 #: Web Mercator's half-width (m): pi times WGS84's semi-major axis.
-_MERCATOR_HALF = math.pi * qm.WGS84_A
 _RGB_SUFFIXES = (".png", ".webp")
 _NUMBER = re.compile(r"^\d+$")
 
@@ -229,19 +228,9 @@ def _tile_float(tiles: Tiles, z: int, lon: np.ndarray, lat: np.ndarray) -> tuple
     if tiles.projection == "EPSG:4326":
         size = 180.0 / 2 ** z
         return (lon + 180.0) / size, (lat + 90.0) / size
-    x, y = _mercator(lon, lat)
-    size = 2 * _MERCATOR_HALF / 2 ** z
-    return (x + _MERCATOR_HALF) / size, (y + _MERCATOR_HALF) / size
-
-
-def _mercator(lon, lat) -> tuple[np.ndarray, np.ndarray]:
-    lat = np.clip(np.asarray(lat, dtype=np.float64), -85.0511287798066, 85.0511287798066)
-    return (np.radians(np.asarray(lon, dtype=np.float64)) * qm.WGS84_A,
-            qm.WGS84_A * np.log(np.tan(np.pi / 4 + np.radians(lat) / 2)))
-
-
-def _lat_of_mercator(y) -> np.ndarray:
-    return np.degrees(np.arctan(np.sinh(np.asarray(y, dtype=np.float64) / qm.WGS84_A)))
+    x, y = x_of_lon(lon), y_of_lat(lat)
+    size = 2 * MERCATOR_HALF / 2 ** z
+    return (x + MERCATOR_HALF) / size, (y + MERCATOR_HALF) / size
 
 
 def _to_lonlat(tiles: Tiles, z: int, U: np.ndarray, V: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
@@ -250,15 +239,15 @@ def _to_lonlat(tiles: Tiles, z: int, U: np.ndarray, V: np.ndarray, steps: int) -
     if tiles.projection == "EPSG:4326":
         return -180.0 + U / n * 180.0, -90.0 + V / n * 180.0
     if tiles.format == "terrain-rgb":  # linear in Web Mercator across the tile
-        x = -_MERCATOR_HALF + U / n * 2 * _MERCATOR_HALF
-        y = -_MERCATOR_HALF + V / n * 2 * _MERCATOR_HALF
-        return np.degrees(x / qm.WGS84_A), _lat_of_mercator(y)
+        x = -MERCATOR_HALF + U / n * 2 * MERCATOR_HALF
+        y = -MERCATOR_HALF + V / n * 2 * MERCATOR_HALF
+        return lon_of_x(x), lat_of_y(y)
     # quantized-mesh in Web Mercator tiles: linear in latitude across each tile's latitude range (as Cesium)
     lon = -180.0 + U / n * 360.0
     row = np.minimum(V // steps, 2 ** z - 1)
-    size = 2 * _MERCATOR_HALF / 2 ** z
-    south = _lat_of_mercator(-_MERCATOR_HALF + row * size)
-    north = _lat_of_mercator(-_MERCATOR_HALF + (row + 1) * size)
+    size = 2 * MERCATOR_HALF / 2 ** z
+    south = lat_of_y(-MERCATOR_HALF + row * size)
+    north = lat_of_y(-MERCATOR_HALF + (row + 1) * size)
     return lon, south + (V - row * steps) / steps * (north - south)
 
 

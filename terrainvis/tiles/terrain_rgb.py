@@ -42,7 +42,7 @@ from ..tolerances import TILE_BUDGET_REL
 from . import quantized_mesh as qm
 from ._common import Made, equirectangular, sample_lattice, within_budget
 
-__all__ = ["DEFAULT_PIXELS", "RGB_STEP", "rgb_heights", "rgb_encode", "mercator_tile_bounds", "mercator_tiles_covering", "pixel_lattice",
+__all__ = ["DEFAULT_PIXELS", "RGB_STEP", "MERCATOR_HALF", "x_of_lon", "y_of_lat", "lon_of_x", "lat_of_y", "rgb_heights", "rgb_encode", "mercator_tile_bounds", "mercator_tiles_covering", "pixel_lattice",
            "encode_png", "decode_png"]
 
 #: Pixels per tile side (Mapbox's terrain-RGB tiles are 256 x 256; 512 x 512 for "@2x").
@@ -50,7 +50,7 @@ DEFAULT_PIXELS = 256
 #: The encoding's height step (m).
 RGB_STEP = 0.1
 #: Half the circumference of Web Mercator's sphere (m): x and y run over [-H, H].
-_HALF = math.pi * qm.WGS84_A
+MERCATOR_HALF = math.pi * qm.WGS84_A
 #: Web Mercator's latitude limit (the square's edge).
 MAX_LAT = 85.0511287798066
 #: The PNG text chunk holding the vertices and triangles of the surface a tile's pixels were taken from.
@@ -79,29 +79,33 @@ def rgb_encode(heights) -> np.ndarray:
     return np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=-1).astype(np.uint8)
 
 
-def _x_of_lon(lon) -> np.ndarray:
+def x_of_lon(lon) -> np.ndarray:
+    """Web Mercator x (m) of longitudes (degrees)."""
     return np.radians(np.asarray(lon, dtype=np.float64)) * qm.WGS84_A
 
 
-def _y_of_lat(lat) -> np.ndarray:
+def y_of_lat(lat) -> np.ndarray:
+    """Web Mercator y (m) of latitudes (degrees), clipped to the square's edge (:data:`MAX_LAT`)."""
     lat = np.clip(np.asarray(lat, dtype=np.float64), -MAX_LAT, MAX_LAT)
     return qm.WGS84_A * np.log(np.tan(np.pi / 4 + np.radians(lat) / 2))
 
 
-def _lon_of_x(x) -> np.ndarray:
+def lon_of_x(x) -> np.ndarray:
+    """Longitudes (degrees) of Web Mercator x (m)."""
     return np.degrees(np.asarray(x, dtype=np.float64) / qm.WGS84_A)
 
 
-def _lat_of_y(y) -> np.ndarray:
+def lat_of_y(y) -> np.ndarray:
+    """Latitudes (degrees) of Web Mercator y (m)."""
     return np.degrees(np.arctan(np.sinh(np.asarray(y, dtype=np.float64) / qm.WGS84_A)))
 
 
 def mercator_tile_bounds(z: int, x: int, y: int) -> tuple[float, float, float, float]:
     """(west, south, east, north) in degrees of the Web Mercator tile (z, x, y), rows from the north."""
-    size = 2 * _HALF / 2 ** z
-    west, east = -_HALF + x * size, -_HALF + (x + 1) * size
-    north, south = _HALF - y * size, _HALF - (y + 1) * size
-    return (float(_lon_of_x(west)), float(_lat_of_y(south)), float(_lon_of_x(east)), float(_lat_of_y(north)))
+    size = 2 * MERCATOR_HALF / 2 ** z
+    west, east = -MERCATOR_HALF + x * size, -MERCATOR_HALF + (x + 1) * size
+    north, south = MERCATOR_HALF - y * size, MERCATOR_HALF - (y + 1) * size
+    return (float(lon_of_x(west)), float(lat_of_y(south)), float(lon_of_x(east)), float(lat_of_y(north)))
 
 
 def mercator_tiles_covering(z: int, bounds) -> tuple[int, int, int, int]:
@@ -109,9 +113,9 @@ def mercator_tiles_covering(z: int, bounds) -> tuple[int, int, int, int]:
     lon/lat rectangle ``bounds`` = (west, south, east, north) in a part of positive area."""
     west, south, east, north = bounds
     n = 2 ** z
-    size = 2 * _HALF / n
-    fx0, fx1 = (_x_of_lon(west) + _HALF) / size, (_x_of_lon(east) + _HALF) / size
-    fy0, fy1 = (_HALF - _y_of_lat(north)) / size, (_HALF - _y_of_lat(south)) / size
+    size = 2 * MERCATOR_HALF / n
+    fx0, fx1 = (x_of_lon(west) + MERCATOR_HALF) / size, (x_of_lon(east) + MERCATOR_HALF) / size
+    fy0, fy1 = (MERCATOR_HALF - y_of_lat(north)) / size, (MERCATOR_HALF - y_of_lat(south)) / size
 
     def first(f):
         return min(n - 1, max(0, int(math.floor(f))))
@@ -149,10 +153,10 @@ class PixelLattice:
 def pixel_lattice(grid: HeightGrid, z: int, x: int, y: int, rectangle, frame, pixels: int = DEFAULT_PIXELS,
                   name: str = "grid") -> PixelLattice:
     """The lattice of terrain-RGB tile ``(z, x, y)`` (the module docstring)."""
-    size = 2 * _HALF / 2 ** z
+    size = 2 * MERCATOR_HALF / 2 ** z
     steps = np.arange(pixels + 1) / pixels
-    lon = _lon_of_x(-_HALF + (x + steps) * size)
-    lat = _lat_of_y(_HALF - (y + steps) * size)[::-1]  # south to north
+    lon = lon_of_x(-MERCATOR_HALF + (x + steps) * size)
+    lat = lat_of_y(MERCATOR_HALF - (y + steps) * size)[::-1]  # south to north
     rw, rs, re_, rn = rectangle
     heights, lon0, lat0, even = sample_lattice(grid, frame, lon, lat, name, np.clip(lon, rw, re_),
                                                np.clip(lat, rs, rn))
