@@ -85,7 +85,7 @@ from .engines import Predicate, choose
 from .field_of_view import apply_field_of_view, field_of_view_mask
 from .output_modes import check_output, eye_thresholds, output_values, tin_of_grid_thresholds
 from .predicate import EARTH_RADIUS, _check_heights, clearance_tolerance, target_grid, terrain_scale, trim_length
-from .sight import Sight, engine_on, sight_of
+from .sight import KEYWORDS, Sight, _differs, engine_on, sight_of
 
 __all__ = ["viewshed"]
 
@@ -284,7 +284,7 @@ def _eye_observer(eye, terrain, observer, observer_height) -> tuple[float, float
         raise ValueError(f"with eye=, observer must be its position (x, y): the eye surface gives its height; got "
                          f"{describe(observer)}")
     z = _eye_heights(eye, terrain, np.array([[xy[0], xy[1], 0.0]]))[0, 2]  # checks eye and the position
-    if not (np.ndim(observer_height) == 0 and observer_height == 1.7):
+    if _differs(observer_height, KEYWORDS["observer_height"]):
         raise TypeError(f"pass either eye= or observer_height=, not both (the eye surface stands the observer "
                         f"{eye.offset:g} above S(T) plus its offset there; got observer_height="
                         f"{describe(observer_height)})")
