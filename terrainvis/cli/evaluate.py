@@ -9,10 +9,6 @@ from pathlib import Path
 from ._common import UsageError, add_nodata, method_arg, plural, read_terrain
 
 
-#: Options of compare that do not apply: what is simplified, and how, is given.
-_NOT_HERE = ("methods", "levels", "max_errors", "cascade")
-
-
 #: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
 HELP = "measure simplifications made elsewhere (meshes, rasters, tilesets) as compare measures a method's"
 
@@ -24,7 +20,7 @@ _TILE_FLAGS = {"zoom": "--zoom", "tile_mesh": "--tile-mesh", "tile_max_error": "
 def add_parser(sub) -> None:
     from simplifiers import METHODS
 
-    from ..experiment.evaluate import MESH_SUFFIXES, RASTER_SUFFIXES
+    from ..experiment.evaluate import COMPARE_ONLY, MESH_SUFFIXES, RASTER_SUFFIXES
     from ..experiment.options import add_flags
 
     e = sub.add_parser(
@@ -75,7 +71,7 @@ def add_parser(sub) -> None:
     again.add_argument("--overwrite", action="store_true",
                        help="replace an earlier run's files in --out (once the new run is complete)")
     e.add_argument("--no-plots", action="store_true", help="with --out: do not write the figures")
-    add_flags(e, exclude=_NOT_HERE)
+    add_flags(e, exclude=tuple(COMPARE_ONLY))  # what is simplified, and how, is given
     add_nodata(e)
 
 
@@ -88,11 +84,12 @@ def run(args) -> int:
     for s in args.simplified:
         if not Path(s).exists():
             raise UsageError(f"SIMPLIFIED {s!r} does not exist")
+    from ..experiment.evaluate import COMPARE_ONLY
     from ..experiment.options import given
     from ..experiment.plan import settings_for
 
     # the options checked here, where a message names the flags (evaluate() checks them again)
-    settings_for({label: grid}, {**{k: v for k, v in given(args).items() if k not in _NOT_HERE},
+    settings_for({label: grid}, {**{k: v for k, v in given(args).items() if k not in COMPARE_ONLY},
                                  "methods": args.against or ["simple"]}, flags=True)
     if not args.out:
         if args.resume:
@@ -113,11 +110,11 @@ def _evaluate(args, label: str, grid, out: Path | None, earlier: list) -> int:
     ``results.csv``. ``--resume`` of a finished run continues its ``results.csv`` in place.
     """
     from ..experiment._outdir import PARTIAL, RESULTS
-    from ..experiment.evaluate import prepared
+    from ..experiment.evaluate import COMPARE_ONLY, prepared
     from ..experiment.options import given
     from ._common import on_interrupt
 
-    options = {k: v for k, v in given(args).items() if k not in _NOT_HERE}
+    options = {k: v for k, v in given(args).items() if k not in COMPARE_ONLY}
     t0 = time.perf_counter()
     run = prepared({label: grid}, list(args.simplified), against=args.against, frame=args.frame, repair=args.repair,
                    **_tile_options(args), names=_TILE_FLAGS, **options)

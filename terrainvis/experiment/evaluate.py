@@ -183,8 +183,8 @@ class Prepared:
 
 
 #: compare's options that choose what is simplified, which evaluate refuses (it would ignore them), and
-#: what to use instead.
-_COMPARE_ONLY = {
+#: what to use instead; ``terrainvis evaluate`` has no flags for them.
+COMPARE_ONLY = {
     "methods": "against= measures built-in methods beside them, at their size",
     "levels": "against= measures built-in methods at the level whose grid is closest to each",
     "max_errors": "against= measures built-in methods at their size; terrainvis.compare(max_errors=...) budgets "
@@ -204,10 +204,10 @@ def prepared(original, simplified, *, name=None, against=(), frame=None, repair=
         raise ValueError(f"original must be one terrain, got {len(grids)}")
     (tname, grid), = grids.items()
     against = [against] if isinstance(against, str) else list(against)
-    chosen = [k for k in _COMPARE_ONLY if k in options]
+    chosen = [k for k in COMPARE_ONLY if k in options]
     if chosen:
         raise TypeError(f"evaluate() takes no {chosen[0]}=: it measures the simplified terrains it is given; "
-                        f"{_COMPARE_ONLY[chosen[0]]}")
+                        f"{COMPARE_ONLY[chosen[0]]}")
     items = _named(simplified, name, taken=against)
     settings = settings_for(grids, {**options, "methods": against or ["simple"]})
     if frame is not None:
