@@ -38,6 +38,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import os
+import pickle
 import sys
 import threading
 import time
@@ -82,12 +83,16 @@ _installed = False
 
 
 def install() -> None:
-    """Listen to numba's compile events (once per process; called when a kernel module is imported)."""
+    """Listen to numba's compile events and read stale cache indexes of terrainvis's kernels
+    as empty (:func:`_tolerate_stale_indexes`); once per process, called when a kernel
+    module is imported."""
     global _installed
     with _lock:
         if _installed:
             return
         from numba.core import event
+
+        _tolerate_stale_indexes()
 
         class Listener(event.Listener):
             def on_start(self, ev):
@@ -98,6 +103,65 @@ def install() -> None:
 
         event.register("numba:compile", Listener())
         _installed = True
+
+
+#: What unpickling a cache index raises when the index names a module, class or function
+#: that is gone (a kernel module moved, a record renamed) or when the file is damaged.
+_STALE_INDEX_ERRORS = (ImportError, AttributeError, EOFError, pickle.UnpicklingError)
+
+
+def _ours(cache) -> bool:
+    """Whether a numba ``Cache`` holds one of terrainvis's kernels (by its module's name)."""
+    return getattr(getattr(cache, "_py_func", None), "__module__", "").startswith(_OURS)
+
+
+def _drop_index(cache) -> None:
+    """Remove a cache's index file (its compiled files stay until numba reuses their names)."""
+    with contextlib.suppress(FileNotFoundError):
+        os.remove(cache._cache_file._index_path)
+
+
+def _tolerate_stale_indexes() -> None:
+    """Treat a cache index of terrainvis's kernels that cannot be unpickled as a cache miss.
+
+    numba keeps, per kernel, an index of the signatures it compiled, pickled with the types
+    in them: a record type (a named tuple) is pickled by its module and name. When a new
+    version of terrainvis moves a kernel module or renames a record, the indexes an older
+    version left in a kept cache (``__pycache__`` folders of an editable install, a CI
+    cache kept between runs, ``NUMBA_CACHE_DIR``) name a module that is gone, and numba
+    0.68 raises ``ModuleNotFoundError`` from the first call of any kernel that had been
+    compiled with that record, before it checks whether the index is stale (numba issue
+    6018). Here the index of such a kernel is removed and the kernel compiles again, as
+    for any stale index; numba writes a new one. Other programs' kernels are left to
+    numba.
+    """
+    from numba.core import caching
+
+    load, save = caching.Cache.load_overload, caching.Cache.save_overload
+    if getattr(load, "terrainvis_tolerant", False):
+        return
+
+    def load_overload(self, sig, target_context):
+        try:
+            return load(self, sig, target_context)
+        except _STALE_INDEX_ERRORS:
+            if not _ours(self):
+                raise
+            _drop_index(self)
+            return None
+
+    def save_overload(self, sig, data):
+        try:
+            return save(self, sig, data)
+        except _STALE_INDEX_ERRORS:
+            if not _ours(self):
+                raise
+            _drop_index(self)
+            return save(self, sig, data)
+
+    load_overload.terrainvis_tolerant = True
+    caching.Cache.load_overload = load_overload
+    caching.Cache.save_overload = save_overload
 
 
 def seconds() -> float:

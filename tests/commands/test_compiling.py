@@ -122,3 +122,54 @@ def test_an_unknown_part_is_one_line(capsys):
     err = capsys.readouterr().err.strip()
     assert err == ("terrainvis compile: error: PART must be some of viewshed, output-modes, los, methods, compare, got "
                    "'viewsheds'"), err
+
+
+# A kernel cached with a record type, then the record's module moved, as a new version of
+# terrainvis moves a kernel module: the index numba kept names a module that is gone.
+_PROBE_RUN = """
+import importlib.util, sys
+folder, records, mode, name = sys.argv[1:5]
+sys.path.insert(0, folder)
+if mode == "tolerant":
+    from terrainvis.core import compiling
+    compiling.install()
+source = f"import numba\\nfrom {records} import Rec\\n\\n@numba.njit(cache=True)\\ndef total(r):\\n    return r.a + r.b\\n"
+path = f"{folder}/kernels/probe_kernel.py"
+open(path, "w").write(source)
+spec = importlib.util.spec_from_file_location(name, path)
+module = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(module)
+print(module.total(module.Rec(1.0, 2.0)))
+"""
+
+
+def _probe(tmp_path, name: str, mode: str):
+    """Cache a kernel (in a module called ``name``) of a record defined in ``probe_records``,
+    move the record to ``probe_moved`` and call the kernel again on the same cache; the
+    second run's result."""
+    folder = tmp_path / mode / name
+    (folder / "kernels").mkdir(parents=True)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / mode / "cache"))
+    record = "from collections import namedtuple\nRec = namedtuple('Rec', ['a', 'b'])\n"
+    (folder / "probe_records.py").write_text(record)
+    first = subprocess.run([sys.executable, "-c", _PROBE_RUN, str(folder), "probe_records", mode, name],
+                           env=env,
+                           capture_output=True, text=True)
+    assert first.returncode == 0 and first.stdout.strip() == "3.0", first.stderr
+    (folder / "probe_records.py").unlink()
+    (folder / "probe_moved.py").write_text(record)
+    return subprocess.run([sys.executable, "-c", _PROBE_RUN, str(folder), "probe_moved", mode, name],
+                          env=env,
+                          capture_output=True, text=True)
+
+
+def test_a_kept_cache_whose_index_names_a_moved_module_is_compiled_again(tmp_path):
+    """numba raises ModuleNotFoundError on such an index (the first case); a kernel of
+    terrainvis compiles again and answers (the second); other programs' kernels are left
+    to numba (the third)."""
+    plain = _probe(tmp_path, "terrainvis.probe_kernel", "plain")
+    assert plain.returncode != 0 and "ModuleNotFoundError: No module named 'probe_records'" in plain.stderr
+    ours = _probe(tmp_path, "terrainvis.probe_kernel", "tolerant")
+    assert ours.returncode == 0 and ours.stdout.strip() == "3.0", ours.stderr
+    theirs = _probe(tmp_path / "elsewhere", "probe_kernel", "tolerant")
+    assert theirs.returncode != 0 and "ModuleNotFoundError: No module named 'probe_records'" in theirs.stderr
