@@ -38,7 +38,7 @@ Agreement, per case (cells with a height, the observer's own cell left out):
    viewshed leaves holes out instead, so near a hole this is an approximation).
 2. **Sight-line angle**, at the cells both call visible: r.viewshed's ``value - 90``
    against the geometric elevation angle of the sight line from our eye to our target,
-   ``atan2(z_T - k d**2 - E_z, d)`` (``terrainvis.visibility.field_of_view.elevation_degrees``,
+   ``atan2(z_T - k d**2 - E_z, d)`` (``terrainvis.visibility.viewsheds.field_of_view.elevation_degrees``,
    the first term of our angle: E_z the observer's sample plus the eye height, z_T the
    target's sample plus the target height, d the horizontal distance between the sample
    centres, k = curvature / (2 R), R = 6,378,137 m). It tests that both programs put the
@@ -95,7 +95,7 @@ from bench_output_modes import DEMS, STD_CURVATURE, _geotiff, _median_time, _obs
 from terrainvis import load_dem, viewshed
 from terrainvis.core.metrics import verdict_edges
 from terrainvis.visibility import EARTH_RADIUS, curvature_coefficient, lowest_point
-from terrainvis.visibility.field_of_view import elevation_degrees
+from terrainvis.visibility.viewsheds.field_of_view import elevation_degrees
 
 
 #: Differing cells farther than this from our horizon (degrees) are located (see the docstring).

@@ -61,7 +61,7 @@ if command == "viewshed":
     from terrainvis.cli import viewshed as _command
     from terrainvis.io import write_mask_geotiff
     from terrainvis.visibility import viewshed
-    from terrainvis.visibility.sweep import _build_tables
+    from terrainvis.visibility.viewsheds.sweep import _build_tables
     import rasterio
     mark("imports")
     _command._load_kernels(dem)  # what the command loads beside its reading (the DEM's heights' dtype)

@@ -5,7 +5,7 @@ stands on the sample nearest the centre, ``--observer-height`` above it (xarray-
 snaps its observer to a cell, so both programs answer the same question from the same
 eye). The script prints, per size, the median over ``--repeats`` runs of
 
-* ours: :func:`terrainvis.visibility.sweep.viewshed` (grid engine, exact), with how
+* ours: :func:`terrainvis.visibility.viewsheds.sweep.viewshed` (grid engine, exact), with how
   its samples were decided (the sweep's lower bound, its upper bound plus the exact walk
   of the last ring, or the pair engine for the rest);
 * the pair engine: ``grid_clearance`` from the eye to all samples (its own pyramid), which
@@ -84,7 +84,7 @@ from terrainvis.core.metrics import verdict_edges
 from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import clearance_tolerance, trim_length
 from terrainvis.visibility.grid import grid_accel, grid_clearance
-from terrainvis.visibility.sweep import _viewshed
+from terrainvis.visibility.viewsheds.sweep import _viewshed
 
 
 def _terrain(kind: str, n: int, seed: int = 0):

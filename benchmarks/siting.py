@@ -117,8 +117,8 @@ def main() -> None:
     print(f"  lazy greedy: {result.evaluations:,} gains evaluated (the plain greedy: {plain_evals:,})")
     if args.plain:
         from terrainvis.visibility import Sight
-        from terrainvis.visibility.observer_runs import prepare, run_chunks
-        from terrainvis.visibility.siting import _siting_unit
+        from terrainvis.visibility.viewsheds.many import prepare, run_chunks
+        from terrainvis.visibility.viewsheds.siting import _siting_unit
 
         sight = Sight.make(observer_height=args.observer_height, max_distance=args.max_distance,
                            curvature=args.curvature)

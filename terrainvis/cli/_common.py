@@ -102,7 +102,7 @@ def sight_args(args):
     """The one :class:`~terrainvis.visibility.Sight` of a command's flags (``--height``, ``--target-height``,
     ``--curvature``, ``--earth-radius`` and the field of view), checked before anything is computed (a
     mistake in the field of view names its flag)."""
-    from ..visibility.field_of_view import CLI_NAMES
+    from ..visibility.viewsheds.field_of_view import CLI_NAMES
     from ..visibility.sight import Sight
 
     try:

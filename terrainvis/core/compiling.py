@@ -52,7 +52,7 @@ __all__ = ["KERNELS", "COMPILE_GC_THRESHOLD", "install", "quiet", "seconds", "an
 #: a second, or that follow one of these and share its callees (the best heights after
 #: the calibration's sweeps), are not announced.
 KERNELS: dict[str, tuple[str, float]] = {
-    "terrainvis.visibility._sweep_kernels.sweep": ("the viewshed sweep", 17.0),
+    "terrainvis.visibility.viewsheds._sector_kernels.sweep": ("the viewshed sweep", 17.0),
     "terrainvis.visibility._kernels.grid_walks": ("the line-of-sight walk on grids", 6.0),
     "terrainvis.visibility._kernels.tin_pairs": ("the line-of-sight clipper on TINs", 1.0),
     "terrainvis.visibility._threshold_kernels.grid_sweep": ("the calibrated relocation's walks on grids", 9.0),

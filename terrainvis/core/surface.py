@@ -56,7 +56,7 @@ _INF = np.inf
 #: ``pyr`` (k,) float32 min/max pyramid with its level tables ``off`` and ``nxl`` (ltop + 1,)
 #: int64 and ``ltop`` (int) its root level (:mod:`terrainvis.visibility._kernels`);
 #: ``cmax`` (segments, cols) and ``rmax`` (rows, segments) float32 the strip maxima of the
-#: viewshed sweep, rounded up (:mod:`terrainvis.visibility._sweep_kernels`).
+#: viewshed sweep, rounded up (:mod:`terrainvis.visibility.viewsheds._sector_kernels`).
 SurfaceGrid = namedtuple(
     "SurfaceGrid", ["z", "xs", "ys", "ixw", "iyw", "uniform", "has_nan", "pyr", "off", "nxl", "ltop", "cmax", "rmax"]
 )

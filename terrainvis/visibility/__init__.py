@@ -76,28 +76,29 @@ sight calculations", AFRIGRAPH 2009, doi:10.1145/1503454.1503465.
 
 import importlib
 
-# The field of view is imported here: its module's name is also one of its functions, and a
-# submodule imported first would otherwise take the package attribute ``field_of_view``.
-# It needs no numba; every other name below is imported on first use (PEP 562), so that a
-# command that reads only what it uses (``terrainvis viewshed`` checks its flags before it
-# loads the sweep) does not pay for the whole package.
-from .field_of_view import FieldOfView, field_of_view, field_of_view_mask
+# Every name below is imported on first use (PEP 562), so that a command that reads only
+# what it uses (``terrainvis viewshed`` checks its flags before it loads the sweep) does not
+# pay for the whole package.
 
 #: Each public name and the submodule that defines it (``(module, name there)`` when renamed).
 _API = {
-    "cumulative_viewshed": "cumulative",
+    "cumulative_viewshed": "viewsheds.cumulative",
     "ENGINES": "engines", "Engine": "engines", "Predicate": "engines", "engine_names": "engines",
     "register_engine": ("engines", "register"), "unregister_engine": ("engines", "unregister"),
     "embree_tolerance": "los", "line_of_sight": "los", "min_clearance": "los", "visibility_matrix": "los",
-    "ObserverSets": "observers", "intervisibility_network": "observers", "observer_sets": "observers",
+    "ObserverSets": "viewsheds.observers", "intervisibility_network": "viewsheds.observers",
+    "observer_sets": "viewsheds.observers",
     "EARTH_RADIUS": "predicate", "STANDARD_REFRACTION": "predicate", "TOL_REL": "predicate", "TRIM_REL": "predicate",
     "clearance_tolerance": "predicate", "curvature_coefficient": "predicate", "terrain_scale": "predicate",
     "trim_length": "predicate",
     "FresnelClearance": "fresnel", "fresnel_clearance": "fresnel", "fresnel_radius": "fresnel",
     "clearance_profile": "profile", "lowest_point": "profile",
-    "SitingResult": "siting", "candidate_grid": "siting", "sample_areas": "siting", "site_observers": "siting",
+    "SitingResult": "viewsheds.siting", "candidate_grid": "viewsheds.siting", "sample_areas": "viewsheds.siting",
+    "site_observers": "viewsheds.siting",
+    "FieldOfView": "viewsheds.field_of_view", "field_of_view": "viewsheds.field_of_view",
+    "field_of_view_mask": "viewsheds.field_of_view",
     "Sight": "sight",
-    "viewshed": "sweep",
+    "viewshed": "viewsheds.sweep",
 }
 
 

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..core.validate import as_nonnegative_finite, describe
 from .engines import AUTO, Engine, check_name, choose
-from .field_of_view import FieldOfView, field_of_view
+from .viewsheds.field_of_view import FieldOfView, field_of_view
 from .predicate import EARTH_RADIUS, _check_end_radius, _height_above, curvature_coefficient
 
 __all__ = ["Sight", "KEYWORDS", "PAIR_KEYWORDS", "sight_of", "pair_sight", "engine_on"]
@@ -116,7 +116,7 @@ class Sight:
              end_radius=0.0, names=None) -> "Sight":
         """A Sight from the keywords of :func:`terrainvis.viewshed` (and the same messages).
 
-        ``names`` is passed to :func:`~terrainvis.visibility.field_of_view` (the command line
+        ``names`` is passed to :func:`~terrainvis.visibility.viewsheds.field_of_view.field_of_view` (the command line
         names the limits by its flags).
         """
         fov = field_of_view(azimuth=azimuth, vertical=vertical, min_distance=min_distance,

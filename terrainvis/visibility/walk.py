@@ -7,7 +7,7 @@ diagonals (between two breakpoints the surface along the track is linear). The w
 here find them; each consumer keeps only its own reduction of the surface there:
 
 * the pair engine (:mod:`terrainvis.visibility._kernels`): the least clearance;
-* the viewshed sweep (:mod:`terrainvis.visibility._sweep_kernels`): the least clearance,
+* the viewshed sweep (:mod:`terrainvis.visibility.viewsheds._walk_kernels`): the least clearance,
   on grids with nodata too;
 * the threshold engine (:mod:`terrainvis.visibility._threshold_kernels`): the largest
   height a point needs;

@@ -268,7 +268,7 @@ def test_a_crs_it_cannot_write_fails_before_the_viewshed_in_one_line(tmp_path):
     # the viewshed of the DEM (not the 3 x 3 one that loads the kernels) must not run
     guard = (
         "import sys\n"
-        "from terrainvis.visibility import sweep\n"
+        "from terrainvis.visibility.viewsheds import sweep\n"
         "real = sweep._viewshed\n"
         "def computed(t, *a, **k):\n"
         "    assert t.size <= 9, 'the viewshed was computed before the output was checked'\n"

@@ -62,7 +62,7 @@ def test_info_reads_and_describes_without_numba(tmp_path):
 
 def test_the_visibility_package_imports_its_parts_on_first_use():
     code = ("import sys\nimport terrainvis.visibility as v\nprint('numba' in sys.modules)\n"
-            "v.viewshed\nprint('numba' in sys.modules, 'terrainvis.visibility.siting' in sys.modules)\n")
+            "v.viewshed\nprint('numba' in sys.modules, 'terrainvis.visibility.viewsheds.siting' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["False", "True", "False"], out.stdout

@@ -1,4 +1,4 @@
-"""Tests of cumulative viewsheds (terrainvis.visibility.cumulative).
+"""Tests of cumulative viewsheds (terrainvis.visibility.viewsheds.cumulative).
 
 References, independent of the way the counts are gathered (chunks, workers, dask):
 * the sum of single viewsheds (:func:`terrainvis.viewshed`, itself tested against the pair
@@ -26,8 +26,8 @@ from terrainvis import HeightGrid, cumulative_viewshed, viewshed
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import line_of_sight
-from terrainvis.visibility.observer_runs import _chunks, count_dtype
-from terrainvis.visibility.sweep import _surface_at
+from terrainvis.visibility.viewsheds.many import _chunks, count_dtype
+from terrainvis.visibility.viewsheds.sweep import _surface_at
 
 
 # ----------------------------------------------------------------- fixtures
@@ -164,7 +164,7 @@ def test_threads_and_one_thread_give_the_same_raster(hills, monkeypatch):
     that is what it does."""
     import numba
 
-    from terrainvis.visibility import observer_runs as module
+    from terrainvis.visibility.viewsheds import many as module
 
     obs = _observers(hills, 24, seed=5)
     if numba.get_num_threads() < 2:

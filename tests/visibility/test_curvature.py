@@ -39,7 +39,7 @@ from terrainvis.visibility import (
     visibility_matrix,
 )
 from terrainvis.visibility.profile import clearance_profile, lowest_point
-from terrainvis.visibility.sweep import _surface_at, _viewshed
+from terrainvis.visibility.viewsheds.sweep import _surface_at, _viewshed
 
 
 # ----------------------------------------------------------------- brute force
@@ -452,9 +452,10 @@ def test_bad_curvature_input():
 def _wedges(x, y, bsz):
     """Global wedge index of the directions (x, y) from the eye (pseudo-angles unwrapped
     around quadrant 0, as the sweep does)."""
-    from terrainvis.visibility import _sweep_kernels as vk
+    from terrainvis.visibility.viewsheds import _bound_kernels as bk
+    from terrainvis.visibility.viewsheds import _geometry_kernels as geo
 
-    p = np.array([vk._unwrap(vk.diamond(a, b), 0) for a, b in zip(x, y)])
+    p = np.array([geo.unwrap(geo.diamond(a, b), 0) for a, b in zip(x, y)])
     return np.floor(p * bsz / 4).astype(int)
 
 
@@ -462,25 +463,26 @@ def _cell_case(z, X0, Y0, w, h, ez, kc):
     """The far-cell bound of one cell (corner heights z (2, 2), lower-left corner (X0, Y0)
     relative to the eye) as the sweep computes it (no rounding terms): (ub, lb, glo, bsz)."""
     from terrainvis.core.surface import SurfaceGrid, no_pyramid
-    from terrainvis.visibility import _sweep_kernels as vk
+    from terrainvis.visibility.viewsheds import _bound_kernels as bk
+    from terrainvis.visibility.viewsheds import _geometry_kernels as geo
 
     xs, ys = np.array([X0, X0 + w]), np.array([Y0, Y0 + h])
     zz = np.asarray(z, float)
     cmax, rmax = np.empty((1, 2), dtype=np.float32), np.empty((2, 1), dtype=np.float32)
-    vk.strip_max(zz, cmax, rmax)
+    bk.strip_max(zz, cmax, rmax)
     pyr, off, nxl, ltop = no_pyramid()
     g = SurfaceGrid(zz, xs, ys, 1.0 / np.diff(xs), 1.0 / np.diff(ys), False, False, pyr, off, nxl, ltop, cmax, rmax)
-    eye = vk.Eye(0, 0, 0.0, 0.0, ez)
-    vals = [vk._sample_val(g, eye, r, c, 0, kc) for r, c in ((0, 0), (0, 1), (1, 0), (1, 1))]
+    eye = geo.Eye(0, 0, 0.0, 0.0, ez)
+    vals = [bk._sample_val(g, eye, r, c, 0, kc) for r, c in ((0, 0), (0, 1), (1, 0), (1, 1))]
     dring = np.hypot(max(X0, 0.0), 0.0 if Y0 <= 0.0 <= Y0 + h else min(abs(Y0), abs(Y0 + h)))
     diag2 = w * w + h * h
     rel = 0.25 * diag2 / dring**2 * (1.0 + 1e-12)
-    pads = vk.curvature_pads(kc, diag2, dring, rel, np.hypot(X0 + w, max(abs(Y0), abs(Y0 + h))))
+    pads = bk.curvature_pads(kc, diag2, dring, rel, np.hypot(X0 + w, max(abs(Y0), abs(Y0 + h))))
     bsz = 1 << 14
     glo = -bsz // 2
     ub = np.full(2 * bsz, -np.inf)
     lb = np.full(2 * bsz, -np.inf)
-    vk._cell_bounds(ub, lb, (glo, 2 * bsz, bsz * 0.25), (rel, pads[0], pads[1], True),
+    bk.cell_bounds(ub, lb, (glo, 2 * bsz, bsz * 0.25), (rel, pads[0], pads[1], True),
                     tuple(v[0] for v in vals), tuple(v[1] for v in vals))
     return ub, lb, glo, bsz
 
@@ -541,7 +543,8 @@ def test_far_cell_bound_covers_a_minimum_distance_inside_an_edge():
 def test_edge_bounds_cover_the_triangles_beside_them(seed, kc):
     """Near the eye the sweep clips edges to wedges: each edge's upper bound, lowered by
     k (d_min - diagonal), still covers every point of the triangles beside it."""
-    from terrainvis.visibility import _sweep_kernels as vk
+    from terrainvis.visibility.viewsheds import _bound_kernels as bk
+    from terrainvis.visibility.viewsheds import _geometry_kernels as geo
 
     rng = np.random.default_rng(seed)
     pts = rng.uniform(-40.0, 40.0, (3, 2))
@@ -554,7 +557,7 @@ def test_edge_bounds_cover_the_triangles_beside_them(seed, kc):
     ub = np.full(2 * bsz, -np.inf)
     lb = np.full(2 * bsz, -np.inf)
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        vk._edge_update((pts[i, 0], pts[i, 1], zs[i]), (pts[j, 0], pts[j, 1], zs[j]), ez, (glo, 2 * bsz, bsz),
+        bk._edge_update((pts[i, 0], pts[i, 1], zs[i]), (pts[j, 0], pts[j, 1], zs[j]), ez, (glo, 2 * bsz, bsz),
                         ub, lb, (0.0, 0.0, 0.0, 0.0, kc, diam))
     # points inside the triangle (barycentric)
     r = rng.random((4000, 3))
@@ -570,7 +573,8 @@ def test_edge_bound_covers_a_peak_inside_the_triangle():
     # flat ground 10 m under the eye: along a ray the corrected slope -10/d - k d peaks at
     # d* = sqrt(10 / k) = 141 m, inside this triangle (its edges cross the rays near it at
     # 100 m and 200 m, where it is 0.0086 lower); the pad of one diameter covers the peak
-    from terrainvis.visibility import _sweep_kernels as vk
+    from terrainvis.visibility.viewsheds import _bound_kernels as bk
+    from terrainvis.visibility.viewsheds import _geometry_kernels as geo
 
     kc = 1.0 / 2_000
     pts = np.array([[100.0, -50.0], [100.0, 50.0], [200.0, 0.0]])
@@ -580,7 +584,7 @@ def test_edge_bound_covers_a_peak_inside_the_triangle():
     ub = np.full(2 * bsz, -np.inf)
     lb = np.full(2 * bsz, -np.inf)
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        vk._edge_update((pts[i, 0], pts[i, 1], 0.0), (pts[j, 0], pts[j, 1], 0.0), 10.0, (glo, 2 * bsz, bsz),
+        bk._edge_update((pts[i, 0], pts[i, 1], 0.0), (pts[j, 0], pts[j, 1], 0.0), 10.0, (glo, 2 * bsz, bsz),
                         ub, lb, (0.0, 0.0, 0.0, 0.0, kc, diam))
     x = np.linspace(100.0, 199.0, 991)
     y = np.zeros_like(x)

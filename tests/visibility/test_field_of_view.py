@@ -1,4 +1,4 @@
-"""Field-of-view limits of viewsheds (terrainvis.visibility.field_of_view; issue 30, part 2).
+"""Field-of-view limits of viewsheds (terrainvis.visibility.viewsheds.field_of_view; issue 30, part 2).
 
 References, independent of the module's code:
 * a per-cell loop with ``math.atan2`` of every target against the observer, whose
@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from terrainvis import HeightGrid, bundled_terrain, cumulative_viewshed, synthetic_terrain, viewshed
 from terrainvis.cli import main
 from terrainvis.visibility import curvature_coefficient, field_of_view, field_of_view_mask
-from terrainvis.visibility.sweep import _surface_at
+from terrainvis.visibility.viewsheds.sweep import _surface_at
 
 
 # ----------------------------------------------------------------- reference

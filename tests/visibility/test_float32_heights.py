@@ -18,8 +18,8 @@ from hypothesis import strategies as st
 
 from terrainvis import HeightGrid
 from terrainvis.core.synthetic import synthetic_terrain
-from terrainvis.visibility import _sweep_kernels as vk
-from terrainvis.visibility.sweep import _viewshed, viewshed
+from terrainvis.visibility.viewsheds import _bound_kernels as bk
+from terrainvis.visibility.viewsheds.sweep import _viewshed, viewshed
 
 
 def _held32(z, xs, ys, attrs=None) -> HeightGrid:
@@ -129,10 +129,10 @@ def test_max_slope_on_even_columns_is_the_edge_by_edge_maximum(seed, rows, cols,
     hx = np.diff(xs)
     even = bool((hx == hx[0]).all())
     edge_by_edge = np.empty(rows)
-    vk.max_slope(z, xs, ys, False, edge_by_edge)
+    bk.max_slope(z, xs, ys, False, edge_by_edge)
     if even:  # dx 0.25, 1 and 30 always; 0.1 rarely
         once = np.empty(rows)
-        vk.max_slope(z, xs, ys, True, once)
+        bk.max_slope(z, xs, ys, True, once)
         assert np.array_equal(once, edge_by_edge)
     # and the loop itself against numpy's slopes
     zf = z.astype(np.float64)

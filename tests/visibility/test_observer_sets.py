@@ -1,4 +1,4 @@
-"""Tests of the observer sets and the intervisibility network (terrainvis.visibility.observers),
+"""Tests of the observer sets and the intervisibility network (terrainvis.visibility.viewsheds.observers),
 and of the GeoPackage layers the network is written to (terrainvis.io._gpkg).
 
 References, independent of the packing and of the chunks:

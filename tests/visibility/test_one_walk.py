@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 import terrainvis as tv
 from terrainvis.core.surface import cell_height
 from terrainvis.visibility import _kernels as pk
-from terrainvis.visibility import _sweep_kernels as sk
+from terrainvis.visibility.viewsheds import _walk_kernels as wk
 from terrainvis.visibility import _threshold_kernels as tk
 from terrainvis.visibility import thresholds
 from terrainvis.visibility.walk import cell_diagonal, cells_next, cells_start
@@ -269,7 +269,7 @@ def test_the_least_clearance_is_over_the_breakpoints(case, end_radius, curved, n
     assert on_tin == pytest.approx(want, abs=1e-7 * scale)
     # the viewshed sweep's two exact walks: along the edges (no nodata) and cell by cell (nodata)
     sg = _sweep_grid(g, nodata)
-    walked = sk.walk_min(sg, seg6, t0, 1.0 - t0, -np.inf, bulge)
+    walked = wk.walk_min(sg, seg6, t0, 1.0 - t0, -np.inf, bulge)
     assert walked == pytest.approx(want, abs=1e-9 * scale)
 
 

@@ -110,7 +110,7 @@ def test_min_height_agrees_with_the_viewshed_at_every_height(name, nodata):
     inside = tv.visibility.field_of_view_mask(g, obs, tv.visibility.field_of_view(**fov)) if fov else np.ones(g.shape, bool)
     expected_nan = ~(inside & np.isfinite(g.z))
     if nodata:
-        from terrainvis.visibility.sweep import _on_surface
+        from terrainvis.visibility.viewsheds.sweep import _on_surface
 
         expected_nan |= ~_on_surface(g.z)
     np.testing.assert_array_equal(np.isnan(mh), expected_nan)

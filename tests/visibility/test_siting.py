@@ -1,4 +1,4 @@
-"""Tests of observer siting (terrainvis.visibility.siting).
+"""Tests of observer siting (terrainvis.visibility.viewsheds.siting).
 
 References, independent of the lazy greedy and its packed bits:
 * the plain greedy, written here over boolean viewsheds from :func:`terrainvis.viewshed`

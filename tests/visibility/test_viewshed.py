@@ -1,4 +1,4 @@
-"""Tests of exact viewsheds (terrainvis.visibility.sweep).
+"""Tests of exact viewsheds (terrainvis.visibility.viewsheds.sweep).
 
 References, all independent of the viewshed sweep:
 * the pair engine, one segment per target (``line_of_sight(..., engine="grid")``): the grid
@@ -25,7 +25,7 @@ from terrainvis import HeightGrid, TIN
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.synthetic import KINDS, synthetic_terrain
 from terrainvis.visibility import clearance_tolerance, embree_tolerance, line_of_sight, min_clearance
-from terrainvis.visibility.sweep import _surface_at, _viewshed, viewshed
+from terrainvis.visibility.viewsheds.sweep import _surface_at, _viewshed, viewshed
 
 
 # ----------------------------------------------------------------- references
@@ -494,8 +494,11 @@ def test_edge_walk_matches_cell_walk_from_any_ring(spacing, bulge):
     line up to rounding, and the crossing the DDA meets first is then 'behind' it (an
     earlier version took the row line for the column line there and read a corner's
     height, 0.34 m too low, blocking a visible sample)."""
-    from terrainvis.visibility import _sweep_kernels as vk
-    from terrainvis.visibility.sweep import _sweep_grid
+    from terrainvis.visibility.viewsheds import _bound_kernels as bk
+    from terrainvis.visibility.viewsheds import _geometry_kernels as geo
+    from terrainvis.visibility.viewsheds import _sector_kernels as sectors
+    from terrainvis.visibility.viewsheds import _walk_kernels as wk
+    from terrainvis.visibility.viewsheds.sweep import _sweep_grid
 
     rng = np.random.default_rng(11)
     base = synthetic_terrain("mountains", 40, seed=3)
@@ -516,14 +519,14 @@ def test_edge_walk_matches_cell_walk_from_any_ring(spacing, bulge):
         ray = (ex, ey, ez, sg.xs[tc] - ex, sg.ys[tr] - ey, float(g.z[tr, tc]) - ez)
         if ray[3] == 0.0 and ray[4] == 0.0:
             continue
-        eye = vk.Eye(re, ce, ex, ey, ez)
-        starts = [0.02] + [vk._box_exit(sg, eye, k, ray[3], ray[4]) for k in range(0, 40)]
+        eye = geo.Eye(re, ce, ex, ey, ez)
+        starts = [0.02] + [sectors._box_exit(sg, eye, k, ray[3], ray[4]) for k in range(0, 40)]
         for t0 in starts:
             if not 0.0 <= t0 < 0.98:
                 continue
             n_starts += 1
-            e_edges = vk._walk_edges(sg, ray, t0, 0.98, -np.inf, bulge)
-            e_cells = vk._walk_cells(sg, ray, t0, 0.98, -np.inf, bulge)
+            e_edges = wk._walk_edges(sg, ray, t0, 0.98, -np.inf, bulge)
+            e_cells = wk._walk_cells(sg, ray, t0, 0.98, -np.inf, bulge)
             assert e_edges == pytest.approx(e_cells, abs=1e-9), (ray, t0)
     assert n_starts > 1000
 
@@ -535,7 +538,7 @@ def test_a_large_grid_s_tables_built_on_two_threads_are_the_tables():
     import numba
 
     from terrainvis.core.interrupt import THREAD_MIN_WORK
-    from terrainvis.visibility import sweep
+    from terrainvis.visibility.viewsheds import sweep
 
     z = synthetic_terrain("mountains", 520, seed=2).z
     assert z.size >= THREAD_MIN_WORK
@@ -558,8 +561,11 @@ def test_strip_maxima_are_float32_upper_bounds_of_each_segment(seed, rows, cols)
     """The sweep's strip maxima (float32, half the memory of float64 tables) are the float32
     rounded up of each segment's largest height: never below it, and exact for heights
     a float32 raster holds."""
-    from terrainvis.visibility import _sweep_kernels as vk
-    from terrainvis.visibility import sweep
+    from terrainvis.visibility.viewsheds import _bound_kernels as bk
+    from terrainvis.visibility.viewsheds import _geometry_kernels as geo
+    from terrainvis.visibility.viewsheds import _sector_kernels as sectors
+    from terrainvis.visibility.viewsheds import _walk_kernels as wk
+    from terrainvis.visibility.viewsheds import sweep
 
     rng = np.random.default_rng(seed)
     z = rng.normal(300.0, 50.0, (rows, cols))
@@ -567,7 +573,7 @@ def test_strip_maxima_are_float32_upper_bounds_of_each_segment(seed, rows, cols)
     g = HeightGrid(z)
     cmax, rmax = sweep._strip_max(g)
     assert cmax.dtype == np.float32 and rmax.dtype == np.float32
-    seg = vk.SEG
+    seg = bk.SEG
     for k in range(cmax.shape[0]):
         for c in range(cols):
             part = z[seg * k: seg * k + seg + 1, c]
@@ -596,13 +602,16 @@ def _f32_up(v: float) -> np.float32:
 def test_undecided_codes_found_block_by_block(shape):
     """The sweep's leftover targets, found a block of rows at a time: every UNDECIDED code's flat
     index, in order, as a comparison of the whole array finds them."""
-    from terrainvis.visibility import _sweep_kernels as vk
-    from terrainvis.visibility.sweep import _undecided
+    from terrainvis.visibility.viewsheds import _bound_kernels as bk
+    from terrainvis.visibility.viewsheds import _geometry_kernels as geo
+    from terrainvis.visibility.viewsheds import _sector_kernels as sectors
+    from terrainvis.visibility.viewsheds import _walk_kernels as wk
+    from terrainvis.visibility.viewsheds.sweep import _undecided
 
     rng = np.random.default_rng(shape[0] * 7 + shape[1])
-    code = rng.choice(np.array([vk.UNDECIDED, vk.VISIBLE, vk.BLOCKED, vk.NOT_TARGET], dtype=np.int8), size=shape,
+    code = rng.choice(np.array([geo.UNDECIDED, geo.VISIBLE, geo.BLOCKED, geo.NOT_TARGET], dtype=np.int8), size=shape,
                       p=[0.01, 0.4, 0.4, 0.19])
     got = _undecided(code)
-    assert np.array_equal(got, np.flatnonzero(code.ravel() == vk.UNDECIDED)) and got.dtype == np.int64
-    code[:] = vk.VISIBLE
+    assert np.array_equal(got, np.flatnonzero(code.ravel() == geo.UNDECIDED)) and got.dtype == np.int64
+    code[:] = geo.VISIBLE
     assert _undecided(code).size == 0

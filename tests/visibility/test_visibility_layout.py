@@ -33,32 +33,51 @@ def test_the_package_init_only_hands_names_on():
     tree = ast.parse((PACKAGE / "__init__.py").read_text())
     defined = [n.name for n in tree.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))]
     assert sorted(defined) == ["__dir__", "__getattr__"]
-    assert sorted(vis._API) == sorted(set(vis.__all__) - {"FieldOfView", "field_of_view", "field_of_view_mask"})
+    assert sorted(vis._API) == sorted(vis.__all__)
     for name, spec in vis._API.items():
         module, attr = spec if isinstance(spec, tuple) else (spec, name)
         assert getattr(vis, name) is getattr(importlib.import_module(f"terrainvis.visibility.{module}"), attr), name
     assert set(vis.__all__) <= set(dir(vis))
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         vis.nothing
-    # the function, though its module has the same name and is imported by the package
+    # the function, though its module (in the viewsheds subpackage) has the same name
     assert callable(vis.field_of_view) and not inspect.ismodule(vis.field_of_view)
 
 
+def _name(path: Path) -> str:
+    """The dotted name of a module of the package (or of its subpackages), from the package:
+    ``los``, ``viewsheds.sweep``, ``viewsheds`` for a subpackage's ``__init__``."""
+    parts = list(path.relative_to(PACKAGE).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1] or ["__init__"]
+    return ".".join(parts)
+
+
 def _module_imports(path: Path) -> set[str]:
-    """Modules of the visibility package imported at module level by ``path``
-    (``from . import name`` of a name that is no module imports the package's ``__init__``)."""
+    """Modules of the visibility package (and its subpackages) imported at module level by
+    ``path``, by :func:`_name` (``from . import name`` of a name that is no module imports the
+    package's ``__init__``)."""
+    here = list(path.relative_to(PACKAGE).parent.parts)
     out = set()
     for node in ast.parse(path.read_text()).body:
-        if isinstance(node, ast.ImportFrom) and node.level == 1:
-            if node.module:
-                out.add(node.module.split(".")[0])
-            else:
-                out.update(a.name if (PACKAGE / f"{a.name}.py").exists() else "__init__" for a in node.names)
+        if not isinstance(node, ast.ImportFrom) or node.level == 0 or node.level > len(here) + 1:
+            continue
+        base = here[: len(here) - (node.level - 1)]
+        if node.module:
+            parts = base + node.module.split(".")
+            out.add(".".join(parts) if (PACKAGE.joinpath(*parts).with_suffix(".py").exists()
+                                        or PACKAGE.joinpath(*parts).is_dir()) else ".".join(parts[:-1]) or "__init__")
+        else:
+            for a in node.names:
+                parts = base + [a.name]
+                module = PACKAGE.joinpath(*parts).with_suffix(".py").exists() or PACKAGE.joinpath(*parts).is_dir()
+                out.add(".".join(parts) if module else (".".join(base) or "__init__"))
     return out
 
 
 def test_no_import_cycle_inside_the_package():
-    mods = {p.stem: _module_imports(p) for p in PACKAGE.glob("*.py")}
+    mods = {_name(p): _module_imports(p) for p in PACKAGE.rglob("*.py")}
+    assert "viewsheds.sweep" in mods and "viewsheds._sector_kernels" in mods["viewsheds.sweep"]
     state = {}
 
     def visit(m, path):
@@ -78,8 +97,9 @@ def test_no_import_cycle_inside_the_package():
 def _functions():
     import importlib
 
-    for p in sorted(PACKAGE.glob("*.py")):
-        mod = importlib.import_module(f"terrainvis.visibility.{p.stem}") if p.stem != "__init__" else vis
+    for p in sorted(PACKAGE.rglob("*.py")):
+        name = _name(p)
+        mod = importlib.import_module(f"terrainvis.visibility.{name}") if name != "__init__" else vis
         for name, obj in vars(mod).items():
             fn = getattr(obj, "py_func", obj)
             if inspect.isfunction(fn) and fn.__module__ == mod.__name__:

@@ -35,12 +35,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.interrupt import call
-from ..core.terrain import HeightGrid
-from . import _threshold_kernels as _tk
+from ...core.interrupt import call
+from ...core.terrain import HeightGrid
+from .. import _threshold_kernels as _tk
 from .field_of_view import elevation_degrees
-from .predicate import clearance_tolerance, trim_length
-from .thresholds import ThresholdSurface
+from ..predicate import clearance_tolerance, trim_length
+from ..thresholds import ThresholdSurface
 
 __all__ = ["OUTPUTS", "check_output", "eye_thresholds", "output_values"]
 
@@ -97,7 +97,7 @@ def tin_of_grid_thresholds(grid: HeightGrid, eye: np.ndarray, targets: np.ndarra
     """:func:`eye_thresholds` on a grid with nodata, walked as its TIN (``grid.to_tin()``, the
     same surface without the triangles touching nodata) under the grid's own trim and
     tolerance. The TIN walk stops at a hole: callers check its answers (see
-    :func:`terrainvis.visibility.sweep`)."""
+    :func:`terrainvis.visibility.viewshed`)."""
     surf = ThresholdSurface(grid.to_tin())
     rules = surf.rules(kc=kc)._replace(delta=float(trim_length(grid)), tol=float(clearance_tolerance(grid)))
     return _run(_tk.tin_eye_thresholds, surf, rules, eye, targets)

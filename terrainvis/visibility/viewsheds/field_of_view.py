@@ -55,9 +55,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.terrain import HeightGrid
-from ..core.validate import as_nonnegative_finite, describe
-from .predicate import EARTH_RADIUS, curvature_coefficient, target_grid
+from ...core.terrain import HeightGrid
+from ...core.validate import as_nonnegative_finite, describe
+from ..predicate import EARTH_RADIUS, curvature_coefficient, target_grid
 
 __all__ = ["FieldOfView", "field_of_view", "field_of_view_mask", "azimuth_degrees", "elevation_degrees"]
 

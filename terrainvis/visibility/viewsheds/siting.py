@@ -20,7 +20,7 @@ Memory: each candidate's viewshed is kept as packed bits (``numpy.packbits``), K
 cols / 8 bytes (1,000 candidates on 1024²: 125 MiB); a request that would not fit is
 refused before anything runs (:func:`terrainvis.core.memory.check_memory`). The viewsheds
 run in chunks of candidates as :func:`terrainvis.cumulative_viewshed`'s observers do
-(:mod:`terrainvis.visibility.observer_runs`), on this process, local workers or
+(:mod:`terrainvis.visibility.viewsheds.many`), on this process, local workers or
 dask; the greedy choice itself runs here, in numpy (an AND and a popcount per evaluation).
 
 References
@@ -51,11 +51,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.memory import check_memory
-from ..core.terrain import HeightGrid
-from ..core.validate import as_int, describe
-from .observer_runs import eyes, keep_terrain, prepare, run_chunks, sight_of_many
-from .predicate import EARTH_RADIUS
+from ...core.memory import check_memory
+from ...core.terrain import HeightGrid
+from ...core.validate import as_int, describe
+from .many import eyes, keep_terrain, prepare, run_chunks, sight_of_many
+from ..predicate import EARTH_RADIUS
 from .sweep import _on_surface, viewshed
 
 __all__ = ["site_observers", "candidate_grid", "sample_areas", "SitingResult"]
@@ -306,7 +306,7 @@ def _lazy_greedy(packed: np.ndarray, k: int, weights, size: int):
 
 
 def _table(run, chosen, packed: np.ndarray, grid: HeightGrid, weights):
-    """The table of :class:`SitingResult` (``run``: the :class:`~terrainvis.visibility.observer_runs.Run`):
+    """The table of :class:`SitingResult` (``run``: the :class:`~terrainvis.visibility.viewsheds.many.Run`):
     each choice, its gain and the coverage after it."""
     import pandas as pd
 

@@ -11,7 +11,7 @@ The observers are cut into chunks; each chunk is one unit of
 process pool or on a dask cluster, and stops them all on Ctrl-C. A unit returns the counts
 of its chunk and the caller adds them up as units finish, so memory stays at one count
 raster per running unit whatever K is. The run (the checks, the chunks, the units) is
-:mod:`terrainvis.visibility.observer_runs`, which observer sets and siting share.
+:mod:`terrainvis.visibility.viewsheds.many`, which observer sets and siting share.
 
 Costs: one viewshed per observer (:func:`terrainvis.viewshed`; docs/user-guide.md, "Many
 observers", gives the measured figures), plus per unit the transfer of the terrain to the worker
@@ -24,8 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .observer_runs import count_dtype, keep_terrain, prepare, run_chunks, sight_of_many
-from .predicate import EARTH_RADIUS
+from .many import count_dtype, keep_terrain, prepare, run_chunks, sight_of_many
+from ..predicate import EARTH_RADIUS
 from .sweep import viewshed
 
 __all__ = ["cumulative_viewshed"]

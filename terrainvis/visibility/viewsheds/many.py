@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.terrain import HeightGrid, as_terrain
-from ..core.validate import as_float_array, describe
-from ..errors import OutsideFootprintError
-from .predicate import _height_above, target_grid
-from .sight import Sight, engine_on, sight_of
+from ...core.terrain import HeightGrid, as_terrain
+from ...core.validate import as_float_array, describe
+from ...errors import OutsideFootprintError
+from ..predicate import _height_above, target_grid
+from ..sight import Sight, engine_on, sight_of
 from .sweep import _surface_at
 
 __all__ = ["Run", "sight_of_many", "prepare", "run_chunks", "keep_terrain", "as_observers", "as_heights",
@@ -78,7 +78,7 @@ def prepare(terrain, observers, each, sight: Sight, at, *, workers, client, prog
     ``each`` is the (K,) heights given one per observer, or None (the Sight's height for
     all); ``name`` names the observers' argument in messages.
     """
-    from ..core.runner import check_client, check_workers
+    from ...core.runner import check_client, check_workers
 
     as_terrain(terrain)
     obs = as_observers(observers, name)
@@ -213,7 +213,7 @@ def run_chunks(run: Run, unit, on_result, *, align: int = 1, desc: str) -> None:
 
     A unit is called as ``unit(terrain, at, token, observers, heights, sight)``.
     """
-    from ..core.runner import run_units
+    from ...core.runner import run_units
 
     k = run.obs.shape[0]
     threads = _local_threads(run.terrain, run.sight.engine, run.workers, run.client)
@@ -251,7 +251,7 @@ def _progress_bar(k: int, show: bool, desc: str, done: int = 0):
 
     bar = tqdm
     if show:
-        from ..core._progress import ProgressLines, in_kernel, on_a_terminal, progress_bar_class
+        from ...core._progress import ProgressLines, in_kernel, on_a_terminal, progress_bar_class
 
         if not (on_a_terminal() or in_kernel()):
             return ProgressLines(k, desc, "observer", initial=done)

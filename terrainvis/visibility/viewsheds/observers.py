@@ -13,8 +13,8 @@ same exact :func:`terrainvis.viewshed` per observer, the same chunks of observer
 terrain between them, with the pair engine's exact minimum clearance
 (:func:`terrainvis.min_clearance`).
 
-The chunked run (:mod:`terrainvis.visibility.observer_runs`) is the cumulative
-viewshed's, shared with :mod:`terrainvis.visibility.siting`, whose units keep each
+The chunked run (:mod:`terrainvis.visibility.viewsheds.many`) is the cumulative
+viewshed's, shared with :mod:`terrainvis.visibility.viewsheds.siting`, whose units keep each
 candidate's viewshed as packed bits instead.
 """
 
@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.memory import check_memory
-from ..core.terrain import as_terrain
-from ..core.validate import as_int
-from ..errors import OutsideFootprintError
-from .observer_runs import (
+from ...core.memory import check_memory
+from ...core.terrain import as_terrain
+from ...core.validate import as_int
+from ...errors import OutsideFootprintError
+from .many import (
     as_heights,
     as_observers,
     check_on_surface,
@@ -40,7 +40,7 @@ from .observer_runs import (
     run_chunks,
     sight_of_many,
 )
-from .predicate import EARTH_RADIUS, clearance_tolerance, curvature_coefficient
+from ..predicate import EARTH_RADIUS, clearance_tolerance, curvature_coefficient
 from .sweep import viewshed
 
 __all__ = ["ObserverSets", "observer_sets", "intervisibility_network"]
@@ -154,7 +154,7 @@ class ObserverSets:
     # ------------------------------------------------------------------ files
     def save(self, path) -> Path:
         """Write to an ``.npz`` file (compressed), atomically; :meth:`load` reads it back."""
-        from ..core.fileio import atomic_path
+        from ...core.fileio import atomic_path
 
         p = Path(path)
         if p.suffix.lower() != ".npz":
@@ -357,7 +357,7 @@ def intervisibility_network(
     """
     import pandas as pd
 
-    from .los import min_clearance
+    from ..los import min_clearance
 
     as_terrain(terrain)
     obs = as_observers(observers, "observers")

@@ -72,20 +72,23 @@ import threading
 import numba
 import numpy as np
 
-from ..tolerances import EXTENT_INSIDE_REL, HOLE_REACH_SLACK, OUTPUT_SETTLE_REL, TRIM_MARGIN_REL
-from ..core.interrupt import THREAD_MIN_WORK, alongside, call
-from ..core.memory import fresh_array
-from ..core.mesh import footprint_matches
-from ..core.surface import SurfaceGrid, no_pyramid, no_strips
-from ..core.validate import describe
-from ..errors import OutsideFootprintError
-from ..core.terrain import TIN, HeightGrid, as_terrain, height_range
-from . import _sweep_kernels as _vk
-from .engines import Predicate, choose
+from ...tolerances import EXTENT_INSIDE_REL, HOLE_REACH_SLACK, OUTPUT_SETTLE_REL, TRIM_MARGIN_REL
+from ...core.interrupt import THREAD_MIN_WORK, alongside, call
+from ...core.memory import fresh_array
+from ...core.mesh import footprint_matches
+from ...core.surface import SurfaceGrid, no_pyramid, no_strips
+from ...core.validate import describe
+from ...errors import OutsideFootprintError
+from ...core.terrain import TIN, HeightGrid, as_terrain, height_range
+from . import _bound_kernels as _bk
+from . import _geometry_kernels as _geo
+from . import _sector_kernels as _sk
+from . import _walk_kernels as _wk
+from ..engines import Predicate, choose
 from .field_of_view import apply_field_of_view, field_of_view_mask
 from .output_modes import check_output, eye_thresholds, output_values, tin_of_grid_thresholds
-from .predicate import EARTH_RADIUS, _check_heights, clearance_tolerance, target_grid, terrain_scale, trim_length
-from .sight import KEYWORDS, Sight, _differs, engine_on, sight_of
+from ..predicate import EARTH_RADIUS, _check_heights, clearance_tolerance, target_grid, terrain_scale, trim_length
+from ..sight import KEYWORDS, Sight, _differs, engine_on, sight_of
 
 __all__ = ["viewshed"]
 
@@ -178,7 +181,7 @@ def viewshed(
         checked when it was made), instead of the keywords: a keyword set to other than
         its default beside it is a TypeError.
     output : {"visible", "min_height", "angle"}, default "visible"
-        What to return for each target (:mod:`terrainvis.visibility.output_modes`):
+        What to return for each target (:mod:`terrainvis.visibility.viewsheds.output_modes`):
         ``"visible"`` the bool mask below; ``"min_height"`` (float64) the least height
         above the surface at which a target at that sample is visible, 0 where the ground
         itself is visible (GDAL's ``-om GROUND``; ``target_height`` is not used, but for
@@ -211,7 +214,7 @@ def viewshed(
         :func:`~terrainvis.visibility.line_of_sight`. Nodata samples (of ``at``, or where
         the surface under test is absent) are False, and samples outside the field of
         view (beyond ``max_distance``, nearer than ``min_distance``, outside ``azimuth``
-        or ``vertical``: :mod:`terrainvis.visibility.field_of_view`) are False, but for
+        or ``vertical``: :mod:`terrainvis.visibility.viewsheds.field_of_view`) are False, but for
         the sample nearest the observer (the ground it stands on), which gets the exact
         verdict whatever the limits but ``min_distance`` (with earth curvature an eye on
         the ground may not see it). Inside the field of view every verdict is the one
@@ -277,7 +280,7 @@ def viewshed(
 
 def _eye_observer(eye, terrain, observer, observer_height) -> tuple[float, float, float]:
     """The eye (x, y, z) an eye surface gives the observer at (x, y) on ``terrain`` (S(T))."""
-    from .los import _eye_heights
+    from ..los import _eye_heights
 
     xy = np.asarray(observer, dtype=np.float64)
     if xy.shape != (2,):
@@ -545,7 +548,7 @@ def _surface_at(terrain, x: float, y: float) -> float:
         return math.nan
     lx = min(max(x, xs[0]), xs[-1]) - xs[0]
     ly = min(max(y, ys[0]), ys[-1]) - ys[0]
-    return float(_vk.surface_height(_sweep_grid(terrain, strips=False), lx, ly))
+    return float(_geo.surface_height(_sweep_grid(terrain, strips=False), lx, ly))
 
 
 def _touches_present(z: np.ndarray, r: int, c: int) -> bool:
@@ -594,13 +597,13 @@ def _sweep_grid(grid: HeightGrid, strips: bool = True) -> SurfaceGrid:
 
 
 def _strip_max(grid: HeightGrid):
-    """Cached largest heights of each column's and row's aligned segments (:func:`_vk.strip_max`)."""
+    """Cached largest heights of each column's and row's aligned segments (:func:`_bk.strip_max`)."""
     v = grid._cache.get("viewshed_strip_max")
     if v is None:
         rows, cols = grid.shape
-        cmax = np.empty(((rows - 2) // _vk.SEG + 1, cols), dtype=np.float32)
-        rmax = np.empty((rows, (cols - 2) // _vk.SEG + 1), dtype=np.float32)
-        _vk.strip_max(grid.heights, cmax, rmax)
+        cmax = np.empty(((rows - 2) // _bk.SEG + 1, cols), dtype=np.float32)
+        rmax = np.empty((rows, (cols - 2) // _bk.SEG + 1), dtype=np.float32)
+        _bk.strip_max(grid.heights, cmax, rmax)
         v = grid._cache["viewshed_strip_max"] = (cmax, rmax)
     return v
 
@@ -611,7 +614,7 @@ def _max_slope(grid: HeightGrid) -> float:
     if g is None:
         rows = np.empty(grid.shape[0])
         hx = np.diff(grid.xs)
-        _vk.max_slope(grid.heights, grid.xs, grid.ys, bool((hx == hx[0]).all()), rows)
+        _bk.max_slope(grid.heights, grid.xs, grid.ys, bool((hx == hx[0]).all()), rows)
         g = float(rows.max())
         grid._cache["viewshed_max_slope"] = g
     return g
@@ -663,12 +666,12 @@ def _grid(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, own: bool, s
     if todo.size:
         r, c = np.divmod(todo, at.shape[1])
         vis = _exact(grid, eye, (at.xs[c], at.ys[r], zt[r, c].astype(np.float64) + h_t), delta, tol, kc)
-        code.ravel()[todo] = np.where(vis, _vk.VISIBLE, _vk.BLOCKED)
-    info = {"targets": int(code.size - np.count_nonzero(code == _vk.NOT_TARGET)), "lb": counts[0],
+        code.ravel()[todo] = np.where(vis, _geo.VISIBLE, _geo.BLOCKED)
+    info = {"targets": int(code.size - np.count_nonzero(code == _geo.NOT_TARGET)), "lb": counts[0],
             "ub": counts[1], "walk": counts[2], "exact": int(todo.size), "ub_bound": counts[3]}
     # the verdicts written over the codes (one byte each, as bools are): an 8192² grid's
     # viewshed then holds one array of 64 MiB, not two
-    return np.equal(code, _vk.VISIBLE, out=code.view(np.bool_)), info
+    return np.equal(code, _geo.VISIBLE, out=code.view(np.bool_)), info
 
 
 def _undecided(code: np.ndarray) -> np.ndarray:
@@ -676,7 +679,7 @@ def _undecided(code: np.ndarray) -> np.ndarray:
     whole array made a temporary as large as it: 64 MiB on 8192², whose first touch cost up to
     0.17 s; a block's is reused from one block to the next)."""
     step = max(1, (1 << 20) // max(code.shape[1], 1))
-    parts = [np.flatnonzero(code[r : r + step].ravel() == _vk.UNDECIDED) + r * code.shape[1]
+    parts = [np.flatnonzero(code[r : r + step].ravel() == _geo.UNDECIDED) + r * code.shape[1]
              for r in range(0, code.shape[0], step)]
     return np.concatenate(parts) if len(parts) > 1 else parts[0]
 
@@ -685,22 +688,22 @@ def _target_codes(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, dmax: float
     """A code per sample of ``at`` (UNDECIDED, or NOT_TARGET: nodata, no surface under
     it, beyond ``dmax``), and the heights of the surface under test there."""
     code = fresh_array(at.shape, np.int8)
-    code.fill(_vk.UNDECIDED)
+    code.fill(_geo.UNDECIDED)
     if own:
         zt = grid.heights  # float32 for a float32 raster: the heights of targets are made float64 where they are used
         if grid.n_nodata:
-            code[~_on_surface(zt)] = _vk.NOT_TARGET
+            code[~_on_surface(zt)] = _geo.NOT_TARGET
     else:
         zt = grid.height_on_grid(at.xs, at.ys)
-        code[np.isnan(zt)] = _vk.NOT_TARGET
+        code[np.isnan(zt)] = _geo.NOT_TARGET
     if at.n_nodata:
-        code[np.isnan(at.heights)] = _vk.NOT_TARGET
+        code[np.isnan(at.heights)] = _geo.NOT_TARGET
     if math.isfinite(dmax):
-        code[(at.xs[None, :] - eye[0]) ** 2 + (at.ys[:, None] - eye[1]) ** 2 > dmax * dmax] = _vk.NOT_TARGET
+        code[(at.xs[None, :] - eye[0]) ** 2 + (at.ys[:, None] - eye[1]) ** 2 > dmax * dmax] = _geo.NOT_TARGET
     return code, zt
 
 
-def _rules(grid: HeightGrid, ez: float, query) -> _vk.Rules:
+def _rules(grid: HeightGrid, ez: float, query) -> _geo.Rules:
     """The sweep's numbers: trim, tolerance, rounding bound and margin, exclusion radii."""
     h_t, dmax, kc = query
     xs, ys = _local_axes(grid)[:2]
@@ -718,7 +721,7 @@ def _rules(grid: HeightGrid, ez: float, query) -> _vk.Rules:
     # closer than r_excl to the eye, a point lies in every target's trimmed end
     r_excl = 0.5 * delta * wmin / math.hypot(wmin, dz)
     diag2 = float(np.diff(xs).max() ** 2 + np.diff(ys).max() ** 2)
-    return _vk.Rules(float(h_t), delta, clearance_tolerance(grid), 64.0 * e_h, e_h, r_excl, delta * (1.0 + TRIM_MARGIN_REL),
+    return _geo.Rules(float(h_t), delta, clearance_tolerance(grid), 64.0 * e_h, e_h, r_excl, delta * (1.0 + TRIM_MARGIN_REL),
                      diag2, float(dmax), float(kc))
 
 
@@ -730,13 +733,13 @@ def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.nd
     ex = float(eye[0] - grid.xs[0])
     ey = float(eye[1] - grid.ys[0])
     ez = float(eye[2])
-    ce = int(_vk.locate(sg.xs, sg.ixw, sg.uniform, ex))
-    re = int(_vk.locate(sg.ys, sg.iyw, sg.uniform, ey))
-    veye = _vk.Eye(re, ce, ex, ey, ez)
+    ce = int(_geo.locate(sg.xs, sg.ixw, sg.uniform, ex))
+    re = int(_geo.locate(sg.ys, sg.iyw, sg.uniform, ey))
+    veye = _geo.Eye(re, ce, ex, ey, ez)
     jstop = _last_ring(sg.xs, sg.ys, re, ce, ex, ey, query[1])
     stats = np.zeros((_N_SECTORS, 5), dtype=np.int64)
     if own:
-        targets = _vk.Targets(True, code, np.empty(0), np.empty(0), np.empty(0), np.zeros(1, dtype=np.int64),
+        targets = _geo.Targets(True, code, np.empty(0), np.empty(0), np.empty(0), np.zeros(1, dtype=np.int64),
                               np.zeros(1, dtype=np.int64), np.empty(0, dtype=np.int8))
     else:
         idx = _undecided(code)
@@ -746,11 +749,11 @@ def _sweep(grid: HeightGrid, at: HeightGrid, eye: np.ndarray, query, code: np.nd
         tz = np.ascontiguousarray(zt.ravel()[idx] + query[0])
         tstart = np.zeros(_N_SECTORS * (jstop + 2) + 1, dtype=np.int64)
         torder = np.empty(idx.size, dtype=np.int64)
-        _vk.bucket_targets(sg, veye, tx, ty, _N_SECTORS, jstop, tstart, torder)
-        targets = _vk.Targets(False, np.zeros((1, 1), dtype=np.int8), tx, ty, tz, tstart, torder,
-                              np.full(idx.size, _vk.UNDECIDED, dtype=np.int8))
+        _sk.bucket_targets(sg, veye, tx, ty, _N_SECTORS, jstop, tstart, torder)
+        targets = _geo.Targets(False, np.zeros((1, 1), dtype=np.int8), tx, ty, tz, tstart, torder,
+                              np.full(idx.size, _geo.UNDECIDED, dtype=np.int8))
     # through the interrupt helper: the sectors on threads, and Ctrl-C stops the sweep within a ring of each
-    call(_vk.sweep, sg, veye, _rules(grid, ez, query), _vk.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
+    call(_sk.sweep, sg, veye, _rules(grid, ez, query), _geo.Layout(_N_SECTORS, _B0, _R1, _J_NEAR, jstop),
          targets, stats, work=int(code.size), items=_N_SECTORS)
     if not own:
         code.ravel()[idx] = targets.tcode
@@ -771,14 +774,14 @@ def _exact(grid: HeightGrid, eye, targets, delta: float, tol: float, kc: float) 
     tx, ty, tz = targets
     m = tx.size
     if grid.n_nodata == 0 and m > _WALK_MAX_TARGETS:
-        from .grid import grid_clearance
+        from ..grid import grid_clearance
 
         a = np.empty((m, 3))
         a[:] = eye
         b = np.column_stack([tx, ty, tz])
         return grid_clearance(grid, a, b, delta=delta, tol=tol, los=True, kc=kc) >= -tol
     out = np.empty(m)
-    _vk.walk_targets(
+    _wk.walk_targets(
         _sweep_grid(grid), (eye[0] - grid.xs[0], eye[1] - grid.ys[0], float(eye[2])),
         np.ascontiguousarray(tx - grid.xs[0]), np.ascontiguousarray(ty - grid.ys[0]), np.ascontiguousarray(tz),
         float(delta), float(tol), float(kc), out,
