@@ -25,9 +25,9 @@ S(T) is close to T (level 1) they vary within a cell of T, and interpolated offs
 keep fewer verdicts than full projection. So the fit checks itself (``validate=True``)
 on :data:`VALIDATION_SETS` sets of :data:`VALIDATION_POINTS` points of its own (from its
 own seed stream, never the points it will serve): their pairs' verdicts on T against
-those on S(T) with the offsets scaled by each factor of :data:`SHRINKS`, and keeps the
-first factor that keeps the most (0: the surface is full projection, never worse than
-it on those points).
+those on S(T) with the offsets scaled by each factor of :data:`SHRINKS`, and keeps a
+factor only where it keeps clearly more verdicts than full projection on those pairs
+(:func:`_choose_shrink`); otherwise the surface is full projection (factor 0).
 
 The representation
 ------------------
@@ -84,9 +84,13 @@ FORMAT_VERSION = 1
 #: Bytes an eye surface ships besides its codes: eight float64 (extent, scale, mu, offset,
 #: target height).
 HEADER_BYTES = 64
-#: The shrink factors a fit tries on its validation points (the first that keeps the most
-#: verdicts is kept; 0 is full projection).
+#: The shrink factors a fit tries on its validation points (0 is full projection; which one
+#: is kept: :func:`_choose_shrink`).
 SHRINKS = (1.0, 0.5, 0.0)
+#: How clearly a factor must beat full projection on the validation pairs to be kept: its
+#: McNemar statistic (pairs it gains minus pairs it loses, over the square root of their
+#: sum) above this. Measured in docs/relocation.md ("The fit's check").
+SHRINK_Z = 2.0
 #: Validation point sets of a fit, and points per set.
 VALIDATION_SETS = 4
 VALIDATION_POINTS = 50
@@ -468,14 +472,15 @@ def eye_surface(original, simplified, *, offset: float = 0.0, target_height=None
 
 def _validated_shrink(eye: EyeSurface, original, simplified, seed: int, curvature: float, earth_radius: float,
                       end_radius: float) -> float:
-    """The first factor of :data:`SHRINKS` whose scaled offsets keep the most verdicts of the
-    fit's own validation pairs (points ``eye.offset`` above T; their own seed stream)."""
+    """The factor of :data:`SHRINKS` the fit's own validation pairs choose (points
+    ``eye.offset`` above T; their own seed stream): :func:`_choose_shrink` of whether each
+    pair's verdict on S(T), with the offsets scaled by each factor, is its verdict on T."""
     from ..core.sampling import sample_points
     from ..visibility import visibility_matrix
 
     curve = {"curvature": curvature, "earth_radius": earth_radius}
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xE7E5]))
-    kept = np.zeros(len(SHRINKS))
+    kept = [[] for _ in SHRINKS]
     for _ in range(VALIDATION_SETS):
         pts = sample_points(original, VALIDATION_POINTS, seed=rng, offset=eye.offset)
         truth = visibility_matrix(original, pts, engine="grid", **curve)
@@ -485,8 +490,34 @@ def _validated_shrink(eye: EyeSurface, original, simplified, seed: int, curvatur
         for k, f in enumerate(SHRINKS):
             placed = np.column_stack([pts[:, :2], ground + f * e])
             seen = visibility_matrix(simplified, placed, end_radius=end_radius, **curve)
-            kept[k] += np.count_nonzero((seen == truth) & upper)
-    return float(SHRINKS[int(np.argmax(kept))])
+            kept[k].append((seen == truth)[upper])
+    return _choose_shrink(np.array([np.concatenate(k) for k in kept]))
+
+
+def _choose_shrink(kept: np.ndarray) -> float:
+    """The factor of :data:`SHRINKS` that ``kept`` (factors, pairs) bool, whether each
+    validation pair keeps its verdict with the offsets scaled by each factor, chooses.
+
+    Against full projection (the factor 0, when :data:`SHRINKS` holds it) a factor counts
+    the pairs it keeps that full projection loses (``b``) and those it loses that full
+    projection keeps (``c``); it is a candidate when ``b - c`` exceeds
+    :data:`SHRINK_Z` times ``sqrt(b + c)`` (McNemar's statistic: on the few pairs where
+    the two differ, a gain larger than chance). The candidate that keeps the most is
+    chosen (the first on ties), full projection when there is none: a fit whose offsets
+    do not clearly help on its own points ships full projection rather than a coin's
+    toss. Without a factor 0, the factor that keeps the most.
+    """
+    totals = kept.sum(axis=1)
+    if 0.0 not in SHRINKS:
+        return float(SHRINKS[int(np.argmax(totals))])
+    zero = SHRINKS.index(0.0)
+    best = zero
+    for k in range(len(SHRINKS)):
+        b = int(np.count_nonzero(kept[k] & ~kept[zero]))
+        c = int(np.count_nonzero(kept[zero] & ~kept[k]))
+        if k != zero and b - c > SHRINK_Z * np.sqrt(b + c) and (best == zero or totals[k] > totals[best]):
+            best = k
+    return float(SHRINKS[best])
 
 
 # ---------------------------------------------------------------------- the relocation

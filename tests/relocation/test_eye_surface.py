@@ -320,3 +320,36 @@ def test_a_viewshed_takes_the_eye_surface_for_its_observer():
         viewshed(S, (obs[0], obs[1], z), eye=e)
     with pytest.raises(TypeError, match="eye must be an EyeSurface"):
         viewshed(S, obs, eye="surface.npz")
+
+
+def _pairs(n: int, gained: int, lost: int, base_kept: int) -> np.ndarray:
+    """Whether each of ``n`` pairs keeps its verdict: full projection keeps ``base_kept`` of
+    them; a factor keeps those, less ``lost``, plus ``gained`` others."""
+    base = np.zeros(n, dtype=bool)
+    base[:base_kept] = True
+    other = base.copy()
+    other[:lost] = False
+    other[base_kept:base_kept + gained] = True
+    return base, other
+
+
+def test_a_factor_is_kept_only_where_it_beats_full_projection_by_more_than_chance(monkeypatch):
+    """McNemar's statistic on the pairs where a factor and full projection differ: 30 gained
+    and 10 lost (3.2) is kept; 6 and 2 (1.4), more pairs kept but as a coin could, is not;
+    of two factors that beat it, the one keeping more wins; ties go to the first."""
+    monkeypatch.setattr(eyemod, "SHRINKS", (1.0, 0.5, 0.0))
+    base, clear = _pairs(1000, 30, 10, 900)
+    _, noisy = _pairs(1000, 6, 2, 900)
+    assert eyemod._choose_shrink(np.array([clear, noisy, base])) == 1.0
+    assert eyemod._choose_shrink(np.array([noisy, noisy, base])) == 0.0
+    _, better = _pairs(1000, 50, 10, 900)
+    assert eyemod._choose_shrink(np.array([clear, better, base])) == 0.5
+    assert eyemod._choose_shrink(np.array([better, better, base])) == 1.0
+    # the rule's threshold: 2 x sqrt(b + c) against b - c
+    _, edge = _pairs(1000, 12, 4, 900)  # 8 > 2 sqrt(16) = 8 is false
+    _, past = _pairs(1000, 13, 4, 900)  # 9 > 2 sqrt(17) = 8.25
+    assert eyemod._choose_shrink(np.array([edge, edge, base])) == 0.0
+    assert eyemod._choose_shrink(np.array([past, past, base])) == 1.0
+    # without full projection among the factors, the one that keeps the most
+    monkeypatch.setattr(eyemod, "SHRINKS", (1.0, 0.5))
+    assert eyemod._choose_shrink(np.array([noisy, clear])) == 0.5
