@@ -175,6 +175,11 @@ def test_worker_processes_get_it_and_give_the_same_rows(toy):
     assert not serial[cols].equals(at_default[cols])  # so equal rows say the workers lifted by 5
 
 
+def toy_function(points, simplified, *, offset=0.0, scale=1.0):
+    """A relocation workers can import (this module's top level): the points as given."""
+    return points.copy()
+
+
 def test_a_function_workers_cannot_import_is_refused_before_the_run(tmp_path):
     grid = synthetic_terrain("hills", size=33, seed=2)
     register(Relocation("inline", lambda points, simplified, *, offset=0.0: points.copy(), "a lambda"))
@@ -186,6 +191,15 @@ def test_a_function_workers_cannot_import_is_refused_before_the_run(tmp_path):
         assert (compare({"g": grid}, relocations=["inline"], workers=1, **_small())["error"].isna()).all()
     finally:
         unregister("inline")
+    # the same for a run option's check (the checks terrainvis.core.option builds are sent)
+    register(Relocation("checked", toy_function, "x", run_options=(
+        Option("scale", 1.0, lambda value, name: float(value), "a toy's scale", "float"),)))
+    try:
+        with pytest.raises(TypeError, match=r"relocation 'checked': its entry \(a check of its run options\?\) "
+                                            r"cannot be sent to worker processes .*top level of a module"):
+            compare({"g": grid}, relocations=["checked"], workers=2, **_small(levels=[1, 2]))
+    finally:
+        unregister("checked")
 
 
 def test_the_command_line_picks_it_up(toy, tmp_path, capsys):
