@@ -7,7 +7,12 @@ S(T); a *relocation* places them there before their visibility is tested. Each o
 the default ones and hands each the options it declares, the tables and figures take
 its order and style from it, and the command line's ``--relocations`` and ``--how`` list
 it. Adding a relocation is one :func:`register` call (or one entry here) and its own
-function.
+function. An entry declares, besides its function and style, its own options of a run
+(:attr:`Relocation.run_options`: :class:`~terrainvis.core.option.Option` records, which
+:func:`terrainvis.compare` takes as keywords, validates, stores with the run and hands to
+it, and ``terrainvis compare`` and ``terrainvis relocate`` offer as flags) and what it
+cannot run without (:attr:`Relocation.needs`: T, or T's verdicts of the pairs), so that
+no other module knows a relocation by name.
 
 The built-in ones:
 
@@ -17,7 +22,8 @@ The built-in ones:
     Each point takes the height on S(T) whose verdicts agree best with its verdicts on T,
     against partners spread over the terrain that stand for the points it will be tested
     with (never the other points themselves): :mod:`terrainvis.relocation.calibrated`.
-    It needs T (``original=``).
+    It needs T (``original=``). Its own options of a run, the partners and the neighbours,
+    are declared in its module (:data:`terrainvis.relocation.calibrated.RUN_OPTIONS`).
 ``"eye"``
     The calibrated relocation without T: each point at S(T) plus the offset an *eye
     surface* (fitted once from T and S(T), shipped with S(T)) gives there
