@@ -310,7 +310,7 @@ def _check_run_options(relocation: Relocation) -> None:
         if not isinstance(own, Option):
             raise TypeError(f"relocation {name!r}: each of run_options must be a terrainvis.core.option.Option, got "
                             f"{describe(own)}")
-        if not own.name.isidentifier() or own.name == "offset":
+        if not isinstance(own.name, str) or not own.name.isidentifier() or own.name == "offset":
             raise ValueError(f"relocation {name!r}: a run option's name must be a Python keyword other than offset, "
                              f"got {own.name!r}")
         if own.name not in relocation.options:
