@@ -50,8 +50,10 @@ def assert_visibility_kept(original, simplified, *, min_accuracy: float, points=
     n, seed, offset
         How many random points, their seed and their height above T.
     relocation : str
-        How the points are placed on S(T) (:data:`terrainvis.relocation.RELOCATIONS`;
-        ``"calibrated"`` is given T).
+        How the points are placed on S(T) (:data:`terrainvis.relocation.RELOCATIONS`): a
+        relocation that needs T (its entry declares ``needs=("original",)``, as the
+        calibrated one does) is given it; one that needs T's verdicts of the pairs (a bound,
+        ``needs=("reference",)``) is refused.
     frame, repair
         As in :func:`terrainvis.evaluate`, for ``simplified``.
     worst : int
@@ -92,13 +94,18 @@ def assert_visibility_kept(original, simplified, *, min_accuracy: float, points=
     from .core.metrics import agreement
     from .experiment.evaluate import as_simplified
     from .experiment.plan import resolve_terrains
-    from .relocation import relocate
+    from .relocation import RELOCATIONS, relocate
     from .visibility import min_clearance, visibility_matrix
 
     threshold = as_finite_scalar(min_accuracy, "min_accuracy")
     if not 0.0 <= threshold <= 1.0:
         raise ValueError(f"min_accuracy must be a share in [0, 1] (0.95 for 95 %), got {min_accuracy!r}")
     worst = as_int(worst, "worst", minimum=0)
+    beyond = [n for n in (RELOCATIONS[relocation].needs if isinstance(relocation, str) and relocation in RELOCATIONS
+                                                      else ()) if n != "original"]
+    if beyond:
+        raise ValueError(f"relocation {relocation!r} needs {', '.join(beyond)} (T's verdicts of the very pairs it is "
+                         "tested on), which a test of the simplification cannot give; use a practical relocation")
     offset = as_nonnegative_finite(offset, "offset", "z units")  # a point below T sees nothing, on T or S(T)
     (_, T), = resolve_terrains([original]).items()
     S = as_simplified(simplified, T, frame=frame, repair=repair, label="simplified")
@@ -110,7 +117,7 @@ def assert_visibility_kept(original, simplified, *, min_accuracy: float, points=
             raise ValueError(f"points must hold at least 2 points, got {P.shape[0]}")
     on_s = {k: v for k, v in predicate.items()}
     on_t = {k: v for k, v in predicate.items() if k != "end_radius"}
-    # T to every relocation: one that takes no original ignores it (terrainvis.relocate)
+    # T to every relocation (one that needs it declares so; one that takes no original ignores it, terrainvis.relocate)
     Q = relocate(P, S, relocation, offset=offset, original=T, **on_s)
     v_t = visibility_matrix(T, P, **on_t)
     v_s = visibility_matrix(S, Q, **on_s)

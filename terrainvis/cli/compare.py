@@ -10,10 +10,17 @@ from pathlib import Path
 from ._common import UsageError, add_nodata, dask_client, plural, read_terrain
 
 
-#: ``--quick``: a run of seconds for smoke tests (terrains, and options by name, each unless given);
-#: the calibrated relocation against its core partners alone (512, calibrated jointly), whose
-#: cost does not grow with the points, as the sets are small.
-QUICK = {"terrains": ["hills", "ridges"], "levels": [1, 3], "n_points": 20, "n_sets": 2, "n_partners": 512}
+#: ``--quick``: a run of seconds for smoke tests, on these terrains; each option declared with a
+#: ``quick`` value takes it unless given (:func:`quick_options`).
+QUICK_TERRAINS = ["hills", "ridges"]
+
+
+def quick_options() -> dict:
+    """The options of ``--quick`` (name -> value), each as its declaration's ``quick`` says
+    (the levels, points and sets; the calibrated relocation against its core partners alone)."""
+    from ..experiment.options import OPTIONS
+
+    return {name: option.quick for name, option in OPTIONS.items() if option.quick is not None}
 
 
 #: The command's line in ``terrainvis --help`` (also its light sub-parser: :func:`terrainvis.cli._parser`).
@@ -60,7 +67,8 @@ def _quick_flags() -> str:
     from ..experiment.options import OPTIONS
 
     words = lambda v: " ".join(map(str, v)) if isinstance(v, list) else str(v)  # noqa: E731
-    return " ".join(f"{'--terrain' if k == 'terrains' else OPTIONS[k].flag} {words(v)}" for k, v in QUICK.items())
+    return " ".join([f"--terrain {words(QUICK_TERRAINS)}"]
+                    + [f"{OPTIONS[k].flag} {words(v)}" for k, v in quick_options().items()])
 
 
 def run(args) -> int:
@@ -93,11 +101,11 @@ def _compare_in(out: Path, args) -> int:
     from ..experiment.options import given
     from ..experiment.plan import DEFAULT_TERRAINS, settings_for
 
-    terrains = args.terrain or (QUICK["terrains"] if args.quick else list(DEFAULT_TERRAINS))
+    terrains = args.terrain or (list(QUICK_TERRAINS) if args.quick else list(DEFAULT_TERRAINS))
     options = given(args)
     if args.quick:  # a run budgeted in vertical error keeps its budgets in place of the quick levels
-        skip = {"terrains"} | ({"levels"} if options.get("max_errors") is not None else set())
-        options = {**{k: v for k, v in QUICK.items() if k not in skip}, **options}
+        skip = {"levels"} if options.get("max_errors") is not None else set()
+        options = {**{k: v for k, v in quick_options().items() if k not in skip}, **options}
     grids = {}
     for t in terrains:
         label, grid = read_terrain(t, args)

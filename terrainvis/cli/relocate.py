@@ -32,9 +32,10 @@ HELP = "place points of a DEM on its simplification"
 def add_parser(sub) -> None:
     from simplifiers import METHODS
 
-    from ..relocation.calibrated import N_PARTNERS
-    from ..relocation.registry import RELOCATIONS, practical_relocations
+    from ..core.option import add_flag
+    from ..relocation.registry import CALIBRATED, RELOCATIONS, run_options
 
+    offered = offered_relocations()
     r = sub.add_parser(
         "relocate", help=HELP,
         description=(
@@ -55,23 +56,43 @@ def add_parser(sub) -> None:
     r.add_argument("-m", "--method", type=method_arg, metavar="METHOD",
                    help=f"simplify the DEM here instead, with one of {', '.join(METHODS)}")
     r.add_argument("-l", "--level", type=int, default=None, help="with -m: the level (default 1)")
-    r.add_argument("--how", choices=list(practical_relocations()), default="calibrated", metavar="HOW",
-                   help="the relocation: " + "; ".join(f"{name}: {RELOCATIONS[name].summary}"
-                                                         for name in practical_relocations())
-                        + " (default calibrated)")
+    r.add_argument("--how", choices=list(offered), default=CALIBRATED, metavar="HOW",
+                   help="the relocation: " + "; ".join(f"{name}: {RELOCATIONS[name].summary}" for name in offered)
+                        + f" (default {CALIBRATED})")
     r.add_argument("--offset", type=height_arg, default=0.0,
                    help="the points' height above the DEM's surface, >= 0 (default 0: on the surface)")
     r.add_argument("--target-height", type=height_arg, default=None,
-                   help="calibrated: the points will look at targets this high above the surface (a viewshed's "
-                        "cells); without it they will look at each other")
-    r.add_argument("--no-neighbours", dest="neighbours", action="store_false",
-                   help="calibrated: the partners alone, without each point's neighbours 1.5-8 cells around it")
-    r.add_argument("--partners", type=int, default=N_PARTNERS,
-                   help=f"calibrated: partners spread over the DEM (default {N_PARTNERS})")
-    r.add_argument("--seed", type=int, default=0, help="calibrated: seed of the partners' positions (default 0)")
-    add_earth(r)  # the calibrated relocation's lines of sight
+                   help=f"{_takers('target_height', offered)}: the points will look at targets this high above the "
+                        "surface (a viewshed's cells); without it they will look at each other")
+    for option in run_options(offered):  # the relocations' own options, as terrainvis compare spells them
+        add_flag(r, option)
+    r.add_argument("--seed", type=int, default=0,
+                   help=f"{_takers('seed', offered)}: seed of the relocation's random draws (default 0)")
+    add_earth(r)  # the lines of sight of the relocations that evaluate visibility
     add_nodata(r)
     add_positions(r)
+
+
+def offered_relocations() -> tuple:
+    """The relocations ``--how`` offers: the practical ones that need at most T (a bound needs T's verdicts)."""
+    from ..relocation.registry import RELOCATIONS, practical_relocations
+
+    return tuple(name for name in practical_relocations() if set(RELOCATIONS[name].needs) <= {"original"})
+
+
+def _takers(keyword: str, offered) -> str:
+    """The relocations of ``offered`` that take ``keyword`` ("calibrated, eye"), for a flag's help."""
+    from ..relocation.registry import RELOCATIONS
+
+    return ", ".join(name for name in offered if keyword in RELOCATIONS[name].options) or "no relocation"
+
+
+def own_options(args) -> dict:
+    """The run options of the relocation ``--how`` names that the command line gives, checked (messages name the flags)."""
+    from ..relocation.registry import RELOCATIONS
+
+    return {o.name: o.check(getattr(args, o.name), o.flag or o.name)
+            for o in RELOCATIONS[args.how].declared_options() if hasattr(args, o.name)}
 
 
 def run(args) -> int:
@@ -80,7 +101,7 @@ def run(args) -> int:
 
     from ..core.fileio import check_output_file
     from ..io import write_csv
-    from ..relocation.registry import relocate
+    from ..relocation.registry import RELOCATIONS, relocate
 
     out = Path(args.output)
     if out.suffix.lower() != ".csv":
@@ -108,12 +129,15 @@ def run(args) -> int:
                          f"{outside_message(frame, user[k], ' or its simplification')}; {int(outside.sum())} point(s) do")
     z = np.where(np.isnan(table[:, 2]), ground + args.offset, table[:, 2])
     points = np.column_stack([xy, z])
+    entry = RELOCATIONS[args.how]
+    own = own_options(args)
+    shown = {o.name: own.get(o.name, o.default) for o in entry.declared_options()}
     working("relocate", f"placing {plural(len(points), 'point')} on {what} ({args.how}"
-            + (f", {args.partners:,} partners)" if args.how == "calibrated" else ")"))
+            + "".join(f", {k} {v}" for k, v in shown.items()) + ")")
     t0 = time.perf_counter()
+    # T to every relocation (one that takes no original ignores it, terrainvis.relocate), and its own options
     moved = relocate(points, simplified, args.how, offset=args.offset, original=grid, target_height=args.target_height,
-                     n_partners=args.partners, seed=args.seed, curvature=args.curvature,
-                     earth_radius=args.earth_radius, neighbours=args.neighbours)
+                     seed=args.seed, curvature=args.curvature, earth_radius=args.earth_radius, **own)
     seconds = time.perf_counter() - t0
     surface = simplified.height_at(xy)
     written = pd.DataFrame({**csv_positions(frame, user), "z": moved[:, 2], "z_original": z,
@@ -121,7 +145,7 @@ def run(args) -> int:
     write_csv(written, out, float_format="%.6f")
     lift = moved[:, 2] - (surface + args.offset)
     print(f"{label}: {plural(len(points), 'point')} relocated ({args.how}) onto {what}, {seconds:.2f} s")
-    if args.how == "calibrated" and len(points):
+    if entry.predicate and len(points):  # a relocation that evaluates visibility: how far, under which earth
         from ..tolerances import MOVED_ABS
 
         off = np.abs(lift) > MOVED_ABS

@@ -379,12 +379,14 @@ def _seen_share(grid: HeightGrid, positions: np.ndarray, offset: float, target_h
 
 def _relocation_keywords(settings, grid: HeightGrid, end_radius: float) -> dict:
     """What a unit knows that a relocation may take (each takes those its entry declares,
-    :meth:`terrainvis.relocation.Relocation.keywords`): the observers' offset, T, the
-    partners of the calibrated relocation (from the run's seed) and the predicate of the
-    verdicts on S(T) (its end radius; a relocation that evaluates visibility gets the
-    predicate's options as well)."""
-    return {"offset": settings.offset, "original": grid, "end_radius": end_radius, "n_partners": settings.n_partners,
-            "neighbours": settings.neighbours, "seed": settings.seed}
+    :meth:`terrainvis.relocation.Relocation.keywords`): the observers' offset, T, the run's
+    seed, the predicate of the verdicts on S(T) (its end radius; a relocation that
+    evaluates visibility gets the predicate's options as well) and the values of the run
+    options the run's relocations declare (:func:`terrainvis.relocation.registry.run_options`)."""
+    from ..relocation.registry import run_options
+
+    own = {option.name: getattr(settings, option.name) for option in run_options(settings.relocations)}
+    return {"offset": settings.offset, "original": grid, "end_radius": end_radius, "seed": settings.seed, **own}
 
 
 def _row(base, s, how, d, t_test, t_true, counts) -> dict:

@@ -17,6 +17,14 @@ passed on to every visibility computation of the run. From that one entry:
 
 Checks that involve several options (or the terrains) are the :data:`RULES`.
 ``docs/architecture.md`` ("How to add an option") shows how to add one.
+
+An option that only one relocation reads (the number of the calibrated relocation's partners,
+for instance) is not declared here but in the relocation's own entry
+(:attr:`terrainvis.relocation.Relocation.run_options`): :data:`OPTIONS` reads those from
+the relocation registry whenever it is asked, so such an option is everything above, and
+the units hand its value to the relocations that declare it.
+:class:`~terrainvis.core.option.Option` itself lives in :mod:`terrainvis.core.option`, so
+that the relocation layer can make one without importing the experiment.
 """
 
 from __future__ import annotations
@@ -24,19 +32,19 @@ from __future__ import annotations
 import argparse
 import inspect
 import numbers
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, MutableMapping, Sequence
 
 import numpy as np
 
-from ..core.validate import as_bool, as_finite_scalar, as_float_array, as_int, choice, describe
-from ..relocation.calibrated import N_PARTNERS
+from ..core.option import Flag, Option, Switch, add_flag, boolean, finite, height, integer
+from ..core.validate import as_float_array, as_int, choice, describe
+from ..relocation.registry import run_options
 from ..visibility import EARTH_RADIUS
 
 __all__ = [
     "Option", "Flag", "Switch", "OPTIONS", "RULES", "Settings", "DEFAULTS", "validate", "los_keywords",
     "add_flags", "given", "PREDICATES", "DISTANCE_UNITS", "CASCADE_AUTO_MIN_SAMPLES", "budgeted", "steps",
+    "integer", "finite", "height", "boolean", "one_of", "names",
 ]
 
 
@@ -56,122 +64,7 @@ DISTANCE_UNITS = ("world", "cells")
 CASCADE_AUTO_MIN_SAMPLES = 1 << 19
 
 
-# ---------------------------------------------------------------------- declarations
-@dataclass(frozen=True)
-class Flag:
-    """A command-line flag that takes a value (``--points 20``) or several (``--levels 1 3``).
-
-    ``spelling`` defaults to ``--`` and the option's name with dashes; ``type`` converts
-    one word; ``choices`` (called when the parser is built) lists the valid words, which
-    argparse then checks; ``listed`` (called then too) lists words the help names without
-    argparse checking them (the option's own check has the better message).
-    """
-
-    spelling: str | None = None
-    type: Callable[[str], Any] = str
-    many: bool = False
-    metavar: str | None = None
-    choices: Callable[[], Sequence[str]] | None = None
-    listed: Callable[[], Sequence[str]] | None = None
-
-
-@dataclass(frozen=True)
-class Switch:
-    """Command-line flags without a value: ``on`` sets True, ``off`` sets False (either may be absent)."""
-
-    on: str | None = None
-    off: str | None = None
-    on_help: str | None = None
-    off_help: str | None = None
-
-
-@dataclass(frozen=True)
-class Option:
-    """One option of :func:`terrainvis.compare`.
-
-    Parameters
-    ----------
-    name : str
-        The keyword of :func:`~terrainvis.compare`, the attribute of :class:`Settings`
-        and the key in the stored settings.
-    default
-        The value when the option is not given (also the command line's default).
-    check : callable
-        ``check(value, name) -> value``: the value validated and normalised (tuples for
-        sequences), or a TypeError / ValueError naming ``name``, what was expected and
-        what was received.
-    help : str
-        One line for ``--help`` and the first line of the option in ``help(compare)``.
-    type : str
-        The type as the docstring shows it (``"int"``, ``"sequence of str"``, ...).
-    doc : str
-        More for the docstring (optional).
-    measures : tuple of str, optional
-        The measures (:data:`terrainvis.experiment.measures.MEASURES`) the option applies
-        to; None (the default) is every measure. The help says so when it is not every
-        measure.
-    cli : Flag, Switch or None
-        How ``terrainvis compare`` spells it (None: the API only).
-    los : bool
-        Passed, under its name, to every visibility computation of a run
-        (``visibility_matrix``, ``viewshed`` and ``relocate``, whose calibrated and oracle
-        relocations compute visibility): an option such as the earth-curvature
-        coefficient is then one entry here and nothing else.
-    default_text : str, optional
-        How help texts show the default (when ``repr`` of it would not say it well).
-    """
-
-    name: str
-    default: Any
-    check: Callable[[Any, str], Any]
-    help: str
-    type: str
-    doc: str = ""
-    measures: tuple | None = None
-    cli: Flag | Switch | None = Flag()
-    los: bool = False
-    default_text: str | None = None
-
-    @property
-    def flag(self) -> str | None:
-        """The option's command-line flag (a value flag's spelling, or a switch's first flag)."""
-        if isinstance(self.cli, Switch):
-            return self.cli.on or self.cli.off
-        if isinstance(self.cli, Flag):
-            return self.cli.spelling or "--" + self.name.replace("_", "-")
-        return None
-
-    def shown_default(self) -> str:
-        """The default as the command line's help shows it."""
-        if self.default_text is not None:
-            return self.default_text
-        value = self.default
-        if isinstance(value, (tuple, list)):
-            return " ".join(map(str, value))
-        return f"{value:g}" if isinstance(value, float) else str(value)
-
-    def documented_default(self) -> str:
-        """The default as :func:`~terrainvis.compare`'s docstring shows it."""
-        return f"{self.default!r}" + (f" ({self.default_text})" if self.default_text is not None else "")
-
-    def scope(self) -> str:
-        """``" (pairs only)"`` for an option of some measures only, else ``""``."""
-        if self.measures is None:
-            return ""
-        return f" ({', '.join(self.measures)} only)"
-
-
 # ---------------------------------------------------------------------- checks
-def integer(minimum: int | None = None):
-    """A check: an integer, at least ``minimum``."""
-    return lambda value, name: as_int(value, name, minimum=minimum)
-
-
-def finite(value, name: str) -> float:
-    """A check: a finite real number (:func:`terrainvis.core.validate.as_finite_scalar`)."""
-    return as_finite_scalar(value, name)
-
-
 def _nonnegative(value, name: str) -> float:
     """A check: a finite real number >= 0."""
     out = finite(value, name)
@@ -188,22 +81,9 @@ def _positive(value, name: str) -> float:
     return out
 
 
-def height(value, name: str) -> float:
-    """A check: a height above the surface, finite and >= 0 (a negative one would stand underground)."""
-    out = finite(value, name)
-    if out < 0:
-        raise ValueError(f"{name} must be >= 0 (a height above the surface), got {out!r}")
-    return out
-
-
 def one_of(valid: Callable[[], Sequence[str]]):
     """A check: one of the names ``valid()`` lists (read when the check runs)."""
     return lambda value, name: choice(value, name, valid())
-
-
-def boolean(value, name: str) -> bool:
-    """A check: True or False (numpy's bool too)."""
-    return as_bool(value, name)
 
 
 def names(valid: Callable[[], Sequence[str]], default: Callable[[], Sequence[str]], hint: str = ""):
@@ -410,7 +290,7 @@ _DECLARED = [
     Option(
         "levels", (1, 2, 3), _levels, "simplification levels", "int or sequence of int",
         doc="For 120x120 grids 1, 2, 3 are the paper's 25 %, 6 % and 1.5 %.",
-        cli=Flag(type=int, many=True),
+        cli=Flag(type=int, many=True), quick=[1, 3],
     ),
     Option(
         "max_errors", None, _budgets,
@@ -440,27 +320,12 @@ _DECLARED = [
         cli=Flag(many=True, metavar="R"),
     ),
     Option(
-        "n_partners", N_PARTNERS, integer(minimum=1), "partners of the calibrated relocation", "int",
-        doc=("The calibrated relocation places each point against about this many partners spread over the "
-             "terrain (:func:`terrainvis.relocation.calibrated.partners`: a core of up to ``CORE_PARTNERS`` = 512 "
-             "calibrated jointly, the others placed against the core); their positions come from ``seed``."),
-        cli=Flag("--partners", int),
-    ),
-    Option(
-        "neighbours", True, boolean, "calibrated relocation: count each point's neighbours (short sight lines)",
-        "bool",
-        doc=("The calibrated relocation weighs each point's agreement with 48 neighbours 1.5 to 8 cells of T "
-             "around it beside its partners (:func:`terrainvis.relocate`); False: the partners alone, a little "
-             "better over all pairs, worse among pairs a few cells apart."),
-        cli=Switch(off="--no-neighbours", off_help="calibrated relocation: the partners alone, no neighbours"),
-    ),
-    Option(
         "n_points", 50, integer(minimum=2), "points per set", "int", measures=("pairs",),
         doc="Each terrain gets ``n_sets`` sets of ``n_points`` uniform random points; every method sees the same sets.",
-        cli=Flag("--points", int),
+        cli=Flag("--points", int), quick=20,
     ),
     Option("n_sets", 6, integer(minimum=1), "point sets per terrain", "int", measures=("pairs",),
-           cli=Flag("--sets", int)),
+           cli=Flag("--sets", int), quick=2),
     Option(
         "seed", 0, integer(minimum=0), "seed of the point sets (and of the viewshed measure's observers)", "int",
         doc="The point sets depend only on ``seed`` and the terrain's name.",
@@ -568,9 +433,68 @@ _DECLARED = [
     ),
 ]
 
+
+
+class _Options(MutableMapping):
+    """The options of :func:`terrainvis.compare` by name, in the order of its signature: those
+    declared here, and after ``relocations`` those the relocations declare (their
+    :attr:`~terrainvis.relocation.Relocation.run_options`, in registry order), read from
+    the registry whenever asked, so that a relocation registered at any time brings its own.
+    Setting or deleting a name changes the options declared here."""
+
+    def __init__(self, declared):
+        self._declared = {o.name: o for o in declared}
+
+    def _all(self) -> dict:
+        out = {}
+        for name, option in self._declared.items():
+            out[name] = option
+            if name == "relocations":
+                for own in run_options():
+                    out.setdefault(own.name, own)  # a name taken here is refused (check_relocation_options)
+        return out
+
+    def __getitem__(self, name: str) -> Option:
+        return self._all()[name]
+
+    def __iter__(self):
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+    def __setitem__(self, name: str, option: Option) -> None:
+        self._declared[name] = option
+
+    def __delitem__(self, name: str) -> None:
+        del self._declared[name]
+
+    def __repr__(self) -> str:
+        return f"OPTIONS({list(self)})"
+
+
 #: Every option of :func:`terrainvis.compare`, by name, in the order of its signature.
-#: Adding an option is one entry here (plus the code that uses it).
-OPTIONS: dict[str, Option] = {o.name: o for o in _DECLARED}
+#: Adding an option is one entry in ``_DECLARED`` (plus the code that uses it); an option
+#: of one relocation is declared by its entry instead (``Relocation(run_options=...)``).
+OPTIONS: MutableMapping[str, Option] = _Options(_DECLARED)
+
+
+def check_relocation_options() -> None:
+    """Refuse a relocation's own option whose name is one of the options declared here.
+
+    Raises
+    ------
+    TypeError
+        Naming the relocation, the option and what to do.
+    """
+    from ..relocation.registry import RELOCATIONS
+
+    for relocation in RELOCATIONS.values():
+        for own in relocation.declared_options():
+            if own.name in OPTIONS._declared:  # noqa: SLF001
+                raise TypeError(f"relocation {relocation.name!r} declares a run option {own.name!r}, which is an option "
+                                f"of compare already; list it in its options to be handed the run's value, or give "
+                                "its own option another name")
 
 
 # ---------------------------------------------------------------------- rules
@@ -757,6 +681,7 @@ def validate(grids: dict, values: dict, *, caller: str = "compare()", flags: boo
     ValueError
         A value out of range, or options that do not go together.
     """
+    check_relocation_options()
     unknown = [k for k in values if k not in OPTIONS]
     if unknown:
         raise TypeError(f"{caller} got unexpected option(s) {unknown}; the options are {list(OPTIONS)}")
@@ -823,33 +748,8 @@ def add_flags(parser: argparse.ArgumentParser, *, exclude=()) -> None:
     everything else takes the option's default in :func:`validate`.
     """
     for option in OPTIONS.values():
-        if option.name in exclude:
-            continue
-        cli = option.cli
-        if isinstance(cli, Switch):
-            _add_switch(parser, option, cli)
-        elif isinstance(cli, Flag):
-            listed = f"; one of: {', '.join(cli.listed())}" if cli.listed is not None else ""
-            kw = {"dest": option.name, "default": argparse.SUPPRESS, "type": cli.type,
-                  "help": f"{option.help}{option.scope()} (default: {option.shown_default()}){listed}"}
-            if cli.many:
-                kw["nargs"] = "+"
-            if cli.choices is not None:
-                kw["choices"] = list(cli.choices())
-            else:  # named after the flag, not the option (--points N, not N_POINTS)
-                kw["metavar"] = cli.metavar or option.flag.lstrip("-").upper().replace("-", "_")
-            parser.add_argument(option.flag, **kw)
-
-
-def _add_switch(parser, option: Option, cli: Switch) -> None:
-    target = parser.add_mutually_exclusive_group() if cli.on and cli.off else parser
-    default = f" (default: {option.shown_default()})"
-    if cli.on:
-        target.add_argument(cli.on, dest=option.name, action="store_const", const=True, default=argparse.SUPPRESS,
-                            help=(cli.on_help or option.help) + option.scope() + default)
-    if cli.off:
-        target.add_argument(cli.off, dest=option.name, action="store_const", const=False, default=argparse.SUPPRESS,
-                            help=(cli.off_help or f"not: {option.help}") + option.scope())
+        if option.name not in exclude:
+            add_flag(parser, option)
 
 
 def given(args: argparse.Namespace) -> dict:

@@ -210,10 +210,12 @@ def check_sendable(entries, *, dask: bool) -> None:
             if getattr(fn, "__module__", None) == "__main__" and not getattr(main, "__file__", None):
                 raise TypeError(f"{what}: its function {name} was defined in an interactive session, which {where} "
                                 f"cannot import; {advice}")
-        try:
-            dumps(entry)
-        except Exception as exc:  # pickle raises PicklingError, AttributeError or TypeError, cloudpickle others
-            raise TypeError(f"{what}: its function {name} cannot be sent to {where} ({exc}); {advice}") from None
+        # the function first (the usual culprit), then the rest of the entry (a relocation's run options' checks)
+        for part, label in ((fn, f"its function {name}"), (entry, "its entry (a check of its run options?)")):
+            try:
+                dumps(part)
+            except Exception as exc:  # pickle raises PicklingError, AttributeError or TypeError, cloudpickle others
+                raise TypeError(f"{what}: {label} cannot be sent to {where} ({exc}); {advice}") from None
 
 
 def tasks(grids: dict, settings: Settings, done=frozenset(), *,

@@ -1,12 +1,15 @@
 """Placing test points on a simplified terrain: the paper's relocations, the calibrated one, the oracle bound.
 
 :func:`relocate` dispatches by name on the registry :data:`RELOCATIONS`
-(:mod:`~terrainvis.relocation.registry`); :func:`register` adds a relocation of your own.
+(:mod:`~terrainvis.relocation.registry`); :func:`register` adds a relocation of your own, with
+its own options of a run if it has some (:class:`Option`, :class:`Flag`, :class:`Switch`:
+``Relocation(run_options=...)``).
 The relocations themselves: :mod:`~terrainvis.relocation.paper` (identity, full, half),
 :mod:`~terrainvis.relocation.calibrated`, :mod:`~terrainvis.relocation.eye` (the calibrated
 relocation shipped with S(T), without T) and :mod:`~terrainvis.relocation.oracle`.
 """
 
+from ..core.option import Flag, Option, Switch
 from .registry import (
     CALIBRATED,
     EYE,
@@ -19,13 +22,14 @@ from .registry import (
     practical_relocations,
     register,
     relocate,
+    run_options,
     unregister,
 )
 
 __all__ = [
     "relocate", "Relocation", "RELOCATIONS", "register", "unregister", "available", "default_relocations",
-    "practical_relocations", "PAPER_RELOCATIONS", "CALIBRATED", "EYE", "ORACLE",
-    "EyeSurface", "eye_surface",
+    "practical_relocations", "run_options", "Option", "Flag", "Switch", "PAPER_RELOCATIONS", "CALIBRATED", "EYE",
+    "ORACLE", "EyeSurface", "eye_surface",
 ]
 
 

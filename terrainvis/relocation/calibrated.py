@@ -88,6 +88,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.option import Flag, Option, Switch, boolean, integer
 from ..core.validate import as_int, describe
 from ..errors import OutsideFootprintError
 from ..core.terrain import HeightGrid, fingerprint
@@ -96,7 +97,7 @@ from ..visibility import EARTH_RADIUS, Sight, curvature_coefficient
 from ..visibility.thresholds import ThresholdSurface, best_height, best_heights, gauss_seidel, threshold_row
 
 __all__ = ["calibrated_heights", "best_responses", "neighbour_weight", "Partners", "partners", "N_PARTNERS",
-           "CORE_PARTNERS", "SWEEPS", "MIN_GAIN", "WINDOW_ERRORS"]
+           "CORE_PARTNERS", "SWEEPS", "MIN_GAIN", "WINDOW_ERRORS", "RUN_OPTIONS"]
 
 #: Default number of partners (K), the core and the others (see "Partners" in the module
 #: docstring); chosen on the tuning terrains (docs/relocation.md gives the figures).
@@ -132,6 +133,29 @@ NEIGHBOUR_DIRECTIONS = 12
 NEIGHBOUR_WEIGHT = 0.5
 #: The number of partners at which :data:`NEIGHBOUR_WEIGHT` holds as given.
 NEIGHBOUR_WEIGHT_PARTNERS = 512
+
+#: The calibrated relocation's own options of a run, declared in its registry entry
+#: (:attr:`terrainvis.relocation.Relocation.run_options`; the eye relocation, whose surface
+#: a calibrated relocation fits, declares them too): keywords of :func:`terrainvis.compare`,
+#: validated before a run and stored with it, and flags of ``terrainvis compare`` and
+#: ``terrainvis relocate``. ``terrainvis compare --quick`` runs against the core alone.
+RUN_OPTIONS = (
+    Option(
+        "n_partners", N_PARTNERS, integer(minimum=1), "partners of the calibrated relocation", "int",
+        doc=("The calibrated relocation places each point against about this many partners spread over the "
+             "terrain (:func:`terrainvis.relocation.calibrated.partners`: a core of up to ``CORE_PARTNERS`` = 512 "
+             "calibrated jointly, the others placed against the core); their positions come from ``seed``."),
+        cli=Flag("--partners", int), quick=CORE_PARTNERS,
+    ),
+    Option(
+        "neighbours", True, boolean, "calibrated relocation: count each point's neighbours (short sight lines)",
+        "bool",
+        doc=("The calibrated relocation weighs each point's agreement with 48 neighbours 1.5 to 8 cells of T "
+             "around it beside its partners (:func:`terrainvis.relocate`); False: the partners alone, a little "
+             "better over all pairs, worse among pairs a few cells apart."),
+        cli=Switch(off="--no-neighbours", off_help="calibrated relocation: the partners alone, no neighbours"),
+    ),
+)
 
 
 def neighbour_weight(k: int) -> float:

@@ -7,7 +7,12 @@ S(T); a *relocation* places them there before their visibility is tested. Each o
 the default ones and hands each the options it declares, the tables and figures take
 its order and style from it, and the command line's ``--relocations`` and ``--how`` list
 it. Adding a relocation is one :func:`register` call (or one entry here) and its own
-function.
+function. An entry declares, besides its function and style, its own options of a run
+(:attr:`Relocation.run_options`: :class:`~terrainvis.core.option.Option` records, which
+:func:`terrainvis.compare` takes as keywords, validates, stores with the run and hands to
+it, and ``terrainvis compare`` and ``terrainvis relocate`` offer as flags) and what it
+cannot run without (:attr:`Relocation.needs`: T, or T's verdicts of the pairs), so that
+no other module knows a relocation by name.
 
 The built-in ones:
 
@@ -17,7 +22,8 @@ The built-in ones:
     Each point takes the height on S(T) whose verdicts agree best with its verdicts on T,
     against partners spread over the terrain that stand for the points it will be tested
     with (never the other points themselves): :mod:`terrainvis.relocation.calibrated`.
-    It needs T (``original=``).
+    It needs T (``original=``). Its own options of a run, the partners and the neighbours,
+    are declared in its module (:data:`terrainvis.relocation.calibrated.RUN_OPTIONS`).
 ``"eye"``
     The calibrated relocation without T: each point at S(T) plus the offset an *eye
     surface* (fitted once from T and S(T), shipped with S(T)) gives there
@@ -38,14 +44,19 @@ from typing import Callable
 
 import numpy as np
 
+from ..core.option import Option
 from ..core.registry import Registry
 from ..core.terrain import as_terrain
 from ..core.validate import as_finite_scalar, as_points, describe
 
 __all__ = [
     "Relocation", "RELOCATIONS", "register", "unregister", "available", "default_relocations",
-    "practical_relocations", "relocate", "PAPER_RELOCATIONS", "CALIBRATED", "EYE", "ORACLE",
+    "practical_relocations", "relocate", "run_options", "PAPER_RELOCATIONS", "CALIBRATED", "EYE", "ORACLE",
 ]
+
+#: What a relocation may need besides the points, S(T) and the offset (:attr:`Relocation.needs`):
+#: T itself, or T's verdicts of the evaluated pairs (a bound's).
+NEEDS = ("original", "reference")
 
 #: The paper's relocations, in the paper's order.
 PAPER_RELOCATIONS = ("identity", "full", "half")
@@ -75,9 +86,25 @@ class Relocation:
     options : tuple of str
         The keyword options ``function`` takes besides ``offset``. :func:`terrainvis.compare`
         hands it those it knows from the run (``original``, ``end_radius``, ``curvature``,
-        ``earth_radius``, ``engine``, ``seed``, ``n_partners``, ``neighbours``,
-        ``target_height`` and, for a bound, ``reference``, ``mask``, ``start``);
-        :func:`relocate` passes on those the caller gives.
+        ``earth_radius``, ``engine``, ``seed``, ``target_height``, the run options of the
+        relocations and, for a bound, ``reference``, ``mask``, ``start``);
+        :func:`relocate` passes on those the caller gives. The names of its
+        :attr:`run_options` are added when they are not listed.
+    run_options : tuple of Option, or callable
+        Its own options of a run, each a :class:`terrainvis.core.option.Option` (name,
+        default, check, help, command-line flag): :func:`terrainvis.compare` takes each as a
+        keyword, validates it before any unit runs, stores it in the run's settings (a
+        resume with another value is refused, naming it) and hands it to this relocation;
+        ``terrainvis compare`` and ``terrainvis relocate`` get its flag; :func:`relocate`
+        runs its check on a value given. Several relocations may declare the same option
+        (the very same declaration). A callable returning the tuple is read when first
+        needed (a built-in relocation whose module is slow to import declares its options
+        in that module); its names must then be in ``options``.
+    needs : tuple of str
+        What it cannot run without besides the points and S(T): ``"original"`` (T itself)
+        or ``"reference"`` (T's verdicts of the evaluated pairs, as a bound needs them).
+        :mod:`terrainvis.testing` and ``terrainvis relocate`` give T to a relocation that
+        needs it and do not offer one that needs the reference.
     default : bool
         In :func:`terrainvis.compare`'s default relocations.
     bound : bool
@@ -110,6 +137,8 @@ class Relocation:
     function: Callable
     summary: str
     options: tuple = ()
+    run_options: tuple | Callable = ()
+    needs: tuple = ()
     default: bool = False
     bound: bool = False
     measures: tuple | None = None
@@ -119,6 +148,18 @@ class Relocation:
     color: str = "black"
     marker: str = "o"
     linestyle: str = "-"
+
+    def __post_init__(self):
+        if isinstance(self.run_options, list):
+            object.__setattr__(self, "run_options", tuple(self.run_options))
+        if isinstance(self.run_options, tuple):
+            own = tuple(o.name for o in self.run_options if isinstance(o, Option) and o.name not in self.options)
+            if own:
+                object.__setattr__(self, "options", tuple(self.options) + own)
+
+    def declared_options(self) -> tuple:
+        """Its :attr:`run_options` (read from their module when declared by a callable)."""
+        return tuple(self.run_options() if callable(self.run_options) else self.run_options)
 
     def keywords(self, available: dict, los: dict | None = None) -> dict:
         """What this relocation takes of ``available`` (name -> value): ``offset`` and its
@@ -162,6 +203,12 @@ def _eye_memory(settings) -> tuple[int, str]:
             f"n_partners={settings.n_partners:,} (the eye surface's fit, a calibrated relocation of its lattice)")
 
 
+def _calibrated_run_options() -> tuple:
+    from .calibrated import RUN_OPTIONS
+
+    return RUN_OPTIONS
+
+
 def _oracle(points, simplified, **options):
     from .oracle import oracle
 
@@ -184,14 +231,16 @@ RELOCATIONS: Registry = Registry("relocation", {
         Relocation("half", _paper("half"), "points below S(T) moved up onto it, the others kept", default=True,
                    color="tab:green", marker="^"),
         Relocation(CALIBRATED, _calibrated, "the height on S(T) that keeps the most verdicts against partners "
-                   "spread over T", options=_CALIBRATED_OPTIONS, default=True, predicate=True,
-                   memory=_calibrated_memory, color="tab:purple",
+                   "spread over T", options=_CALIBRATED_OPTIONS, run_options=_calibrated_run_options,
+                   needs=("original",), default=True, predicate=True, memory=_calibrated_memory, color="tab:purple",
                    marker="D"),
+        # the eye surface is fitted by a calibrated relocation of its lattice: the same run options
         Relocation(EYE, _eye, "the calibrated height from an eye surface shipped with S(T), without T",
-                   options=_EYE_OPTIONS, predicate=True, memory=_eye_memory, color="tab:orange", marker="v"),
+                   options=_EYE_OPTIONS, run_options=_calibrated_run_options, needs=("original",), predicate=True,
+                   memory=_eye_memory, color="tab:orange", marker="v"),
         Relocation(ORACLE, _oracle, "an upper bound fitted to T's verdicts of the evaluated pairs",
-                   options=_ORACLE_OPTIONS, bound=True, measures=("pairs",), starts_from=(CALIBRATED,),
-                   predicate=True, color="black", marker="*", linestyle="--"),
+                   options=_ORACLE_OPTIONS, needs=("reference",), bound=True, measures=("pairs",),
+                   starts_from=(CALIBRATED,), predicate=True, color="black", marker="*", linestyle="--"),
     )
 })
 #: The relocations terrainvis ships, which :func:`register` never replaces.
@@ -242,9 +291,35 @@ def register(relocation: Relocation, *, replace: bool = False) -> Relocation:
     for start in relocation.starts_from:
         if start not in RELOCATIONS and start != name:
             raise ValueError(f"relocation {name!r}: starts_from names {start!r}, which is not registered")
+    if not isinstance(relocation.needs, tuple) or any(n not in NEEDS for n in relocation.needs):
+        raise ValueError(f"relocation {name!r}: needs must be a tuple of {list(NEEDS)}, got {relocation.needs!r}")
+    _check_run_options(relocation)
     _check_signature(relocation)
     RELOCATIONS[name] = relocation
     return relocation
+
+
+def _check_run_options(relocation: Relocation) -> None:
+    """Its run options are Options of names it takes, each the same declaration as another relocation's of that name."""
+    name = relocation.name
+    if not isinstance(relocation.run_options, tuple) and not callable(relocation.run_options):
+        raise TypeError(f"relocation {name!r}: run_options must be a tuple of terrainvis.core.option.Option, got "
+                        f"{describe(relocation.run_options)}")
+    others = {o.name: (r.name, o) for r in RELOCATIONS.values() if r.name != name for o in r.declared_options()}
+    for own in relocation.declared_options():
+        if not isinstance(own, Option):
+            raise TypeError(f"relocation {name!r}: each of run_options must be a terrainvis.core.option.Option, got "
+                            f"{describe(own)}")
+        if not isinstance(own.name, str) or not own.name.isidentifier() or own.name == "offset":
+            raise ValueError(f"relocation {name!r}: a run option's name must be a Python keyword other than offset, "
+                             f"got {own.name!r}")
+        if own.name not in relocation.options:
+            raise ValueError(f"relocation {name!r}: its run option {own.name!r} is not among its options "
+                             f"{list(relocation.options)}")
+        if own.name in others and others[own.name][1] != own:
+            raise ValueError(f"relocation {name!r}: its run option {own.name!r} is declared otherwise by the "
+                             f"{others[own.name][0]!r} relocation; declare it with the same Option, or name it "
+                             "otherwise")
 
 
 def _check_signature(relocation: Relocation) -> None:
@@ -280,6 +355,17 @@ def default_relocations() -> tuple:
 def practical_relocations() -> tuple:
     """The relocations that are not bounds, in registry order."""
     return tuple(name for name, r in RELOCATIONS.items() if not r.bound)
+
+
+def run_options(names=None) -> tuple:
+    """The run options the relocations declare (:attr:`Relocation.run_options`): of those
+    ``names`` (default every registered relocation), each name once, in registry order."""
+    chosen = RELOCATIONS.values() if names is None else [RELOCATIONS[n] for n in names]
+    out = {}
+    for relocation in chosen:
+        for own in relocation.declared_options():
+            out.setdefault(own.name, own)
+    return tuple(out.values())
 
 
 def relocate(points, simplified, how: str, *, offset: float = 0.0, **options) -> np.ndarray:
@@ -337,6 +423,9 @@ def relocate(points, simplified, how: str, *, offset: float = 0.0, **options) ->
     if unknown:
         raise TypeError(f"relocate got unknown option(s) {unknown}; {how!r} takes "
                         f"{sorted(relocation.options) or 'no options'} besides offset")
+    for own in relocation.declared_options():  # its run options, checked as compare checks them
+        if own.name in options:
+            options[own.name] = own.check(options[own.name], own.name)
     out = relocation.function(pts, simplified, **relocation.keywords({**options, "offset": off}))
     out = np.asarray(out, dtype=np.float64)
     if out.shape != pts.shape:
