@@ -434,7 +434,6 @@ _DECLARED = [
 ]
 
 
-
 class _Options(MutableMapping):
     """The options of :func:`terrainvis.compare` by name, in the order of its signature: those
     declared here, and after ``relocations`` those the relocations declare (their
