@@ -16,6 +16,11 @@ Workloads (each warmed once in its process, then timed ``--repeats`` times):
 * ``viewshed-nodata``: the same on a 1024² mountains grid with 0.2 % of its samples NaN;
 * ``calibrated``: 300 points relocated onto LLS level 2 of a 257² mountains grid (the
   threshold engine);
+* ``calibrated-tin``: the same onto its greedy-insertion level 2 (the threshold engine's face walk);
+* ``min-height``: ``viewshed(..., output="min_height")`` of an eye on a 513² mountains grid
+  (the threshold engine's one-eye loops, the pyramid's descent);
+* ``angle-tin``: ``viewshed(..., output="angle")`` of the TIN of a 257² hills grid at the
+  grid's samples (the one-eye loops on a TIN);
 * ``visopt``: ``simplify(hills 65², "visopt", 2, n_train=300)``;
 * ``greedy-cuts``: one advancing front, ``greedy_cuts(mountains 513², 1.0)`` (its three
   steps, the fallback's candidate heap included);
@@ -35,8 +40,8 @@ import subprocess
 import sys
 import time
 
-WORKLOADS = ("los", "viewshed", "viewshed-nodata", "calibrated", "visopt", "greedy-cuts", "greedy-insertion",
-             "feature", "volume")
+WORKLOADS = ("los", "viewshed", "viewshed-nodata", "calibrated", "calibrated-tin", "min-height", "angle-tin", "visopt",
+             "greedy-cuts", "greedy-insertion", "feature", "volume")
 
 
 def _work(name: str):
@@ -63,6 +68,18 @@ def _work(name: str):
         s = simplifiers.simplify(t, "lls", 2)
         pts = tv.sample_points(t, 300, seed=1)
         return lambda: tv.relocate(pts, s, "calibrated", original=t)
+    if name == "calibrated-tin":
+        t = tv.synthetic_terrain("mountains", size=257)
+        s = simplifiers.simplify(t, "greedy-insertion", 2)
+        pts = tv.sample_points(t, 300, seed=1)
+        return lambda: tv.relocate(pts, s, "calibrated", original=t)
+    if name == "min-height":
+        g = tv.synthetic_terrain("mountains", size=513)
+        return lambda: tv.viewshed(g, (g.xs[200], g.ys[300]), observer_height=10.0, output="min_height")
+    if name == "angle-tin":
+        g = tv.synthetic_terrain("hills", size=257)
+        tin = g.to_tin()
+        return lambda: tv.viewshed(tin, (g.xs[100], g.ys[150]), at=g, observer_height=10.0, output="angle")
     if name == "greedy-cuts":
         from simplifiers.greedy_cuts import greedy_cuts
 
