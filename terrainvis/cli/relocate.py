@@ -88,11 +88,26 @@ def _takers(keyword: str, offered) -> str:
 
 
 def own_options(args) -> dict:
-    """The run options of the relocation ``--how`` names that the command line gives, checked (messages name the flags)."""
-    from ..relocation.registry import RELOCATIONS
+    """The run options of the relocation ``--how`` names that the command line gives, checked
+    (messages name the flags). A flag of another relocation's option, or ``--target-height``
+    for a relocation that takes no target height, is refused: it would change nothing."""
+    from ..relocation.registry import RELOCATIONS, run_options
 
+    entry = RELOCATIONS[args.how]
+    own = {o.name for o in entry.declared_options()}
+    given = [o for o in run_options(offered_relocations()) if hasattr(args, o.name) and o.name not in own]
+    if args.target_height is not None and "target_height" not in entry.options:
+        raise UsageError(f"--target-height is for {_takers('target_height', offered_relocations())}: "
+                         f"--how {args.how} takes no target height")
+    if given:
+        o = given[0]
+        takes = ", ".join(name for name in offered_relocations()
+                          if o.name in {d.name for d in RELOCATIONS[name].declared_options()})
+        flags = [d.flag for d in entry.declared_options() if d.flag]
+        raise UsageError(f"{o.flag} is an option of {takes}: --how {args.how} takes "
+                         + (", ".join(flags) if flags else "none of the relocations' own options"))
     return {o.name: o.check(getattr(args, o.name), o.flag or o.name)
-            for o in RELOCATIONS[args.how].declared_options() if hasattr(args, o.name)}
+            for o in entry.declared_options() if hasattr(args, o.name)}
 
 
 def run(args) -> int:
@@ -113,6 +128,7 @@ def run(args) -> int:
     if args.metric and args.simplified is not None:
         raise UsageError("--metric resamples the DEM, and a --simplified file is in the DEM's frame as read: "
                          "simplify here with -m METHOD [-l LEVEL] instead")
+    own = own_options(args)
     check_output_file(out, "-o", inputs=[args.dem, args.points] + ([args.simplified] if args.simplified else []))
     label, grid = read_terrain(args.dem, args)
     check_heights(grid, args)
@@ -130,7 +146,6 @@ def run(args) -> int:
     z = np.where(np.isnan(table[:, 2]), ground + args.offset, table[:, 2])
     points = np.column_stack([xy, z])
     entry = RELOCATIONS[args.how]
-    own = own_options(args)
     shown = {o.name: own.get(o.name, o.default) for o in entry.declared_options()}
     working("relocate", f"placing {plural(len(points), 'point')} on {what} ({args.how}"
             + "".join(f", {k} {v}" for k, v in shown.items()) + ")")

@@ -91,3 +91,20 @@ def test_bad_points_and_outputs(case, capsys, monkeypatch):
     code, _, err = _run(capsys, ["relocate", "ridges", "--simplified", "s.npz", "--points", "points.csv",
                                  "-o", "o.txt"])
     assert code == 2 and "-o must end in .csv" in err
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--how", "full", "--partners", "100"], "--partners is an option of calibrated, eye: --how full takes none of the "
+                                             "relocations' own options"),
+    (["--how", "half", "--no-neighbours"], "--no-neighbours is an option of calibrated, eye: --how half takes none"),
+    (["--how", "identity", "--target-height", "2"], "--target-height is for calibrated, eye: --how identity takes no "
+                                                    "target height"),
+])
+def test_another_relocations_flag_is_refused_not_ignored(case, capsys, monkeypatch, extra, message):
+    """A flag that the chosen relocation does not read would change nothing: one line says whose it is."""
+    folder, *_ = case
+    monkeypatch.chdir(folder)
+    code, _, err = _run(capsys, ["relocate", "ridges", "--points", "points.csv", "-o", "refused.csv",
+                                 "--simplified", "s.npz", *extra])
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+    assert not (folder / "refused.csv").exists()
