@@ -29,6 +29,11 @@ default thresholds and 4.0–4.3 s with this one, and a cold ``assert_visibility
 peaked at 407 MB instead of 356 MB (docs/performance.md, "First run", gives the other
 settings tried). Other programs' numba functions compile under the thresholds they set.
 
+A cache that an older terrainvis left (a kept ``NUMBA_CACHE_DIR``, the ``__pycache__``
+folders of an editable install) may index its kernels by record types of modules that a
+newer version moved: the same installation reads such an index of terrainvis's kernels
+as a cache miss instead of numba's ``ModuleNotFoundError`` (:func:`_tolerate_stale_indexes`).
+
 ``terrainvis compile`` compiles every kernel ahead (for CI images and containers):
 :mod:`terrainvis.cli.compile_ahead`.
 """
