@@ -94,15 +94,15 @@ def own_options(args) -> dict:
     from ..relocation.registry import RELOCATIONS, run_options
 
     entry = RELOCATIONS[args.how]
+    offered = offered_relocations()
     own = {o.name for o in entry.declared_options()}
-    given = [o for o in run_options(offered_relocations()) if hasattr(args, o.name) and o.name not in own]
+    given = [o for o in run_options(offered) if hasattr(args, o.name) and o.name not in own]
     if args.target_height is not None and "target_height" not in entry.options:
-        raise UsageError(f"--target-height is for {_takers('target_height', offered_relocations())}: "
+        raise UsageError(f"--target-height is for {_takers('target_height', offered)}: "
                          f"--how {args.how} takes no target height")
     if given:
         o = given[0]
-        takes = ", ".join(name for name in offered_relocations()
-                          if o.name in {d.name for d in RELOCATIONS[name].declared_options()})
+        takes = ", ".join(name for name in offered if o in RELOCATIONS[name].declared_options())
         flags = [d.flag for d in entry.declared_options() if d.flag]
         raise UsageError(f"{o.flag} is an option of {takes}: --how {args.how} takes "
                          + (", ".join(flags) if flags else "none of the relocations' own options"))

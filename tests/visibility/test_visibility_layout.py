@@ -53,6 +53,14 @@ def _name(path: Path) -> str:
     return ".".join(parts)
 
 
+def _resolved(parts: list[str]) -> str:
+    """``parts`` (from the package) as :func:`_name` names them when they are a module or a
+    subpackage; otherwise a name its parent defines, which imports the parent's ``__init__``."""
+    if PACKAGE.joinpath(*parts).with_suffix(".py").exists() or PACKAGE.joinpath(*parts).is_dir():
+        return ".".join(parts)
+    return ".".join(parts[:-1]) or "__init__"
+
+
 def _module_imports(path: Path) -> set[str]:
     """Modules of the visibility package (and its subpackages) imported at module level by
     ``path``, by :func:`_name` (``from . import name`` of a name that is no module imports the
@@ -64,14 +72,9 @@ def _module_imports(path: Path) -> set[str]:
             continue
         base = here[: len(here) - (node.level - 1)]
         if node.module:
-            parts = base + node.module.split(".")
-            out.add(".".join(parts) if (PACKAGE.joinpath(*parts).with_suffix(".py").exists()
-                                        or PACKAGE.joinpath(*parts).is_dir()) else ".".join(parts[:-1]) or "__init__")
+            out.add(_resolved(base + node.module.split(".")))
         else:
-            for a in node.names:
-                parts = base + [a.name]
-                module = PACKAGE.joinpath(*parts).with_suffix(".py").exists() or PACKAGE.joinpath(*parts).is_dir()
-                out.add(".".join(parts) if module else (".".join(base) or "__init__"))
+            out.update(_resolved(base + [a.name]) for a in node.names)
     return out
 
 
