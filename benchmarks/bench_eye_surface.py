@@ -54,12 +54,7 @@ QUICK = dict(terrains=["hills", "mountains"], methods=["lls", "gls", "qec", "gre
 def _terrain(name: str) -> tv.HeightGrid:
     if name in DEMS:
         grid = tv.load_dem(SHARED / f"{name}.npz")
-        rs, cs = grid.valid_window()
-        grid = grid.crop(rs, cs)
-        rows, cols = grid.shape
-        n_r, n_c = min(120, rows), min(120, cols)
-        r0, c0 = (rows - n_r) // 2, (cols - n_c) // 2
-        return grid.crop(rows=(r0, r0 + n_r), cols=(c0, c0 + n_c))
+        return grid.crop(*grid.valid_window(size=120))
     return tv.bundled_terrain(name)
 
 

@@ -36,21 +36,14 @@ DEMS = ("green_mountains_vt", "jacksboro_fault_tn", "mount_st_helens_wa", "west_
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "dem"
 
 
-def _valid(name: str) -> tv.HeightGrid:
+def _valid(name: str, size: int | None = None) -> tv.HeightGrid:
+    """A DEM's largest NaN-free window, or ``size`` x ``size`` (at most) from its middle."""
     grid = tv.load_dem(SHARED / f"{name}.npz")
-    rs, cs = grid.valid_window()
-    return grid.crop(rs, cs)
-
-
-def _crop(grid: tv.HeightGrid, side: int = 120) -> tv.HeightGrid:
-    rows, cols = grid.shape
-    n_r, n_c = min(side, rows), min(side, cols)
-    r0, c0 = (rows - n_r) // 2, (cols - n_c) // 2
-    return grid.crop(rows=(r0, r0 + n_r), cols=(c0, c0 + n_c))
+    return grid.crop(*grid.valid_window(size=size))
 
 
 def run(workload: str, out: Path, workers: int, neighbours: bool = True) -> pd.DataFrame:
-    grids = {name: (_crop(_valid(name)) if workload == "crops" else _valid(name)) for name in DEMS}
+    grids = {name: _valid(name, 120 if workload == "crops" else None) for name in DEMS}
     offset = 0.0 if workload == "crops" else 1.7
     folder = out / (workload + ("" if neighbours else "-no-neighbours"))
     folder.mkdir(parents=True, exist_ok=True)

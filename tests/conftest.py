@@ -59,12 +59,7 @@ def shared_dem_120(name: str):
         return resolve_terrains(["jacksboro"])["jacksboro"]
 
     grid = load_dem(shared_dem_path(name))
-    rs, cs = grid.valid_window()
-    grid = grid.crop(rs, cs)
-    rows, cols = grid.shape
-    n_r, n_c = min(120, rows), min(120, cols)
-    r0, c0 = (rows - n_r) // 2, (cols - n_c) // 2
-    return grid.crop(rows=(r0, r0 + n_r), cols=(c0, c0 + n_c))
+    return grid.crop(*grid.valid_window(size=120))
 
 
 @pytest.fixture

@@ -547,13 +547,36 @@ class HeightGrid:
         return tin
 
     # ---------------------------------------------------------------- nodata
-    def valid_window(self) -> tuple[slice, slice]:
-        """``(rows, cols)`` slices of the largest axis-aligned window without nodata."""
+    def valid_window(self, size=None) -> tuple[slice, slice]:
+        """``(rows, cols)`` slices of the largest axis-aligned window without nodata.
+
+        Parameters
+        ----------
+        size : int or (int, int), optional
+            At most this many rows and columns (one int: both; each >= 2): the window of
+            that size at the middle of the largest one (the whole of it along an axis
+            where it is smaller; an odd remainder leaves the extra sample at the end).
+            None: the largest window itself.
+
+        Examples
+        --------
+        >>> z = np.zeros((6, 7))
+        >>> z[0, 0] = np.nan
+        >>> HeightGrid(z).valid_window()
+        (slice(0, 6, None), slice(1, 7, None))
+        >>> HeightGrid(z).valid_window(size=(2, 4))
+        (slice(2, 4, None), slice(2, 6, None))
+        """
+        limit = None if size is None else _window_size(size)
         if not self.n_nodata:
-            return slice(0, self.shape[0]), slice(0, self.shape[1])
-        r0, r1, c0, c1 = call(_kn().largest_valid_rectangle, np.isfinite(self.z), work=self.size)
-        if r1 - r0 < 2 or c1 - c0 < 2:
-            raise ValueError(f"z has no NaN-free window of at least 2x2 samples ({self.n_nodata} NaN cells)")
+            r0, r1, c0, c1 = 0, self.shape[0], 0, self.shape[1]
+        else:
+            r0, r1, c0, c1 = call(_kn().largest_valid_rectangle, np.isfinite(self.z), work=self.size)
+            if r1 - r0 < 2 or c1 - c0 < 2:
+                raise ValueError(f"z has no NaN-free window of at least 2x2 samples ({self.n_nodata} NaN cells)")
+        if limit is not None:
+            r0, r1 = _middle(int(r0), int(r1), limit[0])
+            c0, c1 = _middle(int(c0), int(c1), limit[1])
         return slice(int(r0), int(r1)), slice(int(c0), int(c1))
 
     def crop(self, rows=None, cols=None, *, bbox=None) -> "HeightGrid":
@@ -904,3 +927,18 @@ def as_terrain(terrain, name: str = "terrain"):
     if not isinstance(terrain, (HeightGrid, TIN)):
         raise TypeError(f"{name} must be a terrainvis.HeightGrid or terrainvis.TIN, got {describe(terrain)}")
     return terrain
+
+
+def _window_size(size) -> tuple[int, int]:
+    """``size`` of :meth:`HeightGrid.valid_window` as (rows, cols), checked."""
+    pair = (size, size) if np.ndim(size) == 0 else tuple(size)
+    if len(pair) != 2:
+        raise TypeError(f"size must be an int or (rows, cols), got {describe(size)}")
+    return as_int(pair[0], "size", minimum=2), as_int(pair[1], "size", minimum=2)
+
+
+def _middle(start: int, stop: int, n: int) -> tuple[int, int]:
+    """The ``n`` indices (at most) in the middle of ``start:stop``."""
+    n = min(n, stop - start)
+    first = start + (stop - start - n) // 2
+    return first, first + n

@@ -308,6 +308,24 @@ def test_nodata_error_message():
     assert g.crop(rs, cs).n_nodata == 0 and g.crop(rs, cs).shape == (3, 4)
 
 
+def test_valid_window_of_a_size_is_the_middle_of_the_largest():
+    """``size`` takes the middle of the largest NaN-free window, worked by hand: the 5x8
+    window below the NaN row, 3x4 from its middle (one row and two columns on each side),
+    the whole window along an axis where it is smaller than ``size``."""
+    z = np.arange(48.0).reshape(6, 8)
+    z[0, 5] = np.nan
+    g = HeightGrid(z)
+    assert g.valid_window() == (slice(1, 6), slice(0, 8))
+    assert g.valid_window(size=(3, 4)) == (slice(2, 5), slice(2, 6))
+    assert g.valid_window(size=4) == (slice(1, 5), slice(2, 6))  # 5 - 4 = 1: the extra row at the end
+    assert g.valid_window(size=(100, 5)) == (slice(1, 6), slice(1, 6))
+    full = HeightGrid(np.zeros((4, 9)))
+    assert full.valid_window(size=3) == (slice(0, 3), slice(3, 6))
+    for bad, match in ((1, "size must be >= 2"), ((3, 4, 5), "size must be an int or"), ("ab", "size")):
+        with pytest.raises((TypeError, ValueError), match=match):
+            g.valid_window(size=bad)
+
+
 def test_fill_nodata_linear_is_exact_for_planes():
     X, Y = np.meshgrid(np.arange(6.0), np.arange(5.0))
     z = 3 * X - 2 * Y + 1
