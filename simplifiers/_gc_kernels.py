@@ -6,8 +6,10 @@ Geometry works in a *plane space* ``(gx[c], gy[r])``: for a uniform grid the wra
 the column and row indices themselves (an affine image of the world coordinates with a
 positive determinant, so orientation signs, barycentric coordinates and "which samples lie
 in a triangle" are the same as in world coordinates, and every orientation test is exact
-integer arithmetic in float64); for a rectilinear grid it passes the world coordinates
-shifted to a local origin.
+integer arithmetic in float64); for a rectilinear grid whose coordinates are whole
+multiples of one unit per axis, those whole numbers (the same, exact); for any other
+rectilinear grid the world coordinates shifted to a local origin, where orientation tests
+round (``simplifiers.greedy_cuts._plane_coords``).
 
 Data structures
 ---------------

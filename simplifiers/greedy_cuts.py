@@ -67,15 +67,50 @@ _MIXED_RUNS_PER_LOG2 = 3
 _PROBE_SPAN = 0.02
 #: Lines (rows and columns each) followed by the 1-D estimate of the first guess.
 _MODEL_LINES = 32
+#: The fractions 1/k of a rectilinear grid's least step tried as the unit of its whole-number plane
+#: coordinates, and how far from a whole number (in units) a coordinate may lie and count as one
+#: (floating-point rounding of coordinates that are multiples of the unit).
+_UNIT_DIVISORS = 64
+_UNIT_SLACK = 1e-9
 
 
 # ---------------------------------------------------------------- one triangulation
 def _plane_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray, str]:
-    """Coordinates the kernel computes in: indices on a uniform grid, local world coordinates otherwise."""
+    """Coordinates the kernel computes in, and their name (``attrs["plane_space"]``).
+
+    ``"index"``: a uniform grid's column and row indices. ``"lattice"``: a rectilinear grid
+    whose coordinates along each axis are whole multiples of one unit (the S(T) of the
+    reverse Faber methods, whose last step is shorter or longer than the others; a DEM cut
+    to a partial last cell), as those whole numbers. Both are affine images of the world
+    coordinates with a positive determinant, in whole numbers, where every orientation test
+    of the kernel is exact. ``"world"``: any other rectilinear grid, in world coordinates from
+    a local origin, where the tests round: there the front can find no valid triangle
+    (a :class:`~terrainvis.errors.SimplificationError` says "got stuck").
+    """
     rows, cols = grid.shape
     if grid.is_uniform:
         return np.arange(cols, dtype=np.float64), np.arange(rows, dtype=np.float64), "index"
+    gx, gy = _whole_units(grid.xs), _whole_units(grid.ys)
+    if gx is not None and gy is not None:
+        return gx, gy, "lattice"
     return np.ascontiguousarray(grid.xs - grid.xs[0]), np.ascontiguousarray(grid.ys - grid.ys[0]), "world"
+
+
+def _whole_units(coords: np.ndarray) -> np.ndarray | None:
+    """``coords - coords[0]`` in whole multiples of the largest unit that divides every step
+    (a fraction 1/k of the least step, k <= :data:`_UNIT_DIVISORS`), or None when there is none
+    (to :data:`_UNIT_SLACK` of the unit) or the multiples reach 2**25 (past which a product of
+    two differences is no longer exact in float64)."""
+    local = coords - coords[0]
+    least = float(np.diff(coords).min())
+    for k in range(1, _UNIT_DIVISORS + 1):
+        units = local / (least / k)
+        whole = np.round(units)
+        if whole[-1] >= 2.0**25:
+            return None
+        if np.abs(units - whole).max() <= _UNIT_SLACK:
+            return np.ascontiguousarray(whole)
+    return None
 
 
 @dataclass
@@ -194,8 +229,8 @@ def greedy_cuts(grid: HeightGrid, max_error: float) -> TIN:
         ``attrs`` holds ``epsilon`` (= ``max_error``), ``n_ears`` (triangles adding no
         vertex: ears and connections to the front), ``n_bites`` (triangles adding a
         vertex, including ``n_splits`` fallback insertions), ``n_evaluated`` (candidate
-        triangles tested), ``plane_space`` (``"index"`` or ``"world"``, see
-        ``_gc_kernels``) and ``runs`` (1).
+        triangles tested), ``plane_space`` (``"index"``, ``"lattice"`` or
+        ``"world"``: the kernel's coordinates, see ``_plane_coords``) and ``runs`` (1).
 
     Examples
     --------

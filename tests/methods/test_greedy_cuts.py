@@ -267,6 +267,58 @@ def test_rectilinear_and_non_square_cells(bundled):
     np.testing.assert_array_equal(a.vertices[:, 0] / 10.0, b.vertices[:, 0] / 30.0)
 
 
+def _whole_multiple_grid(z, ux=149.146261, uy=184.949905):
+    """``z`` on coordinates that are whole multiples of ``ux`` and ``uy``: steps of 2 units and a
+    last step of 3 (as the reverse Faber methods' S(T) of an even grid has), none of them
+    exact in float64."""
+    rows, cols = z.shape
+    xs = np.r_[np.arange(cols - 1) * 2.0 * ux, (2 * cols - 1) * ux]
+    ys = np.r_[np.arange(rows - 1) * 2.0 * uy, (2 * rows - 1) * uy]
+    return HeightGrid.from_coords(z, xs, ys)
+
+
+def test_whole_multiples_of_a_unit_are_computed_on_their_lattice(bundled, monkeypatch):
+    """A rectilinear grid on whole multiples of a unit is triangulated in those whole numbers,
+    where the orientation tests are exact: valid TINs within epsilon. In its world
+    coordinates the same runs get stuck (rounded orientation tests disagree about samples on
+    a line, so no candidate triangle is valid), which is what S(T) grids met before."""
+    from simplifiers import greedy_cuts as gc
+
+    grids = [_whole_multiple_grid(bundled[kind].z[:41, :41]) for kind in ("mountains", "ridges")]
+    for g in grids:
+        for eps in (0.5, 5.0):
+            tin = greedy_cuts(g, eps)
+            assert tin.attrs["plane_space"] == "lattice"
+            vertex_cells(tin, g)
+            assert_rules(tin, g)
+            assert_guarantee(tin, g, eps)
+            assert_conforming(tin)
+    monkeypatch.setattr(gc, "_plane_coords", lambda g: (g.xs - g.xs[0], g.ys - g.ys[0], "world"))
+    for g in grids:
+        for eps in (0.5, 5.0):
+            with pytest.raises(SimplificationError, match="got stuck"):
+                greedy_cuts(g, eps)
+
+
+def test_whole_units_worked_by_hand():
+    from simplifiers.greedy_cuts import _whole_units
+
+    u = 0.1  # not exact in float64
+    np.testing.assert_array_equal(_whole_units(np.array([3.0, 3.0 + 2 * u, 3.0 + 4 * u, 3.0 + 7 * u])), [0, 2, 4, 7])
+    np.testing.assert_array_equal(_whole_units(np.array([0.0, 1.0, 1.5, 2.5])), [0, 2, 3, 5])
+    assert _whole_units(np.array([0.0, 1.0, 1.0 + np.sqrt(2.0)])) is None  # no common unit
+    assert _whole_units(np.array([0.0, 1.0, 2.0**26])) is None  # multiples past 2**25
+
+
+def test_budget_on_a_faber_grid_of_a_real_dem():
+    """The S(T) of LLS level 1 on compare's Jacksboro window (60x60, its last steps 1.5 times the
+    others): greedy cuts at level 2 got stuck there in world coordinates."""
+    S = simplifiers.simplify(shared_dem_120("jacksboro_window"), "lls", 1)
+    assert not S.is_uniform
+    tin = _check_simplified(S, 2)
+    assert tin.attrs["plane_space"] == "lattice"
+
+
 def test_deterministic(bundled):
     g = bundled["mountains"]
     a = simplifiers.simplify(g, "greedy-cuts", 2)
