@@ -65,6 +65,8 @@ _MAX_MIXED_ORDERS = 6
 _MIXED_RUNS_PER_LOG2 = 3
 #: The ε probes of stage 3 lie within this relative distance of the jump.
 _PROBE_SPAN = 0.02
+#: Stage 4: how far below the bracket's top (relative) the mixed tolerance's smaller ε goes.
+_WIDENINGS = (0.1, 0.25, 0.5)
 #: Lines (rows and columns each) followed by the 1-D estimate of the first guess.
 _MODEL_LINES = 32
 #: The fractions 1/k of a rectilinear grid's least step tried as the unit of its whole-number plane
@@ -473,6 +475,31 @@ def _stage_probe(search: _Search) -> _Run | None:
     return None
 
 
+def _stage_wide(search: _Search) -> _Run | None:
+    """Stage 4: the mixed tolerance across a wider bracket.
+
+    Where the count is chaotic near the jump, every run there lands on one of two modes
+    (a large triangle accepted early or not), the window lying between them, and neither
+    the mixed tolerance across the narrow bracket nor the probes reach it. A smaller ε
+    for the samples after the first k (``hi_eps`` times 1 - w, w in :data:`_WIDENINGS`)
+    adds vertices where it applies, so the count moves from below the window (k = all)
+    to well above it (k = 0) through many more values, and :func:`_stage_mixed` lands on
+    one of them. The guarantee stays ``hi_eps``.
+    """
+    s = search
+    top = s.hi_eps
+    for w in _WIDENINGS:
+        run = s.measure(top * (1.0 - w))
+        if s.hit(run):
+            return run
+        if run.n > s.budget:
+            s.lo_eps, s.lo_n = run.eps, run.n
+            run = _stage_mixed(s)
+            if run is not None:
+                return run
+    return None
+
+
 def _quantised(search: _Search) -> bool:
     """True when the heights are whole numbers and a multiple of 1/2 lies in (lo_eps,
     hi_eps]: a jump where many samples have exactly the same error (flat areas whole
@@ -505,7 +532,7 @@ def build(grid: HeightGrid, n_vertices: int, *, max_error: float | None = None,
         ``attrs`` also holds ``stopped_by`` (``"budget"`` or ``"max_error"``; with
         ``max_error`` given, ``max_error_threshold`` records it),
         ``search_stage`` (the stage that landed: ``"max_error"``, ``"bracket"``,
-        ``"mixed"`` or ``"probe"``) and ``runs`` (triangulations made, including the ones
+        ``"mixed"``, ``"probe"`` or ``"wide"``) and ``runs`` (triangulations made, including the ones
         stopped early). When the budget needed the mixed tolerance,
         ``attrs["epsilon_rest"]`` is the smaller tolerance and
         ``attrs["n_samples_at_epsilon"]`` the number of samples (the first of the order
@@ -545,9 +572,13 @@ def build(grid: HeightGrid, n_vertices: int, *, max_error: float | None = None,
        at ε = 1; on a chaotic 2 % bracket it blends the two ends.
     3. *Probes*: single tolerances spread over ±2 % of the jump, for small budgets,
        where the count is chaotic near the target.
+    4. *Wide mixed tolerance*: when the runs near the jump all land on two modes on
+       either side of the window, the mixed tolerance again with the others' ε 10, 25
+       or 50 % below ``eps_hi`` (the guarantee is still ``eps_hi``).
 
     Stages 2 and 3 run in this order when the heights are whole numbers and the jump
-    lies at a multiple of 1/2, or when the counts are chaotic; else in the other order.
+    lies at a multiple of 1/2, or when the counts are chaotic; else in the other order;
+    stage 4 runs last, where both missed.
     Every stage has a fixed cap on its runs, so the result is deterministic.
 
     Examples
@@ -613,7 +644,7 @@ def _search_budget(search: _Search, guess: float | None) -> tuple[str, _Run]:
     stages = [("mixed", _stage_mixed), ("probe", _stage_probe)]
     if not (_quantised(s) or s.chaotic):
         stages.reverse()
-    for name, stage in stages:
+    for name, stage in [*stages, ("wide", _stage_wide)]:
         run = stage(s)
         if run is not None:
             return name, run

@@ -503,6 +503,23 @@ def test_golden_searches(bundled, kind, level, n, eps, runs, stage):
     assert a["epsilon"] == pytest.approx(eps, rel=1e-12)
 
 
+@pytest.mark.parametrize("kind, step, level", [("mountains", 2, 2), ("mesas", 2, 2), ("rough", 4, 1)])
+def test_a_chaotic_count_lands_with_the_wide_mixed_tolerance(bundled, kind, step, level, monkeypatch):
+    """Where the runs near the jump land on two modes either side of the window (these
+    subsampled bundled terrains), the first three stages miss it and the wide mixed
+    tolerance lands: a valid TIN within its epsilon and the budget's tolerance. Without
+    stage 4 the same search raises."""
+    from simplifiers import greedy_cuts as gc
+
+    g = bundled[kind].subsample(step)
+    tin = _check_simplified(g, level)
+    assert tin.attrs["search_stage"] == "wide"
+    assert tin.attrs["epsilon_rest"] < tin.attrs["epsilon"]
+    monkeypatch.setattr(gc, "_stage_wide", lambda search: None)
+    with pytest.raises(SimplificationError, match="no epsilon gave"):
+        simplifiers.simplify(g, "greedy-cuts", level)
+
+
 # ------------------------------------------------------------- bad input
 @pytest.mark.parametrize("budget", [3, 120 * 120 + 1, -5])
 def test_bad_budget(bundled, budget):
