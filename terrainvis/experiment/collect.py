@@ -1,7 +1,8 @@
 """Collecting the rows of a :func:`terrainvis.compare` run into its table.
 
-The columns (:data:`COLUMNS`), which of them identify a unit (:data:`UNIT_KEY`, or
-:data:`BUDGET_KEY` in a run budgeted in vertical error: :func:`unit_key`) or hold times
+The columns (:data:`COLUMNS`; :func:`columns` with the registered measures' own), which of
+them identify a unit (:data:`UNIT_KEY`, or :data:`BUDGET_KEY` in a run budgeted in vertical
+error: :func:`unit_key`) or hold times
 (:data:`TIMING_COLUMNS`), how many rows a complete unit has (:func:`rows_per_unit`), and
 the order of the final table (:func:`order`).
 """
@@ -11,26 +12,15 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from .measures import MEASURES, builtin_columns, columns
 from .options import Settings
 
-__all__ = ["COLUMNS", "MEASURE_COLUMNS", "EVALUATE_COLUMNS", "BUDGET_COLUMNS", "UNIT_KEY", "BUDGET_KEY", "unit_key",
+__all__ = ["COLUMNS", "columns", "EVALUATE_COLUMNS", "BUDGET_COLUMNS", "UNIT_KEY", "BUDGET_KEY", "unit_key",
            "TIMING_COLUMNS", "rows_per_unit", "optional_columns", "table", "order"]
 
-#: Columns of the result table, in order.
-COLUMNS = (
-    "terrain", "set", "method", "kind", "level", "max_error_budget", "relocation", "measure", "predicate",
-    "accuracy", "visible_kept", "blocked_kept", "accuracy_paper", "visible_area_ratio",
-    "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
-    "min_height_rms", "min_height_p95", "siting_share", "siting_share_original", "siting_ratio",
-    "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
-    "max_error", "stopped_by", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
-    "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
-    "seed", "max_distance", "distance_unit", "offset", "repair", "repair_max_snap", "zoom", "error",
-)
-#: Columns that only one measure fills (NaN in the other measures' rows), by that measure;
-#: they came after the first results files, so an older file lacks them (:func:`optional_columns`).
-MEASURE_COLUMNS = {"viewshed": ("min_height_rms", "min_height_p95", "siting_share", "siting_share_original",
-                                "siting_ratio")}
+#: Columns of the result table with the measures terrainvis ships, in order (:func:`columns`
+#: adds those of measures registered since).
+COLUMNS = builtin_columns()
 #: Columns only :func:`terrainvis.evaluate` fills: what it changed in a mesh to measure it (faces
 #: reversed, a ``repair=True`` repair: :func:`terrainvis.core.repair.repair_summary`), the
 #: farthest a vertex was snapped, and the zoom of a tileset's rows; empty in a comparison's rows,
@@ -66,10 +56,10 @@ def rows_per_unit(settings: Settings) -> int:
 
 def optional_columns(measure: str) -> tuple:
     """The columns a results file of ``measure`` may lack and still resume: those only other
-    measures fill, :data:`EVALUATE_COLUMNS` (read back as NaN, which is what a
-    comparison's rows hold there) and :data:`BUDGET_COLUMNS` (empty in a run by levels; a
+    measures fill (their :attr:`~terrainvis.experiment.measures.Measure.columns`),
+    :data:`EVALUATE_COLUMNS` (read back as NaN, which is what a comparison's rows hold there) and :data:`BUDGET_COLUMNS` (empty in a run by levels; a
     run by budgets cannot resume a file written before them, whose settings have no budgets)."""
-    return (tuple(c for m, cols in MEASURE_COLUMNS.items() if m != measure for c in cols) + EVALUATE_COLUMNS
+    return (tuple(c for m in MEASURES.values() if m.name != measure for c in m.columns) + EVALUATE_COLUMNS
             + BUDGET_COLUMNS)
 
 
@@ -77,7 +67,7 @@ def table(rows: list[dict]) -> pd.DataFrame:
     """Rows (dicts) as the frame a results CSV reads back as (see :func:`terrainvis.experiment.results.as_table`)."""
     from .results import as_table
 
-    return as_table(rows, COLUMNS)
+    return as_table(rows, columns())
 
 
 def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
@@ -91,7 +81,7 @@ def order(df: pd.DataFrame, grids: dict) -> pd.DataFrame:
     rank_t = {t: i for i, t in enumerate(grids)}
     rank_m = {m: i for i, m in enumerate(METHODS)}
     rank_r = {r: i for i, r in enumerate(relocation.RELOCATIONS)}
-    df = df[list(COLUMNS)]
+    df = df[list(columns())]
     df = df.assign(
         _t=df["terrain"].map(rank_t), _m=df["method"].map(rank_m), _r=df["relocation"].map(rank_r),
         _d=df["max_distance"].fillna(np.inf),

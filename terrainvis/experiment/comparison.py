@@ -39,7 +39,7 @@ from ..core import compiling as _compiling
 from ..core._progress import progress_bar_class
 from ..core.validate import describe
 from .measures import MEASURES
-from .collect import COLUMNS, optional_columns, order, rows_per_unit, table, unit_key
+from .collect import COLUMNS, columns, optional_columns, order, rows_per_unit, table, unit_key
 from .options import (
     CASCADE_AUTO_MIN_SAMPLES,
     DEFAULTS,
@@ -117,7 +117,7 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
         rows are stored in ``out_csv``: ``key`` is ``(terrain, method, levels)`` (a tuple
         of the levels the unit ran: one, or several when ``cascade`` chains them; with
         ``max_errors``, ``(terrain, method, (E,))``, the unit's budget) and
-        ``rows`` a DataFrame of its rows (the columns :data:`COLUMNS`). For live
+        ``rows`` a DataFrame of its rows (the columns :func:`~terrainvis.experiment.collect.columns`). For live
         figures, logs, or a stop rule: an exception it raises ends the run as an
         interrupt does (the units stored so far stay in ``out_csv``; ``resume=True``
         continues).
@@ -136,7 +136,8 @@ def compare(terrains=DEFAULT_TERRAINS, *, workers: int | None = None, client=Non
     -------
     pandas.DataFrame
         One row per terrain x point set x method x level (or budget) x relocation (x distance), with the columns
-        :data:`COLUMNS`, sorted (terrains as given, methods in the paper's order,
+        :func:`~terrainvis.experiment.collect.columns` (:data:`COLUMNS` with the measures terrainvis
+        ships), sorted (terrains as given, methods in the paper's order,
         relocations identity, full, half). A unit whose simplification failed keeps its
         rows, with the message in ``error`` and NaN measurements; the ``error`` of a unit that did
         not fail is missing (NA), as in ``results.csv`` read back.
@@ -254,7 +255,7 @@ def _store(out_csv, settings: Settings, grids: dict, resume: bool):
     # a settings file written before an option existed ran it at its default
     absent = {name: option.check(option.default, name) for name, option in OPTIONS.items()}
     # a results file written before a measure's columns existed resumes when this measure leaves them empty
-    store = ResultStore(out_csv, run_record(settings, grids), COLUMNS, unit_key(settings), lambda key: per_unit,
+    store = ResultStore(out_csv, run_record(settings, grids), columns(), unit_key(settings), lambda key: per_unit,
                         resume=resume, absent=absent, optional=optional_columns(settings.measure))
     return store, frozenset(store.done)
 
@@ -290,7 +291,7 @@ def _execute(tasks, grids, settings, done, store, *, save_dir, workers, client, 
             store.add(rows)
         bars.finished(len({r[step] for r in rows}))
         if on_unit is not None and rows:
-            on_unit(key, pd.DataFrame(rows, columns=list(COLUMNS)))
+            on_unit(key, pd.DataFrame(rows, columns=list(columns())))
 
     # with its progress shown, compare says what it compiles itself (the parts), not kernel by kernel
     quiet = _compiling.quiet() if bars.show else contextlib.nullcontext()

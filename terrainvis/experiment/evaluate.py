@@ -697,12 +697,12 @@ def _store(out_csv, record: dict, units: list, settings, resume: bool):
         return None, frozenset()
     from collections import Counter
 
-    from .collect import COLUMNS, UNIT_KEY, optional_columns, rows_per_unit
+    from .collect import UNIT_KEY, columns, optional_columns, rows_per_unit
     from .results import ResultStore
 
     per_unit = rows_per_unit(settings)
     count = Counter(unit.key for unit in units)
-    store = ResultStore(out_csv, record, COLUMNS, UNIT_KEY, lambda key: count.get(key, 0) * per_unit, resume=resume,
+    store = ResultStore(out_csv, record, columns(), UNIT_KEY, lambda key: count.get(key, 0) * per_unit, resume=resume,
                         optional=optional_columns(settings.measure))
     return store, frozenset(store.done)
 
@@ -715,7 +715,7 @@ def _rows(grid: HeightGrid, tname: str, units: list, store, done, on_unit, setti
     read, never those its file records."""
     from simplifiers import simplify
 
-    from .collect import COLUMNS, order, table
+    from .collect import columns, order, table
     from .measures import MEASURES
     from .units import failed_rows, measured_rows
 
@@ -737,7 +737,7 @@ def _rows(grid: HeightGrid, tname: str, units: list, store, done, on_unit, setti
         if store is not None:
             store.add(unit)
         if on_unit is not None:
-            on_unit(key, pd.DataFrame(unit, columns=list(COLUMNS)))
+            on_unit(key, pd.DataFrame(unit, columns=list(columns())))
     df = order(store.rows() if store is not None else table(rows), {tname: grid})
     if store is not None:
         store.finish(df)

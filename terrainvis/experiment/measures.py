@@ -40,7 +40,8 @@ from ..core.validate import describe
 
 __all__ = [
     "Measure", "MEASURES", "register", "unregister", "available", "point_sets", "observers", "pair_rows",
-    "viewshed_rows", "min_height_error", "siting_coverage", "siting_candidates", "SITING_LATTICE",
+    "viewshed_rows", "min_height_error", "siting_coverage", "siting_candidates", "SITING_LATTICE", "COMMON_COLUMNS",
+    "columns", "builtin_columns",
 ]
 
 #: The siting's candidates (:func:`siting_coverage`): every ``ceil(max(rows, cols) / SITING_LATTICE)``-th
@@ -90,6 +91,13 @@ class Measure:
     paper : bool
         Its rows compare with the paper's matrices: the report sets them beside the
         paper's published cells and checks the paper's findings on them.
+    columns : tuple of str
+        Columns of the results table that only this measure fills (NaN in the other
+        measures' rows), placed after the agreement counts
+        (:func:`terrainvis.experiment.collect.columns`): the viewshed measure's
+        ``min_height_*`` and ``siting_*``. A results file without them (written before
+        them, or before the measure was registered) still resumes under the other
+        measures.
     """
 
     name: str
@@ -103,6 +111,7 @@ class Measure:
     predicates: tuple = ("exact", "paper")
     tables: Callable | None = None
     paper: bool = False
+    columns: tuple = ()
 
 
 def _set_seed(seed: int, name: str, index: int) -> np.random.SeedSequence:
@@ -444,11 +453,40 @@ MEASURES: Registry = Registry("measure", {
         Measure("viewshed", _observer_sets, viewshed_rows, "cells",
                 "each observer's viewshed of every sample of T", n_points=lambda s: 1,
                 n_sets=lambda s: s.n_observers, unit_bytes=_viewshed_bytes, predicates=("exact",),
-                tables=_viewshed_tables),
+                tables=_viewshed_tables, columns=("min_height_rms", "min_height_p95", "siting_share",
+                                                  "siting_share_original", "siting_ratio")),
     )
 })
 #: The measures terrainvis ships, which :func:`register` never replaces.
 BUILTIN = MEASURES.builtin
+
+#: Columns every results table has, in order; the measures' own (:attr:`Measure.columns`)
+#: stand after ``false_blocked``, the last agreement count.
+COMMON_COLUMNS = (
+    "terrain", "set", "method", "kind", "level", "max_error_budget", "relocation", "measure", "predicate",
+    "accuracy", "visible_kept", "blocked_kept", "accuracy_paper", "visible_area_ratio",
+    "n_pairs", "agree_visible", "agree_blocked", "false_visible", "false_blocked",
+    "n_points", "n_vertices", "n_vertices_original", "size_fraction", "nbytes", "nbytes_original",
+    "max_error", "stopped_by", "rms_error", "volume_error", "end_radius", "backend", "cascaded",
+    "simplify_seconds", "los_seconds", "los_seconds_original", "los_build_seconds",
+    "seed", "max_distance", "distance_unit", "offset", "repair", "repair_max_snap", "zoom", "error",
+)
+
+
+def columns() -> tuple:
+    """The columns of a results table, in order: :data:`COMMON_COLUMNS` with every registered
+    measure's own columns (in the registry's order) after the agreement counts."""
+    return _with_own(tuple(c for m in MEASURES.values() for c in m.columns))
+
+
+def builtin_columns() -> tuple:
+    """:func:`columns` with the measures terrainvis ships only."""
+    return _with_own(tuple(c for name in MEASURES if name in BUILTIN for c in MEASURES[name].columns))
+
+
+def _with_own(own: tuple) -> tuple:
+    cut = COMMON_COLUMNS.index("false_blocked") + 1
+    return COMMON_COLUMNS[:cut] + own + COMMON_COLUMNS[cut:]
 
 
 def register(measure: Measure, *, replace: bool = False) -> Measure:
@@ -459,7 +497,8 @@ def register(measure: Measure, *, replace: bool = False) -> Measure:
     TypeError
         ``measure`` is not a :class:`Measure`, or one of its functions is not callable.
     ValueError
-        Its name is empty or taken (a built-in name always is), or its predicates are unknown.
+        Its name is empty or taken (a built-in name always is), its predicates are unknown,
+        or one of its columns is a column the results table already has.
     """
     if not isinstance(measure, Measure):
         raise TypeError(f"measure must be a terrainvis.experiment.measures.Measure, got {describe(measure)}")
@@ -472,8 +511,21 @@ def register(measure: Measure, *, replace: bool = False) -> Measure:
     if not measure.predicates or any(p not in ("exact", "paper") for p in measure.predicates):
         raise ValueError(f"measure {name!r}: predicates must be some of ['exact', 'paper'], got "
                          f"{list(measure.predicates)}")
+    _check_columns(measure, name, replace)
     MEASURES[name] = measure
     return measure
+
+
+def _check_columns(measure: Measure, name: str, replace: bool) -> None:
+    """A measure's own columns: a tuple of names the results table does not have yet (those of
+    the measure it replaces aside)."""
+    own = measure.columns
+    if not isinstance(own, tuple) or any(not isinstance(c, str) or not c.isidentifier() for c in own):
+        raise TypeError(f"measure {name!r}: columns must be a tuple of column names (identifiers), got {describe(own)}")
+    replaced = MEASURES[name].columns if replace and name in MEASURES else ()
+    taken = sorted((set(columns()) - set(replaced)) & set(own)) + sorted({c for c in own if own.count(c) > 1})
+    if taken:
+        raise ValueError(f"measure {name!r}: columns {taken} are taken (the results table has them, or they repeat)")
 
 
 def unregister(name: str) -> Measure:

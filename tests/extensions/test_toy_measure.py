@@ -4,8 +4,9 @@ A toy measure, *stars* (each point set's first point against every other point: 
 pairs instead of the matrix's n (n - 1) / 2), is written as a module of its own (in a
 temporary folder) and given one :func:`terrainvis.experiment.measures.register` call.
 ``compare`` runs it in this process and on worker processes, the plan's memory check and
-the rows of a complete unit read it, the report's tables say what it counts, and the
-command line's ``--measure`` offers it.
+the rows of a complete unit read it, the results table holds the column of its own
+(``star_seen``), the report's tables say what it counts, and the command line's
+``--measure`` offers it.
 """
 
 from __future__ import annotations
@@ -49,7 +50,8 @@ def rows(grid, simplified, base, settings, sets, los):
             t_test = time.perf_counter() - t0
             for d in settings.max_distance:
                 out.append(dict(base, set=s, relocation=how, max_distance=d, los_seconds=t_test,
-                                los_seconds_original=t_true, **agreement(v_true, v_test, star)))
+                                los_seconds_original=t_true, star_seen=float(v_true[0, 1:].mean()),
+                                **agreement(v_true, v_test, star)))
     return out
 
 
@@ -82,7 +84,7 @@ def toy(tmp_path, monkeypatch):
     entry = measures.register(measures.Measure(
         "stars", toy_stars.sets, toy_stars.rows, "pairs", "the first point of each set against the others",
         n_points=toy_stars.n_points, n_sets=toy_stars.n_sets, unit_bytes=toy_stars.unit_bytes,
-        tables=toy_stars.tables))
+        tables=toy_stars.tables, columns=("star_seen",)))
     yield entry
     measures.unregister("stars")
 
@@ -107,8 +109,33 @@ def test_compare_runs_it_and_counts_the_star(toy):
     expected = agreement(visibility_matrix(grid, pts), visibility_matrix(S, relocate(pts, S, "half")), star)
     row = df[(df["set"] == 1) & (df["relocation"] == "half")].iloc[0]
     assert row["agree_visible"] == expected["agree_visible"] and row["accuracy"] == pytest.approx(expected["accuracy"])
+    # its own column, after the agreement counts and the viewshed measure's own
+    cols = list(df.columns)
+    assert cols.index("star_seen") == cols.index("siting_ratio") + 1
+    assert row["star_seen"] == pytest.approx(visibility_matrix(grid, pts)[0, 1:].mean())
     tables = report.paper_tables(df)
     assert tables["Table 1"].attrs["title"].startswith("Table 1: accuracy (%)")
+
+
+def test_its_column_is_stored_and_resumed_and_empty_elsewhere(toy, tmp_path):
+    """The stars' own column is written to the results file and read back on a resume; a
+    pairs run beside it leaves it empty; a pairs file written before the measure was
+    registered (without the column) still resumes."""
+    grid = synthetic_terrain("hills", size=33, seed=3)
+    csv = tmp_path / "stars.csv"
+    first = compare({"g": grid}, measure="stars", workers=1, out_csv=csv, **_kw())
+    assert "star_seen" in pd.read_csv(csv).columns
+    again = compare({"g": grid}, measure="stars", workers=1, out_csv=csv, resume=True, **_kw())
+    pd.testing.assert_series_equal(first["star_seen"], again["star_seen"])
+    pairs = compare({"g": grid}, workers=1, **_kw())
+    assert pairs["star_seen"].isna().all()
+    measures.unregister("stars")
+    old = tmp_path / "pairs.csv"
+    compare({"g": grid}, workers=1, out_csv=old, **_kw())
+    assert "star_seen" not in pd.read_csv(old).columns
+    measures.register(toy)
+    resumed = compare({"g": grid}, workers=1, out_csv=old, resume=True, **_kw())
+    assert resumed["star_seen"].isna().all() and len(resumed) == len(pairs)
 
 
 def test_the_registry_is_checked(toy):
@@ -121,6 +148,15 @@ def test_the_registry_is_checked(toy):
     with pytest.raises(TypeError, match="measure 'broken': tables must be callable or None, got str"):
         measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
                                            toy.unit_bytes, tables="stars"))
+    with pytest.raises(ValueError, match=r"measure 'broken': columns \['accuracy'\] are taken"):
+        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
+                                           toy.unit_bytes, columns=("accuracy",)))
+    with pytest.raises(ValueError, match=r"measure 'broken': columns \['star_seen'\] are taken"):
+        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
+                                           toy.unit_bytes, columns=("star_seen",)))
+    with pytest.raises(TypeError, match="measure 'broken': columns must be a tuple of column names"):
+        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
+                                           toy.unit_bytes, columns="star_seen"))
     with pytest.raises(TypeError, match="measure 'broken': rows must be callable"):
         measures.register(measures.Measure("broken", toy.sets, None, "pairs", "x", toy.n_points, toy.n_sets,
                                            toy.unit_bytes))
