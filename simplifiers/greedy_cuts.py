@@ -46,7 +46,7 @@ from terrainvis.core.interrupt import call
 from terrainvis.core.validate import as_nonnegative_finite, describe
 from terrainvis.errors import SimplificationError
 from terrainvis.core.terrain import TIN, HeightGrid
-from terrainvis.tolerances import EPS_BRACKET_FLOOR_REL, EPS_GUESS_FLOOR_REL
+from terrainvis.tolerances import EPS_BRACKET_FLOOR_REL, EPS_GUESS_FLOOR_REL, WHOLE_UNIT_SLACK
 
 from . import _gc_kernels as K
 from .levels import budget_tolerance, check_budget
@@ -70,10 +70,9 @@ _WIDENINGS = (0.1, 0.25, 0.5)
 #: Lines (rows and columns each) followed by the 1-D estimate of the first guess.
 _MODEL_LINES = 32
 #: The fractions 1/k of a rectilinear grid's least step tried as the unit of its whole-number plane
-#: coordinates, and how far from a whole number (in units) a coordinate may lie and count as one
-#: (floating-point rounding of coordinates that are multiples of the unit).
+#: coordinates (a coordinate may lie :data:`~terrainvis.tolerances.WHOLE_UNIT_SLACK` units from a
+#: whole number and count as one).
 _UNIT_DIVISORS = 64
-_UNIT_SLACK = 1e-9
 
 
 # ---------------------------------------------------------------- one triangulation
@@ -101,7 +100,7 @@ def _plane_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray, str]:
 def _whole_units(coords: np.ndarray) -> np.ndarray | None:
     """``coords - coords[0]`` in whole multiples of the largest unit that divides every step
     (a fraction 1/k of the least step, k <= :data:`_UNIT_DIVISORS`), or None when there is none
-    (to :data:`_UNIT_SLACK` of the unit) or the multiples reach 2**25 (past which a product of
+    (to :data:`~terrainvis.tolerances.WHOLE_UNIT_SLACK` of the unit) or the multiples reach 2**25 (past which a product of
     two differences is no longer exact in float64)."""
     local = coords - coords[0]
     least = float(np.diff(coords).min())
@@ -110,7 +109,7 @@ def _whole_units(coords: np.ndarray) -> np.ndarray | None:
         whole = np.round(units)
         if whole[-1] >= 2.0**25:
             return None
-        if np.abs(units - whole).max() <= _UNIT_SLACK:
+        if np.abs(units - whole).max() <= WHOLE_UNIT_SLACK:
             return np.ascontiguousarray(whole)
     return None
 

@@ -30,7 +30,7 @@ __all__ = [
     "UNIFORM_STEP_REL", "ROUNDING_ULPS", "EDGE_SNAP_REL", "COVER_EDGE_CELL_REL", "FRAME_AXIS_REL", "DEGREE_CELL_SLACK", "SPACING_MATCH_REL",
     "RESAMPLE_SHIFT_REL", "METRIC_EDGE_MARGIN", "FLOAT32_ROUNDING_REL",
     "BUCKET_SLACK", "RASTER_BOX_REL", "BARYCENTRIC_SLACK", "FOOTPRINT_REL", "EXTENT_MATCH_REL", "DIVISOR_FLOOR",
-    "BUDGET_WINDOW_REL", "MAX_ERROR_TIE_REL", "ROW_SPAN_SNAP", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
+    "BUDGET_WINDOW_REL", "MAX_ERROR_TIE_REL", "ROW_SPAN_SNAP", "WHOLE_UNIT_SLACK", "EPS_GUESS_FLOOR_REL", "EPS_BRACKET_FLOOR_REL", "SQUARE_CELL_REL",
     "TILE_BORDER_REL", "FACE_AREA_REL", "STAR_MARGIN_MIN",
     "EXTENT_INSIDE_REL", "THRESHOLD_MARGIN_REL", "VERTEX_WEIGHT_ZERO",
     "SLOPE_REL", "PSEUDO_ANGLE_SLACK", "EDGE_CLIP_SLACK", "DIAGONAL_SLACK", "PSEUDO_ANGLE_SPAN_MIN", "PARALLEL_SINE_MIN",
@@ -128,6 +128,11 @@ MAX_ERROR_TIE_REL = 1e-9
 #: snapped to whole columns within this many columns (the span is computed from the
 #: face's edges and rounds to just inside a column the face touches).
 ROW_SPAN_SNAP = 1e-7
+#: Greedy cuts, a rectilinear grid: a coordinate within this many units of a whole multiple
+#: of its axis's unit counts as that multiple, and the kernel computes on the whole numbers
+#: (floating-point rounding of coordinates that are multiples of a cell, like a reverse Faber
+#: S(T)'s; ``simplifiers.greedy_cuts._whole_units``).
+WHOLE_UNIT_SLACK = 1e-9
 #: Greedy cuts' first guess of ε: the bisection on log ε searches down to this fraction
 #: of the largest error.
 EPS_GUESS_FLOOR_REL = 1e-7
