@@ -66,7 +66,7 @@ import numpy as np
 from terrainvis.core.stopflag import stopped
 from terrainvis.tolerances import ROW_SPAN_SNAP  # frozen into the kernels when they compile
 
-from ._shared_kernels import orient
+from ._shared_kernels import heap_pop, heapify, orient, smaller_then_item
 
 FREE = 0
 COVERED = 1
@@ -702,27 +702,6 @@ def _blocker_apex(ia, ib, sm, fr):
 
 
 @nb.njit(**_HOT)
-def _heap_less(key, ids, i, j):
-    return key[i] < key[j] or (key[i] == key[j] and ids[i] < ids[j])
-
-
-@nb.njit(**_HOT)
-def _sift_down(key, ids, i, m):
-    """Restore the min-heap order (by key, then sample) below position i of the first m."""
-    while True:
-        c = 2 * i + 1
-        if c >= m:
-            return
-        if c + 1 < m and _heap_less(key, ids, c + 1, c):
-            c += 1
-        if not _heap_less(key, ids, c, i):
-            return
-        key[i], key[c] = key[c], key[i]
-        ids[i], ids[c] = ids[c], ids[i]
-        i = c
-
-
-@nb.njit(**_HOT)
 def _split(na, window, sm, fr, counts, cand):
     """Step 3, edge splitting (fallback) on the edge of node ``na``, in the window
     ``(r0, r1, c0, c1)`` (rows r0..r1, cols c0..c1), on the :data:`Samples` ``sm`` and the
@@ -730,8 +709,10 @@ def _split(na, window, sm, fr, counts, cand):
 
     Candidates are the free samples and front vertices left of the edge in the window,
     tried in order of the circumcircle through the edge's ends
-    (smallest first, ties by sample index: the constrained-Delaunay choice) through a
-    binary min-heap. Returns the apex (its node in ``scr[S_APEX_NODE]``) or -1. The
+    (smallest first, ties by sample index: the constrained-Delaunay choice) through the
+    heap of :mod:`simplifiers._shared_kernels` in the order
+    :func:`~simplifiers._shared_kernels.smaller_then_item`, built and popped only (not
+    indexed). Returns the apex (its node in ``scr[S_APEX_NODE]``) or -1. The
     candidate buffers must hold the window's samples.
     """
     r0, r1, c0, c1 = window
@@ -763,17 +744,13 @@ def _split(na, window, sm, fr, counts, cand):
             cand_id[m] = r * cols + c
             m += 1
     counts[N_CANDIDATES] += m
-    for i in range(m // 2 - 1, -1, -1):
-        _sift_down(cand_key, cand_id, i, m)
+    heapify(cand_key, cand_id, None, m, smaller_then_item)
     while m > 0:
         P = cand_id[0]
         counts[N_EVAL_SPLIT] += 1
         if _evaluate(ia, ib, P, sm, fr) == OK:
             return P
-        m -= 1
-        cand_key[0] = cand_key[m]
-        cand_id[0] = cand_id[m]
-        _sift_down(cand_key, cand_id, 0, m)
+        m = heap_pop(cand_key, cand_id, None, m, smaller_then_item)
     return -1
 
 

@@ -18,8 +18,10 @@ neighbouring triangle or -1 on the grid boundary.
 Each triangle keeps one candidate: the non-vertex grid sample in its closure with the
 largest vertical error (``cand[t]``, the flat index ``row * W + col``, or -1 when the
 triangle holds no sample besides its corners) and that error ``terr[t]``. Triangles with a
-candidate sit in an indexed binary max-heap (``heap``, ``hval``, ``pos[t]`` = heap slot
-or -1), so a triangle's entry can be updated or removed when it changes.
+candidate sit in an indexed binary max-heap (``heap`` the triangles, ``hval`` their errors,
+``pos[t]`` = heap slot or -1), so a triangle's entry can be updated or removed when it
+changes: the heap of :mod:`simplifiers._shared_kernels` in the order
+:func:`~simplifiers._shared_kernels.larger` (equal errors in the order the sifting leaves).
 
 Limits: the in-circle determinants are exact in int64 for grids up to about 30,000
 samples per side; triangle and half-edge indices are int32 (grids below about 350 million
@@ -41,7 +43,7 @@ import numpy as np
 
 from terrainvis.core.stopflag import stopped
 
-from ._shared_kernels import orient
+from ._shared_kernels import heap_remove, heap_set, larger, orient
 
 NV, NT, NH, NFLIP, NEDGE = 0, 1, 2, 3, 4
 
@@ -155,81 +157,6 @@ def scan_triangle(z, W, ax, ay, bx, by, cx, cy):
     return best, best_idx
 
 
-# ---------------------------------------------------------------- the max-heap
-@nb.njit(cache=True, nogil=True)
-def _heap_up(heap, hval, pos, i):
-    t = heap[i]
-    v = hval[i]
-    while i > 0:
-        p = (i - 1) >> 1
-        if hval[p] >= v:
-            break
-        heap[i] = heap[p]
-        hval[i] = hval[p]
-        pos[heap[i]] = i
-        i = p
-    heap[i] = t
-    hval[i] = v
-    pos[t] = i
-
-
-@nb.njit(cache=True, nogil=True)
-def _heap_down(heap, hval, pos, i, n):
-    t = heap[i]
-    v = hval[i]
-    while True:
-        c = 2 * i + 1
-        if c >= n:
-            break
-        if c + 1 < n and hval[c + 1] > hval[c]:
-            c += 1
-        if hval[c] <= v:
-            break
-        heap[i] = heap[c]
-        hval[i] = hval[c]
-        pos[heap[i]] = i
-        i = c
-    heap[i] = t
-    hval[i] = v
-    pos[t] = i
-
-
-@nb.njit(cache=True, nogil=True)
-def _heap_remove(heap, hval, pos, counts, t):
-    i = np.int64(pos[t])
-    pos[t] = -1
-    n = counts[NH] - 1
-    counts[NH] = n
-    if i == n:
-        return
-    heap[i] = heap[n]
-    hval[i] = hval[n]
-    pos[heap[i]] = i
-    if i > 0 and hval[i] > hval[(i - 1) >> 1]:
-        _heap_up(heap, hval, pos, i)
-    else:
-        _heap_down(heap, hval, pos, i, n)
-
-
-@nb.njit(cache=True, nogil=True)
-def _heap_set(heap, hval, pos, counts, t, v):
-    i = np.int64(pos[t])
-    if i < 0:
-        i = counts[NH]
-        counts[NH] = i + 1
-        heap[i] = t
-        hval[i] = v
-        pos[t] = i
-        _heap_up(heap, hval, pos, i)
-        return
-    old = hval[i]
-    hval[i] = v
-    if v > old:
-        _heap_up(heap, hval, pos, i)
-    elif v < old:
-        _heap_down(heap, hval, pos, i, counts[NH])
-
-
 # ------------------------------------------------------------ triangulation
 @nb.njit(cache=True, nogil=True, inline="always")
 def _link(half, a, b):
@@ -322,9 +249,9 @@ def _rescan(z, W, st, npend):
         terr[t] = err
         if idx < 0:
             if pos[t] >= 0:
-                _heap_remove(heap, hval, pos, counts, t)
+                heap_remove(hval, heap, pos, counts, NH, t, larger)
         else:
-            _heap_set(heap, hval, pos, counts, t, err)
+            heap_set(hval, heap, pos, counts, NH, t, err, larger)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -368,7 +295,7 @@ def run(z, W, ratio, st, n_target, max_error, stop):
         if stopped(stop):
             break
         t = np.int64(heap[0])
-        _heap_remove(heap, hval, pos, counts, t)
+        heap_remove(hval, heap, pos, counts, NH, t, larger)
         idx = cand[t]
         px = idx % W
         py = idx // W
@@ -435,7 +362,7 @@ def run(z, W, ratio, st, n_target, max_error, stop):
                 h_db = np.int64(half[bp])
                 tb = b0 // 3
                 if pos[tb] >= 0:
-                    _heap_remove(heap, hval, pos, counts, tb)
+                    heap_remove(hval, heap, pos, counts, NH, tb, larger)
                 t0 = t
                 t1 = nt
                 t2 = tb

@@ -83,9 +83,9 @@ def index_tin(grid: HeightGrid, cols: np.ndarray, rows: np.ndarray, faces: np.nd
     rows = np.asarray(rows, dtype=np.int64)
     vertices = np.column_stack([grid.xs[cols], grid.ys[rows], grid.z[rows, cols]])
     f = np.array(faces, dtype=np.int64).reshape(-1, 3)
-    p0, p1, p2 = vertices[f[:, 0], :2], vertices[f[:, 1], :2], vertices[f[:, 2], :2]
-    area2 = (p1[:, 0] - p0[:, 0]) * (p2[:, 1] - p0[:, 1]) - (p2[:, 0] - p0[:, 0]) * (p1[:, 1] - p0[:, 1])
-    if area2.sum() < 0:
+    from terrainvis.core.mesh import signed_area2  # core.mesh imports numba: not at import time
+
+    if signed_area2(vertices, f).sum() < 0:
         f = f[:, ::-1]
     return TIN(vertices, f, attrs=attrs)
 

@@ -177,11 +177,11 @@ def clip_mesh(xy: np.ndarray, triangles: np.ndarray, r_max: int, c_max: int):
     >>> sorted(zip(cols.tolist(), rows.tolist())), len(faces), extra
     ([(0, 0), (0, 4), (3, 0), (3, 3), (3, 4)], 3, 3)
     """
+    from terrainvis.core.mesh import signed_area2  # core.mesh imports numba: not at import time
+
     xy = np.asarray(xy, dtype=np.int64)
     tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    p = xy[tri]  # (m, 3, 2)
-    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
-    tri = np.where((area2 < 0)[:, None], tri[:, ::-1], tri)  # counter-clockwise
+    tri = np.where((signed_area2(xy, tri) < 0)[:, None], tri[:, ::-1], tri)  # counter-clockwise
     p = xy[tri]
     inside = (p[:, :, 0].max(axis=1) <= c_max) & (p[:, :, 1].max(axis=1) <= r_max)
     gone = (p[:, :, 0].min(axis=1) >= c_max) | (p[:, :, 1].min(axis=1) >= r_max)

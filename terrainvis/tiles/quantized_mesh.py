@@ -190,7 +190,9 @@ def encode_tile(u, v, heights, triangles, bounds) -> bytes:
             raise ValueError(f"{name} must hold integers in [0, {QUANTIZED_MAX}]")
     if not np.isfinite(h).all():
         raise ValueError("heights must be finite")
-    area = _areas(u.astype(np.int64), v.astype(np.int64), tri)
+    from ..core.mesh import signed_area2  # core.mesh imports numba: not at import time
+
+    area = signed_area2(np.column_stack([u.astype(np.int64), v.astype(np.int64)]), tri)  # exact in int64
     if (area <= 0).any():
         raise ValueError(f"triangles must be counter-clockwise with positive area in (u, v): "
                          f"{int((area <= 0).sum())} of {tri.shape[0]} are not")
@@ -228,12 +230,6 @@ def encode_tile(u, v, heights, triangles, bounds) -> bytes:
     for edge in _edges(u, v):
         parts += [struct.pack("<I", edge.size), edge.astype(itype).tobytes()]
     return b"".join(parts)
-
-
-def _areas(u: np.ndarray, v: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Twice the signed area of each triangle in integer (u, v) (exact)."""
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    return (u[b] - u[a]) * (v[c] - v[a]) - (u[c] - u[a]) * (v[b] - v[a])
 
 
 def _float32_range(h: np.ndarray) -> tuple[float, float]:

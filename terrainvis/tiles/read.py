@@ -411,9 +411,10 @@ def _mesh_rgb(z: np.ndarray, mesher: str, max_error: float | None, path: Path):
 def _clean(piece: _Piece) -> _Piece:
     """Counter-clockwise triangles of positive area on the lattice (skirts and degenerate ones dropped), and
     only the vertices they use."""
+    from ..core.mesh import signed_area2  # core.mesh imports numba: not at import time
+
     U, V, tri = piece.U, piece.V, piece.tri
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    area = (U[b] - U[a]) * (V[c] - V[a]) - (U[c] - U[a]) * (V[b] - V[a])
+    area = signed_area2(np.column_stack([U, V]), tri)
     tri = np.where((area < 0)[:, None], tri[:, [0, 2, 1]], tri)[area != 0]
     used = np.unique(tri)
     new = np.full(U.size, -1, dtype=np.int64)
@@ -706,8 +707,9 @@ def stitch_zoom(grid: HeightGrid, tiles, zoom, *, mesh: str = "grid", max_error:
                          f"position in the DEM's CRS {frame.crs_text!r}")
     xmin, xmax, ymin, ymax = grid.extent
     xy = np.column_stack([_onto_edges(xy[:, 0], xmin, xmax), _onto_edges(xy[:, 1], ymin, ymax)])
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    area = (xy[b, 0] - xy[a, 0]) * (xy[c, 1] - xy[a, 1]) - (xy[c, 0] - xy[a, 0]) * (xy[b, 1] - xy[a, 1])
+    from ..core.mesh import signed_area2  # core.mesh imports numba: not at import time
+
+    area = signed_area2(xy, tri)
     if (area < 0).sum() > (area > 0).sum():  # the grid's y runs south: the same mesh, the other winding
         tri = tri[:, [0, 2, 1]]
     xy, h, tri = _clip(xy, h + float(offset), tri, grid.extent)

@@ -343,7 +343,9 @@ def _encode(lat_: _Lattice, tin: TIN) -> tuple[bytes, qm.DecodedTile] | None:
     lon, lat = lat_.grid_to_lonlat(v[:, 0], v[:, 1])
     u, vv = qm.to_uv(lon, lat, lat_.bounds)
     faces = np.asarray(tin.faces, dtype=np.int64)
-    if (qm._areas(u, vv, faces) <= 0).any():
+    from ..core.mesh import signed_area2  # core.mesh imports numba: not at import time
+
+    if (signed_area2(np.column_stack([u, vv]), faces) <= 0).any():
         return None
     u, vv, h, faces = _whole_tile(u, vv, v[:, 2], faces, (int(lat_.us[0]), int(lat_.us[-1])),
                                   (int(lat_.vs[0]), int(lat_.vs[-1])))

@@ -161,8 +161,8 @@ def test_whole_tile_extends_the_part_to_the_tiles_edges(u_span, v_span):
     covered exactly once (triangle areas summing to the tile's, all counter-clockwise), and every added
     vertex at the height of the part's vertex it extends (the same v on the west and east sides, the
     same u on the south and north sides, the part's corner beyond its corners)."""
+    from terrainvis.core.mesh import signed_area2
     from terrainvis.tiles.quantized_mesh import QUANTIZED_MAX as M
-    from terrainvis.tiles.quantized_mesh import _areas
     from terrainvis.tiles.tileset import _whole_tile
 
     rng = np.random.default_rng(sum(u_span) + sum(v_span))
@@ -176,7 +176,7 @@ def test_whole_tile_extends_the_part_to_the_tiles_edges(u_span, v_span):
     faces = np.concatenate([np.column_stack([k, k + 1, k + us.size + 1]), np.column_stack([k, k + us.size + 1, k + us.size])])
     u, v, h, f = _whole_tile(U.ravel(), V.ravel(), H.ravel(), faces, u_span, v_span)
     assert np.array_equal(f[: len(faces)], faces) and np.array_equal(h[: U.size], H.ravel())
-    area = _areas(u, v, f)
+    area = signed_area2(np.column_stack([u, v]), f)
     assert (area > 0).all() and area.sum() == 2 * M * M  # twice the tile's area: covered once, no overlap
     assert {u.min(), u.max(), v.min(), v.max()} == {0, M}
     part = {(int(a), int(b)): float(x) for a, b, x in zip(U.ravel(), V.ravel(), H.ravel())}
