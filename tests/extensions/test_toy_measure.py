@@ -138,28 +138,23 @@ def test_its_column_is_stored_and_resumed_and_empty_elsewhere(toy, tmp_path):
     assert resumed["star_seen"].isna().all() and len(resumed) == len(pairs)
 
 
-def test_the_registry_is_checked(toy):
-    with pytest.raises(ValueError, match="measure 'pairs' is built in and cannot be replaced"):
-        measures.register(measures.Measure("pairs", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
-                                           toy.unit_bytes))
-    with pytest.raises(ValueError, match=r"predicates must be some of \['exact', 'paper'\], got \['fuzzy'\]"):
-        measures.register(measures.Measure("fuzzy", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
-                                           toy.unit_bytes, predicates=("fuzzy",)))
-    with pytest.raises(TypeError, match="measure 'broken': tables must be callable or None, got str"):
-        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
-                                           toy.unit_bytes, tables="stars"))
-    with pytest.raises(ValueError, match=r"measure 'broken': columns \['accuracy'\] are taken"):
-        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
-                                           toy.unit_bytes, columns=("accuracy",)))
-    with pytest.raises(ValueError, match=r"measure 'broken': columns \['star_seen'\] are taken"):
-        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
-                                           toy.unit_bytes, columns=("star_seen",)))
-    with pytest.raises(TypeError, match="measure 'broken': columns must be a tuple of column names"):
-        measures.register(measures.Measure("broken", toy.sets, toy.rows, "pairs", "x", toy.n_points, toy.n_sets,
-                                           toy.unit_bytes, columns="star_seen"))
-    with pytest.raises(TypeError, match="measure 'broken': rows must be callable"):
-        measures.register(measures.Measure("broken", toy.sets, None, "pairs", "x", toy.n_points, toy.n_sets,
-                                           toy.unit_bytes))
+@pytest.mark.parametrize("name, fields, error, match", [
+    ("pairs", {}, ValueError, "measure 'pairs' is built in and cannot be replaced"),
+    ("fuzzy", {"predicates": ("fuzzy",)}, ValueError, r"predicates must be some of \['exact', 'paper'\], got \['fuzzy'\]"),
+    ("broken", {"tables": "stars"}, TypeError, "measure 'broken': tables must be callable or None, got str"),
+    ("broken", {"columns": ("accuracy",)}, ValueError, r"measure 'broken': columns \['accuracy'\] are taken"),
+    ("broken", {"columns": ("star_seen",)}, ValueError, r"measure 'broken': columns \['star_seen'\] are taken"),
+    ("broken", {"columns": "star_seen"}, TypeError, "measure 'broken': columns must be a tuple of column names"),
+    ("broken", {"rows": None}, TypeError, "measure 'broken': rows must be callable"),
+])
+def test_the_registry_is_checked(toy, name, fields, error, match):
+    entry = {"sets": toy.sets, "rows": toy.rows, "n_points": toy.n_points, "n_sets": toy.n_sets,
+             "unit_bytes": toy.unit_bytes, **fields}
+    with pytest.raises(error, match=match):
+        measures.register(measures.Measure(name, counts="pairs", summary="x", **entry))
+
+
+def test_compare_refuses_a_measure_not_registered(toy):
     with pytest.raises(ValueError, match=r"measure must be one of \['pairs', 'viewshed', 'stars'\], got 'star'"):
         compare({"g": synthetic_terrain("hills", size=33)}, measure="star", workers=1, **_kw())
 
