@@ -10,8 +10,9 @@ core's named tuple of a grid's arrays, with the min/max pyramid of "Pyramid layo
 built by ``terrainvis.visibility.grid``), keeps its descent on a
 :data:`WalkStack` (scratch arrays, one per thread, from :func:`new_stack`) and takes a
 segment as the 6-tuple ``seg = (ax, ay, az, dx, dy, dz)``, the points ``a + t * d``.
-The per-cell and per-pair functions (``_cell_min``, :func:`segment_min`, ``_pair_min``)
-are inlined at numba IR level (``inline="always"``) into the pair loop. As
+The per-cell and per-pair functions (:func:`~terrainvis.visibility.walk.cell_least` with
+this engine's ``_clear_at`` and ``_piece_min``, :func:`segment_min`, ``_pair_min``) are
+inlined at numba IR level (``inline="always"``) into the pair loop. As
 separate calls they cost 1-4 % of the LOS throughput against the earlier kernels that
 took two dozen positional arrays (every call updates the reference counts of the named
 tuples' arrays); inlined, ``line_of_sight`` is 9-17 % faster than with those kernels,
@@ -72,7 +73,7 @@ import numpy as np
 from ..core.stopflag import stopped
 from ..core.surface import barycentric, borrow, borrow_grid, borrow_tin, cell_height, keep_alive, weighted
 from ..tolerances import BUCKET_SLACK_REL
-from .walk import cell_diagonal
+from .walk import cell_least
 from .walk import mid_height_inline as mid_height
 from .walk import node_pop_inline as node_pop
 from .walk import node_push_inline as node_push
@@ -135,38 +136,19 @@ def _tt_range(a0, a1):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
-    """Exact minimum clearance of the segment ``seg`` over [t0, t1] inside cell (r, c).
+def _clear_at(g, r, c, seg, a, b, t):
+    """Clearance of the segment ``seg`` at t over cell (r, c)'s surface (the point clamped
+    into the cell, on the triangle holding it; the piece [a, b] holding t is not needed):
+    the pair engine's ``point`` of :func:`~terrainvis.visibility.walk.cell_least`."""
+    return seg[2] + t * seg[5] - cell_height(g.z, g.xs, g.ys, g.ixw, g.iyw, r, c, seg[0] + t * seg[3], seg[1] + t * seg[4])
 
-    The flat clearance is linear on each side of the cell diagonal, so its minimum is at
-    t0, t1 or the diagonal crossing. ``with_t0`` False skips t0 (already evaluated as
-    the end of the previous cell: the surface is continuous). With ``bulge > 0`` (earth
-    curvature, see "Earth curvature") each side's convex clearance may also have its
-    minimum inside (:func:`curved_min`), and every end is evaluated.
 
-    Inlined into the walk (numba IR), like the walk itself into the pair loops (see
-    "Kernel arguments").
-    """
-    z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
-    ax, ay, az, dx, dy, dz = seg
-    td = cell_diagonal(xs, ys, ixw, iyw, r, c, (ax, ay, dx, dy))
-    if bulge > 0.0:
-        f0 = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
-        f1 = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
-        if td > t0 and td < t1:
-            fd = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
-            return min(curved_min(f0, fd, t0, td, bulge), curved_min(fd, f1, td, t1, bulge))
-        return curved_min(f0, f1, t0, t1, bulge)
-    m = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
-    if with_t0:
-        e = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
-        if e < m:
-            m = e
-    if td > t0 and td < t1:
-        e = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
-        if e < m:
-            m = e
-    return m
+@nb.njit(cache=True, nogil=True, inline="always")
+def _piece_min(g, r, c, seg, a, b, bulge):
+    """Least clearance of the segment over the piece [a, b] of cell (r, c) under earth
+    curvature (:func:`curved_min`): the pair engine's ``piece`` of
+    :func:`~terrainvis.visibility.walk.cell_least`."""
+    return curved_min(_clear_at(g, r, c, seg, a, b, a), _clear_at(g, r, c, seg, a, b, b), a, b, bulge)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -218,7 +200,7 @@ def segment_min(g, seg, t0, t1, los, tol, bulge, st):
     while sp > 0:
         sp, L, R, C, a0, a1 = node_pop(stk, sp)
         if L == 0:
-            m = _cell_min(g, R, C, seg, a0, a1, a0 != last_t, bulge)
+            m = cell_least(g, R, C, seg, a0, a1, a0 != last_t, bulge, True, _clear_at, _piece_min)
             last_t = a1
             if m < best:
                 best = m

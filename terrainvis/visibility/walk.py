@@ -1,5 +1,5 @@
-"""The walk along a sight line over a grid, written once: the cell-by-cell cursor and the
-pyramid descent's bookkeeping (numba primitives).
+"""The walk along a sight line over a grid, written once: the cell-by-cell cursor, a
+cell's least clearance and the pyramid descent's bookkeeping (numba primitives).
 
 Every kernel that follows a ground track across a grid visits the same *breakpoints*:
 the ends of its tested interval, its crossings of grid lines and its crossings of cell
@@ -53,6 +53,14 @@ splits its interval where the track crosses the node's two mid lines
 (:func:`node_split`), may probe the surface there (:func:`mid_height`) and pushes the
 children far-first (:func:`node_push`), so that the near ones pop first; at level 0 it
 evaluates the cell (its own reduction).
+
+A cell's least clearance
+------------------------
+The pair engine and the viewshed's exact walk both reduce a cell to the least clearance
+of the sight line over its part of the track: :func:`cell_least`, with each consumer's
+evaluation of the surface passed in (the pair engine: the height at each point, clamped
+into the cell; the viewshed: each piece on its own triangle's plane, with nodata's absent
+triangles). Those evaluations round differently, so each keeps its own, bit for bit.
 """
 
 from __future__ import annotations
@@ -138,6 +146,51 @@ def cell_diagonal(xs, ys, ixw, iyw, r, c, seg):
     if den == 0.0:
         return -_INF
     return ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
+
+
+# --------------------------------------------------------------------------- one cell's least clearance
+@nb.njit(cache=False, nogil=True, inline="always")
+def cell_least(g, r, c, seg, ta, tb, with_ta, bulge, whole, point, piece):
+    """Least clearance of the sight line ``seg = (ax, ay, az, dx, dy, dz)`` (the points
+    ``a + t d``) over its part [ta, tb] inside cell (r, c) of the grid ``g``.
+
+    The cell's diagonal cuts [ta, tb] into one or two pieces, each inside one triangle,
+    where the flat clearance is linear: its least value is at a piece's end. With
+    ``whole`` True and a flat earth (``bulge`` 0) each end is evaluated once, by the
+    consumer's ``point(g, r, c, seg, a, b, t)`` (the clearance at t, an end of the piece
+    [a, b]), ta only when ``with_ta`` (False: the previous cell evaluated it as its own
+    end; the surface is continuous). Otherwise each piece [a, b] is reduced by the
+    consumer's ``piece(g, r, c, seg, a, b, bulge)``: under earth curvature (``bulge >
+    0``) its convex clearance may be least inside it
+    (:func:`~terrainvis.visibility._kernels.curved_min`), and on a grid
+    with nodata (``whole`` False) its triangle may be absent.
+
+    Its consumers inline it (numba IR) with their own ``point`` and ``piece`` (numba
+    compiles a copy per function passed): the pair engine
+    (:mod:`terrainvis.visibility._kernels`: the surface's height at each point, clamped
+    into the cell) and the viewshed's exact walk
+    (:mod:`terrainvis.visibility.viewsheds._walk_kernels`: each piece on its own
+    triangle's plane, with nodata).
+    """
+    td = _INF
+    t = cell_diagonal(g.xs, g.ys, g.ixw, g.iyw, r, c, (seg[0], seg[1], seg[3], seg[4]))
+    if t > ta and t < tb:
+        td = t
+    if whole and bulge == 0.0:
+        tc = tb if td == _INF else td
+        m = point(g, r, c, seg, ta, tc, tc)
+        if with_ta:
+            m = min(m, point(g, r, c, seg, ta, tc, ta))
+        if td < _INF:
+            m = min(m, point(g, r, c, seg, td, tb, tb))
+        return m
+    best = _INF
+    npc = 1 if td == _INF else 2
+    for k in range(npc):
+        e = piece(g, r, c, seg, ta if k == 0 else td, tb if k == npc - 1 else td, bulge)
+        if e < best:
+            best = e
+    return best
 
 
 # --------------------------------------------------------------------------- pyramid
