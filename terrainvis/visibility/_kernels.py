@@ -10,11 +10,8 @@ core's named tuple of a grid's arrays, with the min/max pyramid of "Pyramid layo
 built by ``terrainvis.visibility.grid``), keeps its descent on a
 :data:`WalkStack` (scratch arrays, one per thread, from :func:`new_stack`) and takes a
 segment as the 6-tuple ``seg = (ax, ay, az, dx, dy, dz)``, the points ``a + t * d``.
-The per-cell and per-pair functions (:func:`~terrainvis.visibility.walk.cell_least` with
-this engine's ``_clear_at`` and ``_piece_min``, :func:`segment_min`, ``_pair_min``) are
-inlined at numba IR level (``inline="always"``) into the pair loop; so is the pyramid's
-descent (:data:`~terrainvis.visibility.walk.descend_inline`, the threshold engine's too,
-with this engine's ``_leaf_min``, ``_node_min``, ``_probe_min``). As
+The per-cell and per-pair functions (``_cell_min``, :func:`segment_min`, ``_pair_min``)
+are inlined at numba IR level (``inline="always"``) into the pair loop. As
 separate calls they cost 1-4 % of the LOS throughput against the earlier kernels that
 took two dozen positional arrays (every call updates the reference counts of the named
 tuples' arrays); inlined, ``line_of_sight`` is 9-17 % faster than with those kernels,
@@ -75,7 +72,12 @@ import numpy as np
 from ..core.stopflag import stopped
 from ..core.surface import barycentric, borrow, borrow_grid, borrow_tin, cell_height, keep_alive, weighted
 from ..tolerances import BUCKET_SLACK_REL
-from .walk import SKIP, SPLIT, STOP, cell_least, descend_inline
+from .walk import cell_diagonal
+from .walk import mid_height_inline as mid_height
+from .walk import node_pop_inline as node_pop
+from .walk import node_push_inline as node_push
+from .walk import node_root_inline as node_root
+from .walk import node_split_inline as node_split
 
 _INF = np.inf
 
@@ -133,19 +135,38 @@ def _tt_range(a0, a1):
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
-def _clear_at(g, r, c, seg, a, b, t):
-    """Clearance of the segment ``seg`` at t over cell (r, c)'s surface (the point clamped
-    into the cell, on the triangle holding it; the piece [a, b] holding t is not needed):
-    the pair engine's ``point`` of :func:`~terrainvis.visibility.walk.cell_least`."""
-    return seg[2] + t * seg[5] - cell_height(g.z, g.xs, g.ys, g.ixw, g.iyw, r, c, seg[0] + t * seg[3], seg[1] + t * seg[4])
+def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
+    """Exact minimum clearance of the segment ``seg`` over [t0, t1] inside cell (r, c).
 
+    The flat clearance is linear on each side of the cell diagonal, so its minimum is at
+    t0, t1 or the diagonal crossing. ``with_t0`` False skips t0 (already evaluated as
+    the end of the previous cell: the surface is continuous). With ``bulge > 0`` (earth
+    curvature, see "Earth curvature") each side's convex clearance may also have its
+    minimum inside (:func:`curved_min`), and every end is evaluated.
 
-@nb.njit(cache=True, nogil=True, inline="always")
-def _piece_min(g, r, c, seg, a, b, bulge):
-    """Least clearance of the segment over the piece [a, b] of cell (r, c) under earth
-    curvature (:func:`curved_min`): the pair engine's ``piece`` of
-    :func:`~terrainvis.visibility.walk.cell_least`."""
-    return curved_min(_clear_at(g, r, c, seg, a, b, a), _clear_at(g, r, c, seg, a, b, b), a, b, bulge)
+    Inlined into the walk (numba IR), like the walk itself into the pair loops (see
+    "Kernel arguments").
+    """
+    z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
+    ax, ay, az, dx, dy, dz = seg
+    td = cell_diagonal(xs, ys, ixw, iyw, r, c, (ax, ay, dx, dy))
+    if bulge > 0.0:
+        f0 = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
+        f1 = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
+        if td > t0 and td < t1:
+            fd = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+            return min(curved_min(f0, fd, t0, td, bulge), curved_min(fd, f1, td, t1, bulge))
+        return curved_min(f0, f1, t0, t1, bulge)
+    m = az + t1 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t1 * dx, ay + t1 * dy)
+    if with_t0:
+        e = az + t0 * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + t0 * dx, ay + t0 * dy)
+        if e < m:
+            m = e
+    if td > t0 and td < t1:
+        e = az + td * dz - cell_height(z, xs, ys, ixw, iyw, r, c, ax + td * dx, ay + td * dy)
+        if e < m:
+            m = e
+    return m
 
 
 @nb.njit(cache=True, nogil=True)
@@ -162,64 +183,6 @@ def new_stack(ltop):
         np.empty(ns, dtype=np.int64),
         np.empty(2 * ns, dtype=np.float64),
     )
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _leaf_min(g, r, c, a0, a1, with_a0, best, ctx):
-    """:func:`segment_min`'s ``leaf`` of :func:`~terrainvis.visibility.walk.descend`: the
-    cell's least clearance (:func:`~terrainvis.visibility.walk.cell_least`); ``ctx`` is
-    ``(seg, los, tol, bulge)``."""
-    seg, los, tol, bulge = ctx
-    m = cell_least(g, r, c, seg, a0, a1, with_a0, bulge, True, _clear_at, _piece_min)
-    if m < best:
-        return m, los and m < -tol
-    return best, False
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _node_min(pyr, k, a0, a1, best, ctx):
-    """:func:`segment_min`'s ``node``: skip a node whose lower bound on the clearance is at
-    least the threshold (``-tol`` in ``los`` mode, the best so far otherwise); in ``los``
-    mode stop at a node whose upper bound is below ``-tol`` (the segment is blocked)."""
-    seg, los, tol, bulge = ctx
-    za0 = seg[2] + a0 * seg[5]
-    za1 = seg[2] + a1 * seg[5]
-    lo = min(za0, za1)
-    thr = -tol if los else best
-    if bulge > 0.0:
-        b_lo, b_hi = _tt_range(a0, a1)
-        if lo - pyr[k + 1] - bulge * b_hi >= thr:
-            return SKIP, best
-        if los:
-            hi = max(za0, za1)
-            if hi - pyr[k] - bulge * b_lo < -tol:
-                return STOP, hi - pyr[k] - bulge * b_lo
-    else:
-        if lo - pyr[k + 1] >= thr:
-            return SKIP, best
-        if los:
-            hi = max(za0, za1)
-            if hi - pyr[k] < -tol:
-                return STOP, hi - pyr[k]
-    return SPLIT, best
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _probe_min(h, t, best, ctx):
-    """:func:`segment_min`'s ``probe``: the clearance over the surface height h at t."""
-    seg, los, tol, bulge = ctx
-    e = seg[2] + t * seg[5] - h
-    if bulge > 0.0:
-        e -= bulge * t * (1.0 - t)
-    if e < best:
-        return e, los and e < -tol
-    return best, False
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _never(best, ctx):
-    """:func:`segment_min`'s ``done``: it stops only where its functions say so."""
-    return False
 
 
 @nb.njit(cache=True, nogil=True, inline="always")
@@ -244,9 +207,68 @@ def segment_min(g, seg, t0, t1, los, tol, bulge, st):
     the clearance at t is lowered by ``bulge t (1 - t)``, and a node's bounds by the
     bulge's largest (skip test) or smallest (block test) value over its interval.
     """
-    ctx = (seg, los, tol, bulge)
-    return descend_inline(g, st, (seg[0], seg[1], seg[3], seg[4]), t0, t1, _INF, ctx, _leaf_min, _node_min,
-                          _probe_min, _never)
+    z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
+    pyr, off, nxl, uniform = g.pyr, g.off, g.nxl, g.uniform
+    ax, ay, az, dx, dy, dz = seg
+    track = (ax, ay, dx, dy)
+    best = _INF
+    stk = (st.level, st.row, st.col, st.t)
+    sp = node_root(stk, g.ltop, t0, t1)
+    last_t = -_INF
+    while sp > 0:
+        sp, L, R, C, a0, a1 = node_pop(stk, sp)
+        if L == 0:
+            m = _cell_min(g, R, C, seg, a0, a1, a0 != last_t, bulge)
+            last_t = a1
+            if m < best:
+                best = m
+                if los and best < -tol:
+                    return best
+            continue
+        za0 = az + a0 * dz
+        za1 = az + a1 * dz
+        lo = min(za0, za1)
+        k = off[L] + 2 * (R * nxl[L] + C)
+        thr = -tol if los else best
+        if bulge > 0.0:
+            b_lo, b_hi = _tt_range(a0, a1)
+            if lo - pyr[k + 1] - bulge * b_hi >= thr:
+                continue
+            if los:
+                hi = max(za0, za1)
+                if hi - pyr[k] - bulge * b_lo < -tol:
+                    return hi - pyr[k] - bulge * b_lo
+        else:
+            if lo - pyr[k + 1] >= thr:
+                continue
+            if los:
+                hi = max(za0, za1)
+                if hi - pyr[k] < -tol:
+                    return hi - pyr[k]
+        node = (L, R, C, a0, a1)
+        split = node_split(xs, ys, node, track)
+        cm, rm, tx, ty = split
+        if L >= 2:
+            # probe the clearance where the track crosses the mid lines (the surface is
+            # linear along a grid line)
+            if tx < _INF:
+                e = az + tx * dz - mid_height(z, xs, ys, ixw, iyw, uniform, node, True, cm, ay + tx * dy)
+                if bulge > 0.0:
+                    e -= bulge * tx * (1.0 - tx)
+                if e < best:
+                    best = e
+                    if los and best < -tol:
+                        return best
+            if ty < _INF:
+                e = az + ty * dz - mid_height(z, xs, ys, ixw, iyw, uniform, node, False, rm, ax + ty * dx)
+                if bulge > 0.0:
+                    e -= bulge * ty * (1.0 - ty)
+                if e < best:
+                    best = e
+                    if los and best < -tol:
+                        return best
+        sp = node_push(stk, sp, xs, ys, node, split, track)
+    return best
 
 
 @nb.njit(cache=True, nogil=True)

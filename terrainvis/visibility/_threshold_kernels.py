@@ -39,8 +39,7 @@ twelve positional arguments (``tests/visibility/test_visibility_layout.py``).
 The walks
 ---------
 * :func:`grid_max_slope` walks a HeightGrid with the visibility engine's min/max
-  pyramid (:func:`terrainvis.visibility.walk.descend`, the pair engine's descent, with
-  this engine's functions): a node whose maximum height ``H`` gives
+  pyramid: a node whose maximum height ``H`` gives
   ``(H - tol - qz) / u <= best`` over its parameter range cannot raise the threshold
   and is skipped.
 * :func:`tin_max_slope` walks the TIN from face to face across the edges the track
@@ -105,7 +104,7 @@ from ..core.stopflag import stopped
 from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height, locate
 from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
 from ._kernels import WalkStack, new_stack
-from .walk import SKIP, SPLIT, cell_diagonal, cells_next, cells_start, descend
+from .walk import cell_diagonal, cells_next, cells_start, mid_height, node_pop, node_push, node_root, node_split
 
 _INF = np.inf
 #: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
@@ -186,42 +185,6 @@ def _leaf(g, r, c, tr, a0, a1, with_a0):
     return best
 
 
-@nb.njit(cache=True, nogil=True, inline="always")
-def _leaf_max(g, r, c, a0, a1, with_a0, best, tr):
-    """:func:`grid_max_slope`'s ``leaf`` of :func:`~terrainvis.visibility.walk.descend`
-    (:func:`_leaf`); ``tr`` is the :data:`Track`."""
-    v = _leaf(g, r, c, tr, a0, a1, with_a0)
-    if v > best:
-        return v, False
-    return best, False
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _node_max(pyr, k, a0, a1, best, tr):
-    """:func:`grid_max_slope`'s ``node``: skip a node whose maximum height ``H`` gives
-    ``(H - tol - qz) / u + bulge (1 - u) <= best`` over its interval."""
-    num = np.float64(pyr[k + 1]) - tr.tol - tr.qz
-    bound = (num / a0 if num > 0.0 else num / a1) + tr.bulge * (1.0 - a0)
-    if bound <= best:
-        return SKIP, best
-    return SPLIT, best
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _probe_max(h, t, best, tr):
-    """:func:`grid_max_slope`'s ``probe``: :func:`_value` of the surface height h at t."""
-    e = _value(h, t, tr.qz, tr.tol, tr.bulge)
-    if e > best:
-        return e, False
-    return best, False
-
-
-@nb.njit(cache=True, nogil=True, inline="always")
-def _capped(best, tr):
-    """:func:`grid_max_slope`'s ``done``: the maximum has reached the track's ``cap``."""
-    return best >= tr.cap
-
-
 @nb.njit(cache=True, nogil=True)
 def grid_max_slope(g, tr, st):
     """Max of :func:`_value` over the :data:`Track` ``tr``, q + u d for u in [u0, u1] (u0 > 0):
@@ -233,8 +196,43 @@ def grid_max_slope(g, tr, st):
     The descent visits children nearest to q first, so that the large values near q
     are found before the far nodes they prune.
     """
-    return descend(g, st, (tr.qx, tr.qy, tr.dx, tr.dy), tr.u0, tr.u1, tr.floor, tr, _leaf_max, _node_max, _probe_max,
-                   _capped)
+    z, xs, ys, ixw, iyw = g.z, g.xs, g.ys, g.ixw, g.iyw
+    pyr, off, nxl, uniform = g.pyr, g.off, g.nxl, g.uniform
+    qx, qy, qz, dx, dy, u0, u1, tol, bulge, floor, cap = tr
+    track = (qx, qy, dx, dy)
+    best = floor
+    stk = (st.level, st.row, st.col, st.t)
+    sp = node_root(stk, g.ltop, u0, u1)
+    last = -_INF
+    while sp > 0:
+        if best >= cap:
+            return best
+        sp, L, R, C, a0, a1 = node_pop(stk, sp)
+        if L == 0:
+            v = _leaf(g, R, C, tr, a0, a1, a0 != last)
+            last = a1
+            if v > best:
+                best = v
+            continue
+        k = off[L] + 2 * (R * nxl[L] + C)
+        num = np.float64(pyr[k + 1]) - tol - qz
+        bound = (num / a0 if num > 0.0 else num / a1) + bulge * (1.0 - a0)
+        if bound <= best:
+            continue
+        node = (L, R, C, a0, a1)
+        split = node_split(xs, ys, node, track)
+        cm, rm, tx, ty = split
+        if L >= 2:  # probe the surface where the track crosses the mid lines
+            if tx < _INF:
+                e = _value(mid_height(z, xs, ys, ixw, iyw, uniform, node, True, cm, qy + tx * dy), tx, qz, tol, bulge)
+                if e > best:
+                    best = e
+            if ty < _INF:
+                e = _value(mid_height(z, xs, ys, ixw, iyw, uniform, node, False, rm, qx + ty * dx), ty, qz, tol, bulge)
+                if e > best:
+                    best = e
+        sp = node_push(stk, sp, xs, ys, node, split, track)  # near pieces pop first
+    return best
 
 
 #: Grids with a pyramid of at most this many levels (up to 128 cells a side) are walked

@@ -1,5 +1,5 @@
-"""The walk along a sight line over a grid, written once: the cell-by-cell cursor, a
-cell's least clearance and the pyramid descent (numba primitives).
+"""The walk along a sight line over a grid, written once: the cell-by-cell cursor and the
+pyramid descent's bookkeeping (numba primitives).
 
 Every kernel that follows a ground track across a grid visits the same *breakpoints*:
 the ends of its tested interval, its crossings of grid lines and its crossings of cell
@@ -39,36 +39,32 @@ they allocate nothing), which LLVM inlines into the consumers' loops: no allocat
 no reference count. Inlined at numba IR level instead (``inline="always"``), each step
 bound the grid's arrays to the helper's parameters anew, with a reference-count
 increment and decrement per array, and the walks were slower than the copies they
-replace. The pair engine's loop is the exception: there the plain calls stay calls, so
-its descent (:data:`descend_inline`) takes the descent helpers' IR-inlined twins
-(``node_pop_inline``, ...), compiled from the same source.
+replace. The pair engine's parallel loop is the exception: there the plain calls stay
+calls, so it takes the descent helpers' IR-inlined twins (``node_pop_inline``, ...),
+compiled from the same source.
 
 The pyramid descent
 -------------------
 The min/max pyramid (``pyr``, ``off``, ``nxl``, ``ltop``: see
 :mod:`terrainvis.visibility._kernels`) is descended near-first with an explicit stack (the arrays
-``stk = (level, row, col, t)`` of a :data:`~terrainvis.visibility._kernels.WalkStack`), by
-one loop, :func:`_descend`: it pops a node (:func:`node_pop`), asks the consumer whether
-to skip it (its own test of the node's bounds), splits its interval where the track
-crosses the node's two mid lines (:func:`node_split`), gives the consumer the surface
-there (:func:`mid_height`, nodes of level 2 or more) and pushes the children far-first
-(:func:`node_push`), so that the near ones pop first; at level 0 the consumer reduces the
-cell. Its consumers are the pair engine's least clearance and the threshold engine's
-largest height (``segment_min``, ``grid_max_slope``); each passes its functions, which
-numba inlines (at IR level, as the descent itself), so each compiles to its own loop.
+``stk = (level, row, col, t)`` of a :data:`~terrainvis.visibility._kernels.WalkStack`). A consumer pops a node
+(:func:`node_pop`), decides from the node's bounds whether to skip it (its own test),
+splits its interval where the track crosses the node's two mid lines
+(:func:`node_split`), may probe the surface there (:func:`mid_height`) and pushes the
+children far-first (:func:`node_push`), so that the near ones pop first; at level 0 it
+evaluates the cell (its own reduction).
 
-A cell's least clearance
-------------------------
-The pair engine and the viewshed's exact walk both reduce a cell to the least clearance
-of the sight line over its part of the track: :func:`cell_least`, with each consumer's
-evaluation of the surface passed in (the pair engine: the height at each point, clamped
-into the cell; the viewshed: each piece on its own triangle's plane, with nodata's absent
-triangles). Those evaluations round differently, so each keeps its own, bit for bit.
+Two pieces stay with their consumers: the loop of the descent (the pair engine's
+``segment_min``, the threshold engine's ``grid_max_slope``) and a cell's least clearance
+(the pair engine's ``_cell_min``, the viewshed walk's ``_cell_piece``, which evaluate the
+surface with different rounding). Written once here, with each consumer's functions
+passed in, they gave the same bits and run times but compiled the pair engine 10-30 %
+longer (numba inlines each function passed at every call site; docs/performance.md,
+"Cell clearance and descent written once: tried, not kept").
 """
 
 from __future__ import annotations
 
-import types
 from collections import namedtuple
 
 import numba as nb
@@ -150,51 +146,6 @@ def cell_diagonal(xs, ys, ixw, iyw, r, c, seg):
     if den == 0.0:
         return -_INF
     return ((ay - ys[r]) * iyw[r] - (ax - xs[c]) * ixw[c]) / den
-
-
-# --------------------------------------------------------------------------- one cell's least clearance
-@nb.njit(cache=False, nogil=True, inline="always")
-def cell_least(g, r, c, seg, ta, tb, with_ta, bulge, whole, point, piece):
-    """Least clearance of the sight line ``seg = (ax, ay, az, dx, dy, dz)`` (the points
-    ``a + t d``) over its part [ta, tb] inside cell (r, c) of the grid ``g``.
-
-    The cell's diagonal cuts [ta, tb] into one or two pieces, each inside one triangle,
-    where the flat clearance is linear: its least value is at a piece's end. With
-    ``whole`` True and a flat earth (``bulge`` 0) each end is evaluated once, by the
-    consumer's ``point(g, r, c, seg, a, b, t)`` (the clearance at t, an end of the piece
-    [a, b]), ta only when ``with_ta`` (False: the previous cell evaluated it as its own
-    end; the surface is continuous). Otherwise each piece [a, b] is reduced by the
-    consumer's ``piece(g, r, c, seg, a, b, bulge)``: under earth curvature (``bulge >
-    0``) its convex clearance may be least inside it
-    (:func:`~terrainvis.visibility._kernels.curved_min`), and on a grid
-    with nodata (``whole`` False) its triangle may be absent.
-
-    Its consumers inline it (numba IR) with their own ``point`` and ``piece`` (numba
-    compiles a copy per function passed): the pair engine
-    (:mod:`terrainvis.visibility._kernels`: the surface's height at each point, clamped
-    into the cell) and the viewshed's exact walk
-    (:mod:`terrainvis.visibility.viewsheds._walk_kernels`: each piece on its own
-    triangle's plane, with nodata).
-    """
-    td = _INF
-    t = cell_diagonal(g.xs, g.ys, g.ixw, g.iyw, r, c, (seg[0], seg[1], seg[3], seg[4]))
-    if t > ta and t < tb:
-        td = t
-    if whole and bulge == 0.0:
-        tc = tb if td == _INF else td
-        m = point(g, r, c, seg, ta, tc, tc)
-        if with_ta:
-            m = min(m, point(g, r, c, seg, ta, tc, ta))
-        if td < _INF:
-            m = min(m, point(g, r, c, seg, td, tb, tb))
-        return m
-    best = _INF
-    npc = 1 if td == _INF else 2
-    for k in range(npc):
-        e = piece(g, r, c, seg, ta if k == 0 else td, tb if k == npc - 1 else td, bulge)
-        if e < best:
-            best = e
-    return best
 
 
 # --------------------------------------------------------------------------- pyramid
@@ -307,7 +258,7 @@ def _node_push(stk, sp, xs, ys, node, split, seg):
 
 # Each descent helper twice, from the one source above: plain and without the runtime for
 # the serial walks (the thresholds), inlined at numba IR level for the pair engine's
-# loop (there the plain calls are not inlined by LLVM, and every node paid them;
+# parallel loop (there the plain calls are not inlined by LLVM, and every node paid them;
 # the IR-inlined twins count no references there, the arrays being bound once per walk).
 # The inlined twins are never cached (numba inlines their source).
 _INLINE = {"cache": False, "nogil": True, "inline": "always"}
@@ -316,82 +267,3 @@ node_root, node_root_inline = nb.njit(**_STEP)(_node_root), nb.njit(**_INLINE)(_
 node_split, node_split_inline = nb.njit(**_STEP)(_node_split), nb.njit(**_INLINE)(_node_split)
 mid_height, mid_height_inline = nb.njit(**_STEP)(_mid_height), nb.njit(**_INLINE)(_mid_height)
 node_push, node_push_inline = nb.njit(**_STEP)(_node_push), nb.njit(**_INLINE)(_node_push)
-
-
-#: What a consumer's ``node`` test tells the descent (:func:`_descend`) to do with a node: split it, skip
-#: it, or stop the walk with the value it returns.
-SPLIT, SKIP, STOP = 0, 1, 2
-
-
-def _descend(g, st, track, t0, t1, best, ctx, leaf, node, probe, done):
-    """The pyramid's near-first descent over [t0, t1] of the ground track ``track = (ax, ay,
-    dx, dy)`` on the grid ``g`` (with its pyramid; ``st`` a
-    :data:`~terrainvis.visibility._kernels.WalkStack`), reducing from ``best``.
-
-    The consumer's functions (inlined at numba IR level, with ``ctx``, its own record):
-
-    * ``done(best, ctx)``: whether the walk may stop with ``best``, asked before each node;
-    * ``leaf(g, r, c, a0, a1, with_a0, best, ctx)``: ``(best, stop)`` after cell (r, c)'s
-      part [a0, a1] of the track (``with_a0`` False: a0 was the previous cell's end);
-    * ``node(pyr, k, a0, a1, best, ctx)``: :data:`SPLIT`, :data:`SKIP` or :data:`STOP`
-      from the node's bounds ``pyr[k]`` (min) and ``pyr[k + 1]`` (max) over [a0, a1], and
-      the value to return on STOP;
-    * ``probe(h, t, best, ctx)``: ``(best, stop)`` after the surface height h where the
-      track crosses a mid line of a node of level 2 or more, at t.
-
-    ``stop`` True returns ``best`` at once. The pair engine's least clearance
-    (:mod:`terrainvis.visibility._kernels`) and the threshold engine's largest height
-    (:mod:`terrainvis.visibility._threshold_kernels`) are its consumers; the pair engine
-    takes :data:`descend_inline`, whose steps are the helpers' IR-inlined twins.
-    """
-    z, xs, ys, ixw, iyw, uniform = g.z, g.xs, g.ys, g.ixw, g.iyw, g.uniform
-    stk = (st.level, st.row, st.col, st.t)
-    sp = node_root(stk, g.ltop, t0, t1)
-    last = -_INF
-    while sp > 0:
-        if done(best, ctx):
-            return best
-        sp, L, R, C, a0, a1 = node_pop(stk, sp)
-        if L == 0:
-            best, stop = leaf(g, R, C, a0, a1, a0 != last, best, ctx)
-            last = a1
-            if stop:
-                return best
-            continue
-        act, v = node(g.pyr, g.off[L] + 2 * (R * g.nxl[L] + C), a0, a1, best, ctx)
-        if act == SKIP:
-            continue
-        if act == STOP:
-            return v
-        nd = (L, R, C, a0, a1)
-        split = node_split(xs, ys, nd, track)
-        cm, rm, tx, ty = split
-        if L >= 2:
-            # probe the surface where the track crosses the mid lines (linear along a grid line)
-            if tx < _INF:
-                best, stop = probe(mid_height(z, xs, ys, ixw, iyw, uniform, nd, True, cm, track[1] + tx * track[3]),
-                                   tx, best, ctx)
-                if stop:
-                    return best
-            if ty < _INF:
-                best, stop = probe(mid_height(z, xs, ys, ixw, iyw, uniform, nd, False, rm, track[0] + ty * track[2]),
-                                   ty, best, ctx)
-                if stop:
-                    return best
-        sp = node_push(stk, sp, xs, ys, nd, split, track)  # near pieces pop first
-    return best
-
-
-def _with_inlined_steps(fn):
-    """A copy of ``fn`` whose calls of the descent's steps (``node_root``, ``node_pop``,
-    ``node_split``, ``mid_height``, ``node_push``) are their IR-inlined twins."""
-    steps = {"node_root": node_root_inline, "node_pop": node_pop_inline, "node_split": node_split_inline,
-             "mid_height": mid_height_inline, "node_push": node_push_inline}
-    return types.FunctionType(fn.__code__, {**fn.__globals__, **steps}, fn.__name__, fn.__defaults__, fn.__closure__)
-
-
-# The descent twice from its one source, both inlined into their consumers at numba IR
-# level: with the plain steps (the threshold engine's serial walks, where LLVM inlines
-# them) and with their IR-inlined twins (the pair engine's loop, where it does not).
-descend = nb.njit(**_INLINE)(_descend)
-descend_inline = nb.njit(**_INLINE)(_with_inlined_steps(_descend))

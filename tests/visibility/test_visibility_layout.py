@@ -117,17 +117,3 @@ def test_no_function_takes_more_than_a_dozen_positional_arguments(limit):
         if len(params) > limit:
             long.append(f"{name} ({len(params)})")
     assert not long, f"more than {limit} parameters (keyword-only options aside): {long}"
-
-
-def test_the_pyramid_is_descended_by_one_loop():
-    """Issue 41: the descent's steps are called only by ``walk.py``'s one loop (its twins
-    compiled from one source); the pair and threshold engines pass it their functions."""
-    steps = {"node_root", "node_pop", "node_split", "mid_height", "node_push"}
-    callers = {}
-    for p in sorted(PACKAGE.rglob("*.py")) + sorted((PACKAGE.parents[1] / "simplifiers").rglob("*.py")):
-        for node in ast.walk(ast.parse(p.read_text())):
-            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
-                    and node.func.id.removesuffix("_inline") in steps:
-                callers.setdefault(p.name, set()).add(node.func.id)
-    assert set(callers) == {"walk.py"}, f"the pyramid's descent written outside walk.py: {callers}"
-    assert callers["walk.py"] == steps

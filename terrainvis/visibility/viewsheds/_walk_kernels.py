@@ -3,9 +3,7 @@
 :func:`walk_min` is the least clearance of the ray ``E + t d`` over ``[t0, t1]`` on the
 grid's surface, crossing the grid lines and cell diagonals the ray meets
 (:mod:`terrainvis.visibility.walk`'s one cursor) and, on a grid with nodata, only the
-triangles present (:func:`_walk_cells`: each cell's least clearance is
-:func:`terrainvis.visibility.walk.cell_least`'s, the pair engine's too, with this walk's
-``_piece_clear`` and ``_piece_min``). The sector sweep (:mod:`._sector_kernels`)
+triangles present (:func:`_walk_cells`). The sector sweep (:mod:`._sector_kernels`)
 walks the parts of a target's ray its bounds cannot decide; :func:`walk_targets` gives
 the exact least clearance of whole segments eye -> target for the few targets the sweep
 leaves undecided. Records and constants: :mod:`._geometry_kernels`.
@@ -19,7 +17,7 @@ import numpy as np
 from ...core.surface import cell_height, line_height
 from ...tolerances import DIAGONAL_SLACK
 from .._kernels import _canonical, curved_min, interval_start
-from ..walk import cell_diagonal, cell_least, cells_next, cells_start
+from ..walk import cell_diagonal, cells_next, cells_start
 from ._geometry_kernels import HORIZONTAL, INF, LOWER, UPPER, VERTICAL, plane_height, tri_present
 
 
@@ -81,34 +79,58 @@ def _absent_piece(g, r, c, upper, ray, ta, tb, bulge):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _upper(g, r, c, ray, a, b):
-    """Whether the piece [a, b] of the ray in cell (r, c) lies in the upper triangle (v > u
-    at its midpoint: a piece never crosses the diagonal)."""
+def _cell_piece(g, r, c, ray, ta, tb, with_ta, bulge):
+    """Exact min clearance over [ta, tb] inside cell (r, c) (ends and diagonal crossing;
+    with ``bulge > 0`` also each side's interior minimum, see :func:`walk_min`)."""
+    xs, ys, ixw, iyw = g.xs, g.ys, g.ixw, g.iyw
     ex, ey, ez, dx, dy, dz = ray
-    tm = 0.5 * (a + b)
-    u = (ex + tm * dx - g.xs[c]) * g.ixw[c]
-    v = (ey + tm * dy - g.ys[r]) * g.iyw[r]
-    return v > u
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _piece_clear(g, r, c, ray, a, b, t):
-    """Clearance of the ray at t, an end of the piece [a, b] of cell (r, c), over the plane
-    of the piece's triangle: the viewshed's ``point`` of
-    :func:`~terrainvis.visibility.walk.cell_least` (a grid without nodata)."""
-    return _clear(g, r, c, _upper(g, r, c, ray, a, b), ray, t)
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _piece_min(g, r, c, ray, a, b, bulge):
-    """Least clearance of the ray over the piece [a, b] of cell (r, c) on its triangle's
-    plane (curved: :func:`curved_min`), or along its boundaries with the present
-    triangles when that triangle is absent (:func:`_absent_piece`): the viewshed's
-    ``piece`` of :func:`~terrainvis.visibility.walk.cell_least`."""
-    up = _upper(g, r, c, ray, a, b)
-    if not g.has_nan or tri_present(g.z, r, c, up):
-        return curved_min(_clear(g, r, c, up, ray, a), _clear(g, r, c, up, ray, b), a, b, bulge)
-    return _absent_piece(g, r, c, up, ray, a, b, bulge)
+    td = INF
+    t = cell_diagonal(xs, ys, ixw, iyw, r, c, (ex, ey, dx, dy))
+    if t > ta and t < tb:
+        td = t
+    if not g.has_nan and bulge == 0.0:
+        tm = 0.5 * (ta + tb) if td == INF else 0.5 * (ta + td)
+        u = (ex + tm * dx - xs[c]) * ixw[c]
+        v = (ey + tm * dy - ys[r]) * iyw[r]
+        up = v > u
+        if td == INF:
+            m = _clear(g, r, c, up, ray, tb)
+            if with_ta:
+                m = min(m, _clear(g, r, c, up, ray, ta))
+            return m
+        m = _clear(g, r, c, up, ray, td)
+        if with_ta:
+            m = min(m, _clear(g, r, c, up, ray, ta))
+        # the second piece's own triangle (a track touching the diagonal only at a cell
+        # corner stays in the same triangle)
+        tm = 0.5 * (td + tb)
+        u = (ex + tm * dx - xs[c]) * ixw[c]
+        v = (ey + tm * dy - ys[r]) * iyw[r]
+        m = min(m, _clear(g, r, c, v > u, ray, tb))
+        return m
+    best = INF
+    npc = 1 if td == INF else 2
+    for k in range(npc):
+        if npc == 1:
+            a = ta
+            b = tb
+        elif k == 0:
+            a = ta
+            b = td
+        else:
+            a = td
+            b = tb
+        tm = 0.5 * (a + b)
+        u = (ex + tm * dx - xs[c]) * ixw[c]
+        v = (ey + tm * dy - ys[r]) * iyw[r]
+        up = v > u
+        if not g.has_nan or tri_present(g.z, r, c, up):
+            e = curved_min(_clear(g, r, c, up, ray, a), _clear(g, r, c, up, ray, b), a, b, bulge)
+        else:
+            e = _absent_piece(g, r, c, up, ray, a, b, bulge)
+        if e < best:
+            best = e
+    return best
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -203,8 +225,7 @@ def _walk_cells(g, ray, t0, t1, stop, bulge):
     best = INF
     first = True
     while True:
-        m = cell_least(g, cur.r, cur.c, ray, cur.t, cur.tn, first or g.has_nan, bulge, not g.has_nan, _piece_clear,
-                       _piece_min)
+        m = _cell_piece(g, cur.r, cur.c, ray, cur.t, cur.tn, first or g.has_nan, bulge)
         first = False
         if m < best:
             best = m
