@@ -53,6 +53,14 @@ splits its interval where the track crosses the node's two mid lines
 (:func:`node_split`), may probe the surface there (:func:`mid_height`) and pushes the
 children far-first (:func:`node_push`), so that the near ones pop first; at level 0 it
 evaluates the cell (its own reduction).
+
+Two pieces stay with their consumers: the loop of the descent (the pair engine's
+``segment_min``, the threshold engine's ``grid_max_slope``) and a cell's least clearance
+(the pair engine's ``_cell_min``, the viewshed walk's ``_cell_piece``, which evaluate the
+surface with different rounding). Written once here, with each consumer's functions
+passed in, they gave the same bits and run times but compiled the pair engine 10-30 %
+longer (numba inlines each function passed at every call site; docs/performance.md,
+"Cell clearance and descent written once: tried, not kept").
 """
 
 from __future__ import annotations
