@@ -85,8 +85,10 @@ def _plane_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray, str]:
     to a partial last cell), as those whole numbers. Both are affine images of the world
     coordinates with a positive determinant, in whole numbers, where every orientation test
     of the kernel is exact. ``"world"``: any other rectilinear grid, in world coordinates from
-    a local origin, where the tests round: there the front can find no valid triangle
-    (a :class:`~terrainvis.errors.SimplificationError` says "got stuck").
+    a local origin, where the tests round. Rounding matters where samples are exactly
+    collinear, as on a lattice: computed in world coordinates, the S(T) grids made the front
+    find no valid triangle ("got stuck"); samples in general position (an irregular
+    rectilinear grid) agree.
     """
     rows, cols = grid.shape
     if grid.is_uniform:
@@ -99,9 +101,9 @@ def _plane_coords(grid: HeightGrid) -> tuple[np.ndarray, np.ndarray, str]:
 
 def _whole_units(coords: np.ndarray) -> np.ndarray | None:
     """``coords - coords[0]`` in whole multiples of the largest unit that divides every step
-    (a fraction 1/k of the least step, k <= :data:`_UNIT_DIVISORS`), or None when there is none
-    (to :data:`~terrainvis.tolerances.WHOLE_UNIT_SLACK` of the unit) or the multiples reach 2**25 (past which a product of
-    two differences is no longer exact in float64)."""
+    (a fraction 1/k of the least step, k <= :data:`_UNIT_DIVISORS`), or None when there is
+    none (to :data:`~terrainvis.tolerances.WHOLE_UNIT_SLACK` of the unit) or the multiples
+    reach 2**25 (past which a product of two differences is no longer exact in float64)."""
     local = coords - coords[0]
     least = float(np.diff(coords).min())
     for k in range(1, _UNIT_DIVISORS + 1):
@@ -483,10 +485,11 @@ def _stage_wide(search: _Search) -> _Run | None:
     for the samples after the first k (``hi_eps`` times 1 - w, w in :data:`_WIDENINGS`)
     adds vertices where it applies, so the count moves from below the window (k = all)
     to well above it (k = 0) through many more values, and :func:`_stage_mixed` lands on
-    one of them. The guarantee stays ``hi_eps``.
+    one of them. The guarantee stays ``hi_eps``. When none lands, the bracket is left as
+    it was (the error names the jump).
     """
     s = search
-    top = s.hi_eps
+    top, jump = s.hi_eps, (s.lo_eps, s.lo_n)
     for w in _WIDENINGS:
         run = s.measure(top * (1.0 - w))
         if s.hit(run):
@@ -496,6 +499,7 @@ def _stage_wide(search: _Search) -> _Run | None:
             run = _stage_mixed(s)
             if run is not None:
                 return run
+    s.lo_eps, s.lo_n = jump
     return None
 
 
@@ -531,8 +535,8 @@ def build(grid: HeightGrid, n_vertices: int, *, max_error: float | None = None,
         ``attrs`` also holds ``stopped_by`` (``"budget"`` or ``"max_error"``; with
         ``max_error`` given, ``max_error_threshold`` records it),
         ``search_stage`` (the stage that landed: ``"max_error"``, ``"bracket"``,
-        ``"mixed"``, ``"probe"`` or ``"wide"``) and ``runs`` (triangulations made, including the ones
-        stopped early). When the budget needed the mixed tolerance,
+        ``"mixed"``, ``"probe"`` or ``"wide"``) and ``runs`` (triangulations made, including
+        the ones stopped early). When the budget needed the mixed tolerance,
         ``attrs["epsilon_rest"]`` is the smaller tolerance and
         ``attrs["n_samples_at_epsilon"]`` the number of samples (the first of the order
         ``attrs["mixed_order"]``) allowed ``attrs["epsilon"]``.

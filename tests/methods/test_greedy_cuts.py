@@ -516,8 +516,15 @@ def test_a_chaotic_count_lands_with_the_wide_mixed_tolerance(bundled, kind, step
     assert tin.attrs["search_stage"] == "wide"
     assert tin.attrs["epsilon_rest"] < tin.attrs["epsilon"]
     monkeypatch.setattr(gc, "_stage_wide", lambda search: None)
-    with pytest.raises(SimplificationError, match="no epsilon gave"):
+    with pytest.raises(SimplificationError, match="no epsilon gave") as without:
         simplifiers.simplify(g, "greedy-cuts", level)
+    # where stage 4 misses too (its mixed runs made to miss), the error names the same jump
+    monkeypatch.undo()
+    monkeypatch.setattr(gc, "_stage_mixed", lambda search: None)
+    with pytest.raises(SimplificationError, match="no epsilon gave") as missed:
+        simplifiers.simplify(g, "greedy-cuts", level)
+    jump = str(without.value).split("; ")[1]
+    assert jump.startswith("the count jumps from") and str(missed.value).endswith(jump)
 
 
 # ------------------------------------------------------------- bad input
