@@ -2,9 +2,8 @@
 
 The columns (:data:`COLUMNS`; :func:`columns` with the registered measures' own), which of
 them identify a unit (:data:`UNIT_KEY`, or :data:`BUDGET_KEY` in a run budgeted in vertical
-error: :func:`unit_key`) or hold times
-(:data:`TIMING_COLUMNS`), how many rows a complete unit has (:func:`rows_per_unit`), and
-the order of the final table (:func:`order`).
+error: :func:`unit_key`) or hold times (:data:`TIMING_COLUMNS`), how many rows a complete
+unit has (:func:`rows_per_unit`), and the order of the final table (:func:`order`).
 """
 
 from __future__ import annotations
@@ -57,8 +56,9 @@ def rows_per_unit(settings: Settings) -> int:
 def optional_columns(measure: str) -> tuple:
     """The columns a results file of ``measure`` may lack and still resume: those only other
     measures fill (their :attr:`~terrainvis.experiment.measures.Measure.columns`),
-    :data:`EVALUATE_COLUMNS` (read back as NaN, which is what a comparison's rows hold there) and :data:`BUDGET_COLUMNS` (empty in a run by levels; a
-    run by budgets cannot resume a file written before them, whose settings have no budgets)."""
+    :data:`EVALUATE_COLUMNS` (read back as NaN, which is what a comparison's rows hold there)
+    and :data:`BUDGET_COLUMNS` (empty in a run by levels; a run by budgets cannot resume a
+    file written before them, whose settings have no budgets)."""
     return (tuple(c for m in MEASURES.values() if m.name != measure for c in m.columns) + EVALUATE_COLUMNS
             + BUDGET_COLUMNS)
 
