@@ -730,7 +730,7 @@ def _split(na, window, sm, fr, counts, cand):
     nx = -(yb - ya)
     ny = xb - xa
     half2 = 0.25 * ((xb - xa) ** 2 + (yb - ya) ** 2)
-    m = 0
+    m = np.int64(0)  # int64 from the start: a literal 0 reaching heapify would compile the heap once more
     for r in range(r0, r1 + 1):
         for c in range(c0, c1 + 1):
             if occ[r, c] == COVERED:

@@ -56,9 +56,6 @@ _HOT = {"cache": True, "nogil": True, "_nrt": False}
 #: module docstring).
 _HEAP = {"cache": False, "nogil": True, "_nrt": False}
 
-#: 0 as an int64 (not a literal): numba compiles a callee again for every literal argument.
-_ZERO = np.int64(0)
-
 
 @nb.njit(**_HOT)
 def orient(ax, ay, bx, by, cx, cy):
@@ -147,7 +144,7 @@ def heap_pop(key, item, pos, n, before):
     if n > 0:
         key[0] = key[n]
         item[0] = item[n]
-        sift_down(key, item, pos, _ZERO, n, before)
+        sift_down(key, item, pos, np.int64(0), n, before)  # int64, not a literal: one compilation
     return n
 
 
