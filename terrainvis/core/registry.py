@@ -13,7 +13,10 @@ entries are built in. Each family's ``register`` checks what is particular to it
 * a built-in entry is never replaced or removed;
 * a name taken by an entry registered earlier is replaced only with ``replace=True``;
 * :meth:`Registry.names` lists the names, :meth:`Registry.remove` removes one, each
-  family's ``available()`` and ``unregister()`` are these.
+  family's ``available()`` and ``unregister()`` are these;
+* :meth:`Registry.watch` calls a function after every change, for what is made from the
+  entries and kept elsewhere (``compare``'s signature and docstring hold the relocations'
+  own options).
 
 :func:`registry` finds a family's registry by its kind, for code that reads entries
 without importing the module that defines them (the report reads a measure's ``counts``,
@@ -65,7 +68,31 @@ class Registry(dict):
         super().__init__(entries)
         self.kind = kind
         self.builtin = frozenset(self)
+        self._watchers = []
         _BY_KIND.setdefault(kind, self)  # an unpickled copy skips __init__: it is never registry(kind)'s
+
+    def watch(self, listener) -> None:
+        """Call ``listener()`` after every later change of the entries (one registered,
+        replaced or removed)."""
+        self._watchers.append(listener)
+
+    def __setitem__(self, name, entry):
+        super().__setitem__(name, entry)
+        self._changed()
+
+    def pop(self, name, *default):
+        out = super().pop(name, *default)
+        self._changed()
+        return out
+
+    def _changed(self) -> None:
+        for listener in getattr(self, "_watchers", ()):  # (an unpickled copy has none)
+            listener()
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state.pop("_watchers", None)  # a copy in another process tells no one here
+        return state
 
     def _a(self) -> str:
         return "an" if self.kind[:1] in "aeiou" else "a"

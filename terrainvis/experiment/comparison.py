@@ -38,6 +38,7 @@ import pandas as pd
 from ..core import compiling as _compiling
 from ..core._progress import progress_bar_class
 from ..core.validate import describe
+from ..relocation.registry import RELOCATIONS
 from .measures import MEASURES
 from .collect import COLUMNS, columns, optional_columns, order, rows_per_unit, table, unit_key
 from .options import (
@@ -392,10 +393,21 @@ class _Progress:
 
 def _signature() -> inspect.Signature:
     """:func:`compare`'s signature with every declared option as a keyword-only parameter."""
+    compare.__signature__ = None  # (the one set before would be read back)
     own = inspect.signature(compare, follow_wrapped=False)
     params = [p for p in own.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
     return own.replace(parameters=params[:1] + signature_parameters() + params[1:])
 
 
-compare.__doc__ = compare.__doc__.replace("    <options>", docstring_section())
-compare.__signature__ = _signature()
+_DOC = compare.__doc__
+
+
+def _describe() -> None:
+    """:func:`compare`'s docstring and signature from the options declared now; again whenever a
+    relocation is registered or removed (its own options are compare's keywords while it is)."""
+    compare.__doc__ = _DOC.replace("    <options>", docstring_section())
+    compare.__signature__ = _signature()
+
+
+_describe()
+RELOCATIONS.watch(_describe)

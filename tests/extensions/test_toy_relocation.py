@@ -290,6 +290,23 @@ def test_its_own_run_option_is_a_keyword_of_compare_checked_stored_and_resumed(t
     pd.testing.assert_frame_equal(again[cols], high[cols])
 
 
+def test_help_of_compare_shows_its_own_run_option_while_it_is_registered(toy):
+    """``help(compare)`` reads compare's signature and docstring: they name ``lift`` (keyword-only,
+    its default, its help) from the registration on, and no longer once it is removed."""
+    import inspect
+
+    param = inspect.signature(compare).parameters["lift"]
+    assert param.kind is inspect.Parameter.KEYWORD_ONLY and param.default == 1.0
+    assert "how far above S(T) it lifts the points" in compare.__doc__
+    unregister("toy")
+    try:
+        assert "lift" not in inspect.signature(compare).parameters
+        assert "how far above S(T) it lifts the points" not in compare.__doc__
+    finally:
+        register(toy)
+    assert "lift" in inspect.signature(compare).parameters
+
+
 def test_a_run_option_of_a_relocation_may_not_take_a_name_of_compare(toy):
     from terrainvis.experiment.options import OPTIONS
 
