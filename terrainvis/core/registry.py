@@ -73,11 +73,15 @@ class Registry(dict):
 
     def watch(self, listener) -> None:
         """Call ``listener()`` after every later change of the entries (one registered,
-        replaced or removed)."""
+        replaced or removed: an item set, deleted or popped)."""
         self._watchers.append(listener)
 
     def __setitem__(self, name, entry):
         super().__setitem__(name, entry)
+        self._changed()
+
+    def __delitem__(self, name):
+        super().__delitem__(name)
         self._changed()
 
     def pop(self, name, *default):
