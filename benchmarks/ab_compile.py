@@ -21,33 +21,21 @@ import subprocess
 import sys
 import tempfile
 
+from bench_cold_start import OUTERMOST
+
 CHILD = r'''
 import json, sys, time
 import numpy as np
-from numba.core import event
 import terrainvis as tv
 from terrainvis.visibility.thresholds import ThresholdSurface, threshold_row, gauss_seidel, best_heights
 try:
     from terrainvis.visibility.viewsheds.output_modes import eye_thresholds
 except ImportError:  # a checkout from before the viewsheds subpackage
     from terrainvis.visibility.output_modes import eye_thresholds
-depth, t0, out = [0], [0.0], []
-class L(event.Listener):
-    def on_start(self, ev):
-        if depth[0] == 0:
-            t0[0] = time.perf_counter()
-        depth[0] += 1
-    def on_end(self, ev):
-        depth[0] -= 1
-        if depth[0] == 0:
-            f = ev.data["dispatcher"].py_func
-            a = ev.data["args"]
-            rec = getattr(a[0], "instance_class", None) if len(a) else None
-            out.append((f"{f.__qualname__}[{rec.__name__ if rec else ''}]", time.perf_counter() - t0[0]))
 g = tv.synthetic_terrain("hills", size=65, seed=0)
 pts = tv.sample_points(g, 40, seed=1)[:, :2]
 T0 = time.perf_counter()
-event.register("numba:compile", L())
+''' + OUTERMOST + r'''
 for S in (g, g.to_tin()):
     surf = ThresholdSurface(S)
     q = surf.local(np.column_stack([pts, g.height_at(pts) + 1.0]))
@@ -57,7 +45,11 @@ for S in (g, g.to_tin()):
     best_heights(surf, q[:10], q[10:], vis[:10, 10:].copy(), neighbour_thresholds=np.full((10, 3), -np.inf),
                  neighbour_verdicts=np.ones((10, 3), dtype=np.int8), weight=0.5, window=5.0)
     eye_thresholds(S, np.array([g.xs[20], g.ys[30], 500.0]), np.column_stack([pts, g.height_at(pts)]), 0.0)
-print(json.dumps({"file": tv.__file__, "events": out, "total": time.perf_counter() - T0}))
+def _name(f, args):  # the kernel and its first argument's record type
+    rec = getattr(args[0], "instance_class", None) if len(args) else None
+    return f"{f.__qualname__}[{rec.__name__ if rec else ''}]"
+events = [(_name(f, a), s) for f, a, s in compiled]
+print(json.dumps({"file": tv.__file__, "events": events, "total": time.perf_counter() - T0}))
 '''
 
 def run(checkout):

@@ -51,26 +51,32 @@ tv.save_dem(tv.HeightGrid(z, 30.0, 30.0, (500000.0, 4000000.0), attrs={"crs": "E
             dtype="float32")
 """
 
-#: Prints each outermost compile (a kernel called from Python, with what it calls) and its seconds.
-KERNELS = """
-import sys, time
-from numba.core import event
-from terrainvis.cli.compile_ahead import PARTS
-depth, t0, out = [0], [0.0], []
-class L(event.Listener):
+#: Child-script source that, from where it stands on, records each outermost numba compile (a
+#: kernel called from Python, with every callee not compiled before it) in ``compiled`` as
+#: (the kernel's Python function, its argument types, wall seconds). ``ab_compile.py`` uses it too.
+OUTERMOST = """
+import time as _time
+from numba.core import event as _event
+_depth, _t0, compiled = [0], [0.0], []
+class _Outermost(_event.Listener):
     def on_start(self, ev):
-        if depth[0] == 0:
-            t0[0] = time.perf_counter()
-        depth[0] += 1
+        if _depth[0] == 0:
+            _t0[0] = _time.perf_counter()
+        _depth[0] += 1
     def on_end(self, ev):
-        depth[0] -= 1
-        if depth[0] == 0:
-            f = ev.data["dispatcher"].py_func
-            out.append((f"{f.__module__}.{f.__qualname__}", time.perf_counter() - t0[0]))
-event.register("numba:compile", L())
+        _depth[0] -= 1
+        if _depth[0] == 0:
+            compiled.append((ev.data["dispatcher"].py_func, ev.data["args"], _time.perf_counter() - _t0[0]))
+_event.register("numba:compile", _Outermost())
+"""
+
+#: Prints each outermost compile of one part of ``terrainvis compile`` and its seconds.
+KERNELS = OUTERMOST + """
+import sys
+from terrainvis.cli.compile_ahead import PARTS
 PARTS[sys.argv[1]][1]()
-for name, s in out:
-    print(f"{s:8.2f}  {name}")
+for f, _, s in compiled:
+    print(f"{s:8.2f}  {f.__module__}.{f.__qualname__}")
 """
 
 
