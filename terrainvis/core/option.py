@@ -22,7 +22,7 @@ from typing import Any
 
 from .validate import as_bool, as_finite_scalar, as_int
 
-__all__ = ["Option", "Flag", "Switch", "integer", "finite", "height", "boolean", "add_flag"]
+__all__ = ["Option", "Flag", "Switch", "integer", "finite", "nonnegative", "height", "boolean", "add_flag"]
 
 
 @dataclass(frozen=True)
@@ -153,11 +153,20 @@ def finite(value, name: str) -> float:
     return as_finite_scalar(value, name)
 
 
+def nonnegative(value, name: str) -> float:
+    """A check: a finite real number >= 0."""
+    return _at_least_zero(value, name, "")
+
+
 def height(value, name: str) -> float:
     """A check: a height above the surface, finite and >= 0 (a negative one would stand underground)."""
+    return _at_least_zero(value, name, " (a height above the surface)")
+
+
+def _at_least_zero(value, name: str, what: str) -> float:
     out = finite(value, name)
     if out < 0:
-        raise ValueError(f"{name} must be >= 0 (a height above the surface), got {out!r}")
+        raise ValueError(f"{name} must be >= 0{what}, got {out!r}")
     return out
 
 

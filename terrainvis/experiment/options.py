@@ -36,7 +36,7 @@ from collections.abc import Callable, MutableMapping, Sequence
 
 import numpy as np
 
-from ..core.option import Flag, Option, Switch, add_flag, boolean, finite, height, integer
+from ..core.option import Flag, Option, Switch, add_flag, boolean, finite, height, integer, nonnegative
 from ..core.validate import as_float_array, as_int, choice, describe
 from ..relocation.registry import run_options
 from ..visibility import EARTH_RADIUS
@@ -65,14 +65,6 @@ CASCADE_AUTO_MIN_SAMPLES = 1 << 19
 
 
 # ---------------------------------------------------------------------- checks
-def _nonnegative(value, name: str) -> float:
-    """A check: a finite real number >= 0."""
-    out = finite(value, name)
-    if out < 0:
-        raise ValueError(f"{name} must be >= 0, got {out!r}")
-    return out
-
-
 def _positive(value, name: str) -> float:
     """A check: a finite real number > 0."""
     out = finite(value, name)
@@ -355,7 +347,7 @@ _DECLARED = [
         cli=Flag(choices=_engines), los=True,
     ),
     Option(
-        "curvature", 0.0, _nonnegative, "earth curvature coefficient: 0 a flat earth (the paper's), 1 geometric, "
+        "curvature", 0.0, nonnegative, "earth curvature coefficient: 0 a flat earth (the paper's), 1 geometric, "
         "0.85714 with standard refraction (GDAL's -cc)", "float",
         doc=("Every line of sight, on T and on S(T), clears the surface raised by ``curvature * d1 * d2 / "
              "(2 * earth_radius)`` (:func:`terrainvis.line_of_sight`)."),
