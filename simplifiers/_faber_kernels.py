@@ -26,6 +26,7 @@ import math
 import numba as nb
 import numpy as np
 
+from terrainvis.core.compiling import KERNEL_ONLY
 from terrainvis.core.stopflag import stopped
 
 # Columns per block when a kernel walks several curves that are interleaved along B.
@@ -109,7 +110,7 @@ def lls_rows(f, w0, w1, w2, out, t0, t1, stop):
     return bad
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _lls_filter_row(r, w0, w1, w2, o):
     """The row filter of :func:`lls_curves` for one curve ``r`` (m,) into ``o`` (n,)."""
     m = r.shape[0]
@@ -358,7 +359,7 @@ def critical_points(g, crit):
     return nc + 1
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _feature_one(g, op, w2, work, x):
     """Feature-aware least squares for one curve ``g`` (m,), result in ``x`` (n,).
 

@@ -63,6 +63,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from terrainvis.core.compiling import KERNEL_ONLY
 from terrainvis.core.stopflag import stopped
 from terrainvis.tolerances import ROW_SPAN_SNAP  # frozen into the kernels when they compile
 
@@ -113,7 +114,7 @@ Front = namedtuple("Front", ["nodes", "pool", "bhead", "nbx", "scr"])
 _ZERO = np.int64(0)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _grow(arr, n):
     """``arr`` itself when it has a row ``n``, else a copy with twice the rows.
 
@@ -132,7 +133,7 @@ def _grow(arr, n):
     return new
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _edge_value(u, w, s, gx, gy, zf, cols):
     """Height at sample ``s`` of the segment u-w, computed the same way from either side."""
     p = min(u, w)
@@ -197,7 +198,7 @@ def boundary_chain(ids, gx, gy, zf, cols, eps):
     return keep[:k].copy()
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _chain_segments(z, line, along_rows, coord, eps):
     """Segments of the greedy longest eps-valid chain along one row (or column) of z.
 
@@ -258,7 +259,7 @@ def line_segments(z, gx, gy, rows, cols, eps):
 
 
 # ----------------------------------------------------------------- scan conversion
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _row_range(y, xa, ya, xb, yb, xc, yc):
     """x-interval of triangle abc on the horizontal line at y (lo > hi when empty)."""
     lo = np.inf
@@ -282,7 +283,7 @@ def _row_range(y, xa, ya, xb, yb, xc, yc):
     return lo, hi
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _first_at_least(gx, v, lo, hi):
     """The first index i in [lo, hi] with gx[i] >= v (hi + 1 when none); gx increasing."""
     hi += 1
@@ -295,7 +296,7 @@ def _first_at_least(gx, v, lo, hi):
     return lo
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
     """Scan-convert triangle (ia, ib, ic) (counter-clockwise) over the samples.
 
@@ -370,7 +371,7 @@ def _scan(ia, ib, ic, gx, gy, index_space, zf, cols, eps, occ, mark):
 
 
 # ----------------------------------------------------------------- front queries
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _cone_contains(e, wx, wy, nodes, gx, gy, cols):
     """True when direction (wx, wy) lies strictly inside the free angle at node e."""
     v = nodes[e, VERT]
@@ -394,7 +395,7 @@ def _cone_contains(e, wx, wy, nodes, gx, gy, cols):
     return c1 > 0.0
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _next_live(b, prev, k, nodes, pool, bhead, scr):
     """The first live entry of bucket b from entry ``k`` on (-1 at the end).
 
@@ -416,7 +417,7 @@ def _next_live(b, prev, k, nodes, pool, bhead, scr):
     return -1
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _node_at(P, ia, ib, nodes, pool, bhead, nbx, scr, gx, gy, cols):
     """The front node of vertex P whose free angle holds triangle (ia, ib, P), or -1."""
     cp = P % cols
@@ -437,7 +438,7 @@ def _node_at(P, ia, ib, nodes, pool, bhead, nbx, scr, gx, gy, cols):
     return -1
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _geom(ia, ib, ic, nodes, pool, bhead, nbx, scr, gx, gy, cols):
     """True when triangle (ia, ib, ic) lies in the free region without touching the front.
 
@@ -582,7 +583,7 @@ def _evaluate(ia, ib, P, sm, fr):
 
 
 # ----------------------------------------------------------------- the three steps
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _ear(na, sm, fr, counts):
     """Step 1, ear cutting on the edge of node ``na``: the apex sample or -1.
 
@@ -601,7 +602,7 @@ def _ear(na, sm, fr, counts):
     return -1
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _apex_at(mc, mr, nc, nr, t, rows, cols):
     pc = int(np.floor(mc + t * nc + 0.5))
     pr = int(np.floor(mr + t * nr + 0.5))
@@ -610,7 +611,7 @@ def _apex_at(mc, mr, nc, nr, t, rows, cols):
     return pr * cols + pc
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _bite(na, sm, fr, rows, counts):
     """Step 2, greedy biting on the edge of node ``na``: the apex sample or -1.
 
@@ -691,7 +692,7 @@ def _bite(na, sm, fr, rows, counts):
     return best
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _blocker_apex(ia, ib, sm, fr):
     """The vertex that blocked the last evaluation (``scr[S_BLOCKER]``) as the apex, when
     that evaluates OK (``scr[S_APEX_NODE]`` is then its node); -1 otherwise."""
@@ -701,7 +702,7 @@ def _blocker_apex(ia, ib, sm, fr):
     return -1
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _split(na, window, sm, fr, counts, cand):
     """Step 3, edge splitting (fallback) on the edge of node ``na``, in the window
     ``(r0, r1, c0, c1)`` (rows r0..r1, cols c0..c1), on the :data:`Samples` ``sm`` and the
@@ -755,7 +756,7 @@ def _split(na, window, sm, fr, counts, cand):
 
 
 # ----------------------------------------------------------------- front updates
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _register(e, nodes, pool, bhead, nbx, scr, cols):
     """List node e's current edge in every bucket its bounding box overlaps.
 
@@ -778,7 +779,7 @@ def _register(e, nodes, pool, bhead, nbx, scr, cols):
             bhead[b] = k
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def _n_buckets(iu, iw, cols):
     """Buckets overlapped by the bounding box of the segment between samples iu and iw."""
     nr = max(iu // cols, iw // cols) // BS - min(iu // cols, iw // cols) // BS + 1

@@ -41,6 +41,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from terrainvis.core.compiling import KERNEL_ONLY
 from terrainvis.core.stopflag import stopped
 
 from ._shared_kernels import heap_remove, heap_set, larger, orient
@@ -64,7 +65,7 @@ State = namedtuple(
 
 
 # ----------------------------------------------------------------- predicates
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _in_circle(ax, ay, bx, by, cx, cy, px, py, ratio):
     """True when p lies strictly inside the circumcircle of the counter-clockwise (a, b, c).
 
@@ -89,7 +90,7 @@ def _in_circle(ax, ay, bx, by, cx, cy, px, py, ratio):
 
 
 # ------------------------------------------------------------ scan conversion
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _edge_span(ux, uy, vx, vy, py, lo, hi):
     """Narrow [lo, hi] to the columns px with orient(u, v, (px, py)) >= 0 (exact)."""
     a = -(vy - uy)
@@ -107,7 +108,7 @@ def _edge_span(ux, uy, vx, vy, py, lo, hi):
     return lo, hi
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def scan_triangle(z, W, ax, ay, bx, by, cx, cy):
     """Largest vertical error over the grid samples in the closed triangle (a, b, c).
 
@@ -165,7 +166,7 @@ def _link(half, a, b):
         half[b] = a
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _set_tri(tri, half, pend, pmark, npend, t, p0, p1, p2, h0, h1, h2):
     """Write triangle t = (p0, p1, p2), link its half-edges to h0, h1, h2, mark it for a rescan."""
     e = 3 * t
@@ -182,7 +183,7 @@ def _set_tri(tri, half, pend, pmark, npend, t, p0, p1, p2, h0, h1, h2):
     return npend
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, a_start, ratio):
     """Restore the Delaunay property around half-edge ``a_start`` by in-circle edge flips."""
     top = 0
@@ -232,7 +233,7 @@ def _legalize(vx, vy, tri, half, pend, pmark, npend, stack, counts, a_start, rat
     return npend
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _rescan(z, W, st, npend):
     """Rescan the ``npend`` triangles marked in ``st.pend``: their candidates and heap entries."""
     vx, vy, tri, cand, terr = st.vx, st.vy, st.tri, st.cand, st.terr

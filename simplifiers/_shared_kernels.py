@@ -51,13 +51,15 @@ import numba as nb
 import numpy as np
 from numba.extending import register_jitable
 
+from terrainvis.core.compiling import KERNEL_ONLY
+
 _HOT = {"cache": True, "nogil": True, "_nrt": False}
 #: The heap functions: as ``_HOT`` but uncached (their signatures hold the order, see the
 #: module docstring).
 _HEAP = {"cache": False, "nogil": True, "_nrt": False}
 
 
-@nb.njit(**_HOT)
+@nb.njit(**_HOT, **KERNEL_ONLY)
 def orient(ax, ay, bx, by, cx, cy):
     """Twice the signed area of (a, b, c): > 0 counter-clockwise, 0 collinear.
 
@@ -80,7 +82,7 @@ def smaller_then_item(ka, ta, kb, tb):
 
 
 # ------------------------------------------------------------------------ the heap
-@nb.njit(**_HEAP)
+@nb.njit(**_HEAP, **KERNEL_ONLY)
 def sift_up(key, item, pos, i, before):
     """Move the entry at slot ``i`` up to its place (it may now come before its parent)."""
     t = item[i]
@@ -100,7 +102,7 @@ def sift_up(key, item, pos, i, before):
         pos[t] = i
 
 
-@nb.njit(**_HEAP)
+@nb.njit(**_HEAP, **KERNEL_ONLY)
 def sift_down(key, item, pos, i, n, before):
     """Move the entry at slot ``i`` down to its place among the first ``n`` slots."""
     t = item[i]
@@ -131,7 +133,7 @@ def heapify(key, item, pos, n, before):
         sift_down(key, item, pos, i, n, before)
 
 
-@nb.njit(**_HEAP)
+@nb.njit(**_HEAP, **KERNEL_ONLY)
 def heap_pop(key, item, pos, n, before):
     """Take the first entry out of the heap of ``n >= 1`` entries; returns the new size.
 
@@ -148,7 +150,7 @@ def heap_pop(key, item, pos, n, before):
     return n
 
 
-@nb.njit(**_HEAP)
+@nb.njit(**_HEAP, **KERNEL_ONLY)
 def heap_remove(key, item, pos, size, at, t, before):
     """Take item ``t`` (in the heap) out of an indexed heap of ``size[at]`` entries."""
     i = np.int64(pos[t])  # int64 whatever pos holds: one compilation of the sifts
@@ -166,7 +168,7 @@ def heap_remove(key, item, pos, size, at, t, before):
         sift_down(key, item, pos, i, n, before)
 
 
-@nb.njit(**_HEAP)
+@nb.njit(**_HEAP, **KERNEL_ONLY)
 def heap_set(key, item, pos, size, at, t, v, before):
     """Give item ``t`` the key ``v`` in an indexed heap of ``size[at]`` entries: insert it, or
     move it up or down when it changed."""

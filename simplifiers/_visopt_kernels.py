@@ -38,6 +38,7 @@ import numpy as np
 
 from terrainvis.visibility.thresholds import interval
 from terrainvis.visibility.walk import cell_diagonal, cells_next, cells_start
+from terrainvis.core.compiling import KERNEL_ONLY
 from terrainvis.core.stopflag import stopped
 from terrainvis.core.surface import borrow, locate
 from terrainvis.tolerances import VERTEX_WEIGHT_ZERO
@@ -102,7 +103,7 @@ def _put(xs, ys, ncx, r, c, x, y, u, n, record, out):
         bb[n] = b
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _track(axes, ax, ay, bx, by, u0, u1, start, record, out):
     """Breakpoints of the ground track a -> b over [u0, u1] on the grid ``axes = (xs, ys,
     ixw, iyw)`` (:func:`terrainvis.visibility.walk.cells_start`: the walk every LOS engine
@@ -258,7 +259,7 @@ def _weight_of(v, ev, ew, i):
     return s
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def vertex_intervals(v, c, rd, tk, tol, lo, hi):
     """For each pair of the :data:`Tracks` ``tk`` touching vertex v (``items[vptr[v]:vptr[v + 1]]``):
     the closed interval [lo, hi] of ``c[v]`` in which it sees (lo > hi: it never does), the
@@ -314,7 +315,7 @@ def vertex_intervals(v, c, rd, tk, tol, lo, hi):
     return m
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def best_value(lo, hi, vis, m, cur, bmin, bmax, margin, pos, dl):
     """The value of one coarse height maximising ``#{k: (lo[k] <= x <= hi[k]) == vis[k]}``
     over x in [bmin, bmax], and that count.

@@ -9,11 +9,12 @@ import numba as nb
 import numpy as np
 
 from ..tolerances import BUCKET_SLACK, RASTER_BOX_REL  # frozen into the kernels when they compile
+from .compiling import KERNEL_ONLY
 from .stopflag import stopped
 from .surface import barycentric, plane_uv, weighted
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tri_z_at(vx, vy, vz, i0, i1, i2, x, y, rel_eps):
     """Height of triangle (i0, i1, i2) at (x, y), or NaN when (x, y) is outside it.
 
@@ -29,7 +30,7 @@ def _tri_z_at(vx, vy, vz, i0, i1, i2, x, y, rel_eps):
     return weighted(vz, i0, i1, i2, l1, l2)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _face_buckets(vx, vy, faces, f, x0, y0, bw, bh, nbx, nby):
     """The range of bucket columns and rows covered by face f's bounding box."""
     xmin = min(vx[faces[f, 0]], vx[faces[f, 1]], vx[faces[f, 2]])

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .compiling import KERNEL_ONLY
 from .stopflag import stopped
 
 # Columns of the per-chunk result rows written by :func:`volume_between`.
@@ -46,7 +47,7 @@ N_PCOL = 6
 MAX_POLY = 8  # a triangle clipped by three half-planes has at most 6 vertices
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def abs_integral_tri(area, d0, d1, d2):
     """The integral of |d| over a triangle on which d is linear.
 
@@ -84,7 +85,7 @@ def abs_integral_tri(area, d0, d1, d2):
     return area * (2.0 * pos - s) / 3.0
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _neumaier(s, c, x):
     """Add x to the compensated sum (s, c); returns the new (s, c)."""
     t = s + x
@@ -95,7 +96,7 @@ def _neumaier(s, c, x):
     return t, c
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _cell_at_or_below(v, x, inv_step):
     """The largest cell i in [0, n-2] with v[i] <= x (0 when x < v[0])."""
     n = v.shape[0]
@@ -111,7 +112,7 @@ def _cell_at_or_below(v, x, inv_step):
     return min(max(np.searchsorted(v, x, side="right") - 1, 0), n - 2)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _cell_below(v, x, inv_step):
     """The largest cell i in [0, n-2] with v[i] < x (0 when x <= v[0])."""
     n = v.shape[0]
@@ -126,7 +127,7 @@ def _cell_below(v, x, inv_step):
     return min(max(np.searchsorted(v, x, side="left") - 1, 0), n - 2)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _clip_integrate(buf):
     """Clip the triangle in ``buf[0, :3]`` by the coarse triangle's three edges and integrate.
 
@@ -182,7 +183,7 @@ def _clip_integrate(buf):
     return vol, area
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _subtriangle(area, da, db, dc, ea, eb, ec):
     """The corner of a triangle at vertex a cut off by the zero line of e (ea > 0 >= eb, ec, or ea < 0 <= eb, ec).
 
@@ -195,7 +196,7 @@ def _subtriangle(area, da, db, dc, ea, eb, ec):
     return abs_integral_tri(sub, da, da + tb * (db - da), da + tc * (dc - da)), sub
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def inside_one_edge(area, da, db, dc, ea, eb, ec):
     """The integral of |d| and the area over the part of a triangle where e >= 0.
 
@@ -228,7 +229,7 @@ def inside_one_edge(area, da, db, dc, ea, eb, ec):
     return abs_integral_tri(area, da, db, dc) - v, area - a
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _load_corner(buf, slot, x, y, d, e0, e1, e2):
     buf[0, slot, PX] = x
     buf[0, slot, PY] = y
@@ -238,7 +239,7 @@ def _load_corner(buf, slot, x, y, d, e0, e1, e2):
     buf[0, slot, PE + 2] = e2
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop):
     """Integral of |coarse - fine| and covered area over coarse faces ``order[f0 .. f1-1]``.
 
@@ -451,7 +452,7 @@ def volume_faces(xs, ys, z, vx, vy, vz, faces, order, f0, f1, buf, stop):
     return vol, vol_c, cov, cov_c
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _volume_chunk(grid, mesh, nchunks, ch, buf, out, stop):
     """Row ``ch`` of ``out``: the compensated sums of chunk ``ch`` of ``nchunks`` equal runs
     of ``order`` (``buf`` the clipping scratch of the calling thread; ``grid`` and ``mesh``

@@ -9,7 +9,7 @@ ones called from Python whose compilation takes a second or more) starts compili
 prints at once, on stderr, one line saying what, why, about how long, and that this
 happens on the first run only::
 
-    terrainvis: compiling the viewshed sweep: about 17 s, on the first run only (numba compiles its kernels once and keeps them in its cache)
+    terrainvis: compiling the viewshed sweep: about 14 s, on the first run only (numba compiles its kernels once and keeps them in its cache)
 
 Each kernel is announced once per process; a kernel that another one calls is compiled
 inside its caller's announcement. The estimates are the compile times measured on this
@@ -48,28 +48,52 @@ import sys
 import threading
 import time
 
-__all__ = ["KERNELS", "COMPILE_GC_THRESHOLD", "install", "quiet", "seconds", "announced"]
+__all__ = ["KERNELS", "KERNEL_ONLY", "from_python", "COMPILE_GC_THRESHOLD", "install", "quiet", "seconds", "announced"]
 
 #: The kernels announced when they start compiling: ``module.function`` -> (what, seconds),
 #: the cold compile time of the kernel and every kernel it calls not compiled before it,
 #: one process, measured on this project's 2-core machine (``python
-#: benchmarks/bench_cold_start.py --kernels``, 29 November 2026). Kernels that take under
+#: benchmarks/bench_cold_start.py --kernels``, 29 November 2026, night). Kernels that take under
 #: a second, or that follow one of these and share its callees (the best heights after
 #: the calibration's sweeps), are not announced.
 KERNELS: dict[str, tuple[str, float]] = {
-    "terrainvis.visibility.viewsheds._sector_kernels.sweep": ("the viewshed sweep", 17.0),
-    "terrainvis.visibility._kernels.grid_walks": ("the line-of-sight walk on grids", 6.0),
+    "terrainvis.visibility.viewsheds._sector_kernels.sweep": ("the viewshed sweep", 14.0),
+    "terrainvis.visibility._kernels.grid_walks": ("the line-of-sight walk on grids", 4.0),
     "terrainvis.visibility._kernels.tin_pairs": ("the line-of-sight clipper on TINs", 1.0),
-    "terrainvis.visibility._threshold_kernels.grid_sweep": ("the calibrated relocation's walks on grids", 9.0),
-    "terrainvis.visibility._threshold_kernels.tin_sweep": ("the calibrated relocation's walks on TINs", 5.0),
-    "terrainvis.visibility._threshold_kernels.grid_eye_thresholds": ("a viewshed's heights and angles", 5.0),
+    "terrainvis.visibility._threshold_kernels.grid_sweep": ("the calibrated relocation's walks on grids", 8.0),
+    "terrainvis.visibility._threshold_kernels.tin_sweep": ("the calibrated relocation's walks on TINs", 4.0),
+    "terrainvis.visibility._threshold_kernels.grid_eye_thresholds": ("a viewshed's heights and angles", 4.0),
     "terrainvis.visibility._threshold_kernels.tin_eye_thresholds": ("a viewshed's heights and angles on TINs", 2.0),
     "terrainvis.core._volume_kernels.volume_between": ("the volume between two surfaces", 3.0),
-    "simplifiers._gc_kernels.greedy_cuts_front": ("greedy cuts", 7.0),
-    "simplifiers._gi_kernels.init_state": ("greedy insertion", 3.0),
+    "simplifiers._gc_kernels.greedy_cuts_front": ("greedy cuts", 6.0),
+    "simplifiers._gi_kernels.init_state": ("greedy insertion", 2.0),
     "simplifiers._faber_kernels.feature_apply": ("feature-aware least squares", 2.0),
-    "simplifiers._visopt_kernels.track_counts": ("visopt", 4.0),
+    "simplifiers._visopt_kernels.track_counts": ("visopt", 1.0),
 }
+
+#: numba options of a kernel that only other kernels call: no entry from Python (neither
+#: the CPython wrapper nor the C one is made), which numba otherwise builds, optimises,
+#: emits and caches for every compiled function. A cold first viewshed compiled in 14.8 s
+#: of CPU instead of 18.0 (docs/performance.md, "Kernels without an entry from Python"). Such a kernel
+#: must never be called from Python, where it would crash the interpreter (there is no
+#: code behind its entry): ``tests/whole/test_kernel_only.py`` checks that no Python code of
+#: terrainvis, its tests or its benchmarks names one but through :func:`from_python`.
+KERNEL_ONLY = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+
+
+def from_python(kernel):
+    """A Python entry to a :data:`KERNEL_ONLY` kernel, for tests and benchmarks that call one
+    from Python: a kernel (not cached) that calls it with the same positional arguments and
+    returns what it returns. ``tests/whole/test_kernel_only.py`` allows Python code to name a
+    kernel-only kernel only as this function's argument."""
+    import numba as nb
+
+    @nb.njit(nogil=True)
+    def call(*args):
+        return kernel(*args)
+
+    return call
+
 
 #: The garbage collector's middle threshold (collections of the youngest generation between
 #: two of the middle one; Python's default is 10) while a kernel of terrainvis compiles.

@@ -41,6 +41,7 @@ from numba.extending import intrinsic
 from numba.np.arrayobj import make_array
 
 from ..tolerances import TRACK_FACE_SLACK
+from .compiling import KERNEL_ONLY
 from .stopflag import stopped
 
 _INF = np.inf
@@ -117,7 +118,7 @@ def borrow(typingctx, arr):
     return arr(arr), codegen
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def keep_alive(owners):
     """Nothing: a use of ``owners`` at the end of a kernel that :func:`borrow` ed views of
     arrays it made itself (numba frees an array after its last use)."""
@@ -194,7 +195,7 @@ def plane_uv(z, r, c, u, v):
     return tri_uv(z, r, c, v > u, u, v)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def cell_height(z, xs, ys, ixw, iyw, r, c, x, y):
     """Height of cell (r, c)'s surface at (x, y), local coordinates clamped into the cell."""
     u = (x - xs[c]) * ixw[c]
@@ -295,7 +296,7 @@ def bucket_of(t, x, y):
     return r * t.nbx + c
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def face_at(t, x, y):
     """A face of the :data:`SurfaceTin` ``t`` containing (x, y), or -1: of the faces in its
     bucket, the one the point lies deepest inside (robust on shared edges), unless the

@@ -69,6 +69,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from ..core.compiling import KERNEL_ONLY
 from ..core.stopflag import stopped
 from ..core.surface import barycentric, borrow, borrow_grid, borrow_tin, cell_height, keep_alive, weighted
 from ..tolerances import BUCKET_SLACK_REL
@@ -87,7 +88,7 @@ WalkStack = namedtuple("WalkStack", ["level", "row", "col", "t"])
 
 
 # --------------------------------------------------------------------------- float32 rounding
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _f32_up(v):
     f = np.float32(v)
     if np.float64(f) < v:
@@ -96,7 +97,7 @@ def _f32_up(v):
 
 
 # --------------------------------------------------------------------------- grid walk
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _vertex_min(fa, fb, ta, tb, bulge):
     """Curved clearance at the interior minimum of one piece, or inf when it has none there.
 
@@ -115,7 +116,7 @@ def _vertex_min(fa, fb, ta, tb, bulge):
     return fa + b_ * (ts - ta) - bulge * ts * (1.0 - ts)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def curved_min(fa, fb, ta, tb, bulge):
     """Exact minimum over [ta, tb] of ``flat(t) - bulge t (1 - t)``, the flat clearance
     linear with ``fa``, ``fb`` at the ends; ``min(fa, fb)`` (the same bits) for bulge 0."""
@@ -125,7 +126,7 @@ def curved_min(fa, fb, ta, tb, bulge):
     return min(m, _vertex_min(fa, fb, ta, tb, bulge))
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _tt_range(a0, a1):
     """(min, max) of t (1 - t) over [a0, a1] (the bulge's shape, largest at t = 1/2)."""
     f0 = a0 * (1.0 - a0)
@@ -169,7 +170,7 @@ def _cell_min(g, r, c, seg, t0, t1, with_t0, bulge):
     return m
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def new_stack(ltop):
     """A :data:`WalkStack` deep enough for a pyramid whose root level is ``ltop``.
 
@@ -271,7 +272,7 @@ def segment_min(g, seg, t0, t1, los, tol, bulge, st):
     return best
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _canonical(a, b):
     """The segment between the points ``a``, ``b`` (3-tuples) as (ax, ay, az, dx, dy, dz)
     walked from its lexicographically smaller end, so that (a, b) and (b, a) give
@@ -288,7 +289,7 @@ def _canonical(a, b):
     return (ax, ay, az, dx, dy, dz), np.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def interval_start(seg, length, delta, end_radius):
     """Start t0 of the tested interval [t0, 1 - t0] of a segment, or -1.0 when it has none.
 
@@ -405,7 +406,7 @@ def grid_walks(g, a, b, index, pred, clear, vis, it0, it1, stop):
 
 
 # --------------------------------------------------------------------------- TIN
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _face_clip_min(mesh, f, seg, t0, t1, eps, bulge):
     """Min clearance of the segment over the part of [t0, t1] whose ground track is in face f
     (with ``bulge > 0``, the earth-curvature term: see :func:`curved_min`)."""
@@ -476,7 +477,7 @@ def _face_clip_min(mesh, f, seg, t0, t1, eps, bulge):
     return best
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_segment_min(mesh, seg, t0, t1, eps, bulge):
     """Exact minimum clearance of the segment ``seg`` over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceTin`.
 
@@ -526,7 +527,7 @@ def _tin_segment_min(mesh, seg, t0, t1, eps, bulge):
     return best
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_pair(mesh, a, b, i, delta, end_radius, eps, kc):
     """Exact minimum clearance of segment ``i`` (rows of ``a``, ``b``) over the TIN, as
     :func:`tin_pairs` gives it (infinite when the segment is shorter than its end radii)."""

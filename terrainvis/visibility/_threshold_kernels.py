@@ -95,11 +95,12 @@ window walked exactly stand). A window only saves work.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numba as nb
 import numpy as np
 
-from collections import namedtuple
-
+from ..core.compiling import KERNEL_ONLY
 from ..core.stopflag import stopped
 from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height, locate
 from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
@@ -185,7 +186,7 @@ def _leaf(g, r, c, tr, a0, a1, with_a0):
     return best
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def grid_max_slope(g, tr, st):
     """Max of :func:`_value` over the :data:`Track` ``tr``, q + u d for u in [u0, u1] (u0 > 0):
     the threshold less qz.
@@ -241,7 +242,7 @@ def grid_max_slope(g, tr, st):
 DDA_MAX_LEVELS = 7
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def grid_dda_max_slope(g, tr):
     """:func:`grid_max_slope` by visiting every cell the track crosses (small grids; ``g``'s
     pyramid is not read).
@@ -316,7 +317,7 @@ def interval(px, py, pz, qx, qy, qz, delta, end_radius):
     return u0, 1.0 - u0
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def grid_threshold(g, st, p, q, rules):
     """The threshold height of the point p = (px, py, pz) for the target q = (qx, qy, qz)
     under the :data:`Rules` ``rules``; ``pz`` (a height near the answer) only sets the
@@ -324,7 +325,7 @@ def grid_threshold(g, st, p, q, rules):
     return grid_clamped(g, st, p, q, rules, -_INF, _INF)[0]
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def grid_clamped(g, st, p, q, rules, zlo, zhi):
     """:func:`grid_threshold` known exactly only inside (``zlo``, ``zhi``): ``(z, state)``
     with state 0 (z is the threshold, bit for bit), -1 (the threshold is at most z, about
@@ -355,7 +356,7 @@ def grid_clamped(g, st, p, q, rules, zlo, zhi):
 PROBE_CELLS = (0.5, 1.5, 3.0, 6.0)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _grid_probes_reach(g, tr, margin):
     """Whether the track's value at a few places near the point's end (:data:`PROBE_CELLS`)
     exceeds its cap by more than ``margin``: the maximum, at least as large as any value
@@ -436,7 +437,7 @@ def _exit(w, f, entry, qx, qy, dx, dy, u):
     return best_u, best_e, best_s
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
     """A face other than f that holds the track a little after u (steps growing tenfold), and
     that position of the track: (face, u'), or (-1, u1)."""
@@ -449,7 +450,7 @@ def _face_ahead(w, f, qx, qy, dx, dy, u, u1):
     return -1, u1
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def tin_max_slope(w, tr):
     """Max of :func:`_value` over the :data:`Track` ``tr`` (q -> p, u in [u0, u1]) on a TIN
     (:data:`~terrainvis.core.surface.SurfaceTin` with its neighbours).
@@ -513,13 +514,13 @@ def tin_max_slope(w, tr):
     return best
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def tin_threshold(w, p, q, rules):
     """The threshold height of the point p for the target q on a TIN; see :func:`grid_threshold`."""
     return tin_clamped(w, p, q, rules, -_INF, _INF, -1)[0]
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def tin_clamped(w, p, q, rules, zlo, zhi, fp):
     """:func:`grid_clamped` on a TIN (the walk stops at ``zhi``; a face walk has nothing to
     skip below ``zlo``). ``fp``: the face that holds p (-1: unknown, no probes)."""
@@ -542,7 +543,7 @@ def tin_clamped(w, p, q, rules, zlo, zhi, fp):
 PROBE_FACES = 8
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_probes_reach(w, tr, fp, margin):
     """:func:`_grid_probes_reach` on a TIN: the track's value where it crosses the edges of
     the first :data:`PROBE_FACES` faces from the point's end, walked from the face ``fp``
@@ -688,7 +689,7 @@ def best_height_kept(thr, vis, lthr, lvis, weight, zref, margin, min_gain):
     return best_z, best_g
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def optimistic(thr, state, vis):
     """Turn a window's thresholds (``state``: see :func:`grid_clamped`) into the most
     favourable ones they allow, in place, and return the window ``(lo, hi)`` inside which
@@ -716,7 +717,7 @@ def optimistic(thr, state, vis):
 
 
 # --------------------------------------------------------------------------- loops
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _grid_row(g, st, p, q, rules, skip, out):
     """``out[k]`` = the threshold of the point p = (x, y, z) for the target q[k] (-inf for
     k = ``skip``) on the grid ``g``."""
@@ -731,7 +732,7 @@ def _grid_row(g, st, p, q, rules, skip, out):
             out[k] = grid_threshold(g, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_row(tin, p, q, rules, skip, out):
     """:func:`_grid_row` on a TIN."""
     tin = borrow_tin(tin)  # as in _grid_row (6-20 % of the row)
@@ -742,7 +743,7 @@ def _tin_row(tin, p, q, rules, skip, out):
             out[k] = tin_threshold(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _grid_window_row(g, st, p, q, rules, skip, out, state):
     """:func:`_grid_row` known exactly only within ``rules.window`` of p's height:
     :func:`grid_clamped`'s ``(z, state)`` into ``out`` and ``state``."""
@@ -758,7 +759,7 @@ def _grid_window_row(g, st, p, q, rules, skip, out, state):
             out[k], state[k] = grid_clamped(g, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_window_row(tin, p, q, rules, skip, out, state):
     """:func:`_grid_window_row` on a TIN."""
     tin = borrow_tin(tin)
@@ -773,7 +774,7 @@ def _tin_window_row(tin, p, q, rules, skip, out, state):
             out[k], state[k] = tin_clamped(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi, fp)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _grid_best(g, st, p, q, vis, near, rules, skip, thr, state):
     """The best height of the point p = (x, y, reference height) against the partners q
     (but ``skip``) whose verdicts on T are ``vis``, with its neighbours ``near`` = (their
@@ -797,7 +798,7 @@ def _grid_best(g, st, p, q, vis, near, rules, skip, thr, state):
     return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_best(tin, p, q, vis, near, rules, skip, thr, state):
     """:func:`_grid_best` on a TIN."""
     lthr, lvis, weight = near
@@ -893,7 +894,7 @@ def tin_sweep(tin, q, order, vis, rules, stop):
 EYE_CHUNK = 256
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _grid_span(g, st, tr, u0, u1):
     """Max of :func:`_value` over [u0, u1] of the track ``tr`` on the grid (the walk of
     :func:`grid_threshold`, on that part of the track)."""
@@ -903,13 +904,13 @@ def _grid_span(g, st, tr, u0, u1):
     return grid_max_slope(g, t, st)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_span(w, tr, u0, u1):
     """:func:`_grid_span` on a TIN."""
     return tin_max_slope(w, Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge, -_INF, _INF))
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _eye_track(eye, tx, ty, rules):
     """The :data:`Track` from the eye to the target point (tx, ty) (its interval is set by
     the callers, per part)."""
@@ -919,13 +920,13 @@ def _eye_track(eye, tx, ty, rules):
     return Track(qx, qy, qz, dx, dy, 0.0, 1.0, rules.tol, rules.kc * (dx * dx + dy * dy), -_INF, _INF)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _trim(eye, tx, ty, tz, rules):
     """The start of the tested interval of the segment eye - (tx, ty, tz) (-1: not tested)."""
     return interval(tx, ty, tz, eye[0], eye[1], eye[2], rules.delta, rules.end_radius)[0]
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _grid_eye_one(g, st, eye, tx, ty, tz, rules):
     """The threshold of the target point (tx, ty) for the fixed ``eye`` on the grid ``g``,
     under the trim of a target at the answer itself.
@@ -961,7 +962,7 @@ def _grid_eye_one(g, st, eye, tx, ty, tz, rules):
     return tr.qz + _grid_span(g, st, tr, ub, 1.0 - ub)
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def _tin_eye_one(w, eye, tx, ty, tz, rules):
     """:func:`_grid_eye_one` on a TIN."""
     ua = _trim(eye, tx, ty, tz, rules)

@@ -70,6 +70,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from ..core.compiling import KERNEL_ONLY
 from ..core.surface import line_height, locate
 
 _INF = np.inf
@@ -84,7 +85,7 @@ Cells = namedtuple("Cells", ["r", "c", "t", "tn", "tx", "ty"])
 
 
 # --------------------------------------------------------------------------- cells
-@nb.njit(**_STEP)
+@nb.njit(**_STEP, **KERNEL_ONLY)
 def _piece(xs, ys, r, c, seg, t, t1):
     """The cursor on cell (r, c) entered at t."""
     ax, ay, dx, dy = seg
@@ -104,7 +105,7 @@ def _piece(xs, ys, r, c, seg, t, t1):
     return Cells(r, c, t, tn, tx, ty)
 
 
-@nb.njit(**_STEP)
+@nb.njit(**_STEP, **KERNEL_ONLY)
 def cells_start(xs, ys, ixw, iyw, uniform, seg, t0, t1):
     """The cursor on the cell of the track ``seg`` at t0 (on a grid line while the track
     moves backwards, the cell behind the line: the one it enters), over [t0, t1]."""
@@ -120,7 +121,7 @@ def cells_start(xs, ys, ixw, iyw, uniform, seg, t0, t1):
     return _piece(xs, ys, r, c, seg, t0, t1)
 
 
-@nb.njit(**_STEP)
+@nb.njit(**_STEP, **KERNEL_ONLY)
 def cells_next(xs, ys, cur, seg, t1):
     """The cursor on the cell after ``cur`` (across the grid lines the track crosses at
     ``cur.tn``, both at a corner), or with ``r`` = -1 when the track leaves the grid."""
@@ -137,7 +138,7 @@ def cells_next(xs, ys, cur, seg, t1):
     return _piece(xs, ys, r, c, seg, cur.tn, t1)
 
 
-@nb.njit(**_STEP)
+@nb.njit(**_STEP, **KERNEL_ONLY)
 def cell_diagonal(xs, ys, ixw, iyw, r, c, seg):
     """The parameter at which the track crosses the diagonal of cell (r, c) (its line from
     (r, c) to (r + 1, c + 1)), or -inf when the track runs parallel to it."""

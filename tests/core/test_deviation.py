@@ -20,10 +20,16 @@ from simplifiers.levels import max_level
 from terrainvis import TIN, HeightGrid, bundled_terrain, synthetic_terrain
 from terrainvis.core.mesh import signed_area2
 from terrainvis.core._volume_kernels import abs_integral_tri, inside_one_edge
+from terrainvis.core.compiling import from_python
 from terrainvis.core.deviation import _volume_exact, vertical_errors, volume_error
 from terrainvis.errors import NodataError
 
 from conftest import shared_dem_120
+
+# kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
+# here through one made for them
+abs_integral_tri = from_python(abs_integral_tri)
+inside_one_edge = from_python(inside_one_edge)
 
 REL = 1e-9  # the brief's agreement with manifold3d; measured agreement is ~1e-12 or better
 

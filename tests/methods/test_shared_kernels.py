@@ -8,15 +8,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from simplifiers import _shared_kernels as sk
+from terrainvis.core.compiling import from_python
+
+# kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
+# here through one made for them
+orient = from_python(sk.orient)
 
 
 def test_orient_signs_and_exact_integers():
-    assert sk.orient(0, 0, 1, 0, 0, 1) == 1  # counter-clockwise
-    assert sk.orient(0.0, 0.0, 0.0, 1.0, 1.0, 0.0) == -1.0  # clockwise
-    assert sk.orient(0, 0, 2, 2, 5, 5) == 0  # collinear
+    assert orient(0, 0, 1, 0, 0, 1) == 1  # counter-clockwise
+    assert orient(0.0, 0.0, 0.0, 1.0, 1.0, 0.0) == -1.0  # clockwise
+    assert orient(0, 0, 2, 2, 5, 5) == 0  # collinear
     big = 30_000  # the largest grid side greedy insertion takes
-    assert sk.orient(0, 0, big, 1, big - 1, 1) == 1
-    assert sk.orient(np.int64(0), np.int64(0), np.int64(big), np.int64(1), np.int64(big - 1), np.int64(1)) == 1
+    assert orient(0, 0, big, 1, big - 1, 1) == 1
+    assert orient(np.int64(0), np.int64(0), np.int64(big), np.int64(1), np.int64(big - 1), np.int64(1)) == 1
 
 
 # ---------------------------------------------------------------------------- the heap

@@ -18,6 +18,12 @@ from terrainvis import HeightGrid, synthetic_terrain
 from terrainvis.relocation.calibrated import MARGIN_REL
 from terrainvis.errors import NodataError
 from terrainvis.visibility import clearance_tolerance, terrain_scale
+from terrainvis.core.compiling import from_python
+
+# kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
+# here through one made for them
+vertex_intervals = from_python(vk.vertex_intervals)
+best_value = from_python(vk.best_value)
 
 
 @pytest.fixture(scope="module")
@@ -66,11 +72,11 @@ def test_descent_step_is_the_best_value_of_a_brute_force_scan(descent_case, v):
     margin = MARGIN_REL * terrain_scale(S0)
     mx = int(np.diff(pairs.vptr).max())
     lo, hi, vis = np.empty(mx), np.empty(mx), np.empty(mx, dtype=bool)
-    m = vk.vertex_intervals(v, c, vk.Riders(d, ev, ew), pairs.tracks, tol, lo, hi)
+    m = vertex_intervals(v, c, vk.Riders(d, ev, ew), pairs.tracks, tol, lo, hi)
     touching = pairs.items[pairs.vptr[v]:pairs.vptr[v + 1]]
     vis[:m] = vt[touching]
     R = 30.0
-    x, score = vk.best_value(lo, hi, vis, m, c[v], c[v] - R, c[v] + R, margin, np.empty(2 * mx), np.empty(2 * mx))
+    x, score = best_value(lo, hi, vis, m, c[v], c[v] - R, c[v] + R, margin, np.empty(2 * mx), np.empty(2 * mx))
     assert c[v] - R <= x <= c[v] + R
 
     def agree(value):
@@ -95,16 +101,16 @@ def test_best_value_hand_worked():
     hi = np.array([1.0, 2.0, 3.0])
     vis = np.array([True, True, False])
     pos, dl = np.empty(6), np.empty(6)
-    x, score = vk.best_value(lo, hi, vis, 3, -5.0, -10.0, 10.0, 1e-6, pos, dl)
+    x, score = best_value(lo, hi, vis, 3, -5.0, -10.0, 10.0, 1e-6, pos, dl)
     assert score == 3 and 0.5 < x < 1.0 and x == pytest.approx(0.5, abs=1e-5)  # nearest to -5 in (0.5, 1)
-    x, score = vk.best_value(lo, hi, vis, 3, 0.7, -10.0, 10.0, 1e-6, pos, dl)
+    x, score = best_value(lo, hi, vis, 3, 0.7, -10.0, 10.0, 1e-6, pos, dl)
     assert (x, score) == (0.7, 3)  # already optimal: it stays
     # the trust region excludes (0.5, 1): at -5 only the unseen pair agrees, in (0, 0.2] also the first
-    x, score = vk.best_value(lo, hi, vis, 3, -5.0, -10.0, 0.2, 1e-6, pos, dl)
+    x, score = best_value(lo, hi, vis, 3, -5.0, -10.0, 0.2, 1e-6, pos, dl)
     assert score == 2 and x == pytest.approx(1e-6, abs=1e-12)
-    x, score = vk.best_value(lo, hi, vis, 3, 0.1, -10.0, 0.2, 1e-6, pos, dl)
+    x, score = best_value(lo, hi, vis, 3, 0.1, -10.0, 0.2, 1e-6, pos, dl)
     assert (x, score) == (0.1, 2)  # a tie never moves the height
-    x, score = vk.best_value(lo, hi, vis, 3, 2.5, -10.0, 10.0, 1e-6, pos, dl)
+    x, score = best_value(lo, hi, vis, 3, 2.5, -10.0, 10.0, 1e-6, pos, dl)
     assert score == 3 and x == pytest.approx(1.0 - 1e-6)
 
 

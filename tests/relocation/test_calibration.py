@@ -19,6 +19,13 @@ from terrainvis.visibility import thresholds
 from terrainvis.relocation import calibrated as cal
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.terrain import TIN, HeightGrid
+from terrainvis.core.compiling import from_python
+
+# kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
+# here through one made for them
+grid_max_slope = from_python(ck.grid_max_slope)
+grid_dda_max_slope = from_python(ck.grid_dda_max_slope)
+new_stack = from_python(ck.new_stack)
 
 #: The calibrated relocation's predicate on a flat earth without an end radius (its internal functions take one).
 FLAT = cal._sight(0.0, 0.0, cal.EARTH_RADIUS)
@@ -138,13 +145,13 @@ def test_the_pyramid_walk_equals_the_cell_walk():
     p = surf.local(np.column_stack([_inside(grid, 300, rng), np.zeros(300)]))
     q = surf.local(np.column_stack([_inside(grid, 300, rng), np.zeros(300)]))
     q[:, 2] = grid.height_at(q[:, :2] + [surf.x0, surf.y0]) + 2.0
-    stack = ck.new_stack(surf.ltop)
+    stack = new_stack(surf.ltop)
     for k in range(300):
         dx, dy = p[k, 0] - q[k, 0], p[k, 1] - q[k, 1]
         bulge = (k % 2) * 1e-7 * (dx * dx + dy * dy)  # every other track under a strong curvature
         tr = ck.Track(q[k, 0], q[k, 1], q[k, 2], dx, dy, 1e-6, 1 - 1e-6, surf.tol, bulge, -np.inf, np.inf)
-        a = ck.grid_max_slope(surf.data, tr, stack)
-        b = ck.grid_dda_max_slope(surf.data, tr)
+        a = grid_max_slope(surf.data, tr, stack)
+        b = grid_dda_max_slope(surf.data, tr)
         assert a == pytest.approx(b, rel=1e-12, abs=1e-12)
 
 

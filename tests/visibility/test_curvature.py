@@ -27,6 +27,7 @@ from hypothesis import strategies as st
 
 from conftest import shared_dem_120
 from terrainvis import HeightGrid, TIN
+from terrainvis.core.compiling import from_python
 from terrainvis.core.sampling import sample_points
 from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.visibility import (
@@ -40,6 +41,14 @@ from terrainvis.visibility import (
 )
 from terrainvis.visibility.profile import clearance_profile, lowest_point
 from terrainvis.visibility.viewsheds.sweep import _surface_at, _viewshed
+from terrainvis.visibility.viewsheds import _bound_kernels, _geometry_kernels
+
+# kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
+# here through one made for them
+unwrap = from_python(_geometry_kernels.unwrap)
+diamond = from_python(_geometry_kernels.diamond)
+curvature_pads = from_python(_bound_kernels.curvature_pads)
+edge_update = from_python(_bound_kernels._edge_update)
 
 
 # ----------------------------------------------------------------- brute force
@@ -455,7 +464,7 @@ def _wedges(x, y, bsz):
     from terrainvis.visibility.viewsheds import _bound_kernels as bk
     from terrainvis.visibility.viewsheds import _geometry_kernels as geo
 
-    p = np.array([geo.unwrap(geo.diamond(a, b), 0) for a, b in zip(x, y)])
+    p = np.array([unwrap(diamond(a, b), 0) for a, b in zip(x, y)])
     return np.floor(p * bsz / 4).astype(int)
 
 
@@ -477,7 +486,7 @@ def _cell_case(z, X0, Y0, w, h, ez, kc):
     dring = np.hypot(max(X0, 0.0), 0.0 if Y0 <= 0.0 <= Y0 + h else min(abs(Y0), abs(Y0 + h)))
     diag2 = w * w + h * h
     rel = 0.25 * diag2 / dring**2 * (1.0 + 1e-12)
-    pads = bk.curvature_pads(kc, diag2, dring, rel, np.hypot(X0 + w, max(abs(Y0), abs(Y0 + h))))
+    pads = curvature_pads(kc, diag2, dring, rel, np.hypot(X0 + w, max(abs(Y0), abs(Y0 + h))))
     bsz = 1 << 14
     glo = -bsz // 2
     ub = np.full(2 * bsz, -np.inf)
@@ -557,8 +566,8 @@ def test_edge_bounds_cover_the_triangles_beside_them(seed, kc):
     ub = np.full(2 * bsz, -np.inf)
     lb = np.full(2 * bsz, -np.inf)
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        bk._edge_update((pts[i, 0], pts[i, 1], zs[i]), (pts[j, 0], pts[j, 1], zs[j]), ez, (glo, 2 * bsz, bsz),
-                        ub, lb, (0.0, 0.0, 0.0, 0.0, kc, diam))
+        edge_update((pts[i, 0], pts[i, 1], zs[i]), (pts[j, 0], pts[j, 1], zs[j]), ez, (glo, 2 * bsz, bsz),
+                    ub, lb, (0.0, 0.0, 0.0, 0.0, kc, diam))
     # points inside the triangle (barycentric)
     r = rng.random((4000, 3))
     r /= r.sum(axis=1, keepdims=True)
@@ -584,8 +593,8 @@ def test_edge_bound_covers_a_peak_inside_the_triangle():
     ub = np.full(2 * bsz, -np.inf)
     lb = np.full(2 * bsz, -np.inf)
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        bk._edge_update((pts[i, 0], pts[i, 1], 0.0), (pts[j, 0], pts[j, 1], 0.0), 10.0, (glo, 2 * bsz, bsz),
-                        ub, lb, (0.0, 0.0, 0.0, 0.0, kc, diam))
+        edge_update((pts[i, 0], pts[i, 1], 0.0), (pts[j, 0], pts[j, 1], 0.0), 10.0, (glo, 2 * bsz, bsz),
+                    ub, lb, (0.0, 0.0, 0.0, 0.0, kc, diam))
     x = np.linspace(100.0, 199.0, 991)
     y = np.zeros_like(x)
     sig = -10.0 / x - kc * x

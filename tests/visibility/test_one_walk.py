@@ -24,12 +24,29 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import terrainvis as tv
+from simplifiers import _visopt_kernels
+from terrainvis.core.compiling import from_python
 from terrainvis.core.surface import cell_height
 from terrainvis.visibility import _kernels as pk
 from terrainvis.visibility.viewsheds import _walk_kernels as wk
 from terrainvis.visibility import _threshold_kernels as tk
 from terrainvis.visibility import thresholds
 from terrainvis.visibility.walk import cell_diagonal, cells_next, cells_start
+
+# kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
+# here through one made for them
+cell_height = from_python(cell_height)
+cell_diagonal = from_python(cell_diagonal)
+cells_next = from_python(cells_next)
+cells_start = from_python(cells_start)
+canonical = from_python(pk._canonical)
+interval_start = from_python(pk.interval_start)
+new_stack = from_python(pk.new_stack)
+curved_min = from_python(pk.curved_min)
+grid_threshold = from_python(tk.grid_threshold)
+grid_max_slope = from_python(tk.grid_max_slope)
+tin_threshold = from_python(tk.tin_threshold)
+track = from_python(_visopt_kernels._track)
 
 EARTH = 6378137.0 / 400.0  # a small earth: a bulge of metres on these grids
 
@@ -138,8 +155,8 @@ CASES = st.tuples(st.integers(0, 2**31), st.integers(2, 9), st.integers(2, 9), s
 def test_the_cursor_visits_exactly_the_crossings(case, end_radius, data):
     g = _grid(*case)
     a, b = _track_case(data, g)
-    seg6, length = pk._canonical(a, b)
-    t0 = pk.interval_start(seg6, length, 1e-6, end_radius)
+    seg6, length = canonical(a, b)
+    t0 = interval_start(seg6, length, 1e-6, end_radius)
     if t0 < 0.0:
         return
     seg = (seg6[0], seg6[1], seg6[3], seg6[4])
@@ -167,10 +184,10 @@ def test_visopt_records_the_cursors_breakpoints(case, data):
     u0, u1 = thresholds.interval(b[0], b[1], b[2], a[0], a[1], a[2], 1e-6, 0.0)
     if u0 < 0.0:
         return
-    n = vk._track(axes, a[0], a[1], b[0], b[1], u0, u1, 0, False, (np.empty(0), np.empty(0, np.int32),
+    n = track(axes, a[0], a[1], b[0], b[1], u0, u1, 0, False, (np.empty(0), np.empty(0, np.int32),
                                                                     np.empty(0), np.empty(0)))
     bu, btri, ba, bb = np.empty(n), np.empty(n, np.int32), np.empty(n), np.empty(n)
-    vk._track(axes, a[0], a[1], b[0], b[1], u0, u1, 0, True, (bu, btri, ba, bb))
+    track(axes, a[0], a[1], b[0], b[1], u0, u1, 0, True, (bu, btri, ba, bb))
     seg = (a[0], a[1], b[0] - a[0], b[1] - a[1])
     assert bu.tolist() == _breakpoints(_walk(g, seg, u0, u1))
 
@@ -197,7 +214,7 @@ def test_thresholds_are_the_largest_value_over_the_breakpoints(case, end_radius,
     assert surf.x0 == 0.0 and surf.y0 == 0.0
     kc = tv.visibility.curvature_coefficient(0.85714, EARTH) if curved else 0.0
     rules = surf.rules(end_radius=end_radius, kc=kc)
-    dda = tk.grid_threshold(surf.data, pk.new_stack(surf.ltop), a, b, rules)  # small grids: the cell walk
+    dda = grid_threshold(surf.data, new_stack(surf.ltop), a, b, rules)  # small grids: the cell walk
     if not curved:
         assert dda == _threshold_reference(g, b, a, surf.tol, surf.delta, end_radius)
     u0, u1 = thresholds.interval(a[0], a[1], a[2], b[0], b[1], b[2], surf.delta, end_radius)
@@ -207,11 +224,11 @@ def test_thresholds_are_the_largest_value_over_the_breakpoints(case, end_radius,
     tr = tk.Track(b[0], b[1], b[2], a[0] - b[0], a[1] - b[1], u0, u1, surf.tol,
                   kc * ((a[0] - b[0]) ** 2 + (a[1] - b[1]) ** 2), -np.inf, np.inf)
     # the pyramid descent over the same grid (forced: these grids are small) and the TIN of the grid
-    desc = b[2] + tk.grid_max_slope(surf.data, tr, pk.new_stack(surf.ltop))
+    desc = b[2] + grid_max_slope(surf.data, tr, new_stack(surf.ltop))
     scale = 1.0 + abs(dda)
     assert desc == pytest.approx(dda, abs=1e-9 * scale)
     tin = thresholds.ThresholdSurface(g.to_tin())
-    on_tin = tk.tin_threshold(tin.data, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
+    on_tin = tin_threshold(tin.data, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
                               rules)
     assert on_tin == pytest.approx(dda, abs=1e-7 * scale)
 
@@ -226,10 +243,10 @@ def test_a_track_too_short_to_walk_is_one_ground_point_on_a_tin_too(offset, at):
     a, b = (at[0], at[1] + offset, 0.0), (at[0], at[1], 1.0)
     surf = thresholds.ThresholdSurface(g)
     rules = surf.rules(end_radius=0.0, kc=0.0)
-    dda = tk.grid_threshold(surf.data, pk.new_stack(surf.ltop), a, b, rules)
+    dda = grid_threshold(surf.data, new_stack(surf.ltop), a, b, rules)
     assert dda == _threshold_reference(g, b, a, surf.tol, surf.delta, 0.0)
     tin = thresholds.ThresholdSurface(g.to_tin())
-    on_tin = tk.tin_threshold(tin.data, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
+    on_tin = tin_threshold(tin.data, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
                               rules)
     assert on_tin == pytest.approx(dda, abs=1e-9)
 
@@ -243,7 +260,7 @@ def _clearance_reference(g, seg6, t0, t1, bulge):
         us = [t] + ([td] if td is not None else []) + [tn]
         f = [az + u * dz - _height(g, r, c, u, seg) for u in us]
         for k in range(len(us) - 1):
-            best = min(best, pk.curved_min(f[k], f[k + 1], us[k], us[k + 1], bulge))
+            best = min(best, curved_min(f[k], f[k + 1], us[k], us[k + 1], bulge))
     return best
 
 
@@ -255,8 +272,8 @@ def test_the_least_clearance_is_over_the_breakpoints(case, end_radius, curved, n
     curve = {"curvature": 0.85714, "earth_radius": EARTH} if curved else {}
     kc = tv.visibility.curvature_coefficient(**curve) if curved else 0.0
     delta = tv.visibility.trim_length(g)
-    seg6, length = pk._canonical(a, b)
-    t0 = pk.interval_start(seg6, length, delta, end_radius)
+    seg6, length = canonical(a, b)
+    t0 = interval_start(seg6, length, delta, end_radius)
     got = tv.min_clearance(g, np.array([a]), np.array([b]), end_radius=end_radius, **curve)[0]
     if t0 < 0.0:
         assert got == np.inf

@@ -25,7 +25,11 @@ from terrainvis import HeightGrid, TIN
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.synthetic import KINDS, synthetic_terrain
 from terrainvis.visibility import clearance_tolerance, embree_tolerance, line_of_sight, min_clearance
+from terrainvis.core.compiling import from_python
 from terrainvis.visibility.viewsheds.sweep import _surface_at, _viewshed, viewshed
+from terrainvis.visibility.viewsheds import _walk_kernels
+
+walk_cells = from_python(_walk_kernels._walk_cells)  # a kernel-only kernel, called through a Python entry made here
 
 
 # ----------------------------------------------------------------- references
@@ -526,7 +530,7 @@ def test_edge_walk_matches_cell_walk_from_any_ring(spacing, bulge):
                 continue
             n_starts += 1
             e_edges = wk._walk_edges(sg, ray, t0, 0.98, -np.inf, bulge)
-            e_cells = wk._walk_cells(sg, ray, t0, 0.98, -np.inf, bulge)
+            e_cells = walk_cells(sg, ray, t0, 0.98, -np.inf, bulge)
             assert e_edges == pytest.approx(e_cells, abs=1e-9), (ray, t0)
     assert n_starts > 1000
 

@@ -17,13 +17,14 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ...core.compiling import KERNEL_ONLY
 from ...tolerances import PARALLEL_SINE_MIN, PSEUDO_ANGLE_SPAN_MIN
 from .._kernels import _f32_up
 from ._geometry_kernels import INF, LEPS, LOWER, PEPS, REL, UPPER, diamond, direction, tri_present, unwrap
 
 
 # --------------------------------------------------------------------------- bounds
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _s_at(edge, lam):
     """(slope, distance) of the edge point w + lam e (vectors from the eye)."""
     wx, wy, ex_, ey_, a, b = edge[0], edge[1], edge[2], edge[3], edge[4], edge[5]
@@ -33,7 +34,7 @@ def _s_at(edge, lam):
     return (a + lam * b) / d, d
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _extremes(edge, l0, l1, e_h):
     """Rigorous (max, min) of the slope over the edge part [l0, l1], and its min and max
     distance.
@@ -66,7 +67,7 @@ def _extremes(edge, l0, l1, e_h):
     return hi, lo, dmin, max(d0, d1)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _edge_parts(edge, r_excl):
     """The parts [l0, l1] of the edge (of :func:`_extremes`) outside the disc of radius
     ``r_excl`` around the eye: (number of parts, l0 and l1 of each)."""
@@ -94,7 +95,7 @@ def _edge_parts(edge, r_excl):
     return npart, p0s, p1s
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz):
     """The part of the edge piece [l0, l1] (pseudo-angles pa, pb at its ends) inside global
     wedge g (its boundaries shifted by ``shift`` turns of 4): ``(la, lb, full, ok)``, full
@@ -134,7 +135,7 @@ def _wedge_part(edge, g, shift, l0, l1, pa, pb, pmin, pmax, bsz):
     return la, lb_, full, True
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _edge_update(pa3, pb3, ez, win, ub, lb, lim):
     """Add one edge, from ``pa3`` to ``pb3`` ((x, y, z), x and y relative to the eye), to
     the wedges of the window ``win`` = ``(glo, nloc, bsz)``.
@@ -205,7 +206,7 @@ def _edge_update(pa3, pb3, ez, win, ub, lb, lim):
                         lb[i] = v
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _cell_edges(g, eye, r, c, win, ub, lb, lim):
     """Add the edges of the present triangles of cell (r, c) with exact clipping."""
     z, xs, ys = g.z, g.xs, g.ys
@@ -234,7 +235,7 @@ def _cell_edges(g, eye, r, c, win, ub, lb, lim):
                      ez, win, ub, lb, lim)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def annulus_edges(g, eye, j, win, ub, lb, lim):
     """Add every cell of annulus j with exact edge clipping (used near the eye)."""
     nr = g.ys.shape[0]
@@ -339,7 +340,7 @@ def cell_bounds(ub, lb, win, ann, sv, pv):
             lb[i] = max(lb[i], lo)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def curvature_pads(kc, diag2, dring, rel, far):
     """What earth curvature adds to :func:`cell_bounds`' slacks: ``(pad_hi, pad_lo)``.
 
@@ -375,7 +376,7 @@ def ring_distance(g, eye, k):
     return d
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def far_corner(g, eye, k):
     """Horizontal distance from the eye to the farthest corner of the box of cell rings
     <= k (clipped to the grid): no point of the box is farther."""

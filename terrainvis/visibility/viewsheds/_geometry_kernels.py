@@ -47,6 +47,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
+from ...core.compiling import KERNEL_ONLY
 from ...core.surface import locate as _locate
 from ...core.surface import tri_height
 from ...tolerances import EDGE_CLIP_SLACK, PSEUDO_ANGLE_SLACK, SLOPE_REL
@@ -110,7 +111,7 @@ Wedges = namedtuple("Wedges", ["ubp", "ubold", "lb", "hist", "quads", "grp"])
 
 
 # --------------------------------------------------------------------------- geometry
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def diamond(dx, dy):
     """Diamond angle of the direction (dx, dy): monotone in the true angle, in [0, 4)."""
     if dy >= 0.0:
@@ -126,7 +127,7 @@ def diamond(dx, dy):
     return 3.0 + dx / (dx - dy)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def unwrap(p, q):
     """Pseudo-angle ``p`` unwrapped near quadrant ``q``: into [q - 1.5, q + 2.5)."""
     c = q + 0.5
@@ -156,12 +157,12 @@ def locate(v, iw, uniform, x):
     return _locate(v, iw, 0, v.shape[0] - 1, uniform, x)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _finite(v):
     return v == v and abs(v) < INF
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def tri_present(z, r, c, upper):
     """Whether the lower (u >= v) or upper triangle of cell (r, c) has no nodata vertex."""
     if not (_finite(z[r, c]) and _finite(z[r + 1, c + 1])):

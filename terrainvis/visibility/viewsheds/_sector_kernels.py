@@ -52,6 +52,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ...core.compiling import KERNEL_ONLY
 from ...core.stopflag import stopped
 from ...core.surface import borrow, borrow_grid, keep_alive
 from ...tolerances import RING_BOUND_REL, WEDGE_BOUNDARY_SLACK
@@ -62,7 +63,7 @@ from ._geometry_kernels import (
 from ._walk_kernels import walk_min
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _cell_path(q, j, re, ce, nr, nc):
     """The cells of annulus j near quadrant q, in increasing angle, as two runs.
 
@@ -145,7 +146,7 @@ def _box_exit(g, eye, k, dx, dy):
     return t
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _level(j, r1):
     if j < r1:
         return 0
@@ -157,7 +158,7 @@ def _level(j, r1):
     return lev
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _run_range(g, eye, q, run, plo, phi):
     """Cells [i0, i1] of a run (see :func:`_cell_path`) whose angular range meets [plo, phi]."""
     r0, c0, dr, dc, n = run
@@ -190,7 +191,7 @@ def _run_lo(run, i0, i1):
     return min(run[1] + i0 * run[3], run[1] + i1 * run[3])
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _fill(g, eye, q, run, lo, k0, k1, buf, kc):
     """Slopes, pseudo-angles and distances of the samples k0..k1 of a run's two lines.
 
@@ -336,7 +337,7 @@ def _decide(g, eye, rules, w, j, win, tg, sl, ub_clear):
     return res, (3 if res == UNDECIDED else 2)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
     """Exact walk of the target's ray over the rings < j whose wedge maximum reaches
     ``smin`` (the target's slope less its slack; ``p`` its unwrapped pseudo-angle, ``sl``
@@ -414,7 +415,7 @@ def _block_walk(g, eye, rules, w, j, win, ray, sl, p, smin, tau, t_end):
     return UNDECIDED if ambiguous else VISIBLE
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _walk_rings(g, eye, ray, r_lo, r_hi, tau, t_end, tolm, bulge):
     """Exact minimum clearance of the ray over the annuli r_lo..r_hi (r_hi ``BEYOND``:
     all annuli from r_lo on), within [tau, t_end] (inf when that is empty; the walk stops
@@ -544,7 +545,7 @@ def sweep(g, eye, rules, lay, tg, stats, s0, s1, stop):
         _sector(g, eye, rules, lay, tg, sector, stats, stop)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _close_block(w, j, n, r1):
     """Close the block of rings j - BLOCK .. j - 1: keep its upper bounds (the largest of
     its quads') in the history, fold them into ``ubp``, and fold the block before it into
@@ -571,7 +572,7 @@ def _close_block(w, j, n, r1):
             grow[i] = v if first else max(grow[i], v)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _refine(w, tmp, n):
     """Split each of the ``n`` wedges (plus guards) in two (at a block boundary: the new
     block's rings start at the new resolution): local index i covers global
@@ -587,7 +588,7 @@ def _refine(w, tmp, n):
         w.ubold[i] = tmp[2, ic]
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _add_cells(w, ring, win, ann, runs, ranges, buf, hidden):
     """Add the cells of both runs of annulus ``ring`` (away from the eye) with
     :func:`cell_bounds`, except those of hidden segments.
@@ -682,7 +683,7 @@ def _last_ring_bound(buf, k, outer, filled, side, last):
     return hi + slack + REL * abs(hi)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, last):
     """Fill a run's samples and decide the targets on its outer line, segment by segment.
 
@@ -811,7 +812,7 @@ def _block_line(code, vertical, line, a, top):
     return n
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _sector(g, eye, rules, lay, tg, s, stats, stop):
     """The sweep of one sector (see :func:`sweep`), on views of its inputs and of its work
     arrays without reference counts (:func:`~terrainvis.core.surface.borrow`)."""

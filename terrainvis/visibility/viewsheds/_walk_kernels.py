@@ -14,6 +14,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ...core.compiling import KERNEL_ONLY
 from ...core.surface import cell_height, line_height
 from ...tolerances import DIAGONAL_SLACK
 from .._kernels import _canonical, curved_min, interval_start
@@ -29,7 +30,7 @@ def _clear(g, r, c, upper, ray, t):
     return ez + t * dz - plane_height(g, r, c, upper, ex + t * dx, ey + t * dy)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _edge_clear(g, kind, r, c, ray, t):
     """Clearance on a grid line (kind 0: x = xs[c], rows r..r+1; kind 1: y = ys[r])."""
     z = g.z
@@ -43,7 +44,7 @@ def _edge_clear(g, kind, r, c, ray, t):
     return ez + t * dz - line_height(z, r, c, False, u)
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _absent_piece(g, r, c, upper, ray, ta, tb, bulge):
     """Min clearance of a piece lying in an absent triangle: only where the piece runs
     along a boundary shared with a present triangle (a ray exactly on a grid line or a
@@ -206,7 +207,7 @@ def _walk_edges(g, ray, t0, t1, stop, bulge):
     return best
 
 
-@nb.njit(cache=True, nogil=True, error_model="numpy")
+@nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _walk_cells(g, ray, t0, t1, stop, bulge):
     """Exact minimum clearance of the ray E + t d over [t0, t1] on the :data:`~terrainvis.core.surface.SurfaceGrid` ``g``.
 
