@@ -86,7 +86,7 @@ from terrainvis.core.repair import PostError, PostProcessor
 from .levels import budget_tolerance, check_budget
 
 __all__ = [
-    "build", "resolve_backend", "BACKENDS", "AUTO_MAX_SAMPLES", "TILE_SAMPLES", "PYMESHLAB_DEFAULTS", "FAST_DEFAULTS",
+    "build", "resolve_backend", "report_notes", "BACKENDS", "AUTO_MAX_SAMPLES", "TILE_SAMPLES", "PYMESHLAB_DEFAULTS", "FAST_DEFAULTS",
 ]
 
 #: The decimation libraries :func:`build` can use (and ``"auto"`` to choose by size).
@@ -650,3 +650,16 @@ class _BudgetSearch:
             f"qec ({self.backend} backend) did not meet the budget of {budget} +- {tol} vertices in {max_stages} "
             f"passes (targets, faces and vertices per pass: {self.history})"
         )
+
+
+def report_notes(rows) -> list[str]:
+    """The comparison report's note where QEC ran on fast-simplification (grids of more than
+    :data:`AUTO_MAX_SAMPLES` samples): ``rows`` are QEC's rows of a comparison (the
+    :attr:`simplifiers.registry.Method.report_notes` of ``"qec"``)."""
+    if "backend" not in rows.columns:
+        return []
+    fast = sorted(set(rows.loc[rows["backend"] == "fast-simplification", "terrain"]))
+    if not fast:
+        return []
+    return ["", f"Note: QEC ran on fast-simplification for {', '.join(fast)} (more than {AUTO_MAX_SAMPLES:,} "
+                "samples, where pymeshlab takes minutes per level); pymeshlab, the paper's QEC, ran elsewhere."]

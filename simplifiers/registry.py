@@ -97,6 +97,11 @@ class Method:
         The code itself, for a method registered with :func:`register` (``module`` and
         ``attr`` then name where it was defined, for messages and for worker processes,
         which import it from there).
+    report_notes : str or callable, optional
+        ``report_notes(rows) -> list of str``: lines that the report of
+        :func:`terrainvis.compare` adds about this method's rows (a DataFrame of them) after
+        its tables (:func:`terrainvis.experiment.report.method_notes`): a callable, or the
+        name of a function of ``module``. None: none.
     """
 
     name: str
@@ -113,6 +118,7 @@ class Method:
     default: bool = True
     whole_grid: bool = False
     function: Callable | None = None
+    report_notes: str | Callable | None = None
 
     def memory_need(self, n_samples: int, n_vertices: int) -> int:
         """Estimated peak bytes of simplifying ``n_samples`` grid samples to ``n_vertices`` vertices."""
@@ -128,6 +134,15 @@ class Method:
         for part in self.attr.split("."):
             target = getattr(target, part)
         return target
+
+    def notes(self, rows) -> list[str]:
+        """The report's lines about ``rows``, this method's rows of a comparison (:attr:`report_notes`)."""
+        if self.report_notes is None:
+            return []
+        notes = self.report_notes
+        if isinstance(notes, str):
+            notes = getattr(importlib.import_module(self.module), notes)
+        return list(notes(rows))
 
     @property
     def regular(self) -> bool:
@@ -148,7 +163,7 @@ METHODS: Registry = Registry("method", {
             "quadric edge collapse (Garland & Heckbert 1997): pymeshlab, fast-simplification above 1.2 M samples",
             options=("backend", "start", "tile_samples"), cost_rank=1, style=("tab:red", "v"), cascades=True,
             # pymeshlab holds about 1 kB per sample of the mesh it decimates; tiles of 2^22 samples at most
-            memory=(1000, 48, 2**22),
+            memory=(1000, 48, 2**22), report_notes="report_notes",
         ),
         Method(
             "greedy-cuts", "irregular", "simplifiers.greedy_cuts", "build",
@@ -188,7 +203,8 @@ BUILTIN = METHODS.builtin
 
 # ---------------------------------------------------------------------- methods from outside
 def register(name: str, function: Callable, *, kind: str, description: str = "", options=(), cost_rank: int = 9,
-             style=("k", "o"), memory=(32, 0, None), default: bool = False, replace: bool = False) -> Method:
+             style=("k", "o"), memory=(32, 0, None), default: bool = False, report_notes: Callable | None = None,
+             replace: bool = False) -> Method:
     """Register a simplification method from outside the package, and return its :class:`Method`.
 
     It is then a method like the built-in ones: :func:`simplify` runs it with the budget,
@@ -218,9 +234,10 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
         One line for listings (default: the first line of the function's docstring).
     options : sequence of str
         The keyword options it accepts (through :func:`simplify`).
-    cost_rank, style, memory, default
+    cost_rank, style, memory, default, report_notes
         As in :class:`Method`: scheduling order (lower first), the figures' colour and
-        marker, the memory estimate, and whether a comparison runs it by default.
+        marker, the memory estimate, whether a comparison runs it by default, and the lines
+        a comparison's report adds about its rows.
     replace : bool
         Replace a method registered earlier under this name (never a built-in one).
 
@@ -260,6 +277,8 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
     if isinstance(options, str) or not all(isinstance(o, str) for o in options):
         raise TypeError(f"options must be a sequence of option names, got {options!r}")
     _check_signature(name, function, kind, tuple(options))
+    if report_notes is not None and not callable(report_notes):
+        raise TypeError(f"report_notes must be callable or None, got {describe(report_notes)}")
     if not description:
         doc = inspect.getdoc(function) or ""
         description = doc.splitlines()[0] if doc else f"{kind} method {name} (registered)"
@@ -267,6 +286,7 @@ def register(name: str, function: Callable, *, kind: str, description: str = "",
         name, kind, getattr(function, "__module__", None) or "", getattr(function, "__qualname__", name),
         description, options=tuple(options), cost_rank=as_int(cost_rank, "cost_rank"), style=tuple(style),
         memory=tuple(memory), default=bool(default), whole_grid=kind == "regular", function=function,
+        report_notes=report_notes,
     )
     METHODS[name] = method
     return method

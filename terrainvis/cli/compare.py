@@ -174,8 +174,7 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
     measure = MEASURES[settings.measure]
     step = step_column(df)  # level, or max_error_budget in a run budgeted in vertical error
     extra = {k: t for k, t in (measure.tables(df) if measure.tables is not None else {}).items() if not t.empty}
-    if "beyond" not in extra and (df["relocation"] == "oracle").any():
-        extra["oracle"] = report.oracle_gap(df)
+    extra.update(report.relocation_tables(df, extra))  # the relocations' own (the oracle's gap)
     if df["max_distance"].nunique(dropna=False) > 1:
         extra["localized"] = report.localized(df)
     text = report.to_markdown({**report.paper_tables(df), **extra})
@@ -189,12 +188,7 @@ def _compare_report(df, grids, settings, out: Path, args, seconds: float) -> int
         lines += report.beyond_paper_findings(df)
     if step != "level":
         lines += _budgets_not_met(df)
-    fast = sorted(set(df[(df["method"] == "qec") & (df["backend"] == "fast-simplification")]["terrain"]))
-    if fast:
-        from simplifiers.quadric import AUTO_MAX_SAMPLES
-
-        lines += ["", f"Note: QEC ran on fast-simplification for {', '.join(fast)} (more than {AUTO_MAX_SAMPLES:,} "
-                      "samples, where pymeshlab takes minutes per level); pymeshlab, the paper's QEC, ran elsewhere."]
+    lines += report.method_notes(df)  # the methods' own (QEC's backend beyond pymeshlab's size)
     units = df[["terrain", "method", step]].drop_duplicates().shape[0]
     failed = df[df["error"].notna()].drop_duplicates(["terrain", "method", step])
     if len(failed):

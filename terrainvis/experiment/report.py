@@ -31,7 +31,8 @@ import pandas as pd
 
 __all__ = [
     "paper_tables", "to_markdown", "findings", "findings_markdown", "paper_reference", "paper_comparison",
-    "comparison_markdown", "oracle_gap", "localized", "viewshed_table", "budgeted_rows", "step_column",
+    "comparison_markdown", "oracle_gap", "accuracy_by_relocation", "relocation_tables", "method_notes", "localized",
+    "viewshed_table", "budgeted_rows", "step_column",
 ]
 
 _LEVEL_FRACTION = {1: "25%", 2: "6%", 3: "1.5%"}
@@ -490,27 +491,67 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
         error); columns ``oracle`` (mean accuracy, %, of the ``"oracle"`` relocation: an
         upper bound that needs T's verdicts), ``best``
         (the best practical relocation's name), ``best_accuracy`` and ``gap`` (oracle -
-        best, points). Empty when the result has no oracle rows.
+        best, points). Empty when the result has no oracle rows. The oracle's own table
+        (:func:`terrainvis.relocation.oracle.gap_table`), as :func:`relocation_tables` gives it.
     """
-    from simplifiers import METHODS
+    from ..relocation.oracle import gap_table
+    from ..relocation.registry import practical_relocations
 
-    from ..relocation.registry import ORACLE, practical_relocations
+    mu = accuracy_by_relocation(df, predicate=predicate)
+    return _in_method_order(gap_table(mu, [r for r in practical_relocations() if r in mu.columns]))
+
+
+def accuracy_by_relocation(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame:
+    """The mean accuracy (%) of each relocation (a column each, in the registry's order) per
+    method and level (index: method and level, or method and ``max_error_budget``), of the
+    rows without an error: what a relocation's own tables are made from
+    (:attr:`terrainvis.relocation.Relocation.tables`)."""
+    from ..relocation.registry import RELOCATIONS
 
     data = _ok(df, predicate)
     mu = 100 * data.groupby(["method", step_column(data), "relocation"])["accuracy"].mean().unstack("relocation")
-    if ORACLE not in mu.columns:
-        return pd.DataFrame(columns=["oracle", "best", "best_accuracy", "gap"])
-    practical = mu[[r for r in practical_relocations() if r in mu.columns]]
-    # per row: a run of the oracle alone, or a row without any practical accuracy, has no best ("–")
-    best = [row.idxmax() if row.notna().any() else "–" for _, row in practical.iterrows()] if practical.shape[1] \
-        else ["–"] * len(mu)
-    out = pd.DataFrame({"oracle": mu[ORACLE], "best": best, "best_accuracy": practical.max(axis=1) if practical.shape[1]
-                        else np.nan}, index=mu.index)
-    out["gap"] = out["oracle"] - out["best_accuracy"]
-    idx = [(m, lv) for m in _ordered({i[0] for i in out.index}, METHODS) for lv in sorted({i[1] for i in out.index})
-           if (m, lv) in out.index]
-    out = out.loc[idx]
-    out.attrs["title"] = "Oracle bound: the best any relocation of the points could do (needs T's verdicts), against the best practical one (accuracy %)"
+    return mu[[r for r in RELOCATIONS if r in mu.columns] + [r for r in mu.columns if r not in RELOCATIONS]]
+
+
+def relocation_tables(df: pd.DataFrame, shown: dict | None = None, *, predicate: str | None = None) -> dict:
+    """The report tables of the relocations that ran (:attr:`terrainvis.relocation.Relocation.tables`),
+    in the registry's order, rows in the methods' order; those of a relocation that a table
+    of ``shown`` already reports (its ``attrs["covers"]`` names it) are left out."""
+    from ..relocation.registry import RELOCATIONS
+
+    covered = {r for t in (shown or {}).values() for r in t.attrs.get("covers", ())}
+    ran = set(df["relocation"].dropna()) if "relocation" in df.columns else set()
+    out = {}
+    mu = None
+    for name, entry in RELOCATIONS.items():
+        if entry.tables is None or name not in ran or name in covered:
+            continue
+        mu = accuracy_by_relocation(df, predicate=predicate) if mu is None else mu
+        for key, table in entry.tables(mu).items():
+            if not table.empty:
+                out[key] = _in_method_order(table)
+    return out
+
+
+def method_notes(df: pd.DataFrame) -> list[str]:
+    """The lines the methods that ran add about their rows (:attr:`simplifiers.registry.Method.report_notes`),
+    in the methods' order."""
+    from simplifiers import METHODS
+
+    ran = set(df["method"].dropna()) if "method" in df.columns else set()
+    return [line for name in METHODS if name in ran for line in METHODS[name].notes(df[df["method"] == name])]
+
+
+def _in_method_order(table: pd.DataFrame) -> pd.DataFrame:
+    """``table``'s rows (index: method, step) in the methods' order, then by step."""
+    from simplifiers import METHODS
+
+    if table.empty:
+        return table
+    idx = [(m, lv) for m in _ordered({i[0] for i in table.index}, METHODS) for lv in sorted({i[1] for i in table.index})
+           if (m, lv) in table.index]
+    out = table.loc[idx]
+    out.attrs = dict(table.attrs)
     return out
 
 
@@ -551,6 +592,7 @@ def beyond_paper(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFr
            if (m, lv) in out.index]
     out = out.loc[idx]
     bounds = [r for r in cols if RELOCATIONS[r].bound]
+    out.attrs["covers"] = bounds  # each bound's accuracy is here (with the calibrated one's distance to it)
     out.attrs["title"] = (f"Beyond the paper: the {' and '.join(beyond)} relocation{'s' if len(beyond) > 1 else ''} "
                           "beside the paper's relocations"
                           + (f" and the {' and '.join(bounds)} bound" if bounds else "") + " (accuracy %)")

@@ -3,7 +3,8 @@
 Registered as the relocation ``"oracle"`` (:mod:`terrainvis.relocation.registry`), a
 *bound*: it fits the heights to T's verdicts of the evaluated pairs themselves, so a
 comparison runs it once per distance mask, after the practical relocations, and never
-counts it as one of them.
+counts it as one of them. Its table in a comparison's report, the bound against the best
+practical relocation, is :func:`gap_table`.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from ..visibility import EARTH_RADIUS, terrain_scale
 from .calibrated import best_responses
 from .paper import ground_heights
 
-__all__ = ["oracle"]
+__all__ = ["oracle", "gap_table"]
 
 
 def oracle(points, simplified, *, offset: float = 0.0, reference=None, mask=None, original=None,
@@ -187,3 +188,28 @@ def _row_score(simplified, out, i, others, ref, los_kw) -> int:
 
     a = np.repeat(out[i:i + 1], others.size, axis=0)
     return int((line_of_sight(simplified, a, out[others], **los_kw) == ref[i, others]).sum())
+
+
+def gap_table(accuracy, practical):
+    """How much relocation could recover: the oracle bound against the best practical relocation.
+
+    ``accuracy`` is the mean accuracy (%) of each relocation (a column each) per method and
+    level (:attr:`~terrainvis.relocation.Relocation.tables`); ``practical`` names its
+    columns of practical relocations. Returns a DataFrame on its index with the columns
+    ``oracle``, ``best`` (the best practical relocation's name; "–" where none has an
+    accuracy), ``best_accuracy`` and ``gap`` (oracle - best, points); empty without an
+    oracle column.
+    """
+    import pandas as pd
+
+    if "oracle" not in accuracy.columns:
+        return pd.DataFrame(columns=["oracle", "best", "best_accuracy", "gap"])
+    shown = accuracy[list(practical)]
+    best = [row.idxmax() if row.notna().any() else "–" for _, row in shown.iterrows()] if shown.shape[1] \
+        else ["–"] * len(accuracy)
+    out = pd.DataFrame({"oracle": accuracy["oracle"], "best": best,
+                        "best_accuracy": shown.max(axis=1) if shown.shape[1] else np.nan}, index=accuracy.index)
+    out["gap"] = out["oracle"] - out["best_accuracy"]
+    out.attrs["title"] = ("Oracle bound: the best any relocation of the points could do (needs T's verdicts), "
+                          "against the best practical one (accuracy %)")
+    return out

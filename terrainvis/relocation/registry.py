@@ -129,6 +129,16 @@ class Relocation:
         message names it (``"n_partners=2,048 (the calibrated relocation's partners)"``).
         The run is refused before it starts when the units could not fit
         (:func:`terrainvis.experiment.plan.check_memory`). None: nothing beyond the measure's.
+    tables : callable, optional
+        ``tables(accuracy) -> dict``: report tables of its own (key -> DataFrame with a
+        ``"title"`` in its ``attrs``), which ``terrainvis compare`` prints and writes to
+        ``tables.md`` after the measure's when the run has its rows
+        (:func:`terrainvis.experiment.report.relocation_tables`). ``accuracy`` is the mean
+        accuracy (%) of every relocation of the run, a column each, per method and level
+        (its index: method and level, or method and ``max_error_budget``); each table is on
+        that index (the report orders its rows). A measure's table that reports this
+        relocation already names it in its ``attrs["covers"]``, and these are then left
+        out. None: no table of its own.
     color, marker, linestyle : str
         Its style in the figures (matplotlib names).
     """
@@ -145,6 +155,7 @@ class Relocation:
     starts_from: tuple = ()
     predicate: bool = False
     memory: Callable | None = None
+    tables: Callable | None = None
     color: str = "black"
     marker: str = "o"
     linestyle: str = "-"
@@ -215,6 +226,12 @@ def _oracle(points, simplified, **options):
     return oracle(points, simplified, **options)
 
 
+def _oracle_tables(accuracy) -> dict:
+    from .oracle import gap_table
+
+    return {"oracle": gap_table(accuracy, [r for r in practical_relocations() if r in accuracy.columns])}
+
+
 _CALIBRATED_OPTIONS = ("original", "target_height", "end_radius", "curvature", "earth_radius", "n_partners", "sweeps",
                        "seed", "min_gain", "neighbours")
 _EYE_OPTIONS = ("eye",) + _CALIBRATED_OPTIONS
@@ -240,7 +257,8 @@ RELOCATIONS: Registry = Registry("relocation", {
                    memory=_eye_memory, color="tab:orange", marker="v"),
         Relocation(ORACLE, _oracle, "an upper bound fitted to T's verdicts of the evaluated pairs",
                    options=_ORACLE_OPTIONS, needs=("reference",), bound=True, measures=("pairs",),
-                   starts_from=(CALIBRATED,), predicate=True, color="black", marker="*", linestyle="--"),
+                   starts_from=(CALIBRATED,), predicate=True, tables=_oracle_tables, color="black", marker="*",
+                   linestyle="--"),
     )
 })
 #: The relocations terrainvis ships, which :func:`register` never replaces.
@@ -291,6 +309,10 @@ def register(relocation: Relocation, *, replace: bool = False) -> Relocation:
     for start in relocation.starts_from:
         if start not in RELOCATIONS and start != name:
             raise ValueError(f"relocation {name!r}: starts_from names {start!r}, which is not registered")
+    for field in ("memory", "tables"):
+        if getattr(relocation, field) is not None and not callable(getattr(relocation, field)):
+            raise TypeError(f"relocation {name!r}: {field} must be callable or None, got "
+                            f"{describe(getattr(relocation, field))}")
     if not isinstance(relocation.needs, tuple) or any(n not in NEEDS for n in relocation.needs):
         raise ValueError(f"relocation {name!r}: needs must be a tuple of {list(NEEDS)}, got {relocation.needs!r}")
     _check_run_options(relocation)

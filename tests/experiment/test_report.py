@@ -140,6 +140,14 @@ def test_oracle_gap_and_localized_tables():
     assert row["oracle"] == pytest.approx(mu["oracle"])
     assert row["best"] == mu[["identity", "full", "half"]].idxmax()
     assert row["gap"] == pytest.approx(mu["oracle"] - mu[["identity", "full", "half"]].max()) and row["gap"] >= 0
+    # the oracle's own table (its registry entry's), unless a table shown already covers the oracle
+    own = report.relocation_tables(df)
+    assert list(own) == ["oracle"]
+    pd.testing.assert_frame_equal(own["oracle"], gap)
+    assert own["oracle"].attrs["title"].startswith("Oracle bound")
+    shown = {"beyond": pd.DataFrame({"x": [1.0]})}
+    shown["beyond"].attrs["covers"] = ["oracle"]
+    assert report.relocation_tables(df, shown) == {}
     loc = report.localized(df)
     assert list(loc.columns) == ["5.00", "10.00", "all"]
     sel = df[(df["relocation"] == "half") & (df["max_distance"] == 10)]["accuracy"]

@@ -4,7 +4,8 @@ A toy irregular method, a Delaunay triangulation of the four corners and randoml
 interior samples, is written as a module of its own (in a temporary folder) and given
 one registry entry. Nothing else is edited, and every layer picks it up: ``simplify``
 with its checks and errors, the block-wise guard, ``compare`` (serial and on the pool),
-the report's tables and findings, the figures and the command line.
+the report's tables, findings and notes (a line of its own, declared beside it), the
+figures and the command line.
 """
 
 from __future__ import annotations
@@ -43,6 +44,11 @@ def build(grid, n_vertices, seed=0):
     cw = (b[:, 0] - a[:, 0]) * (d[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (d[:, 0] - a[:, 0]) < 0
     f[cw] = f[cw][:, [0, 2, 1]]
     return TIN(v, f)
+
+
+def report_notes(rows):
+    """The comparison report's line about the toy's rows."""
+    return ["", f"Note: the toy triangulated {len(rows)} rows' terrains at random."]
 '''
 
 
@@ -52,7 +58,7 @@ def toy(tmp_path, monkeypatch):
     (tmp_path / "toy_delaunay.py").write_text(textwrap.dedent(_MODULE))
     monkeypatch.syspath_prepend(str(tmp_path))
     entry = Method("toy", "irregular", "toy_delaunay", "build", "Delaunay of random samples (a test's toy)",
-                   options=("seed",), cost_rank=4, style=("tab:brown", "*"))
+                   options=("seed",), cost_rank=4, style=("tab:brown", "*"), report_notes="report_notes")
     monkeypatch.setitem(METHODS, "toy", entry)
     return entry
 
@@ -108,6 +114,13 @@ def test_compare_report_and_figures_pick_it_up(toy):
     assert "toy" in labels
     bars = [c for ax in fig.axes for c in ax.containers if c.get_label() == "toy"][0]
     assert bars.lines[0].get_marker() == "*"
+    # its line in the report, from its entry; QEC ran on pymeshlab here, so it has none
+    n = int((df["method"] == "toy").sum())
+    assert report.method_notes(df) == ["", f"Note: the toy triangulated {n} rows' terrains at random."]
+    big = df[df["method"] == "qec"].assign(backend="fast-simplification", terrain="big")
+    assert report.method_notes(big) == ["", "Note: QEC ran on fast-simplification for big (more than 1,200,000 "
+                                            "samples, where pymeshlab takes minutes per level); pymeshlab, the "
+                                            "paper's QEC, ran elsewhere."]
 
 
 def test_the_command_line_offers_it(toy, tmp_path, capsys):
@@ -117,3 +130,8 @@ def test_the_command_line_offers_it(toy, tmp_path, capsys):
     assert "289 vertices" in capsys.readouterr().out.replace(",", "")
     assert main(["info", str(dem)]) == 0
     assert "toy" in capsys.readouterr().out
+    # a comparison's report on the command line carries its line too
+    out = tmp_path / "run"
+    assert main(["compare", "--terrain", str(dem), "--methods", "toy", "--levels", "1", "--points", "8", "--sets", "1",
+                 "--repeats", "1", "--workers", "1", "--relocations", "full", "--no-plots", "--out", str(out)]) == 0
+    assert "Note: the toy triangulated 1 rows' terrains at random." in (out / "tables.md").read_text()

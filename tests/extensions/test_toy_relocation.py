@@ -7,7 +7,7 @@ call. ``lift`` is an option of a run of its own, declared in that module
 edited, and every layer picks it up: ``relocate`` with its option checks, ``compare`` in
 this process and on two worker processes (which import terrainvis afresh and get the entry
 sent with each unit) with ``lift=`` validated, stored and checked on resume, the report's
-tables, the figures (in its declared style) and the command line (``terrainvis compare
+tables (and its own table, declared beside it), the figures (in its declared style) and the command line (``terrainvis compare
 --lift``, ``terrainvis relocate --how toy --lift``).
 """
 
@@ -58,6 +58,13 @@ def lifted(points, simplified, *, offset=0.0, lift=1.0):
     out = relocate(points, simplified, "full", offset=offset)
     out[:, 2] += lift
     return out
+
+
+def lift_table(accuracy):
+    """The report's table of its own: what the lift gains over full projection (points)."""
+    gain = (accuracy["toy"] - accuracy["full"]).to_frame("lift_gain")
+    gain.attrs["title"] = "Toy: the lift against full projection (accuracy points)"
+    return {"toy_lift": gain}
 '''
 
 
@@ -70,7 +77,7 @@ def toy(tmp_path, monkeypatch):
     import toy_lift
 
     entry = register(Relocation("toy", toy_lift.lifted, "full projection, lifted", run_options=(toy_lift.LIFT,),
-                                color="tab:olive", marker="P"))
+                                tables=toy_lift.lift_table, color="tab:olive", marker="P"))
     yield entry
     unregister("toy")
 
@@ -108,6 +115,8 @@ def test_registering_is_checked(toy):
         register(Relocation("bad", toy.function, "x", measures="pairs"))
     with pytest.raises(ValueError, match="relocation 'oracle' is built in and cannot be removed"):
         unregister("oracle")
+    with pytest.raises(TypeError, match="relocation 'bad': tables must be callable or None, got"):
+        register(Relocation("bad", toy.function, "x", options=("lift",), tables={"t": pd.DataFrame()}))
     # a run option is an Option, and one name is one declaration: another relocation's option of that name is it
     def anything(points, simplified, *, offset=0.0, **options):
         return points
@@ -148,6 +157,11 @@ def test_compare_the_report_and_the_figures_pick_it_up(toy):
     assert "toy" in beyond.columns and "beyond the paper" in beyond.attrs["title"].lower()
     assert "toy" in beyond.attrs["title"] and "gain" not in beyond.columns  # no calibrated rows: no gain column
     assert list(report.localized(df).index.get_level_values("relocation").unique()) == ["full", "toy"]
+    own = report.relocation_tables(df)  # its table of its own, from its registry entry
+    assert list(own) == ["toy_lift"] and own["toy_lift"].attrs["title"].startswith("Toy: the lift")
+    allpairs = df[df["max_distance"].isna()]
+    mu = 100 * allpairs.groupby("relocation")["accuracy"].mean()
+    assert own["toy_lift"].loc[("lls", 1), "lift_gain"] == pytest.approx(mu["toy"] - mu["full"])
     fig = plot.accuracy_vs_size(df)
     assert [ax.get_title() for ax in fig.axes[:2]] == ["relocation: full", "relocation: toy"]
     fig = plot.accuracy_vs_distance(df)
@@ -208,6 +222,7 @@ def test_the_command_line_picks_it_up(toy, tmp_path, capsys):
             "--repeats", "1", "--workers", "1", "--relocations", "full", "toy"]
     assert main([*argv, "--lift", "2", "--out", str(out)]) == 0
     assert "| toy |" in (out / "tables.md").read_text() or " toy " in (out / "tables.md").read_text()
+    assert "### Toy: the lift against full projection (accuracy points)" in (out / "tables.md").read_text()
     assert (out / "tradeoff_toy.png").exists()
     assert json.loads((out / "results.settings.json").read_text())["lift"] == 2.0
     cols = ["relocation", "accuracy", "agree_visible", "false_visible", "false_blocked"]

@@ -156,6 +156,9 @@ def test_bad_outside_methods_are_refused_clearly(outside):
         simplifiers.register("x", outside.stride, kind="tin")
     with pytest.raises(TypeError, match=r"method 'x': its function must take \(grid, n_vertices, seed=...\)"):
         simplifiers.register("x", lambda grid: grid, kind="irregular", options=("seed",))
+    with pytest.raises(TypeError, match=r"report_notes must be callable or None, got str 'a note'"):
+        simplifiers.register("x", outside.stride, kind="irregular", report_notes="a note")
+    assert "x" not in simplifiers.METHODS
     simplifiers.register("wrong-type", outside.wrong_type, kind="irregular")
     simplifiers.register("too-few", outside.too_few, kind="irregular")
     try:
