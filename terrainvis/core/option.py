@@ -82,10 +82,11 @@ class Option:
     cli : Flag, Switch or None
         How ``terrainvis compare`` spells it (None: the API only).
     los : bool
-        Passed, under its name, to every visibility computation of a run
-        (``visibility_matrix``, ``viewshed`` and ``relocate``, whose calibrated and oracle
-        relocations compute visibility): an option such as the earth-curvature
-        coefficient is then one entry and nothing else.
+        The field of the same name of the run's :class:`~terrainvis.visibility.Sight`
+        (``engine``, ``curvature``, ``earth_radius``), the one record handed to every
+        visibility computation of a run (``visibility_matrix``, ``viewshed``, and
+        ``relocate``, whose calibrated and oracle relocations compute visibility): an
+        option such as the earth-curvature coefficient is then one entry and nothing else.
     default_text : str, optional
         How help texts show the default (when ``repr`` of it would not say it well).
     quick : optional

@@ -20,13 +20,15 @@ The built-in measures:
     ``siting_share_original``, ``siting_ratio``: :func:`siting_coverage`, once per unit);
     NaN in the other measures' rows.
 
-A measure's functions read the run's settings by attribute and take the line-of-sight
-predicate's options (``los``) as an argument; they import nothing from the rest of the
-experiment, which imports them.
+A measure's functions read the run's settings by attribute and take the run's sight lines
+(a :class:`~terrainvis.visibility.Sight`: engine, earth model, target height;
+:func:`terrainvis.experiment.options.sight`) as an argument; they import nothing from the
+rest of the experiment, which imports them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import zlib
 from dataclasses import dataclass
@@ -64,12 +66,13 @@ class Measure:
         terrain called ``name``), deterministic for the run's seed: each an (n, 3) array
         of points on (``offset`` above) T.
     rows : callable
-        ``rows(grid, simplified, base, settings, sets, los) -> list of dict``: for each set,
+        ``rows(grid, simplified, base, settings, sets, sight) -> list of dict``: for each set,
         relocation (``settings.relocations``) and distance (``settings.max_distance``), one
         row: ``dict(base, set=, relocation=, max_distance=, los_seconds=,
         los_seconds_original=)`` with the agreement counts of
-        :func:`terrainvis.agreement` (``accuracy``, ``visible_kept``, ...). ``los`` holds
-        the options of the run's line-of-sight predicate.
+        :func:`terrainvis.agreement` (``accuracy``, ``visible_kept``, ...). ``sight`` is the
+        run's :class:`~terrainvis.visibility.Sight` (its engine, earth model and target
+        height; end radius 0, no field of view).
     counts : str
         What its agreement counts, as the tables say it (``"pairs"``, ``"cells"``).
     summary : str
@@ -162,7 +165,7 @@ def _timed(fn, *args, repeats: int = 3, **kwargs):
     return out, best
 
 
-def pair_rows(grid, simplified, base, settings, sets, los: dict) -> list[dict]:
+def pair_rows(grid, simplified, base, settings, sets, sight) -> list[dict]:
     """The pair measure: visibility matrices of each point set on T and on S(T), per relocation.
 
     The practical relocations place each set once; a bound (the oracle) is fitted to T's
@@ -173,28 +176,28 @@ def pair_rows(grid, simplified, base, settings, sets, los: dict) -> list[dict]:
     from ..visibility import visibility_matrix
 
     radius = base["end_radius"]
-    test_kw = {**los, "end_radius": radius}
+    test = dataclasses.replace(sight, end_radius=radius)  # the predicate of the verdicts on S(T)
     # The first query builds the acceleration structure (pyramid or Embree scene); time it apart.
     t0 = time.perf_counter()
-    visibility_matrix(simplified, sets[0][:2], **test_kw)
+    visibility_matrix(simplified, sets[0][:2], sight=test)
     base = dict(base, los_build_seconds=time.perf_counter() - t0)
     known = _relocation_keywords(settings, grid, radius)
     rows = []
     for s, pts in enumerate(sets):
-        v_true, t_true = _timed(visibility_matrix, grid, pts, repeats=settings.repeats, **los)
+        v_true, t_true = _timed(visibility_matrix, grid, pts, repeats=settings.repeats, sight=sight)
         masks = [(d, _pair_mask(pts, d, grid, settings.distance_unit)) for d in settings.max_distance]
-        placed = {how: relocate(pts, simplified, how, **RELOCATIONS[how].keywords(known, los))
+        placed = {how: relocate(pts, simplified, how, **RELOCATIONS[how].keywords(known, sight))
                   for how in settings.relocations if not RELOCATIONS[how].bound}
         for how in settings.relocations:
             relocation = RELOCATIONS[how]
             if relocation.bound:  # fitted to the pairs each distance counts
                 for d, mask in masks:
                     fit = dict(known, reference=v_true, mask=mask, **_start(relocation, placed))
-                    moved = relocate(pts, simplified, how, **relocation.keywords(fit, los))
-                    v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, **test_kw)
+                    moved = relocate(pts, simplified, how, **relocation.keywords(fit, sight))
+                    v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, sight=test)
                     rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
                 continue
-            v_test, t_test = _timed(visibility_matrix, simplified, placed[how], repeats=settings.repeats, **test_kw)
+            v_test, t_test = _timed(visibility_matrix, simplified, placed[how], repeats=settings.repeats, sight=test)
             for d, mask in masks:
                 rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
     return rows
@@ -208,7 +211,7 @@ def _start(relocation, placed: dict) -> dict:
     return {}
 
 
-def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dict]:
+def viewshed_rows(grid, simplified, base, settings, eyes, sight) -> list[dict]:
     """The viewshed measure: each observer's viewshed of T's samples on T and on S(T), per relocation.
 
     The observer is relocated onto S(T) as the points of the pair measure are; the targets
@@ -229,26 +232,25 @@ def viewshed_rows(grid, simplified, base, settings, eyes, los: dict) -> list[dic
     from ..relocation.registry import RELOCATIONS, relocate
     from ..visibility import viewshed
 
-    kw = {"target_height": settings.target_height, **los}
     known = dict(_relocation_keywords(settings, grid, 0.0), target_height=settings.target_height)
     X, Y = np.meshgrid(grid.xs, grid.ys)
     siting = {}
     if settings.siting:
         siting = siting_coverage(grid, simplified, settings.siting, offset=settings.offset,
-                                 target_height=settings.target_height, **los)
+                                 target_height=settings.target_height, sight=sight)
     rows = []
     for s, eye in enumerate(eyes):
         eye = np.asarray(eye, dtype=np.float64).reshape(1, 3)
-        v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, **kw)
-        h_true = viewshed(grid, eye[0], output="min_height", **los) if settings.min_height else None
+        v_true, t_true = _timed(viewshed, grid, eye[0], repeats=settings.repeats, sight=sight)
+        h_true = viewshed(grid, eye[0], output="min_height", sight=sight) if settings.min_height else None
         dist = np.hypot(X - eye[0, 0], Y - eye[0, 1])
         heights = {}  # relocations that place the eye alike (often identity and half) share its raster
         for how in settings.relocations:
-            moved = relocate(eye, simplified, how, **RELOCATIONS[how].keywords(known, los))[0]
-            v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, **kw)
+            moved = relocate(eye, simplified, how, **RELOCATIONS[how].keywords(known, sight))[0]
+            v_test, t_test = _timed(viewshed, simplified, moved, at=grid, repeats=settings.repeats, sight=sight)
             place = np.asarray(moved, dtype=np.float64).tobytes()
             if settings.min_height and place not in heights:
-                heights[place] = viewshed(simplified, moved, at=grid, output="min_height", **los)
+                heights[place] = viewshed(simplified, moved, at=grid, output="min_height", sight=sight)
             for d in settings.max_distance:
                 counted = dist <= _limit(d, grid, settings.distance_unit)
                 row = _row(base, s, how, d, t_test, t_true, viewshed_agreement(v_true, v_test, counted))
@@ -293,7 +295,7 @@ def siting_candidates(grid: HeightGrid) -> np.ndarray:
 
 
 def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0, target_height: float = 0.0,
-                    **los) -> dict:
+                    sight=None) -> dict:
     """How S(T) changes an observer siting: the area of T that k observers chosen on S(T) see, against k chosen on T.
 
     The candidates are a lattice of T's samples (:data:`SITING_LATTICE` per side at most,
@@ -315,9 +317,10 @@ def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0
         Observers to choose, >= 1 (all the candidates when the lattice has fewer than k).
     offset, target_height : float
         The eyes' and the targets' heights above the surface, as in the viewshed measure.
-    **los
-        The line-of-sight options (``engine``, ``curvature``, ``earth_radius``), passed to
-        every siting and viewshed.
+    sight : Sight, optional
+        The sight lines' engine and earth model (:class:`~terrainvis.visibility.Sight`; its
+        heights are ``offset`` and ``target_height``), for every siting and viewshed; by
+        default the exact engine's on a flat earth.
 
     Returns
     -------
@@ -352,14 +355,16 @@ def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0
     if candidates.shape[0] == 0:
         return {"siting_share": np.nan, "siting_share_original": np.nan, "siting_ratio": np.nan}
     k = min(int(k), candidates.shape[0])
-    kw = dict(observer_height=offset, target_height=target_height, at=grid, **los)
-    on_s = site_observers(simplified, candidates, k, workers=1, **kw).chosen
-    share = _seen_share(grid, candidates[on_s], offset, target_height, los)
-    key = (fingerprint(grid), k, float(offset), float(target_height), repr(sorted(los.items())))
+    from ..visibility import Sight
+
+    s = dataclasses.replace(Sight() if sight is None else sight, observer_height=offset, target_height=target_height)
+    on_s = site_observers(simplified, candidates, k, workers=1, sight=s, at=grid).chosen
+    share = _seen_share(grid, candidates[on_s], s)
+    key = (fingerprint(grid), k, repr(s))
     share_t = _ORIGINAL_SITINGS.pop(key, None)  # popped and put back: the most recent last
     if share_t is None:
-        on_t = site_observers(grid, candidates, k, workers=1, **kw).chosen
-        share_t = _seen_share(grid, candidates[on_t], offset, target_height, los)
+        on_t = site_observers(grid, candidates, k, workers=1, sight=s, at=grid).chosen
+        share_t = _seen_share(grid, candidates[on_t], s)
     _ORIGINAL_SITINGS[key] = share_t
     while len(_ORIGINAL_SITINGS) > _ORIGINAL_SITINGS_SIZE:
         _ORIGINAL_SITINGS.pop(next(iter(_ORIGINAL_SITINGS)))
@@ -374,13 +379,14 @@ _ORIGINAL_SITINGS: dict = {}
 _ORIGINAL_SITINGS_SIZE = 64
 
 
-def _seen_share(grid: HeightGrid, positions: np.ndarray, offset: float, target_height: float, los: dict) -> float:
-    """The share of T's valid area that observers ``offset`` above T at ``positions`` (x, y) see together."""
+def _seen_share(grid: HeightGrid, positions: np.ndarray, sight) -> float:
+    """The share of T's valid area that observers at ``positions`` (x, y) see together, their eyes and
+    the targets as ``sight`` places them above T."""
     from ..visibility import sample_areas, viewshed
 
     seen = np.zeros(grid.shape, dtype=bool)
     for xy in positions:
-        seen |= viewshed(grid, xy, observer_height=offset, target_height=target_height, **los)
+        seen |= viewshed(grid, xy, sight=sight)
     valid = np.isfinite(grid.z)
     areas = sample_areas(grid)
     return float(areas[seen & valid].sum() / areas[valid].sum())

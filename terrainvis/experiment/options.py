@@ -12,8 +12,9 @@ passed on to every visibility computation of the run. From that one entry:
   (:func:`add_flags`, :func:`given`);
 * the run's stored settings (``results.settings.json``) record it, and a resume with
   another value is refused naming it (:meth:`Settings.as_dict`);
-* with ``los=True``, the units pass it, under its name, to every visibility computation
-  (:func:`los_keywords`).
+* with ``los=True``, it is the field of the same name of the run's
+  :class:`~terrainvis.visibility.Sight` (:func:`sight`), the one record the units hand to
+  every visibility computation.
 
 Checks that involve several options (or the terrains) are the :data:`RULES`.
 ``docs/architecture.md`` ("How to add an option") shows how to add one.
@@ -42,7 +43,7 @@ from ..relocation.registry import run_options
 from ..visibility import EARTH_RADIUS
 
 __all__ = [
-    "Option", "Flag", "Switch", "OPTIONS", "RULES", "Settings", "DEFAULTS", "validate", "los_keywords",
+    "Option", "Flag", "Switch", "OPTIONS", "RULES", "Settings", "DEFAULTS", "validate", "sight",
     "add_flags", "given", "PREDICATES", "DISTANCE_UNITS", "CASCADE_AUTO_MIN_SAMPLES", "budgeted", "steps",
     "integer", "finite", "height", "boolean", "one_of", "names",
 ]
@@ -690,6 +691,7 @@ def validate(grids: dict, values: dict, *, caller: str = "compare()", flags: boo
     settings = Settings(**checked)
     for rule in RULES:
         rule(settings, grids)
+    sight(settings)  # the run's Sight, made once here: every unit makes the same
     return settings
 
 
@@ -703,9 +705,20 @@ def steps(settings: Settings) -> tuple:
     return tuple(settings.max_errors) if budgeted(settings) else tuple(settings.levels)
 
 
-def los_keywords(settings: Settings) -> dict:
-    """The options passed, under their names, to every visibility computation (``los=True``)."""
-    return {name: getattr(settings, name) for name, option in OPTIONS.items() if option.los}
+def sight(settings: Settings):
+    """The sight lines of every visibility computation of the run: a
+    :class:`~terrainvis.visibility.Sight` of its options declared ``los=True`` (the engine,
+    the earth's curvature and radius) and its ``target_height``, with no field of view; the
+    pair measure sets the end radius of its verdicts on S(T), the viewshed measure the eye's
+    height (``offset``)."""
+    from ..visibility import Sight
+
+    fields = {name: getattr(settings, name) for name, option in OPTIONS.items() if option.los}
+    try:
+        return Sight(target_height=settings.target_height, **fields)
+    except TypeError as exc:  # an option declared los=True that names no field of a Sight
+        raise TypeError(f"the options declared los=True must be fields of a terrainvis.visibility.Sight, got "
+                        f"{sorted(fields)}: {exc}") from None
 
 
 # ---------------------------------------------------------------------- the signature and docstring

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .measures import MEASURES
-from .options import Settings, budgeted, los_keywords
+from .options import Settings, budgeted, sight
 from ..core.terrain import HeightGrid
 
 __all__ = [
@@ -197,7 +197,7 @@ def measured_rows(grid: HeightGrid, simplified, base: dict, settings: Settings, 
         end_radius=end_radius_for(simplified, grid, base["level"], settings.predicate),
         backend=str(meta.get("backend", "")),
     )
-    return MEASURES[settings.measure].rows(grid, simplified, base, settings, sets, los_keywords(settings))
+    return MEASURES[settings.measure].rows(grid, simplified, base, settings, sets, sight(settings))
 
 
 def failed_rows(base: dict, exc: BaseException, settings: Settings, sets) -> list[dict]:
@@ -317,4 +317,4 @@ def warm_up_part(part: tuple, settings: Settings) -> None:
     simplified = simplify(grid, "simple", 1) if name == "grid" else grid.to_tin()
     base = {"end_radius": end_radius_for(simplified, grid, 1, small.predicate)}
     measure = MEASURES[small.measure]
-    measure.rows(grid, simplified, base, small, measure.sets(grid, "warm-up", small), los_keywords(small))
+    measure.rows(grid, simplified, base, small, measure.sets(grid, "warm-up", small), sight(small))

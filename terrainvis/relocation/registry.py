@@ -118,10 +118,9 @@ class Relocation:
         A bound's starts: the heights of the first of these relocations the run computed
         are passed as ``start=``.
     predicate : bool
-        It evaluates visibility itself: :func:`terrainvis.compare` hands it every option
-        of the run's line-of-sight predicate too (``engine``, ``curvature``,
-        ``earth_radius`` and any option declared ``los=True``), as it hands them to the
-        visibility computations.
+        It evaluates visibility itself: :func:`terrainvis.compare` hands it the predicate of
+        the run's :class:`~terrainvis.visibility.Sight` too (its ``engine``, ``curvature``
+        and ``earth_radius``), the record it hands to the visibility computations.
     memory : callable, optional
         ``memory(settings) -> (bytes, what)``: a lower bound of what it allocates in one
         unit of :func:`terrainvis.compare` beyond the measure's own, from the run's
@@ -172,12 +171,13 @@ class Relocation:
         """Its :attr:`run_options` (read from their module when declared by a callable)."""
         return tuple(self.run_options() if callable(self.run_options) else self.run_options)
 
-    def keywords(self, available: dict, los: dict | None = None) -> dict:
+    def keywords(self, available: dict, sight=None) -> dict:
         """What this relocation takes of ``available`` (name -> value): ``offset`` and its
-        options, and with :attr:`predicate` every option of ``los`` (the predicate's)."""
+        options, and with :attr:`predicate` the predicate of ``sight`` (a
+        :class:`~terrainvis.visibility.Sight`: its engine, curvature and earth radius)."""
         out = {k: v for k, v in available.items() if k == "offset" or k in self.options}
-        if self.predicate and los:
-            out.update(los)
+        if self.predicate and sight is not None:
+            out.update(engine=sight.engine, curvature=sight.curvature, earth_radius=sight.earth_radius)
         return out
 
 

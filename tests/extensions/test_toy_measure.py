@@ -23,6 +23,7 @@ from terrainvis.experiment import measures, point_sets, report
 
 _MODULE = '''
 """A toy measure: each set's first point against every other one."""
+import dataclasses
 import time
 
 import numpy as np
@@ -35,18 +36,18 @@ def sets(grid, name, settings):
     return point_sets(grid, name, settings.n_points, settings.n_sets, settings.seed, settings.offset)
 
 
-def rows(grid, simplified, base, settings, sets, los):
+def rows(grid, simplified, base, settings, sets, sight):
     out = []
     for s, pts in enumerate(sets):
         star = np.zeros((len(pts), len(pts)), dtype=bool)
         star[0, 1:] = True
         t0 = time.perf_counter()
-        v_true = visibility_matrix(grid, pts, **los)
+        v_true = visibility_matrix(grid, pts, sight=sight)
         t_true = time.perf_counter() - t0
         for how in settings.relocations:
             moved = relocate(pts, simplified, how, offset=settings.offset, original=grid)
             t0 = time.perf_counter()
-            v_test = visibility_matrix(simplified, moved, end_radius=base["end_radius"], **los)
+            v_test = visibility_matrix(simplified, moved, sight=dataclasses.replace(sight, end_radius=base["end_radius"]))
             t_test = time.perf_counter() - t0
             for d in settings.max_distance:
                 out.append(dict(base, set=s, relocation=how, max_distance=d, los_seconds=t_test,
