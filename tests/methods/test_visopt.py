@@ -15,10 +15,10 @@ import terrainvis as tv
 from simplifiers import _visopt_kernels as vk
 from simplifiers import visopt as vo
 from terrainvis import HeightGrid, synthetic_terrain
+from terrainvis.core.compiling import from_python
 from terrainvis.relocation.calibrated import MARGIN_REL
 from terrainvis.errors import NodataError
 from terrainvis.visibility import clearance_tolerance, terrain_scale
-from terrainvis.core.compiling import from_python
 
 # kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
 # here through one made for them

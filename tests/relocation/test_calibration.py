@@ -14,12 +14,12 @@ from hypothesis import strategies as st
 
 import simplifiers
 import terrainvis as tv
+from terrainvis.core.compiling import from_python
 from terrainvis.visibility import _threshold_kernels as ck
 from terrainvis.visibility import thresholds
 from terrainvis.relocation import calibrated as cal
 from terrainvis.errors import OutsideFootprintError
 from terrainvis.core.terrain import TIN, HeightGrid
-from terrainvis.core.compiling import from_python
 
 # kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
 # here through one made for them

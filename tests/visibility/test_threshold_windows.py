@@ -16,13 +16,13 @@ import pytest
 
 import simplifiers
 import terrainvis as tv
+from terrainvis.core.compiling import from_python
 from terrainvis.core.surface import face_at
 from terrainvis.core.synthetic import synthetic_terrain
 from terrainvis.relocation import calibrated as cal
 from terrainvis.visibility import _threshold_kernels as tk
 from terrainvis.visibility import thresholds
 from terrainvis.visibility._kernels import new_stack
-from terrainvis.core.compiling import from_python
 
 # kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
 # here through one made for them
