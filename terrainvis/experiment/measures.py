@@ -186,14 +186,14 @@ def pair_rows(grid, simplified, base, settings, sets, sight) -> list[dict]:
     for s, pts in enumerate(sets):
         v_true, t_true = _timed(visibility_matrix, grid, pts, repeats=settings.repeats, sight=sight)
         masks = [(d, _pair_mask(pts, d, grid, settings.distance_unit)) for d in settings.max_distance]
-        placed = {how: relocate(pts, simplified, how, **RELOCATIONS[how].keywords(known, sight))
+        placed = {how: relocate(pts, simplified, how, **RELOCATIONS[how].keywords(known, test))
                   for how in settings.relocations if not RELOCATIONS[how].bound}
         for how in settings.relocations:
             relocation = RELOCATIONS[how]
             if relocation.bound:  # fitted to the pairs each distance counts
                 for d, mask in masks:
                     fit = dict(known, reference=v_true, mask=mask, **_start(relocation, placed))
-                    moved = relocate(pts, simplified, how, **relocation.keywords(fit, sight))
+                    moved = relocate(pts, simplified, how, **relocation.keywords(fit, test))
                     v_test, t_test = _timed(visibility_matrix, simplified, moved, repeats=settings.repeats, sight=test)
                     rows.append(_row(base, s, how, d, t_test, t_true, agreement(v_true, v_test, mask)))
                 continue

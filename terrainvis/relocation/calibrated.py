@@ -231,6 +231,20 @@ def _cached(key, compute):
     return out
 
 
+def predicate_of(sight, **keywords) -> dict:
+    """The predicate's ``keywords`` of a relocation that computes visibility (``end_radius``,
+    ``curvature``, ``earth_radius``, and ``engine`` where it takes one), as ``sight`` gives
+    them when a :class:`~terrainvis.visibility.Sight` is passed in their place (as
+    :func:`terrainvis.compare` does: :meth:`terrainvis.relocation.Relocation.keywords`); a
+    keyword set beside it is refused, naming it."""
+    if sight is None:
+        return keywords
+    from ..visibility.sight import PAIR_KEYWORDS, sight_of
+
+    s = sight_of(sight, keywords, PAIR_KEYWORDS)
+    return {name: getattr(s, name) for name in keywords}
+
+
 def _sight(end_radius: float, curvature: float, earth_radius: float) -> Sight:
     """The relocation's predicate as one value: the verdicts on S(T) take its end radius, those on T
     (:func:`_on_original`) the exact predicate; both the grid engine (on a grid) and its curvature."""
@@ -529,7 +543,7 @@ def _pairs_on_original(original: HeightGrid, a: np.ndarray, b: np.ndarray, sight
 def relocate_calibrated(points, simplified, *, offset: float = 0.0, original=None, target_height=None,
                         end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
                         n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0,
-                        min_gain: int = MIN_GAIN, neighbours: bool = True) -> np.ndarray:
+                        min_gain: int = MIN_GAIN, neighbours: bool = True, sight=None) -> np.ndarray:
     """The calibrated relocation, registered as ``"calibrated"``: :func:`calibrated_heights` with its input checked.
 
     Parameters
@@ -543,6 +557,10 @@ def relocate_calibrated(points, simplified, *, offset: float = 0.0, original=Non
     offset, target_height, end_radius, curvature, earth_radius, n_partners, sweeps, seed, min_gain, neighbours
         See :func:`calibrated_heights`. A point's height depends on these, T, S(T) and
         the point, never on the other points.
+    sight : Sight, optional
+        The predicate of the verdicts on S(T) as one value (its ``end_radius``, ``curvature``
+        and ``earth_radius``; :func:`predicate_of`), instead of those keywords, as
+        :func:`terrainvis.compare` hands it.
 
     Returns
     -------
@@ -555,6 +573,8 @@ def relocate_calibrated(points, simplified, *, offset: float = 0.0, original=Non
     from .paper import ground_heights
 
     pts = as_points(points, "points", 3)
+    end_radius, curvature, earth_radius = predicate_of(sight, end_radius=end_radius, curvature=curvature,
+                                                       earth_radius=earth_radius).values()
     if original is None:
         raise TypeError("relocate(..., 'calibrated') needs original=, the original terrain T (a HeightGrid)")
     if not isinstance(original, HeightGrid):

@@ -64,7 +64,7 @@ from ..core.terrain import TIN, HeightGrid, fingerprint
 from ..core.validate import as_bool, as_finite_scalar, as_int, as_points, describe
 from ..tolerances import EXTENT_INSIDE_REL
 from ..visibility import EARTH_RADIUS
-from .calibrated import MIN_GAIN, N_PARTNERS, SWEEPS
+from .calibrated import MIN_GAIN, N_PARTNERS, SWEEPS, predicate_of
 
 __all__ = ["EyeSurface", "eye_surface", "relocate_eye", "shipped_bytes", "MU", "MAX_NODES", "FORMAT",
            "FORMAT_VERSION", "HEADER_BYTES", "SHRINKS", "VALIDATION_SETS", "VALIDATION_POINTS"]
@@ -524,7 +524,7 @@ def _choose_shrink(kept: np.ndarray) -> float:
 def relocate_eye(points, simplified, *, offset: float = 0.0, eye=None, original=None, target_height=None,
                  end_radius: float = 0.0, curvature: float = 0.0, earth_radius: float = EARTH_RADIUS,
                  n_partners: int = N_PARTNERS, sweeps: int = SWEEPS, seed: int = 0, min_gain: int = MIN_GAIN,
-                 neighbours: bool = True) -> np.ndarray:
+                 neighbours: bool = True, sight=None) -> np.ndarray:
     """The eye relocation, registered as ``"eye"``: each point at ``S(x, y) + offset + e(x, y)``.
 
     Parameters
@@ -541,6 +541,9 @@ def relocate_eye(points, simplified, *, offset: float = 0.0, eye=None, original=
         T, to fit the eye surface when ``eye`` is not given.
     offset, target_height, end_radius, curvature, earth_radius, n_partners, sweeps, seed, min_gain, neighbours
         The fit's (:func:`eye_surface`), when it is fitted here.
+    sight : Sight, optional
+        The fit's predicate as one value, instead of ``end_radius``, ``curvature`` and
+        ``earth_radius`` (:func:`terrainvis.relocation.calibrated.predicate_of`).
 
     Returns
     -------
@@ -549,6 +552,8 @@ def relocate_eye(points, simplified, *, offset: float = 0.0, eye=None, original=
     """
     pts = as_points(points, "points", 3)
     off = as_finite_scalar(offset, "offset")
+    end_radius, curvature, earth_radius = predicate_of(sight, end_radius=end_radius, curvature=curvature,
+                                                       earth_radius=earth_radius).values()
     if eye is None:
         if original is None:
             raise TypeError("relocate(..., 'eye') needs eye=, an EyeSurface shipped with S(T) "

@@ -22,7 +22,7 @@ from ..core.validate import (
     height_limit,
 )
 from ..visibility import EARTH_RADIUS, terrain_scale
-from .calibrated import best_responses
+from .calibrated import best_responses, predicate_of
 from .paper import ground_heights
 
 __all__ = ["oracle", "gap_table"]
@@ -30,7 +30,7 @@ __all__ = ["oracle", "gap_table"]
 
 def oracle(points, simplified, *, offset: float = 0.0, reference=None, mask=None, original=None,
            end_radius: float = 0.0, engine: str = "auto", n_candidates: int = 9, start=None, curvature: float = 0.0,
-           earth_radius: float = EARTH_RADIUS) -> np.ndarray:
+           earth_radius: float = EARTH_RADIUS, sight=None) -> np.ndarray:
     """The oracle bound: the points' heights that keep the most of their own pairs' verdicts.
 
     Not a practical relocation: it needs T's verdicts of the very pairs it is evaluated
@@ -58,7 +58,9 @@ def oracle(points, simplified, *, offset: float = 0.0, reference=None, mask=None
         it (T's samples within one coarse cell); without it they span ``[-max_error,
         max_error]`` of ``simplified.attrs``.
     end_radius, engine, curvature, earth_radius
-        The predicate of the verdicts on S(T) (:func:`terrainvis.line_of_sight`).
+        The predicate of the verdicts on S(T) (:func:`terrainvis.line_of_sight`); or ``sight``,
+        the same as one :class:`~terrainvis.visibility.Sight`
+        (:func:`terrainvis.relocation.calibrated.predicate_of`).
     n_candidates : int
         Candidate heights per point spanning the local error (the original, full and
         half heights are always candidates too).
@@ -72,6 +74,8 @@ def oracle(points, simplified, *, offset: float = 0.0, reference=None, mask=None
     """
     pts = as_points(points, "points", 3)
     off = as_finite_scalar(offset, "offset")
+    end_radius, engine, curvature, earth_radius = predicate_of(
+        sight, end_radius=end_radius, engine=engine, curvature=curvature, earth_radius=earth_radius).values()
     curve = {"curvature": curvature, "earth_radius": earth_radius}
     n = pts.shape[0]
     if reference is None:

@@ -58,6 +58,10 @@ __all__ = [
 #: T itself, or T's verdicts of the evaluated pairs (a bound's).
 NEEDS = ("original", "reference")
 
+#: The keywords of the predicate that a Sight holds: a relocation declared ``predicate=True`` gets
+#: ``sight=`` from :func:`terrainvis.compare` in their place (:meth:`Relocation.keywords`).
+_PREDICATE = ("engine", "end_radius", "curvature", "earth_radius")
+
 #: The paper's relocations, in the paper's order.
 PAPER_RELOCATIONS = ("identity", "full", "half")
 #: The calibrated relocation's name.
@@ -85,11 +89,12 @@ class Relocation:
         One line for ``--help`` and the docs.
     options : tuple of str
         The keyword options ``function`` takes besides ``offset``. :func:`terrainvis.compare`
-        hands it those it knows from the run (``original``, ``end_radius``, ``curvature``,
-        ``earth_radius``, ``engine``, ``seed``, ``target_height``, the run options of the
-        relocations and, for a bound, ``reference``, ``mask``, ``start``);
+        hands it those it knows from the run (``original``, ``end_radius``, ``seed``,
+        ``target_height``, the run options of the relocations, ``sight`` for one declared
+        :attr:`predicate` and, for a bound, ``reference``, ``mask``, ``start``);
         :func:`relocate` passes on those the caller gives. The names of its
-        :attr:`run_options` are added when they are not listed.
+        :attr:`run_options` are added when they are not listed, and ``sight`` for a
+        :attr:`predicate` one.
     run_options : tuple of Option, or callable
         Its own options of a run, each a :class:`terrainvis.core.option.Option` (name,
         default, check, help, command-line flag): :func:`terrainvis.compare` takes each as a
@@ -118,9 +123,11 @@ class Relocation:
         A bound's starts: the heights of the first of these relocations the run computed
         are passed as ``start=``.
     predicate : bool
-        It evaluates visibility itself: :func:`terrainvis.compare` hands it the predicate of
-        the run's :class:`~terrainvis.visibility.Sight` too (its ``engine``, ``curvature``
-        and ``earth_radius``), the record it hands to the visibility computations.
+        It evaluates visibility itself: :func:`terrainvis.compare` hands it ``sight=``, the
+        :class:`~terrainvis.visibility.Sight` of the verdicts on S(T) (the run's engine,
+        curvature and earth radius, and the unit's end radius), in place of those four
+        keywords, so ``sight`` must then be among its :attr:`options`; :func:`relocate`
+        passes it on when the caller gives it.
     memory : callable, optional
         ``memory(settings) -> (bytes, what)``: a lower bound of what it allocates in one
         unit of :func:`terrainvis.compare` beyond the measure's own, from the run's
@@ -160,6 +167,8 @@ class Relocation:
     linestyle: str = "-"
 
     def __post_init__(self):
+        if self.predicate and "sight" not in self.options:  # compare hands it the Sight of its verdicts
+            object.__setattr__(self, "options", tuple(self.options) + ("sight",))
         if isinstance(self.run_options, list):
             object.__setattr__(self, "run_options", tuple(self.run_options))
         if isinstance(self.run_options, tuple):
@@ -173,11 +182,13 @@ class Relocation:
 
     def keywords(self, available: dict, sight=None) -> dict:
         """What this relocation takes of ``available`` (name -> value): ``offset`` and its
-        options, and with :attr:`predicate` the predicate of ``sight`` (a
-        :class:`~terrainvis.visibility.Sight`: its engine, curvature and earth radius)."""
+        options; with :attr:`predicate`, ``sight`` (a :class:`~terrainvis.visibility.Sight`,
+        the predicate of its verdicts) in place of the keywords it holds."""
         out = {k: v for k, v in available.items() if k == "offset" or k in self.options}
         if self.predicate and sight is not None:
-            out.update(engine=sight.engine, curvature=sight.curvature, earth_radius=sight.earth_radius)
+            for name in _PREDICATE:
+                out.pop(name, None)
+            out["sight"] = sight
         return out
 
 
@@ -233,10 +244,10 @@ def _oracle_tables(accuracy) -> dict:
 
 
 _CALIBRATED_OPTIONS = ("original", "target_height", "end_radius", "curvature", "earth_radius", "n_partners", "sweeps",
-                       "seed", "min_gain", "neighbours")
+                       "seed", "min_gain", "neighbours", "sight")
 _EYE_OPTIONS = ("eye",) + _CALIBRATED_OPTIONS
 _ORACLE_OPTIONS = ("reference", "mask", "original", "end_radius", "engine", "n_candidates", "start", "curvature",
-                   "earth_radius")
+                   "earth_radius", "sight")
 
 #: Every relocation by name, in the order of the tables and figures.
 RELOCATIONS: Registry = Registry("relocation", {

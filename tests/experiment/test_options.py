@@ -211,10 +211,9 @@ def test_a_toy_option_is_on_the_command_line(toy, tmp_path, capsys):
 
 def test_the_run_s_sight_reaches_every_visibility_computation(monkeypatch, grid):
     """The options declared ``los=True`` are the fields of the run's Sight, one record that the units
-    hand to visibility_matrix, viewshed and the viewshed measure's siting (site_observers), and whose
-    predicate (engine, curvature, earth radius) they hand as keywords to every relocation that computes
-    visibility itself (declared ``predicate=True``: calibrated, oracle); a relocation that does not
-    (full) gets none of it."""
+    hand to visibility_matrix, viewshed, the viewshed measure's siting (site_observers) and every
+    relocation that computes visibility itself (declared ``predicate=True``: calibrated, oracle; with the
+    end radius of its verdicts on S(T)); a relocation that does not (full) gets none of it."""
     from terrainvis.relocation import registry as relocation
     from terrainvis import visibility
 
@@ -223,11 +222,9 @@ def test_the_run_s_sight_reaches_every_visibility_computation(monkeypatch, grid)
     def spy(fn):
         def wrapped(*args, **kw):
             if not inside:  # the units' own calls, not relocate's calls of visibility_matrix
-                if fn.__name__ == "relocate":
-                    seen.append(("relocate", args[2], kw.get("curvature", "not given")))
-                else:
-                    s = kw.get("sight")
-                    seen.append((fn.__name__, None, s.curvature if s is not None else "no Sight"))
+                s = kw.get("sight")
+                seen.append((fn.__name__, args[2] if fn.__name__ == "relocate" else None,
+                             s.curvature if s is not None else "no Sight"))
             inside.append(fn)
             try:
                 return fn(*args, **kw)
@@ -240,13 +237,13 @@ def test_the_run_s_sight_reaches_every_visibility_computation(monkeypatch, grid)
         monkeypatch.setattr(module, name, spy(getattr(module, name)))
     df = compare({"g": grid}, curvature=0.13, relocations=["full", "calibrated", "oracle"], **_small())
     assert df["error"].isna().all()
-    assert set(seen) == {("visibility_matrix", None, 0.13), ("relocate", "full", "not given"),
+    assert set(seen) == {("visibility_matrix", None, 0.13), ("relocate", "full", "no Sight"),
                          ("relocate", "calibrated", 0.13), ("relocate", "oracle", 0.13)}
     seen.clear()
     df = compare({"g": grid}, curvature=0.25, measure="viewshed", n_observers=1,
                  **_small(relocations=["half", "calibrated"]))
     assert df["error"].isna().all()
-    assert set(seen) == {("viewshed", None, 0.25), ("relocate", "half", "not given"), ("relocate", "calibrated", 0.25),
+    assert set(seen) == {("viewshed", None, 0.25), ("relocate", "half", "no Sight"), ("relocate", "calibrated", 0.25),
                          ("site_observers", None, 0.25)}
     # an option declared los=True is a field of the Sight: one that names none is refused before any unit runs
     monkeypatch.setitem(OPTIONS, "toy_refraction", Option("toy_refraction", 0.0, lambda v, n: float(v),

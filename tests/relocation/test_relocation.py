@@ -9,8 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from terrainvis import HeightGrid, relocate, sample_points, synthetic_terrain
+from simplifiers import simplify
+from terrainvis import HeightGrid, relocate, sample_points, synthetic_terrain, visibility_matrix
 from terrainvis.errors import OutsideFootprintError
+from terrainvis.relocation import RELOCATIONS
+from terrainvis.visibility import Sight
 
 
 def _plane(z0=10.0):
@@ -152,3 +155,24 @@ def test_oracle_respects_the_mask_and_needs_its_reference():
         relocate(P, S, "oracle", reference=V[:3, :3])
     with pytest.raises(TypeError, match="original must be a terrainvis.HeightGrid"):
         relocate(P, S, "oracle", reference=V, original=S.to_tin())
+
+
+def test_the_relocations_that_compute_visibility_take_the_sight_of_their_verdicts():
+    """calibrated, eye and oracle take ``sight=`` (end radius, curvature, earth radius; the oracle's
+    engine too), as compare hands it, in place of those keywords: the same heights; a Sight beside
+    one of those keywords is refused, naming it."""
+    T = synthetic_terrain("hills", size=33, seed=2)
+    S = simplify(T, "lls", 2)
+    P = sample_points(T, 12, seed=1)
+    P[:, 2] += 1.7
+    kw = dict(curvature=0.85714, earth_radius=6378137.0 / 400, end_radius=3.0)
+    reference = visibility_matrix(T, P, curvature=kw["curvature"], earth_radius=kw["earth_radius"])
+    for how, extra in (("calibrated", dict(original=T, n_partners=64)), ("eye", dict(original=T, n_partners=64)),
+                       ("oracle", dict(reference=reference))):
+        by_keywords = relocate(P, S, how, offset=1.7, **extra, **kw)
+        by_sight = relocate(P, S, how, offset=1.7, **extra, sight=Sight.make(**kw))
+        assert np.array_equal(by_keywords, by_sight), how
+        assert not np.array_equal(by_sight, relocate(P, S, how, offset=1.7, **extra)), how  # the Sight was read
+        with pytest.raises(TypeError, match="pass either sight= or the keyword curvature=, not both"):
+            relocate(P, S, how, offset=1.7, **extra, sight=Sight.make(**kw), curvature=0.5)
+    assert "sight" in RELOCATIONS["calibrated"].options and "sight" not in RELOCATIONS["full"].options
