@@ -86,7 +86,8 @@ from terrainvis.core.repair import PostError, PostProcessor
 from .levels import budget_tolerance, check_budget
 
 __all__ = [
-    "build", "resolve_backend", "report_notes", "BACKENDS", "AUTO_MAX_SAMPLES", "TILE_SAMPLES", "PYMESHLAB_DEFAULTS", "FAST_DEFAULTS",
+    "build", "resolve_backend", "report_notes", "BACKENDS", "AUTO_MAX_SAMPLES", "TILE_SAMPLES", "PYMESHLAB_DEFAULTS",
+    "FAST_DEFAULTS",
 ]
 
 #: The decimation libraries :func:`build` can use (and ``"auto"`` to choose by size).

@@ -320,7 +320,7 @@ def siting_coverage(grid: HeightGrid, simplified, k: int, *, offset: float = 0.0
     sight : Sight, optional
         The sight lines' engine and earth model (:class:`~terrainvis.visibility.Sight`; its
         heights are ``offset`` and ``target_height``), for every siting and viewshed; by
-        default the exact engine's on a flat earth.
+        default ``Sight()``'s: the engine ``"auto"`` on a flat earth.
 
     Returns
     -------

@@ -711,14 +711,17 @@ def sight(settings: Settings):
     the earth's curvature and radius) and its ``target_height``, with no field of view; the
     pair measure sets the end radius of its verdicts on S(T), the viewshed measure the eye's
     height (``offset``)."""
+    import dataclasses
+
     from ..visibility import Sight
 
     fields = {name: getattr(settings, name) for name, option in OPTIONS.items() if option.los}
-    try:
-        return Sight(target_height=settings.target_height, **fields)
-    except TypeError as exc:  # an option declared los=True that names no field of a Sight
+    other = sorted(set(fields) - {f.name for f in dataclasses.fields(Sight)} | ({"target_height"} & set(fields)))
+    if other:
         raise TypeError(f"the options declared los=True must be fields of a terrainvis.visibility.Sight, got "
-                        f"{sorted(fields)}: {exc}") from None
+                        f"{sorted(fields)}: {other} {'is not one' if len(other) == 1 else 'are not'} (the Sight "
+                        "holds engine, curvature, earth_radius, and the run's target_height)")
+    return Sight(target_height=settings.target_height, **fields)
 
 
 # ---------------------------------------------------------------------- the signature and docstring

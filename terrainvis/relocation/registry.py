@@ -126,8 +126,8 @@ class Relocation:
         It evaluates visibility itself: :func:`terrainvis.compare` hands it ``sight=``, the
         :class:`~terrainvis.visibility.Sight` of the verdicts on S(T) (the run's engine,
         curvature and earth radius, and the unit's end radius), in place of those four
-        keywords, so ``sight`` must then be among its :attr:`options`; :func:`relocate`
-        passes it on when the caller gives it.
+        keywords (``sight`` is added to its :attr:`options`, so its function takes it);
+        :func:`relocate` passes it on when the caller gives it.
     memory : callable, optional
         ``memory(settings) -> (bytes, what)``: a lower bound of what it allocates in one
         unit of :func:`terrainvis.compare` beyond the measure's own, from the run's
