@@ -683,6 +683,10 @@ def _last_ring_bound(buf, k, outer, filled, side, last):
     return hi + slack + REL * abs(hi)
 
 
+#: Segments per block of the first hidden test (:func:`_run_segments`).
+BLOCK_SEGS = 8
+
+
 @nb.njit(cache=True, nogil=True, error_model="numpy", **KERNEL_ONLY)
 def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, last):
     """Fill a run's samples and decide the targets on its outer line, segment by segment.
@@ -690,8 +694,10 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
     ``span`` is ``(j, q, i0, i1, lo, cells, plo, phi)``: the sample ring, the quadrant,
     the run's cells in the window, its
     first row or column, whether annulus j is bounded cell by cell (then each SEG-aligned
-    segment is first tested with :func:`_seg_hidden`; a hidden one gets no samples, its
-    targets are blocked and ``hidden`` flags it) and the sector's own pseudo-angles
+    segment is first tested with :func:`_seg_hidden`, a whole aligned block of
+    :data:`BLOCK_SEGS` segments at once before them: each segment of a hidden block is
+    hidden too, its rectangle lower and farther; a hidden one gets no samples, its targets
+    are blocked and ``hidden`` flags it) and the sector's own pseudo-angles
     [plo, phi). Returns how many targets the lower bound blocked; ``counts`` gets the
     others (see :func:`sweep`). ``last`` as in :func:`_last_ring_bound`.
     """
@@ -714,18 +720,32 @@ def _run_segments(g, eye, rules, w, tg, rn, span, dwin, buf, hidden, counts, las
     slo = lo // SEG
     while a <= end:
         b = min((a // SEG + 1) * SEG - 1, end)  # cells a..b: one aligned segment
-        top = b + 1 if b == end else b  # its samples a..top (the next segment starts at b + 1)
         hid = False
         pmin = pmax = 0.0
         if cells:
-            if vertical:
-                zmax = np.float64(max(g.cmax[a // SEG, c0], g.cmax[a // SEG, c0 + 1]))
-                rect = (g.xs[c0] - eye.ex, g.xs[c0 + 1] - eye.ex, g.ys[a] - eye.ey, g.ys[b + 1] - eye.ey)
-            else:
-                zmax = np.float64(max(g.rmax[r0, a // SEG], g.rmax[r0 + 1, a // SEG]))
-                rect = (g.xs[a] - eye.ex, g.xs[b + 1] - eye.ex, g.ys[r0] - eye.ey, g.ys[r0 + 1] - eye.ey)
-            hid, pmin, pmax = _seg_hidden(eye, rules, w.lb, (glo, bsz // dwin[5] + 2, bsz * 0.25), rect, zmax, q)
-        hidden[a // SEG - slo] = hid
+            # an aligned block of BLOCK_SEGS segments first: when it lies under the lower bound, so
+            # do all of its segments (one test where there were BLOCK_SEGS); else the segment (one
+            # call site: numba inlines the test once)
+            block = a % (SEG * BLOCK_SEGS) == 0 and a + SEG * BLOCK_SEGS - 1 <= end
+            for attempt in range(2 if block else 1):
+                last_cell = a + SEG * BLOCK_SEGS - 1 if block and attempt == 0 else b
+                zmax = -INF  # the cells' heights are at most their segments' strip maxima
+                for k in range(a // SEG, last_cell // SEG + 1):
+                    if vertical:
+                        zmax = max(zmax, np.float64(max(g.cmax[k, c0], g.cmax[k, c0 + 1])))
+                    else:
+                        zmax = max(zmax, np.float64(max(g.rmax[r0, k], g.rmax[r0 + 1, k])))
+                if vertical:
+                    rect = (g.xs[c0] - eye.ex, g.xs[c0 + 1] - eye.ex, g.ys[a] - eye.ey, g.ys[last_cell + 1] - eye.ey)
+                else:
+                    rect = (g.xs[a] - eye.ex, g.xs[last_cell + 1] - eye.ex, g.ys[r0] - eye.ey, g.ys[r0 + 1] - eye.ey)
+                hid, pmin, pmax = _seg_hidden(eye, rules, w.lb, (glo, bsz // dwin[5] + 2, bsz * 0.25), rect, zmax, q)
+                if hid:
+                    b = last_cell
+                    break
+        top = b + 1 if b == end else b  # the samples a..top (the next segment starts at b + 1)
+        for k in range(a // SEG - slo, b // SEG - slo + 1):
+            hidden[k] = hid
         if hid:
             if tg.own and pmin >= plo + PEPS and pmax < phi - PEPS:
                 # every sample of the segment is in the sector: no pseudo-angle to test, and
