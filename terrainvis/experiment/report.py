@@ -494,11 +494,9 @@ def oracle_gap(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFram
         best, points). Empty when the result has no oracle rows. The oracle's own table
         (:func:`terrainvis.relocation.oracle.gap_table`), as :func:`relocation_tables` gives it.
     """
-    from ..relocation.oracle import gap_table
-    from ..relocation.registry import practical_relocations
+    from ..relocation.registry import ORACLE, RELOCATIONS
 
-    mu = accuracy_by_relocation(df, predicate=predicate)
-    return _in_method_order(gap_table(mu, [r for r in practical_relocations() if r in mu.columns]))
+    return _in_method_order(RELOCATIONS[ORACLE].tables(accuracy_by_relocation(df, predicate=predicate))["oracle"])
 
 
 def accuracy_by_relocation(df: pd.DataFrame, *, predicate: str | None = None) -> pd.DataFrame:

@@ -236,12 +236,13 @@ def predicate_of(sight, **keywords) -> dict:
     ``curvature``, ``earth_radius``, and ``engine`` where it takes one), as ``sight`` gives
     them when a :class:`~terrainvis.visibility.Sight` is passed in their place (as
     :func:`terrainvis.compare` does: :meth:`terrainvis.relocation.Relocation.keywords`); a
-    keyword set beside it is refused, naming it."""
+    keyword set beside it, or a field of view, is refused as the pair functions refuse them
+    (:func:`~terrainvis.visibility.sight.pair_sight`)."""
     if sight is None:
         return keywords
-    from ..visibility.sight import PAIR_KEYWORDS, sight_of
+    from ..visibility.sight import pair_sight
 
-    s = sight_of(sight, keywords, PAIR_KEYWORDS)
+    s = pair_sight(sight, keywords, "relocate")
     return {name: getattr(s, name) for name in keywords}
 
 

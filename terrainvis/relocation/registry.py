@@ -58,10 +58,6 @@ __all__ = [
 #: T itself, or T's verdicts of the evaluated pairs (a bound's).
 NEEDS = ("original", "reference")
 
-#: The keywords of the predicate that a Sight holds: a relocation declared ``predicate=True`` gets
-#: ``sight=`` from :func:`terrainvis.compare` in their place (:meth:`Relocation.keywords`).
-_PREDICATE = ("engine", "end_radius", "curvature", "earth_radius")
-
 #: The paper's relocations, in the paper's order.
 PAPER_RELOCATIONS = ("identity", "full", "half")
 #: The calibrated relocation's name.
@@ -186,7 +182,9 @@ class Relocation:
         the predicate of its verdicts) in place of the keywords it holds."""
         out = {k: v for k, v in available.items() if k == "offset" or k in self.options}
         if self.predicate and sight is not None:
-            for name in _PREDICATE:
+            from ..visibility.sight import PAIR_KEYWORDS  # the predicate's keywords, which the Sight holds
+
+            for name in PAIR_KEYWORDS:
                 out.pop(name, None)
             out["sight"] = sight
         return out

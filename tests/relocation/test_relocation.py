@@ -160,7 +160,7 @@ def test_oracle_respects_the_mask_and_needs_its_reference():
 def test_the_relocations_that_compute_visibility_take_the_sight_of_their_verdicts():
     """calibrated, eye and oracle take ``sight=`` (end radius, curvature, earth radius; the oracle's
     engine too), as compare hands it, in place of those keywords: the same heights; a Sight beside
-    one of those keywords is refused, naming it."""
+    one of those keywords, or with a field of view, is refused, naming it."""
     T = synthetic_terrain("hills", size=33, seed=2)
     S = simplify(T, "lls", 2)
     P = sample_points(T, 12, seed=1)
@@ -175,4 +175,6 @@ def test_the_relocations_that_compute_visibility_take_the_sight_of_their_verdict
         assert not np.array_equal(by_sight, relocate(P, S, how, offset=1.7, **extra)), how  # the Sight was read
         with pytest.raises(TypeError, match="pass either sight= or the keyword curvature=, not both"):
             relocate(P, S, how, offset=1.7, **extra, sight=Sight.make(**kw), curvature=0.5)
+        with pytest.raises(ValueError, match="relocate takes the predicate of a Sight .* its field of view"):
+            relocate(P, S, how, offset=1.7, **extra, sight=Sight.make(max_distance=100.0, **kw))
     assert "sight" in RELOCATIONS["calibrated"].options and "sight" not in RELOCATIONS["full"].options
