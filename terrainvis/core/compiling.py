@@ -95,6 +95,38 @@ def from_python(kernel):
     return call
 
 
+def kernel_of(kind: int, *names: str, **options):
+    """Decorate a kernel written once for several kinds of input (a grid, a TIN) and made
+    for one of them: ``kind`` (0, 1, ...) is a constant of the function's closure, and its
+    body branches on it (``if kind == GRID: ...``), so numba drops the other branches before
+    it types the function, and each made kernel compiles to the code a copy written for its
+    kind alone would (the closure's constant also keys numba's cache). The kernel takes the
+    name ``names[kind]`` (its cache files, the compile notices of :data:`KERNELS`);
+    ``options`` are numba's, beside ``cache=True, nogil=True`` (``**KERNEL_ONLY`` for a
+    kernel only kernels call). A factory makes each kind::
+
+        def _threshold(kind):
+            @kernel_of(kind, "grid_threshold", "tin_threshold", **KERNEL_ONLY)
+            def threshold(s, st, p, q, rules):
+                ...
+            return threshold
+
+        grid_threshold, tin_threshold = _threshold(GRID), _threshold(TIN)
+
+    The whole-code tests read the names from the decorator (``tests/whole/test_kernel_only.py``,
+    ``tests/whole/test_layout.py``)."""
+    import numba as nb
+
+    name = names[kind]
+
+    def made(function):
+        function.__name__ = name
+        function.__qualname__ = name
+        return nb.njit(cache=True, nogil=True, **options)(function)
+
+    return made
+
+
 #: The garbage collector's middle threshold (collections of the youngest generation between
 #: two of the middle one; Python's default is 10) while a kernel of terrainvis compiles.
 COMPILE_GC_THRESHOLD = 1000

@@ -45,13 +45,22 @@ The walks
 * :func:`tin_max_slope` walks the TIN from face to face across the edges the track
   crosses (the faces' neighbours), from the face under the interval's start.
 
-Twins
------
-The grid and TIN drivers (``grid_row`` / ``tin_row``, ``grid_heights`` / ``tin_heights``,
-...) are twins that differ in the walk they call. Writing each once over primitives
-dispatched on the surface record's numba type was tried (docs/performance.md, "Threshold
-kernels written once: tried, not kept"): the same bits, but the calibrated relocation on
-a TIN ran 4-6 % slower and the engine compiled 19 % longer, so the twins stay.
+One driver for both surfaces
+----------------------------
+Each driver above the walks (the threshold, the clamped threshold, the rows, the best
+heights, the loops Python calls, the eye's spans and thresholds) is written once, in a
+factory ``_make_x(kind)``, and made for each surface, ``GRID`` and ``TIN``
+(:func:`terrainvis.core.compiling.kernel_of`): ``grid_row, tin_row = _make_entry_row(GRID),
+_make_entry_row(TIN)``. Its body branches on ``kind`` only where the surfaces differ (the
+walk and the probes it calls, a grid's walk stack ``st``, a TIN's face under the point
+``fp``); ``kind`` is a constant of the closure, so numba drops the other branch before
+typing, and each made driver is compiled as one written for its surface alone: against
+the twins they replaced, the same bits, no slower and compiled no longer
+(docs/performance.md, "Threshold kernels written once, per kind"). Every driver takes
+the stack (None on a TIN) and the clamped walks take ``fp`` (-1 on a grid), so that one
+signature serves both. The walks themselves (:func:`grid_max_slope`,
+:func:`grid_dda_max_slope`, :func:`tin_max_slope`) and the probes stay per surface: they
+are different algorithms.
 
 Threads
 -------
@@ -100,7 +109,7 @@ from collections import namedtuple
 import numba as nb
 import numpy as np
 
-from ..core.compiling import KERNEL_ONLY
+from ..core.compiling import KERNEL_ONLY, kernel_of
 from ..core.stopflag import stopped
 from ..core.surface import borrow, borrow_grid, borrow_tin, cell_height, face_at, face_height, locate
 from ..tolerances import TRACK_EDGE_SLACK, TRACK_PROBE_REL, TRACK_STEP_MIN
@@ -111,6 +120,12 @@ _INF = np.inf
 #: ``skip`` of the row loops when no partner is skipped: an int64, not a literal -1 (numba
 #: would compile the row loop once more for the literal).
 _NO_SKIP = np.int64(-1)
+#: ``fp`` of the clamped walks when no face is known (on a grid, always): an int64, as ``_NO_SKIP``.
+_NO_FACE = np.int64(-1)
+#: The surfaces the drivers below are made for (:func:`terrainvis.core.compiling.kernel_of`:
+#: each driver is written once and branches on its kind, which numba resolves before typing).
+GRID = 0
+TIN = 1
 
 #: The predicate and the choice of a height: the trim ``delta``, the ``end_radius``, the
 #: clearance tolerance ``tol``, the curvature coefficient ``kc`` (``curvature / (2 R)``,
@@ -317,38 +332,59 @@ def interval(px, py, pz, qx, qy, qz, delta, end_radius):
     return u0, 1.0 - u0
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def grid_threshold(g, st, p, q, rules):
-    """The threshold height of the point p = (px, py, pz) for the target q = (qx, qy, qz)
-    under the :data:`Rules` ``rules``; ``pz`` (a height near the answer) only sets the
-    trim. ``-inf`` when the segment is not tested."""
-    return grid_clamped(g, st, p, q, rules, -_INF, _INF)[0]
+def _make_threshold(kind):
+    @kernel_of(kind, "grid_threshold", "tin_threshold", **KERNEL_ONLY)
+    def threshold(s, st, p, q, rules):
+        """The threshold height of the point p = (px, py, pz) for the target q = (qx, qy, qz)
+        on the surface ``s`` (``st``: a grid's walk stack, None on a TIN) under the
+        :data:`Rules` ``rules``; ``pz`` (a height near the answer) only sets the trim.
+        ``-inf`` when the segment is not tested."""
+        if kind == GRID:
+            return grid_clamped(s, st, p, q, rules, -_INF, _INF, _NO_FACE)[0]
+        else:
+            return tin_clamped(s, st, p, q, rules, -_INF, _INF, _NO_FACE)[0]
+
+    return threshold
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def grid_clamped(g, st, p, q, rules, zlo, zhi):
-    """:func:`grid_threshold` known exactly only inside (``zlo``, ``zhi``): ``(z, state)``
-    with state 0 (z is the threshold, bit for bit), -1 (the threshold is at most z, about
-    ``zlo``) or 1 (it is at least z, about ``zhi`` or above). The walk skips what cannot
-    exceed ``zlo`` and stops at ``zhi`` (see "Windows"); with (-inf, inf) it is the
-    exact threshold, state 0 (-inf when the segment is not tested)."""
-    px, py, pz = p
-    qx, qy, qz = q
-    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
-    if u0 < 0.0:
-        return -_INF, 0
-    dx = px - qx
-    dy = py - qy
-    floor = zlo - qz
-    cap = zhi - qz
-    tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy), floor, cap)
-    if _grid_probes_reach(g, tr, rules.margin):
-        return zhi, 1
-    if g.ltop <= DDA_MAX_LEVELS:
-        m = grid_dda_max_slope(g, tr)
-    else:
-        m = grid_max_slope(g, tr, st)
-    return _clamped(qz, m, floor, cap)
+def _make_clamped(kind):
+    @kernel_of(kind, "grid_clamped", "tin_clamped", **KERNEL_ONLY)
+    def clamped(s, st, p, q, rules, zlo, zhi, fp):
+        """:func:`grid_threshold` known exactly only inside (``zlo``, ``zhi``): ``(z, state)``
+        with state 0 (z is the threshold, bit for bit), -1 (the threshold is at most z, about
+        ``zlo``) or 1 (it is at least z, about ``zhi`` or above). The walk stops at ``zhi``
+        and, on a grid, skips what cannot exceed ``zlo`` (a face walk has nothing to skip;
+        see "Windows"); with (-inf, inf) it is the exact threshold, state 0 (-inf when the
+        segment is not tested). ``fp``: on a TIN, the face that holds p (-1: unknown, no
+        probes)."""
+        px, py, pz = p
+        qx, qy, qz = q
+        u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
+        if u0 < 0.0:
+            return -_INF, 0
+        dx = px - qx
+        dy = py - qy
+        floor = zlo - qz
+        cap = zhi - qz
+        tr = Track(qx, qy, qz, dx, dy, u0, u1, rules.tol, rules.kc * (dx * dx + dy * dy), floor, cap)
+        if kind == GRID:
+            if _grid_probes_reach(s, tr, rules.margin):
+                return zhi, 1
+            if s.ltop <= DDA_MAX_LEVELS:
+                m = grid_dda_max_slope(s, tr)
+            else:
+                m = grid_max_slope(s, tr, st)
+        else:
+            if _tin_probes_reach(s, tr, fp, rules.margin):
+                return zhi, 1
+            m = tin_max_slope(s, tr)
+        return _clamped(qz, m, floor, cap)
+
+    return clamped
+
+
+grid_threshold, tin_threshold = _make_threshold(GRID), _make_threshold(TIN)
+grid_clamped, tin_clamped = _make_clamped(GRID), _make_clamped(TIN)
 
 
 #: Where :func:`_grid_probes_reach` probes a track first: these many cells of the grid
@@ -512,30 +548,6 @@ def tin_max_slope(w, tr):
                     break
         f = g
     return best
-
-
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def tin_threshold(w, p, q, rules):
-    """The threshold height of the point p for the target q on a TIN; see :func:`grid_threshold`."""
-    return tin_clamped(w, p, q, rules, -_INF, _INF, -1)[0]
-
-
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def tin_clamped(w, p, q, rules, zlo, zhi, fp):
-    """:func:`grid_clamped` on a TIN (the walk stops at ``zhi``; a face walk has nothing to
-    skip below ``zlo``). ``fp``: the face that holds p (-1: unknown, no probes)."""
-    px, py, pz = p
-    qx, qy, qz = q
-    u0, u1 = interval(px, py, pz, qx, qy, qz, rules.delta, rules.end_radius)
-    if u0 < 0.0:
-        return -_INF, 0
-    floor = zlo - qz
-    cap = zhi - qz
-    bulge = rules.kc * ((px - qx) ** 2 + (py - qy) ** 2)
-    tr = Track(qx, qy, qz, px - qx, py - qy, u0, u1, rules.tol, bulge, floor, cap)
-    if _tin_probes_reach(w, tr, fp, rules.margin):
-        return zhi, 1
-    return _clamped(qz, tin_max_slope(w, tr), floor, cap)
 
 
 #: :func:`_tin_probes_reach` looks at the track where it leaves this many faces, walking
@@ -717,176 +729,169 @@ def optimistic(thr, state, vis):
 
 
 # --------------------------------------------------------------------------- loops
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _grid_row(g, st, p, q, rules, skip, out):
-    """``out[k]`` = the threshold of the point p = (x, y, z) for the target q[k] (-inf for
-    k = ``skip``) on the grid ``g``."""
-    # views without reference counts (the caller keeps the arrays alive): every walk
-    # would otherwise count references to each array of g and st (5-19 % of the row)
-    g = borrow_grid(g)
-    st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
-    for k in range(q.shape[0]):
-        if k == skip:
-            out[k] = -_INF
+def _make_row(kind):
+    @kernel_of(kind, "_grid_row", "_tin_row", **KERNEL_ONLY)
+    def row(s, st, p, q, rules, skip, out):
+        """``out[k]`` = the threshold of the point p = (x, y, z) for the target q[k] (-inf for
+        k = ``skip``) on the surface ``s`` (``st``: a grid's walk stack, None on a TIN)."""
+        # views without reference counts (the caller keeps the arrays alive): every walk
+        # would otherwise count references to each array of the surface (5-20 % of the row)
+        if kind == GRID:
+            s = borrow_grid(s)
+            st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
         else:
-            out[k] = grid_threshold(g, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-
-
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _tin_row(tin, p, q, rules, skip, out):
-    """:func:`_grid_row` on a TIN."""
-    tin = borrow_tin(tin)  # as in _grid_row (6-20 % of the row)
-    for k in range(q.shape[0]):
-        if k == skip:
-            out[k] = -_INF
-        else:
-            out[k] = tin_threshold(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-
-
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _grid_window_row(g, st, p, q, rules, skip, out, state):
-    """:func:`_grid_row` known exactly only within ``rules.window`` of p's height:
-    :func:`grid_clamped`'s ``(z, state)`` into ``out`` and ``state``."""
-    g = borrow_grid(g)
-    st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
-    zlo = p[2] - rules.window
-    zhi = p[2] + rules.window
-    for k in range(q.shape[0]):
-        if k == skip:
-            out[k] = -_INF
-            state[k] = 0
-        else:
-            out[k], state[k] = grid_clamped(g, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi)
-
-
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _tin_window_row(tin, p, q, rules, skip, out, state):
-    """:func:`_grid_window_row` on a TIN."""
-    tin = borrow_tin(tin)
-    zlo = p[2] - rules.window
-    zhi = p[2] + rules.window
-    fp = face_at(tin, p[0], p[1])
-    for k in range(q.shape[0]):
-        if k == skip:
-            out[k] = -_INF
-            state[k] = 0
-        else:
-            out[k], state[k] = tin_clamped(tin, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi, fp)
-
-
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _grid_best(g, st, p, q, vis, near, rules, skip, thr, state):
-    """The best height of the point p = (x, y, reference height) against the partners q
-    (but ``skip``) whose verdicts on T are ``vis``, with its neighbours ``near`` = (their
-    thresholds, verdicts, weight): :func:`best_height_kept`'s ``(z, agreement)``. The
-    thresholds are walked in the window first (``thr``, ``state``: scratch rows), and those
-    known only by a bound exactly when the window's choice might not stand (see "Windows")."""
-    lthr, lvis, weight = near
-    if rules.window < _INF:
-        _grid_window_row(g, st, p, q, rules, skip, thr, state)
-        lo, hi = optimistic(thr, state, vis)
-        z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
-        if z > lo + rules.margin and z < hi - rules.margin:
-            return z, a
-        gb = borrow_grid(g)  # the window's exact thresholds stand; the bounds are walked whole
-        sb = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
+            s = borrow_tin(s)
         for k in range(q.shape[0]):
-            if state[k] != 0:
-                thr[k] = grid_threshold(gb, sb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-    else:
-        _grid_row(g, st, p, q, rules, skip, thr)
-    return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+            if k == skip:
+                out[k] = -_INF
+            elif kind == GRID:
+                out[k] = grid_threshold(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+            else:
+                out[k] = tin_threshold(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+
+    return row
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _tin_best(tin, p, q, vis, near, rules, skip, thr, state):
-    """:func:`_grid_best` on a TIN."""
-    lthr, lvis, weight = near
-    if rules.window < _INF:
-        _tin_window_row(tin, p, q, rules, skip, thr, state)
-        lo, hi = optimistic(thr, state, vis)
-        z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
-        if z > lo + rules.margin and z < hi - rules.margin:
-            return z, a
-        tb = borrow_tin(tin)  # the window's exact thresholds stand; the bounds are walked whole
+def _make_window_row(kind):
+    @kernel_of(kind, "_grid_window_row", "_tin_window_row", **KERNEL_ONLY)
+    def window_row(s, st, p, q, rules, skip, out, state):
+        """:func:`_grid_row` known exactly only within ``rules.window`` of p's height:
+        :func:`grid_clamped`'s ``(z, state)`` into ``out`` and ``state``."""
+        if kind == GRID:
+            s = borrow_grid(s)
+            st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
+            fp = _NO_FACE
+        else:
+            s = borrow_tin(s)
+            fp = face_at(s, p[0], p[1])
+        zlo = p[2] - rules.window
+        zhi = p[2] + rules.window
         for k in range(q.shape[0]):
-            if state[k] != 0:
-                thr[k] = tin_threshold(tb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-    else:
-        _tin_row(tin, p, q, rules, skip, thr)
-    return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+            if k == skip:
+                out[k] = -_INF
+                state[k] = 0
+            elif kind == GRID:
+                out[k], state[k] = grid_clamped(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi, fp)
+            else:
+                out[k], state[k] = tin_clamped(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi, fp)
+
+    return window_row
 
 
-@nb.njit(cache=True, nogil=True)
-def grid_row(g, p, q, rules, skip, out):
-    """:func:`_grid_row` with a stack of its own (one row, called from Python)."""
-    _grid_row(g, new_stack(g.ltop), p, q, rules, skip, out)
+def _make_best(kind):
+    @kernel_of(kind, "_grid_best", "_tin_best", **KERNEL_ONLY)
+    def best(s, st, p, q, vis, near, rules, skip, thr, state):
+        """The best height of the point p = (x, y, reference height) against the partners q
+        (but ``skip``) whose verdicts on T are ``vis``, with its neighbours ``near`` = (their
+        thresholds, verdicts, weight): :func:`best_height_kept`'s ``(z, agreement)``. The
+        thresholds are walked in the window first (``thr``, ``state``: scratch rows), and those
+        known only by a bound exactly when the window's choice might not stand (see "Windows")."""
+        lthr, lvis, weight = near
+        if rules.window < _INF:
+            if kind == GRID:
+                _grid_window_row(s, st, p, q, rules, skip, thr, state)
+            else:
+                _tin_window_row(s, st, p, q, rules, skip, thr, state)
+            lo, hi = optimistic(thr, state, vis)
+            z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+            if z > lo + rules.margin and z < hi - rules.margin:
+                return z, a
+            # the window's exact thresholds stand; the bounds are walked whole
+            if kind == GRID:
+                sb = borrow_grid(s)
+                stb = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
+            else:
+                sb = borrow_tin(s)
+                stb = st
+            for k in range(q.shape[0]):
+                if state[k] == 0:
+                    continue
+                if kind == GRID:
+                    thr[k] = grid_threshold(sb, stb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+                else:
+                    thr[k] = tin_threshold(sb, stb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
+        elif kind == GRID:
+            _grid_row(s, st, p, q, rules, skip, thr)
+        else:
+            _tin_row(s, st, p, q, rules, skip, thr)
+        return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
+
+    return best
 
 
-@nb.njit(cache=True, nogil=True)
-def tin_row(tin, p, q, rules, skip, out):
-    """:func:`_tin_row` (one row, called from Python)."""
-    _tin_row(tin, p, q, rules, skip, out)
+def _make_entry_row(kind):
+    @kernel_of(kind, "grid_row", "tin_row")
+    def entry_row(s, p, q, rules, skip, out):
+        """:func:`_grid_row` (one row, called from Python)."""
+        if kind == GRID:
+            _grid_row(s, new_stack(s.ltop), p, q, rules, skip, out)
+        else:
+            _tin_row(s, None, p, q, rules, skip, out)
+
+    return entry_row
 
 
-@nb.njit(cache=True, nogil=True)
-def grid_heights(g, p, q, vis, near, rules, out, score, i0, i1, stop):
-    """Best height of each point p[i], i in ``i0 .. i1 - 1``, = (x, y, reference height)
-    against the partners q (x, y, height on the surface), whose verdicts on T are
-    ``vis[i]``, keeping its agreement with its :data:`Neighbours` ``near`` (thresholds
-    ``near.lthr[i]``, verdicts ``near.lvis[i]``: :func:`best_height_kept`);
-    :func:`terrainvis.core.interrupt.call` spreads the points over threads."""
-    st = new_stack(g.ltop)
-    thr = np.empty(q.shape[0])
-    state = np.empty(q.shape[0], dtype=np.int8)
-    for i in range(i0, i1):
-        if stopped(stop):
-            return
-        out[i], score[i] = _grid_best(g, st, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
-                                      (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
+def _make_heights(kind):
+    @kernel_of(kind, "grid_heights", "tin_heights")
+    def heights(s, p, q, vis, near, rules, out, score, i0, i1, stop):
+        """Best height of each point p[i], i in ``i0 .. i1 - 1``, = (x, y, reference height)
+        against the partners q (x, y, height on the surface ``s``), whose verdicts on T are
+        ``vis[i]``, keeping its agreement with its :data:`Neighbours` ``near`` (thresholds
+        ``near.lthr[i]``, verdicts ``near.lvis[i]``: :func:`best_height_kept`);
+        :func:`terrainvis.core.interrupt.call` spreads the points over threads."""
+        if kind == GRID:
+            st = new_stack(s.ltop)
+        else:
+            st = None
+        thr = np.empty(q.shape[0])
+        state = np.empty(q.shape[0], dtype=np.int8)
+        for i in range(i0, i1):
+            if stopped(stop):
+                return
+            pi = (p[i, 0], p[i, 1], p[i, 2])
+            ni = (near.lthr[i], near.lvis[i], near.weight)
+            if kind == GRID:
+                out[i], score[i] = _grid_best(s, st, pi, q, vis[i], ni, rules, _NO_SKIP, thr, state)
+            else:
+                out[i], score[i] = _tin_best(s, st, pi, q, vis[i], ni, rules, _NO_SKIP, thr, state)
+
+    return heights
 
 
-@nb.njit(cache=True, nogil=True)
-def tin_heights(tin, p, q, vis, near, rules, out, score, i0, i1, stop):
-    """:func:`grid_heights` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
-    thr = np.empty(q.shape[0])
-    state = np.empty(q.shape[0], dtype=np.int8)
-    for i in range(i0, i1):
-        if stopped(stop):
-            return
-        out[i], score[i] = _tin_best(tin, (p[i, 0], p[i, 1], p[i, 2]), q, vis[i],
-                                     (near.lthr[i], near.lvis[i], near.weight), rules, _NO_SKIP, thr, state)
+def _make_sweep(kind):
+    @kernel_of(kind, "grid_sweep", "tin_sweep")
+    def sweep(s, q, order, vis, rules, stop):
+        """One Gauss-Seidel sweep: each partner q[order[j]] in turn takes its best height
+        (column 2 of ``q``, updated in place) against the others at their current heights.
+
+        Serial: each step depends on the previous one (a compare runs units side by side).
+        """
+        thr = np.empty(q.shape[0])
+        state = np.empty(q.shape[0], dtype=np.int8)
+        if kind == GRID:
+            st = new_stack(s.ltop)
+        else:
+            st = None
+        none = (np.empty(0), np.empty(0, dtype=np.int8), 0.0)
+        for j in range(order.shape[0]):
+            if stopped(stop):
+                return
+            i = order[j]
+            qi = (q[i, 0], q[i, 1], q[i, 2])
+            if kind == GRID:
+                q[i, 2], _ = _grid_best(s, st, qi, q, vis[i], none, rules, i, thr, state)
+            else:
+                q[i, 2], _ = _tin_best(s, st, qi, q, vis[i], none, rules, i, thr, state)
+
+    return sweep
 
 
-@nb.njit(cache=True, nogil=True)
-def grid_sweep(g, q, order, vis, rules, stop):
-    """One Gauss-Seidel sweep: each partner q[order[j]] in turn takes its best height
-    (column 2 of ``q``, updated in place) against the others at their current heights.
-
-    Serial: each step depends on the previous one (a compare runs units side by side).
-    """
-    thr = np.empty(q.shape[0])
-    state = np.empty(q.shape[0], dtype=np.int8)
-    st = new_stack(g.ltop)
-    none = (np.empty(0), np.empty(0, dtype=np.int8), 0.0)
-    for j in range(order.shape[0]):
-        if stopped(stop):
-            return
-        i = order[j]
-        q[i, 2], _ = _grid_best(g, st, (q[i, 0], q[i, 1], q[i, 2]), q, vis[i], none, rules, i, thr, state)
-
-
-@nb.njit(cache=True, nogil=True)
-def tin_sweep(tin, q, order, vis, rules, stop):
-    """:func:`grid_sweep` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
-    thr = np.empty(q.shape[0])
-    state = np.empty(q.shape[0], dtype=np.int8)
-    none = (np.empty(0), np.empty(0, dtype=np.int8), 0.0)
-    for j in range(order.shape[0]):
-        if stopped(stop):
-            return
-        i = order[j]
-        q[i, 2], _ = _tin_best(tin, (q[i, 0], q[i, 1], q[i, 2]), q, vis[i], none, rules, i, thr, state)
+_grid_row, _tin_row = _make_row(GRID), _make_row(TIN)
+_grid_window_row, _tin_window_row = _make_window_row(GRID), _make_window_row(TIN)
+_grid_best, _tin_best = _make_best(GRID), _make_best(TIN)
+grid_row, tin_row = _make_entry_row(GRID), _make_entry_row(TIN)
+grid_heights, tin_heights = _make_heights(GRID), _make_heights(TIN)
+grid_sweep, tin_sweep = _make_sweep(GRID), _make_sweep(TIN)
 
 
 # --------------------------------------------------------------------------- one eye, many targets
@@ -894,20 +899,23 @@ def tin_sweep(tin, q, order, vis, rules, stop):
 EYE_CHUNK = 256
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _grid_span(g, st, tr, u0, u1):
-    """Max of :func:`_value` over [u0, u1] of the track ``tr`` on the grid (the walk of
-    :func:`grid_threshold`, on that part of the track)."""
-    t = Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge, -_INF, _INF)
-    if g.ltop <= DDA_MAX_LEVELS:
-        return grid_dda_max_slope(g, t)
-    return grid_max_slope(g, t, st)
+def _make_span(kind):
+    @kernel_of(kind, "_grid_span", "_tin_span", **KERNEL_ONLY)
+    def span(s, st, tr, u0, u1):
+        """Max of :func:`_value` over [u0, u1] of the track ``tr`` on the surface ``s`` (the
+        walk of :func:`grid_threshold`, on that part of the track)."""
+        t = Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge, -_INF, _INF)
+        if kind == GRID:
+            if s.ltop <= DDA_MAX_LEVELS:
+                return grid_dda_max_slope(s, t)
+            return grid_max_slope(s, t, st)
+        else:
+            return tin_max_slope(s, t)
+
+    return span
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _tin_span(w, tr, u0, u1):
-    """:func:`_grid_span` on a TIN."""
-    return tin_max_slope(w, Track(tr.qx, tr.qy, tr.qz, tr.dx, tr.dy, u0, u1, tr.tol, tr.bulge, -_INF, _INF))
+_grid_span, _tin_span = _make_span(GRID), _make_span(TIN)
 
 
 @nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
@@ -926,94 +934,83 @@ def _trim(eye, tx, ty, tz, rules):
     return interval(tx, ty, tz, eye[0], eye[1], eye[2], rules.delta, rules.end_radius)[0]
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _grid_eye_one(g, st, eye, tx, ty, tz, rules):
-    """The threshold of the target point (tx, ty) for the fixed ``eye`` on the grid ``g``,
-    under the trim of a target at the answer itself.
+def _make_eye_one(kind):
+    @kernel_of(kind, "_grid_eye_one", "_tin_eye_one", **KERNEL_ONLY)
+    def eye_one(s, st, eye, tx, ty, tz, rules):
+        """The threshold of the target point (tx, ty) for the fixed ``eye`` on the surface
+        ``s``, under the trim of a target at the answer itself.
 
-    Walked first with the target at ``tz`` (which only sets the trim): ``t`` over
-    ``[ua, 1 - ua]``. When ``t`` differs from ``tz`` (above it: the target is hidden; below
-    it: the horizon the angle output needs), the trim ``ub`` of a target at ``t`` differs
-    slightly, and only the two slivers between ``ua`` and ``ub`` (at the eye, at the target)
-    are walked: a grown interval takes their maximum too; a shrunk one keeps ``t`` when
-    their maximum is below it (the maximum then lies in the part both share), and is
-    walked whole again otherwise. Near the eye, where a segment is short, this matters:
-    without it a horizon 1.3 m from the eye was 1.3e-6 m off the pair engine's.
-    """
-    ua = _trim(eye, tx, ty, tz, rules)
-    if ua < 0.0:
-        return -_INF
-    tr = _eye_track(eye, tx, ty, rules)
-    t = tr.qz + _grid_span(g, st, tr, ua, 1.0 - ua)
-    if not (t != tz and abs(t) < _INF):
-        return t
-    ub = _trim(eye, tx, ty, t, rules)
-    if ub < 0.0:
-        return -_INF
-    if ub == ua:
-        return t
-    lo = min(ua, ub)
-    hi = max(ua, ub)
-    m = tr.qz + max(_grid_span(g, st, tr, lo, hi), _grid_span(g, st, tr, 1.0 - hi, 1.0 - lo))
-    if ub < ua:
-        return max(t, m)
-    if m < t:
-        return t
-    return tr.qz + _grid_span(g, st, tr, ub, 1.0 - ub)
+        Walked first with the target at ``tz`` (which only sets the trim): ``t`` over
+        ``[ua, 1 - ua]``. When ``t`` differs from ``tz`` (above it: the target is hidden; below
+        it: the horizon the angle output needs), the trim ``ub`` of a target at ``t`` differs
+        slightly, and only the two slivers between ``ua`` and ``ub`` (at the eye, at the target)
+        are walked: a grown interval takes their maximum too; a shrunk one keeps ``t`` when
+        their maximum is below it (the maximum then lies in the part both share), and is
+        walked whole again otherwise. Near the eye, where a segment is short, this matters:
+        without it a horizon 1.3 m from the eye was 1.3e-6 m off the pair engine's.
+        """
+        ua = _trim(eye, tx, ty, tz, rules)
+        if ua < 0.0:
+            return -_INF
+        tr = _eye_track(eye, tx, ty, rules)
+        if kind == GRID:
+            t = tr.qz + _grid_span(s, st, tr, ua, 1.0 - ua)
+        else:
+            t = tr.qz + _tin_span(s, st, tr, ua, 1.0 - ua)
+        if not (t != tz and abs(t) < _INF):
+            return t
+        ub = _trim(eye, tx, ty, t, rules)
+        if ub < 0.0:
+            return -_INF
+        if ub == ua:
+            return t
+        lo = min(ua, ub)
+        hi = max(ua, ub)
+        if kind == GRID:
+            m = tr.qz + max(_grid_span(s, st, tr, lo, hi), _grid_span(s, st, tr, 1.0 - hi, 1.0 - lo))
+        else:
+            m = tr.qz + max(_tin_span(s, st, tr, lo, hi), _tin_span(s, st, tr, 1.0 - hi, 1.0 - lo))
+        if ub < ua:
+            return max(t, m)
+        if m < t:
+            return t
+        if kind == GRID:
+            return tr.qz + _grid_span(s, st, tr, ub, 1.0 - ub)
+        else:
+            return tr.qz + _tin_span(s, st, tr, ub, 1.0 - ub)
 
-
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
-def _tin_eye_one(w, eye, tx, ty, tz, rules):
-    """:func:`_grid_eye_one` on a TIN."""
-    ua = _trim(eye, tx, ty, tz, rules)
-    if ua < 0.0:
-        return -_INF
-    tr = _eye_track(eye, tx, ty, rules)
-    t = tr.qz + _tin_span(w, tr, ua, 1.0 - ua)
-    if not (t != tz and abs(t) < _INF):
-        return t
-    ub = _trim(eye, tx, ty, t, rules)
-    if ub < 0.0:
-        return -_INF
-    if ub == ua:
-        return t
-    lo = min(ua, ub)
-    hi = max(ua, ub)
-    m = tr.qz + max(_tin_span(w, tr, lo, hi), _tin_span(w, tr, 1.0 - hi, 1.0 - lo))
-    if ub < ua:
-        return max(t, m)
-    if m < t:
-        return t
-    return tr.qz + _tin_span(w, tr, ub, 1.0 - ub)
+    return eye_one
 
 
-@nb.njit(cache=True, nogil=True)
-def grid_eye_thresholds(g, eye, t, rules, out, k0, k1, stop):
-    """``out[i]`` = the threshold height of the target point ``t[i]`` = (x, y, z) (local; z
-    sets the trim) for the fixed ``eye`` = (x, y, z) on the grid ``g``: the least height at
-    which it sees the eye (-inf: the segment is not tested), for the targets of chunks
-    ``k0 .. k1 - 1`` of :data:`EYE_CHUNK` targets (:func:`eye_chunks` of them;
-    :func:`terrainvis.core.interrupt.call` spreads them over threads)."""
-    n = t.shape[0]
-    gb = borrow_grid(g)
-    st = new_stack(g.ltop)
-    for k in range(k0, k1):
-        if stopped(stop):
-            return
-        for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
-            out[i] = _grid_eye_one(gb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+def _make_eye_thresholds(kind):
+    @kernel_of(kind, "grid_eye_thresholds", "tin_eye_thresholds")
+    def eye_thresholds(s, eye, t, rules, out, k0, k1, stop):
+        """``out[i]`` = the threshold height of the target point ``t[i]`` = (x, y, z) (local; z
+        sets the trim) for the fixed ``eye`` = (x, y, z) on the surface ``s``: the least height
+        at which it sees the eye (-inf: the segment is not tested), for the targets of chunks
+        ``k0 .. k1 - 1`` of :data:`EYE_CHUNK` targets (:func:`eye_chunks` of them;
+        :func:`terrainvis.core.interrupt.call` spreads them over threads)."""
+        n = t.shape[0]
+        if kind == GRID:
+            sb = borrow_grid(s)
+            st = new_stack(s.ltop)
+        else:
+            sb = borrow_tin(s)
+            st = None
+        for k in range(k0, k1):
+            if stopped(stop):
+                return
+            for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
+                if kind == GRID:
+                    out[i] = _grid_eye_one(sb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+                else:
+                    out[i] = _tin_eye_one(sb, st, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+
+    return eye_thresholds
 
 
-@nb.njit(cache=True, nogil=True)
-def tin_eye_thresholds(w, eye, t, rules, out, k0, k1, stop):
-    """:func:`grid_eye_thresholds` on a TIN (a :data:`~terrainvis.core.surface.SurfaceTin`)."""
-    n = t.shape[0]
-    wb = borrow_tin(w)
-    for k in range(k0, k1):
-        if stopped(stop):
-            return
-        for i in range(k * EYE_CHUNK, min(n, (k + 1) * EYE_CHUNK)):
-            out[i] = _tin_eye_one(wb, eye, t[i, 0], t[i, 1], t[i, 2], rules)
+_grid_eye_one, _tin_eye_one = _make_eye_one(GRID), _make_eye_one(TIN)
+grid_eye_thresholds, tin_eye_thresholds = _make_eye_thresholds(GRID), _make_eye_thresholds(TIN)
 
 
 def eye_chunks(n_targets: int) -> int:

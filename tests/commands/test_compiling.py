@@ -173,3 +173,70 @@ def test_a_kept_cache_whose_index_names_a_moved_module_is_compiled_again(tmp_pat
     assert ours.returncode == 0 and ours.stdout.strip() == "3.0", ours.stderr
     theirs = _probe(tmp_path / "elsewhere", "probe_kernel", "tolerant")
     assert theirs.returncode != 0 and "ModuleNotFoundError: No module named 'probe_records'" in theirs.stderr
+
+
+_MADE = '''
+import numba as nb
+import numpy as np
+
+from terrainvis.core.compiling import KERNEL_ONLY, kernel_of
+
+GRID = 0
+TIN = 1
+
+
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
+def grid_leaf(s, x):
+    return s.shape[0] * x
+
+
+@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
+def tin_leaf(s, x):
+    return s + x  # types on a float only: a grid's branch reaching it would not compile
+
+
+def _make(kind):
+    @kernel_of(kind, "grid_total", "tin_total")
+    def total(s, x):
+        out = 0.0
+        for i in range(3):
+            if kind == GRID:
+                out += grid_leaf(s, x + i)
+            else:
+                out += tin_leaf(s, x + i)
+        return out
+
+    return total
+
+
+grid_total, tin_total = _make(GRID), _make(TIN)
+'''
+
+_MADE_RUN = r'''
+import sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+import made_kernels as m
+print(m.grid_total.__name__, m.tin_total.__name__, m.grid_total(np.zeros(4), 1.0), m.tin_total(10.0, 1.0))
+for k in (m.grid_total, m.tin_total):
+    print(sum(k.stats.cache_hits.values()), sum(k.stats.cache_misses.values()))
+'''
+
+
+def test_a_kernel_written_once_is_made_per_kind_and_each_is_cached(tmp_path):
+    """``kernel_of``: each kind compiles its own branch alone (the other would not type), under
+    its own name, and a second process loads both from numba's cache (the kind, a constant of
+    the closure, keys the cache the same way in every process)."""
+    (tmp_path / "made_kernels.py").write_text(_MADE)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    runs = [subprocess.run([sys.executable, "-c", _MADE_RUN, str(tmp_path)], env=env, capture_output=True, text=True)
+            for _ in range(2)]
+    for run in runs:
+        assert run.returncode == 0, run.stderr
+    first, second = (run.stdout.split("\n") for run in runs)
+    assert first[0] == second[0] == "grid_total tin_total 24.0 36.0"
+    assert first[1:3] == ["0 1", "0 1"]  # compiled, once each
+    assert second[1:3] == ["1 0", "1 0"]  # loaded from the cache, each
+    names = sorted(p.name.split("-")[0] for p in (tmp_path / "cache").rglob("*.nbi"))
+    assert names == ["made_kernels.grid_leaf", "made_kernels.grid_total", "made_kernels.tin_leaf",
+                     "made_kernels.tin_total"]

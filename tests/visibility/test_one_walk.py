@@ -228,7 +228,7 @@ def test_thresholds_are_the_largest_value_over_the_breakpoints(case, end_radius,
     scale = 1.0 + abs(dda)
     assert desc == pytest.approx(dda, abs=1e-9 * scale)
     tin = thresholds.ThresholdSurface(g.to_tin())
-    on_tin = tin_threshold(tin.data, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
+    on_tin = tin_threshold(tin.data, None, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
                               rules)
     assert on_tin == pytest.approx(dda, abs=1e-7 * scale)
 
@@ -246,7 +246,7 @@ def test_a_track_too_short_to_walk_is_one_ground_point_on_a_tin_too(offset, at):
     dda = grid_threshold(surf.data, new_stack(surf.ltop), a, b, rules)
     assert dda == _threshold_reference(g, b, a, surf.tol, surf.delta, 0.0)
     tin = thresholds.ThresholdSurface(g.to_tin())
-    on_tin = tin_threshold(tin.data, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
+    on_tin = tin_threshold(tin.data, None, (a[0] - tin.x0, a[1] - tin.y0, a[2]), (b[0] - tin.x0, b[1] - tin.y0, b[2]),
                               rules)
     assert on_tin == pytest.approx(dda, abs=1e-9)
 

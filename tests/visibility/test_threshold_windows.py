@@ -78,13 +78,13 @@ def test_a_window_walk_is_exact_inside_and_a_bound_outside(name, curved, end_rad
             if surf.grid:
                 exact = grid_threshold(surf.data, stack, pi, qk, rules)
             else:
-                exact = tin_threshold(surf.data, pi, qk, rules)
+                exact = tin_threshold(surf.data, None, pi, qk, rules)
             for half in (0.05, 2.0, 30.0):
                 lo, hi = p[i, 2] - half, p[i, 2] + half
                 if surf.grid:
-                    z, state = grid_clamped(surf.data, stack, pi, qk, rules, lo, hi)
+                    z, state = grid_clamped(surf.data, stack, pi, qk, rules, lo, hi, -1)
                 else:
-                    z, state = tin_clamped(surf.data, pi, qk, rules, lo, hi, face_at(surf.data, pi[0], pi[1]))
+                    z, state = tin_clamped(surf.data, None, pi, qk, rules, lo, hi, face_at(surf.data, pi[0], pi[1]))
                 states.add(int(state))
                 if state == 0:
                     assert z == exact  # bit for bit

@@ -24,7 +24,7 @@ MAX_PARAMETERS = 12
 #: (owned by a branch not merged yet, with the issue that will split it).
 ALLOWED: dict[str, str] = {}
 
-_KERNEL_DECORATORS = {"nb.njit", "numba.njit", "njit"}
+_KERNEL_DECORATORS = {"nb.njit", "numba.njit", "njit", "kernel_of"}
 
 
 def _is_kernel(fn: ast.FunctionDef) -> bool:

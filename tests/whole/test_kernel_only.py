@@ -29,7 +29,7 @@ READERS = SOURCES + ("tests", "benchmarks", "examples", "docs")
 def _is_kernel(fn: ast.FunctionDef) -> bool:
     for dec in fn.decorator_list:
         target = dec.func if isinstance(dec, ast.Call) else dec
-        if ast.unparse(target).split(".")[-1] in ("njit", "jit", "register_jitable"):
+        if ast.unparse(target).split(".")[-1] in ("njit", "jit", "register_jitable", "kernel_of"):
             return True
     return False
 
@@ -40,9 +40,24 @@ def _kernel_only(fn: ast.FunctionDef) -> bool:
                for dec in fn.decorator_list)
 
 
+def _made_names(fn: ast.FunctionDef) -> list[str] | None:
+    """The names a kernel written once for several kinds takes (the strings its
+    ``@kernel_of(kind, "grid_x", "tin_x", ...)`` names), or None for a kernel of its own name."""
+    for dec in fn.decorator_list:
+        if isinstance(dec, ast.Call) and ast.unparse(dec.func).split(".")[-1] == "kernel_of":
+            return [a.value for a in dec.args[1:] if isinstance(a, ast.Constant)]
+    return None
+
+
 def declared(source: str) -> set[str]:
-    """The names of the kernels declared ``**KERNEL_ONLY`` in a module's source."""
-    return {n.name for n in ast.walk(ast.parse(source)) if isinstance(n, ast.FunctionDef) and _kernel_only(n)}
+    """The names of the kernels declared ``**KERNEL_ONLY`` in a module's source (a kernel made
+    per kind by :func:`terrainvis.core.compiling.kernel_of`: every name it takes)."""
+    out = set()
+    for n in ast.walk(ast.parse(source)):
+        if isinstance(n, ast.FunctionDef) and _kernel_only(n):
+            made = _made_names(n)
+            out.update([n.name] if made is None else made)
+    return out
 
 
 def _module_of(path: Path) -> str:
@@ -80,11 +95,12 @@ def kernel_names(source: str, module: str, kernels: dict[str, set[str]], is_pack
             for a in node.names:
                 if a.name in kernels and a.asname:
                     modules[a.asname] = a.name
+    own = set(kernels.get(module, ()))  # bound at its top level where made per kind (kernel_of)
     for node in tree.body:  # a name assigned again at the top level is no longer the kernel
         targets = node.targets if isinstance(node, ast.Assign) else []
         for t in targets:
             for n in ast.walk(t):
-                if isinstance(n, ast.Name):
+                if isinstance(n, ast.Name) and n.id not in own:
                     names.discard(n.id)
     return names, modules
 
@@ -185,6 +201,22 @@ USE = inner(1)
         (11, "k.inner"), (11, "kk.inner"), (11, "inner2"), (13, "inner")]
     again = "from pkg.kern import inner\ninner = from_python(inner)\nUSE = inner(1)\n"
     assert python_uses(again, *kernel_names(again, "pkg.user", kernels), kernels) == []
+    made = '''
+from terrainvis.core.compiling import KERNEL_ONLY, kernel_of
+
+def _make(kind):
+    @kernel_of(kind, "grid_leaf", "tin_leaf", **KERNEL_ONLY)
+    def leaf(a):
+        return a
+
+    return leaf
+
+grid_leaf, tin_leaf = _make(0), _make(1)
+USE = tin_leaf(1)
+'''
+    assert declared(made) == {"grid_leaf", "tin_leaf"}  # the names it takes, not the function's
+    made_kernels = {"pkg.made": declared(made)}
+    assert python_uses(made, *kernel_names(made, "pkg.made", made_kernels), made_kernels) == [(12, "tin_leaf")]
 
 
 def test_no_python_code_names_a_kernel_only_kernel():

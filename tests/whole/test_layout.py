@@ -119,7 +119,7 @@ MAX_KERNEL_PARAMETERS = 12
 #: Kernels allowed over it, as "path:name" -> why; it can only shrink. Empty: at this commit
 #: no kernel of terrainvis/ or simplifiers/ is over it.
 KERNELS_ALLOWED_WIDE: dict[str, str] = {}
-_JIT = {"njit", "jit", "nb.njit", "nb.jit", "numba.njit", "numba.jit"}
+_JIT = {"njit", "jit", "nb.njit", "nb.jit", "numba.njit", "numba.jit", "kernel_of"}
 
 
 def _is_jit(node: ast.expr) -> bool:
