@@ -105,16 +105,30 @@ def test_every_listed_kernel_exists():
         assert hasattr(importlib.import_module(module), name), key
 
 
-def test_compile_ahead_then_cached(tmp_path):
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_compile_ahead_then_cached(tmp_path, jobs):
+    """Two parts, in this process or side by side in two workers: compiled into the cache the
+    first time, each said once, and loaded from it the second."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    run = [sys.executable, "-m", "terrainvis.cli", "compile", "los"]
+    run = [sys.executable, "-m", "terrainvis.cli", "compile", "los", "output-modes", "--jobs", jobs]
     cold = subprocess.run(run, env=env, capture_output=True, text=True, timeout=600)
     assert cold.returncode == 0, cold.stderr
     assert "numba's cache is " + str(tmp_path / "cache") in cold.stderr
-    assert "los           compiled in" in cold.stdout and "terrainvis: compiling" not in cold.stderr
+    assert ("2 processes side by side" in cold.stderr) == (jobs == "2")
+    assert "terrainvis: compiling" not in cold.stderr
+    for part in ("los          ", "output-modes "):
+        assert cold.stdout.count(f"  {part} compiled in") == 1, cold.stdout
     warm = subprocess.run(run, env=env, capture_output=True, text=True, timeout=600)
     assert warm.returncode == 0, warm.stderr
-    assert "los           cached already" in warm.stdout, warm.stdout
+    for part in ("los          ", "output-modes "):
+        assert f"  {part} cached already" in warm.stdout, warm.stdout
+
+
+def test_jobs_must_be_a_whole_number_of_processes(capsys):
+    assert main(["compile", "--jobs", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("terrainvis compile: error: argument --jobs/-j: expected a whole number of processes >= 1, got '0' "
+                   "(see terrainvis compile --help)"), err
 
 
 def test_an_unknown_part_is_one_line(capsys):
