@@ -100,18 +100,18 @@ def _comparison() -> None:
 
 
 #: A part of ``terrainvis compile``: what it compiles, the function that runs its kernels, and
-#: about how many seconds it compiles on this project's 2-core machine (an empty cache, one
-#: process, ``python -m terrainvis.cli compile --jobs 1``): the longest parts start first.
+#: about how many seconds it compiles alone on this project's 2-core machine (an empty cache,
+#: ``python -m terrainvis.cli compile PART --jobs 1``, 30 November 2026): the longest parts start first.
 Part = namedtuple("Part", ["what", "run", "seconds"])
 
 #: The parts, in the order one process runs them.
 PARTS = {
-    "viewshed": Part("viewsheds: the sweep, the nodata-aware walks, cumulative viewsheds, siting", _viewsheds, 27.0),
+    "viewshed": Part("viewsheds: the sweep, the nodata-aware walks, cumulative viewsheds, siting", _viewsheds, 25.0),
     "output-modes": Part("a viewshed's heights and angles (the threshold engine's one-eye loops)", _output_modes,
-                         7.0),
+                         6.0),
     "los": Part("lines of sight on grids and TINs, clearances, profiles, Fresnel zones", _lines_of_sight, 6.0),
-    "methods": Part("every built-in simplification method", _methods, 23.0),
-    "compare": Part("the comparison's measures: every relocation on grids and TINs, the volume", _comparison, 12.0),
+    "methods": Part("every built-in simplification method", _methods, 29.0),
+    "compare": Part("the comparison's measures: every relocation on grids and TINs, the volume", _comparison, 20.0),
 }
 
 
