@@ -106,11 +106,11 @@ Part = namedtuple("Part", ["what", "run", "seconds"])
 
 #: The parts, in the order one process runs them.
 PARTS = {
-    "viewshed": Part("viewsheds: the sweep, the nodata-aware walks, cumulative viewsheds, siting", _viewsheds, 25.0),
+    "viewshed": Part("viewsheds: the sweep, the nodata-aware walks, cumulative viewsheds, siting", _viewsheds, 24.9),
     "output-modes": Part("a viewshed's heights and angles (the threshold engine's one-eye loops)", _output_modes,
-                         6.0),
-    "los": Part("lines of sight on grids and TINs, clearances, profiles, Fresnel zones", _lines_of_sight, 6.0),
-    "methods": Part("every built-in simplification method", _methods, 29.0),
+                         6.3),
+    "los": Part("lines of sight on grids and TINs, clearances, profiles, Fresnel zones", _lines_of_sight, 5.6),
+    "methods": Part("every built-in simplification method", _methods, 28.8),
     "compare": Part("the comparison's measures: every relocation on grids and TINs, the volume", _comparison, 20.0),
 }
 
@@ -137,8 +137,11 @@ def run(args) -> int:
         raise UsageError(f"PART must be some of {', '.join(PARTS)}, got {', '.join(map(repr, unknown))}")
     names = list(dict.fromkeys(args.parts)) or list(PARTS)
     jobs = min(len(names), args.jobs or os.cpu_count() or 1)
-    print(f"terrainvis compile: numba's cache is {_cache_dir()}"
-          + (f"; {jobs} processes side by side" if jobs > 1 else ""), file=sys.stderr)
+    order = names if jobs == 1 else sorted(names, key=lambda n: -PARTS[n].seconds)  # the longest first
+    print(f"terrainvis compile: numba's cache is {_cache_dir()}", file=sys.stderr)
+    print(f"terrainvis compile: {', '.join(order)}"
+          + (f", {jobs} processes side by side (a part's line comes when it is done)" if jobs > 1 else ""),
+          file=sys.stderr, flush=True)
     t_all = time.perf_counter()
     compiled = 0.0
 
@@ -150,13 +153,12 @@ def run(args) -> int:
         print(f"  {name:13s} {state} ({took:.1f} s in all): {PARTS[name].what}", flush=True)
 
     if jobs == 1:
-        for name in names:
+        for name in order:
             done(name, compile_part(name))
     else:
         from ..core.runner import run_units
 
-        longest_first = sorted(names, key=lambda n: -PARTS[n].seconds)
-        run_units([(n, (n,)) for n in longest_first], compile_part, on_result=done, workers=jobs)
+        run_units([(n, (n,)) for n in order], compile_part, on_result=done, workers=jobs)
     print(f"terrainvis compile: {compiled:.1f} s of compilation, {time.perf_counter() - t_all:.1f} s in all")
     return 0
 
