@@ -193,6 +193,8 @@ def test_a_kept_cache_whose_index_names_a_moved_module_is_compiled_again(tmp_pat
 
 
 _MADE = '''
+import math
+
 import numba as nb
 import numpy as np
 
@@ -202,6 +204,8 @@ GRID = 0
 TIN = 1
 
 
+# each leaf types on its own kind's surface only (an array here, a float there): a branch
+# left in the other kind's kernel would not compile
 @nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def grid_leaf(s, x):
     return s.shape[0] * x
@@ -209,7 +213,7 @@ def grid_leaf(s, x):
 
 @nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
 def tin_leaf(s, x):
-    return s + x  # types on a float only: a grid's branch reaching it would not compile
+    return math.floor(s) + x
 
 
 def _make(kind):
