@@ -113,8 +113,8 @@ def kernel_of(kind: int, *names: str, **options):
 
         grid_threshold, tin_threshold = _threshold(GRID), _threshold(TIN)
 
-    The whole-code tests read the names from the decorator (``tests/whole/test_kernel_only.py``,
-    ``tests/whole/test_layout.py``)."""
+    ``tests/whole/test_kernel_only.py`` reads the names from the decorator; the layout and
+    code-shape tests count a function it decorates as a kernel."""
     import numba as nb
 
     name = names[kind]
