@@ -82,17 +82,20 @@ KERNEL_ONLY = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 
 
 def from_python(kernel):
-    """A Python entry to a :data:`KERNEL_ONLY` kernel, for tests and benchmarks that call one
-    from Python: a kernel (not cached) that calls it with the same positional arguments and
-    returns what it returns. ``tests/whole/test_kernel_only.py`` allows Python code to name a
+    """A Python entry to a :data:`KERNEL_ONLY` kernel (or one numba inlines into its callers),
+    for tests and benchmarks that call one from Python: a kernel (not cached) that calls it
+    with the same positional arguments and returns what it returns. ``tests/whole/test_kernel_only.py`` allows Python code to name a
     kernel-only kernel only as this function's argument."""
+    import inspect
+
     import numba as nb
 
-    @nb.njit(nogil=True)
-    def call(*args):
-        return kernel(*args)
-
-    return call
+    # the kernel's own positional parameters, not *args: numba inlines an ``inline="always"``
+    # kernel only into a call with plain arguments
+    names = ", ".join(f"a{i}" for i in range(len(inspect.signature(kernel.py_func).parameters)))
+    scope = {"kernel": kernel}
+    exec(f"def call({names}):\n    return kernel({names})\n", scope)
+    return nb.njit(nogil=True)(scope["call"])
 
 
 def kernel_of(kind: int, *names: str, **options):

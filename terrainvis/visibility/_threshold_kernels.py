@@ -62,6 +62,19 @@ signature serves both. The walks themselves (:func:`grid_max_slope`,
 :func:`grid_dda_max_slope`, :func:`tin_max_slope`) and the probes stay per surface: they
 are different algorithms.
 
+One row, the clamped walk inlined in it
+---------------------------------------
+Every threshold the engine's loops need goes through one row kernel, :func:`_grid_row`
+(:func:`_tin_row`): a point's thresholds for many targets, clamped to a window or exact
+(the window (-inf, inf)), or only those a window left as bounds (``redo``). The clamped
+walk (:func:`grid_clamped`) and its probes are inlined there by numba (``inline="always"``),
+its only call site in the package: as kernels of their own, called once per target, they
+received the surface's record (a grid's: 13 arrays and scalars, flattened into about a
+hundred arguments) and the track's at every call, and the calibrated relocation on a grid
+ran about three times slower, for the same bits (docs/performance.md, "The clamped walk
+inlined in its row"). :func:`grid_threshold` (the clamped walk over (-inf, inf)) is kept for
+tests; no loop calls it.
+
 Threads
 -------
 The loops over points (:func:`grid_heights`, :func:`tin_heights`) and over chunks of
@@ -348,7 +361,7 @@ def _make_threshold(kind):
 
 
 def _make_clamped(kind):
-    @kernel_of(kind, "grid_clamped", "tin_clamped", **KERNEL_ONLY)
+    @kernel_of(kind, "grid_clamped", "tin_clamped", inline="always")
     def clamped(s, st, p, q, rules, zlo, zhi, fp):
         """:func:`grid_threshold` known exactly only inside (``zlo``, ``zhi``): ``(z, state)``
         with state 0 (z is the threshold, bit for bit), -1 (the threshold is at most z, about
@@ -392,7 +405,7 @@ grid_clamped, tin_clamped = _make_clamped(GRID), _make_clamped(TIN)
 PROBE_CELLS = (0.5, 1.5, 3.0, 6.0)
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _grid_probes_reach(g, tr, margin):
     """Whether the track's value at a few places near the point's end (:data:`PROBE_CELLS`)
     exceeds its cap by more than ``margin``: the maximum, at least as large as any value
@@ -555,7 +568,7 @@ def tin_max_slope(w, tr):
 PROBE_FACES = 8
 
 
-@nb.njit(cache=True, nogil=True, **KERNEL_ONLY)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _tin_probes_reach(w, tr, fp, margin):
     """:func:`_grid_probes_reach` on a TIN: the track's value where it crosses the edges of
     the first :data:`PROBE_FACES` faces from the point's end, walked from the face ``fp``
@@ -731,32 +744,20 @@ def optimistic(thr, state, vis):
 # --------------------------------------------------------------------------- loops
 def _make_row(kind):
     @kernel_of(kind, "_grid_row", "_tin_row", **KERNEL_ONLY)
-    def row(s, st, p, q, rules, skip, out):
-        """``out[k]`` = the threshold of the point p = (x, y, z) for the target q[k] (-inf for
-        k = ``skip``) on the surface ``s`` (``st``: a grid's walk stack, None on a TIN)."""
+    def row(s, st, p, q, rules, skip, out, state, zlo, zhi, redo):
+        """The thresholds of the point p = (x, y, z) for the targets q on the surface ``s``
+        (``st``: a grid's walk stack, None on a TIN), known exactly only inside (``zlo``,
+        ``zhi``): :func:`grid_clamped`'s ``(z, state)`` into ``out[k]`` and ``state[k]``
+        (-inf and 0 for k = ``skip``); with (-inf, inf) every threshold exactly. ``redo``:
+        only the targets whose ``state`` is not 0 (their bounds walked again, the others
+        stand).
+
+        The one place the clamped walk is compiled in (it is inlined here, and its probes
+        in it): as a kernel of its own, called once per target, it took the surface's and
+        the track's records as arguments at every call, and the calibrated relocation ran
+        about three times slower (docs/performance.md, "The clamped walk inlined in its row")."""
         # views without reference counts (the caller keeps the arrays alive): every walk
         # would otherwise count references to each array of the surface (5-20 % of the row)
-        if kind == GRID:
-            s = borrow_grid(s)
-            st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
-        else:
-            s = borrow_tin(s)
-        for k in range(q.shape[0]):
-            if k == skip:
-                out[k] = -_INF
-            elif kind == GRID:
-                out[k] = grid_threshold(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-            else:
-                out[k] = tin_threshold(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-
-    return row
-
-
-def _make_window_row(kind):
-    @kernel_of(kind, "_grid_window_row", "_tin_window_row", **KERNEL_ONLY)
-    def window_row(s, st, p, q, rules, skip, out, state):
-        """:func:`_grid_row` known exactly only within ``rules.window`` of p's height:
-        :func:`grid_clamped`'s ``(z, state)`` into ``out`` and ``state``."""
         if kind == GRID:
             s = borrow_grid(s)
             st = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
@@ -764,18 +765,18 @@ def _make_window_row(kind):
         else:
             s = borrow_tin(s)
             fp = face_at(s, p[0], p[1])
-        zlo = p[2] - rules.window
-        zhi = p[2] + rules.window
         for k in range(q.shape[0]):
             if k == skip:
                 out[k] = -_INF
                 state[k] = 0
+            elif redo and state[k] == 0:
+                continue
             elif kind == GRID:
                 out[k], state[k] = grid_clamped(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi, fp)
             else:
                 out[k], state[k] = tin_clamped(s, st, p, (q[k, 0], q[k, 1], q[k, 2]), rules, zlo, zhi, fp)
 
-    return window_row
+    return row
 
 
 def _make_best(kind):
@@ -788,32 +789,25 @@ def _make_best(kind):
         known only by a bound exactly when the window's choice might not stand (see "Windows")."""
         lthr, lvis, weight = near
         if rules.window < _INF:
-            if kind == GRID:
-                _grid_window_row(s, st, p, q, rules, skip, thr, state)
-            else:
-                _tin_window_row(s, st, p, q, rules, skip, thr, state)
+            zlo = p[2] - rules.window
+            zhi = p[2] + rules.window
+        else:
+            zlo = -_INF
+            zhi = _INF
+        if kind == GRID:
+            _grid_row(s, st, p, q, rules, skip, thr, state, zlo, zhi, False)
+        else:
+            _tin_row(s, st, p, q, rules, skip, thr, state, zlo, zhi, False)
+        if rules.window < _INF:
             lo, hi = optimistic(thr, state, vis)
             z, a = best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
             if z > lo + rules.margin and z < hi - rules.margin:
                 return z, a
             # the window's exact thresholds stand; the bounds are walked whole
             if kind == GRID:
-                sb = borrow_grid(s)
-                stb = WalkStack(borrow(st.level), borrow(st.row), borrow(st.col), borrow(st.t))
+                _grid_row(s, st, p, q, rules, skip, thr, state, -_INF, _INF, True)
             else:
-                sb = borrow_tin(s)
-                stb = st
-            for k in range(q.shape[0]):
-                if state[k] == 0:
-                    continue
-                if kind == GRID:
-                    thr[k] = grid_threshold(sb, stb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-                else:
-                    thr[k] = tin_threshold(sb, stb, p, (q[k, 0], q[k, 1], q[k, 2]), rules)
-        elif kind == GRID:
-            _grid_row(s, st, p, q, rules, skip, thr)
-        else:
-            _tin_row(s, st, p, q, rules, skip, thr)
+                _tin_row(s, st, p, q, rules, skip, thr, state, -_INF, _INF, True)
         return best_height_kept(thr, vis, lthr, lvis, weight, p[2], rules.margin, rules.min_gain)
 
     return best
@@ -822,11 +816,13 @@ def _make_best(kind):
 def _make_entry_row(kind):
     @kernel_of(kind, "grid_row", "tin_row")
     def entry_row(s, p, q, rules, skip, out):
-        """:func:`_grid_row` (one row, called from Python)."""
+        """``out[k]`` = the threshold of the point p = (x, y, z) for the target q[k] (-inf for
+        k = ``skip``): :func:`_grid_row` with every threshold exact (one row, called from Python)."""
+        state = np.empty(q.shape[0], dtype=np.int8)
         if kind == GRID:
-            _grid_row(s, new_stack(s.ltop), p, q, rules, skip, out)
+            _grid_row(s, new_stack(s.ltop), p, q, rules, skip, out, state, -_INF, _INF, False)
         else:
-            _tin_row(s, None, p, q, rules, skip, out)
+            _tin_row(s, None, p, q, rules, skip, out, state, -_INF, _INF, False)
 
     return entry_row
 
@@ -887,7 +883,6 @@ def _make_sweep(kind):
 
 
 _grid_row, _tin_row = _make_row(GRID), _make_row(TIN)
-_grid_window_row, _tin_window_row = _make_window_row(GRID), _make_window_row(TIN)
 _grid_best, _tin_best = _make_best(GRID), _make_best(TIN)
 grid_row, tin_row = _make_entry_row(GRID), _make_entry_row(TIN)
 grid_heights, tin_heights = _make_heights(GRID), _make_heights(TIN)
