@@ -84,8 +84,9 @@ KERNEL_ONLY = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
 def from_python(kernel):
     """A Python entry to a :data:`KERNEL_ONLY` kernel (or one numba inlines into its callers),
     for tests and benchmarks that call one from Python: a kernel (not cached) that calls it
-    with the same positional arguments and returns what it returns. ``tests/whole/test_kernel_only.py`` allows Python code to name a
-    kernel-only kernel only as this function's argument."""
+    with the same positional arguments and returns what it returns.
+    ``tests/whole/test_kernel_only.py`` allows Python code to name a kernel-only kernel only
+    as this function's argument."""
     import inspect
 
     import numba as nb
@@ -102,8 +103,8 @@ def kernel_of(kind: int, *names: str, **options):
     """Decorate a kernel written once for several kinds of input (a grid, a TIN) and made
     for one of them: ``kind`` (0, 1, ...) is a constant of the function's closure, and its
     body branches on it (``if kind == GRID: ...``), so numba drops the other branches before
-    it types the function, and each made kernel compiles to the code a copy written for its
-    kind alone would (the closure's constant also keys numba's cache). The kernel takes the
+    it types the function, and each made kernel is typed and compiled as a copy written for
+    its kind alone would be (the closure's constant also keys numba's cache). The kernel takes the
     name ``names[kind]`` (its cache files, the compile notices of :data:`KERNELS`);
     ``options`` are numba's, beside ``cache=True, nogil=True`` (``**KERNEL_ONLY`` for a
     kernel only kernels call). A factory makes each kind::

@@ -24,8 +24,8 @@ from terrainvis.visibility import _threshold_kernels as tk
 from terrainvis.visibility import thresholds
 from terrainvis.visibility._kernels import new_stack
 
-# kernel-only kernels (no Python entry of their own: terrainvis.core.compiling.KERNEL_ONLY), called
-# here through one made for them
+# kernels without a Python entry of their own (terrainvis.core.compiling.KERNEL_ONLY) or inlined by
+# numba into their callers (the clamped walks), called here through one made for them
 face_at = from_python(face_at)
 new_stack = from_python(new_stack)
 grid_threshold = from_python(tk.grid_threshold)
